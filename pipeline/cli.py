@@ -1,0 +1,79 @@
+"""The ``pipeline`` command line. Commands are thin; the work is in importable functions.
+
+Only this module turns :class:`~pipeline.errors.ArmsigError` into exit codes.
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+from collections.abc import Callable
+from typing import Annotated, Any, TypeVar
+
+import numpy as np
+import typer
+
+from pipeline.errors import ArmsigError
+
+app = typer.Typer(
+    name="pipeline",
+    help="armsig: identify a robot arm's kinematic signature and control it with it.",
+    no_args_is_help=True,
+    add_completion=False,
+)
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _errors_to_exit(func: F) -> F:
+    """Turn an ArmsigError into a one-line message on stderr and exit code 1."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except ArmsigError as exc:
+            typer.echo(f"error: {exc}", err=True)
+            sys.exit(1)
+
+    return wrapper  # type: ignore[return-value]
+
+
+@app.command()
+@_errors_to_exit
+def robots() -> None:
+    """List the built-in robots with their joints."""
+    from pipeline.robots import builtin_names, get_robot
+
+    for name in builtin_names():
+        rob = get_robot(name)
+        joints = ", ".join(f"{j.name} ({j.type[0].upper()}, {j.lower:g}..{j.upper:g} {j.unit})" for j in rob.joints)
+        typer.echo(f"{name}: {rob.n_joints} joints: {joints}")
+
+
+@app.command()
+@_errors_to_exit
+def fk(
+    robot: Annotated[str, typer.Argument(help="Built-in robot name or path to a .toml description.")],
+    q: Annotated[str, typer.Option("--q", help="Joint values, comma or space separated (deg / cm).")],
+) -> None:
+    """Print the design model's tool pose at joint values Q."""
+    from pipeline.robots import get_robot
+    from pipeline.robots.fk import design_pose
+
+    try:
+        values = [float(v) for v in q.replace(",", " ").split()]
+    except ValueError as exc:
+        raise ArmsigError("--q must hold numbers", got=repr(q), fix='--q "0 -90 90 0 0 0"') from exc
+    pose = design_pose(get_robot(robot), values)
+    with np.printoptions(precision=6, suppress=True):
+        typer.echo(f"xyz_cm  = {pose.xyz_cm}")
+        typer.echo(f"rpy_deg = {pose.rpy_deg}")
+        typer.echo("T =")
+        typer.echo(str(pose.matrix))
+    if pose.outside_limits:
+        typer.echo(f"warning: outside joint limits: {', '.join(pose.outside_limits)}", err=True)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    app()

@@ -1,0 +1,38 @@
+"""The one exception hierarchy of armsig.
+
+Every message says what was expected, what arrived, and what to try. Only
+``pipeline.cli`` turns these into exit codes.
+"""
+
+from __future__ import annotations
+
+
+class ArmsigError(Exception):
+    """Base class of every error armsig raises on purpose."""
+
+    def __init__(self, what: str, *, expected: str = "", got: str = "", fix: str = "") -> None:
+        parts = [what]
+        if expected:
+            parts.append(f"expected {expected}")
+        if got:
+            parts.append(f"got {got}")
+        if fix:
+            parts.append(f"try: {fix}")
+        super().__init__("; ".join(parts))
+        self.what, self.expected, self.got, self.fix = what, expected, got, fix
+
+
+class RobotDescriptionError(ArmsigError):
+    """A robot description file or dict is malformed."""
+
+
+class UnknownRobotError(ArmsigError):
+    """A robot name is neither built in nor a readable description file."""
+
+
+class SchemaError(ArmsigError):
+    """A schema file is missing or malformed, or a table does not match it."""
+
+
+class KinematicsError(ArmsigError):
+    """Bad arguments to a kinematics routine (shapes, joint counts)."""

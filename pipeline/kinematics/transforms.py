@@ -1,0 +1,221 @@
+"""Primitive homogeneous transforms (Appendix A) and their algebra.
+
+Every function is batch-first: scalar arguments give a ``(4, 4)`` matrix,
+array arguments of shape ``(...)`` give a ``(..., 4, 4)`` stack. Angles are in
+radians, lengths in whatever unit the caller uses consistently (cm in armsig).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+Array = npt.NDArray[np.float64]
+ArrayLike = npt.ArrayLike
+
+
+def _identity_stack(shape: tuple[int, ...]) -> Array:
+    out = np.zeros((*shape, 4, 4))
+    out[..., 0, 0] = out[..., 1, 1] = out[..., 2, 2] = out[..., 3, 3] = 1.0
+    return out
+
+
+def trans(x: ArrayLike = 0.0, y: ArrayLike = 0.0, z: ArrayLike = 0.0) -> Array:
+    """Translation ``Trans(x, y, z)``; the product of the three Appendix A translations.
+
+    Parameters
+    ----------
+    x, y, z : array_like, shape (...)
+        Components of the translation (broadcast against each other).
+
+    Returns
+    -------
+    T : ndarray, shape (..., 4, 4)
+    """
+    bx, by, bz = np.broadcast_arrays(
+        np.asarray(x, float), np.asarray(y, float), np.asarray(z, float)
+    )
+    out = _identity_stack(bx.shape)
+    out[..., 0, 3] = bx
+    out[..., 1, 3] = by
+    out[..., 2, 3] = bz
+    return out
+
+
+def trans_x(x: ArrayLike) -> Array:
+    """``Trans(x, 0, 0)`` of Appendix A, shape (..., 4, 4)."""
+    return trans(x, 0.0, 0.0)
+
+
+def trans_y(y: ArrayLike) -> Array:
+    """``Trans(0, y, 0)`` of Appendix A, shape (..., 4, 4)."""
+    return trans(0.0, y, 0.0)
+
+
+def trans_z(z: ArrayLike) -> Array:
+    """``Trans(0, 0, z)`` of Appendix A, shape (..., 4, 4)."""
+    return trans(0.0, 0.0, z)
+
+
+def _rot(theta: ArrayLike, i: int, j: int) -> Array:
+    """Rotation in the (i, j) coordinate plane: R[i,i]=R[j,j]=c, R[i,j]=-s, R[j,i]=s."""
+    t = np.asarray(theta, float)
+    c, s = np.cos(t), np.sin(t)
+    out = _identity_stack(t.shape)
+    out[..., i, i] = c
+    out[..., j, j] = c
+    out[..., i, j] = -s
+    out[..., j, i] = s
+    return out
+
+
+def rot_x(theta: ArrayLike) -> Array:
+    """``Rot(x, θ)`` of Appendix A; ``theta`` in radians, shape (...) -> (..., 4, 4)."""
+    return _rot(theta, 1, 2)
+
+
+def rot_y(theta: ArrayLike) -> Array:
+    """``Rot(y, θ)`` of Appendix A; ``theta`` in radians, shape (...) -> (..., 4, 4)."""
+    return _rot(theta, 2, 0)
+
+
+def rot_z(theta: ArrayLike) -> Array:
+    """``Rot(z, θ)`` of Appendix A; ``theta`` in radians, shape (...) -> (..., 4, 4)."""
+    return _rot(theta, 0, 1)
+
+
+def invert_transform(A2B: ArrayLike) -> Array:
+    """Closed-form inverse of a homogeneous transform: ``[Rᵀ, -Rᵀp; 0, 1]``.
+
+    Parameters
+    ----------
+    A2B : array_like, shape (..., 4, 4)
+        Rigid transforms (rotation block orthonormal).
+
+    Returns
+    -------
+    B2A : ndarray, shape (..., 4, 4)
+    """
+    T = np.asarray(A2B, float)
+    R_t = np.swapaxes(T[..., :3, :3], -1, -2)
+    out = np.zeros_like(T)
+    out[..., :3, :3] = R_t
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", R_t, T[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def chain_product(*factors: ArrayLike) -> Array:
+    """Left-to-right product of broadcastable ``(..., 4, 4)`` stacks."""
+    out = np.asarray(factors[0], float)
+    for f in factors[1:]:
+        out = out @ np.asarray(f, float)
+    return out
+
+
+def pose_error(T_desired: ArrayLike, T_actual: ArrayLike) -> tuple[Array, Array]:
+    """Position and orientation error between two transform stacks.
+
+    Parameters
+    ----------
+    T_desired, T_actual : array_like, shape (..., 4, 4)
+
+    Returns
+    -------
+    dp : ndarray, shape (...)
+        Euclidean distance between the origins (length unit of the inputs).
+    dtheta : ndarray, shape (...)
+        Angle of the relative rotation ``R_dᵀ R_a`` in radians, in [0, π].
+    """
+    Td = np.asarray(T_desired, float)
+    Ta = np.asarray(T_actual, float)
+    dp = np.linalg.norm(Td[..., :3, 3] - Ta[..., :3, 3], axis=-1)
+    R = np.swapaxes(Td[..., :3, :3], -1, -2) @ Ta[..., :3, :3]
+    # Use the axis-angle identity with both sin and cos for accuracy near 0 and π.
+    cos_t = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
+    skew = np.stack(
+        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
+        axis=-1,
+    )
+    sin_t = np.linalg.norm(skew, axis=-1) / 2.0
+    return dp, np.arctan2(sin_t, cos_t)
+
+
+def differential_motion(T_from: ArrayLike, T_to: ArrayLike) -> Array:
+    """Small-motion vector taking ``T_from`` to ``T_to``, in base coordinates.
+
+    The rotation part is the exact axis-angle vector of ``R_to R_fromᵀ`` (so it
+    stays meaningful for large errors), the translation part the difference of
+    origins. This is the differential δ of Section 5.2 expressed in the base frame.
+
+    Parameters
+    ----------
+    T_from, T_to : array_like, shape (..., 4, 4)
+
+    Returns
+    -------
+    delta : ndarray, shape (..., 6)
+        ``[dx, dy, dz, δx, δy, δz]``; translation in length units, rotation in radians.
+    """
+    Tf = np.asarray(T_from, float)
+    Tt = np.asarray(T_to, float)
+    R = Tt[..., :3, :3] @ np.swapaxes(Tf[..., :3, :3], -1, -2)
+    skew = np.stack(
+        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
+        axis=-1,
+    )
+    sin_t = np.linalg.norm(skew, axis=-1) / 2.0
+    cos_t = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
+    angle = np.arctan2(sin_t, cos_t)
+    # angle/sin(angle) -> 1 as angle -> 0; guard the division there.
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(sin_t > 1e-12, angle / (2.0 * np.maximum(sin_t, 1e-300)), 0.5)
+    rot = skew * scale[..., None]
+    return np.concatenate([Tt[..., :3, 3] - Tf[..., :3, 3], rot], axis=-1)
+
+
+def transform_from_xyz_rpy(xyz: ArrayLike, rpy: ArrayLike) -> Array:
+    """Pose ``Trans(x, y, z) · Rot(z, rz) · Rot(y, ry) · Rot(x, rx)``.
+
+    Parameters
+    ----------
+    xyz : array_like, shape (..., 3)
+        Position (cm).
+    rpy : array_like, shape (..., 3)
+        ``(rx, ry, rz)`` fixed-axis roll, pitch, yaw in radians.
+
+    Returns
+    -------
+    T : ndarray, shape (..., 4, 4)
+    """
+    p = np.asarray(xyz, float)
+    r = np.asarray(rpy, float)
+    return trans(p[..., 0], p[..., 1], p[..., 2]) @ rot_z(r[..., 2]) @ rot_y(r[..., 1]) @ rot_x(
+        r[..., 0]
+    )
+
+
+def xyz_rpy_from_transform(T: ArrayLike) -> tuple[Array, Array]:
+    """Inverse of :func:`transform_from_xyz_rpy`.
+
+    Parameters
+    ----------
+    T : array_like, shape (..., 4, 4)
+
+    Returns
+    -------
+    xyz : ndarray, shape (..., 3)
+    rpy : ndarray, shape (..., 3)
+        ``(rx, ry, rz)`` radians with ``ry`` in [-π/2, π/2]; at ``|ry| = π/2``
+        the split between ``rx`` and ``rz`` is arbitrary and ``rx = 0`` is returned.
+    """
+    M = np.asarray(T, float)
+    R = M[..., :3, :3]
+    ry = np.arctan2(-R[..., 2, 0], np.hypot(R[..., 0, 0], R[..., 1, 0]))
+    # cos(ry) below 1e-12 means gimbal lock: the rx/rz split is undetermined.
+    locked = np.hypot(R[..., 0, 0], R[..., 1, 0]) < 1e-12
+    rz = np.where(
+        locked, np.arctan2(-R[..., 0, 1], R[..., 1, 1]), np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    )
+    rx = np.where(locked, 0.0, np.arctan2(R[..., 2, 1], R[..., 2, 2]))
+    return M[..., :3, 3].copy(), np.stack([rx, ry, rz], axis=-1)

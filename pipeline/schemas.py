@@ -1,0 +1,112 @@
+"""Load the JSON schemas of ``schemas/`` and validate tables against them."""
+
+from __future__ import annotations
+
+import json
+from functools import cache
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+
+from pipeline.errors import SchemaError
+
+_TYPES: dict[str, pa.DataType] = {
+    "int32": pa.int32(),
+    "int64": pa.int64(),
+    "float64": pa.float64(),
+    "bool": pa.bool_(),
+    "string": pa.string(),
+    "list<float64>": pa.list_(pa.float64()),
+}
+UNITS = ("", "cm", "deg", "s", "degF")
+
+
+def schema_dir() -> Path:
+    """The schemas folder: ``pipeline/_schemas`` in a wheel, ``schemas/`` in a checkout."""
+    packaged = resources.files("pipeline") / "_schemas"
+    if packaged.is_dir():
+        return Path(str(packaged))
+    checkout = Path(__file__).resolve().parent.parent / "schemas"
+    if checkout.is_dir():
+        return checkout
+    raise SchemaError(
+        "schema folder not found",
+        expected="pipeline/_schemas (installed) or schemas/ beside the package (checkout)",
+        fix="reinstall armsig (`make install`)",
+    )
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise SchemaError(f"no schema file {path}", fix="check the schema name") from exc
+    except json.JSONDecodeError as exc:
+        raise SchemaError(f"{path}: not valid JSON", got=str(exc)) from exc
+    if not isinstance(data, dict):
+        raise SchemaError(f"{path}: expected a JSON object", got=type(data).__name__)
+    return data
+
+
+@cache
+def mcap_json_schema(channel: str) -> dict[str, Any]:
+    """JSON Schema of an MCAP channel's messages (``schemas/mcap/<channel>.json``)."""
+    return _read_json(schema_dir() / "mcap" / f"{channel}.json")
+
+
+@cache
+def arrow_schema(name: str) -> pa.Schema:
+    """Arrow schema of a table, with ``unit`` and ``description`` in each field's metadata."""
+    path = schema_dir() / "arrow" / f"{name}.json"
+    doc = _read_json(path)
+    fields = []
+    for k, f in enumerate(doc.get("fields", [])):
+        where = f"{path}: fields[{k}]"
+        try:
+            fname, ftype, unit = f["name"], f["type"], f["unit"]
+        except KeyError as exc:
+            raise SchemaError(f"{where}: missing key {exc}", expected="name, type, unit") from exc
+        if ftype not in _TYPES:
+            raise SchemaError(f"{where}: unknown type", expected=", ".join(_TYPES), got=repr(ftype))
+        if unit not in UNITS:
+            raise SchemaError(f"{where}: unknown unit", expected=", ".join(map(repr, UNITS)), got=repr(unit))
+        if unit and not fname.endswith("_" + unit):
+            raise SchemaError(
+                f"{where}: column '{fname}' carries unit '{unit}' but its name does not end in '_{unit}'"
+            )
+        meta = {"unit": unit, "description": f.get("description", "")}
+        fields.append(pa.field(fname, _TYPES[ftype], nullable=bool(f.get("nullable", False)), metadata=meta))
+    meta = {"schema_name": doc.get("name", name), "schema_version": str(doc.get("version", 1))}
+    return pa.schema(fields, metadata=meta)
+
+
+def validate_table(table: pa.Table, name: str, source: str = "table") -> pa.Table:
+    """Check a table against schema ``name`` and return it cast to that schema.
+
+    Columns must match by name and order, types must be castable without loss,
+    and non-nullable columns must hold no nulls.
+
+    Raises
+    ------
+    SchemaError
+        Naming the source, the column, what was expected and what arrived.
+    """
+    schema = arrow_schema(name)
+    if table.column_names != schema.names:
+        raise SchemaError(
+            f"{source}: columns do not match schema '{name}'",
+            expected=str(schema.names),
+            got=str(table.column_names),
+        )
+    for field in schema:
+        col = table.column(field.name)
+        if not field.nullable and col.null_count:
+            raise SchemaError(
+                f"{source}: column '{field.name}' has {col.null_count} nulls", expected="no nulls"
+            )
+    try:
+        return table.cast(schema, safe=True)
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError) as exc:
+        raise SchemaError(f"{source}: cannot cast to schema '{name}'", got=str(exc)) from exc
