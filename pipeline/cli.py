@@ -47,15 +47,21 @@ def robots() -> None:
 
     for name in builtin_names():
         rob = get_robot(name)
-        joints = ", ".join(f"{j.name} ({j.type[0].upper()}, {j.lower:g}..{j.upper:g} {j.unit})" for j in rob.joints)
+        joints = ", ".join(
+            f"{j.name} ({j.type[0].upper()}, {j.lower:g}..{j.upper:g} {j.unit})" for j in rob.joints
+        )
         typer.echo(f"{name}: {rob.n_joints} joints: {joints}")
 
 
 @app.command()
 @_errors_to_exit
 def fk(
-    robot: Annotated[str, typer.Argument(help="Built-in robot name or path to a .toml description.")],
-    q: Annotated[str, typer.Option("--q", help="Joint values, comma or space separated (deg / cm).")],
+    robot: Annotated[
+        str, typer.Argument(help="Built-in robot name or path to a .toml description.")
+    ],
+    q: Annotated[
+        str, typer.Option("--q", help="Joint values, comma or space separated (deg / cm).")
+    ],
 ) -> None:
     """Print the design model's tool pose at joint values Q."""
     from pipeline.robots import get_robot

@@ -71,13 +71,18 @@ def arrow_schema(name: str) -> pa.Schema:
         if ftype not in _TYPES:
             raise SchemaError(f"{where}: unknown type", expected=", ".join(_TYPES), got=repr(ftype))
         if unit not in UNITS:
-            raise SchemaError(f"{where}: unknown unit", expected=", ".join(map(repr, UNITS)), got=repr(unit))
+            raise SchemaError(
+                f"{where}: unknown unit", expected=", ".join(map(repr, UNITS)), got=repr(unit)
+            )
         if unit and not fname.endswith("_" + unit):
             raise SchemaError(
-                f"{where}: column '{fname}' carries unit '{unit}' but its name does not end in '_{unit}'"
+                f"{where}: column '{fname}' carries unit '{unit}'"
+                f" but its name does not end in '_{unit}'"
             )
         meta = {"unit": unit, "description": f.get("description", "")}
-        fields.append(pa.field(fname, _TYPES[ftype], nullable=bool(f.get("nullable", False)), metadata=meta))
+        fields.append(
+            pa.field(fname, _TYPES[ftype], nullable=bool(f.get("nullable", False)), metadata=meta)
+        )
     meta = {"schema_name": doc.get("name", name), "schema_version": str(doc.get("version", 1))}
     return pa.schema(fields, metadata=meta)
 

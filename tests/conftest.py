@@ -8,7 +8,7 @@ def rng() -> np.random.Generator:
 
 
 def random_rigid(rng: np.random.Generator, n: int, scale: float = 50.0) -> np.ndarray:
-    """n random rigid transforms: uniform rotations (QR of Gaussians), translations ~ N(0, scale)."""
+    """n random rigid transforms: uniform rotations, Gaussian translations (cm)."""
     Q, R = np.linalg.qr(rng.normal(size=(n, 3, 3)))
     Q = Q * np.sign(np.diagonal(R, axis1=-2, axis2=-1))[:, None, :]
     Q[np.linalg.det(Q) < 0, :, 0] *= -1

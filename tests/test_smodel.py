@@ -100,8 +100,11 @@ def test_dh_from_smodel_satisfies_3_8(rng: np.random.Generator) -> None:
     gamma_prev = np.r_[0.0, p.gamma[:-1]]
     b_prev = np.r_[0.0, p.b[:-1]]
     rebuilt = (
-        rot_z(-gamma_prev) @ trans_z(-b_prev) @ dh_link(dh.theta, dh.d, dh.a, dh.alpha)
-        @ rot_z(p.gamma) @ trans_z(p.b)
+        rot_z(-gamma_prev)
+        @ trans_z(-b_prev)
+        @ dh_link(dh.theta, dh.d, dh.a, dh.alpha)
+        @ rot_z(p.gamma)
+        @ trans_z(p.b)
     )  # Eq. (3.8)
     np.testing.assert_allclose(rebuilt, B, atol=1e-10)
 

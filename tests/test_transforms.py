@@ -42,7 +42,9 @@ def test_batch_equals_loop(rng: np.random.Generator) -> None:
 
 def test_invert_transform(rng: np.random.Generator) -> None:
     T = random_rigid(rng, 1000)
-    np.testing.assert_allclose(tf.invert_transform(T) @ T, np.tile(np.eye(4), (1000, 1, 1)), atol=1e-12)
+    np.testing.assert_allclose(
+        tf.invert_transform(T) @ T, np.tile(np.eye(4), (1000, 1, 1)), atol=1e-12
+    )
     np.testing.assert_allclose(tf.invert_transform(T), np.linalg.inv(T), atol=1e-12)
 
 
@@ -53,7 +55,9 @@ def test_xyz_rpy_round_trip(rng: np.random.Generator) -> None:
     # Gimbal lock: ry = ±90° still round-trips.
     for ry in (np.pi / 2, -np.pi / 2):
         T1 = tf.transform_from_xyz_rpy([1, 2, 3], [0.3, ry, -0.7])
-        np.testing.assert_allclose(tf.transform_from_xyz_rpy(*tf.xyz_rpy_from_transform(T1)), T1, atol=1e-12)
+        np.testing.assert_allclose(
+            tf.transform_from_xyz_rpy(*tf.xyz_rpy_from_transform(T1)), T1, atol=1e-12
+        )
 
 
 def test_pose_error_and_differential_motion(rng: np.random.Generator) -> None:

@@ -49,7 +49,9 @@ def matrix_from_smodel(
     gamma: ArrayLike,
     b: ArrayLike,
 ) -> Array:
-    """S-Model link matrix ``B = Rot(z,β) Trans(0,0,d̄) Trans(ā,0,0) Rot(x,ᾱ) Rot(z,γ) Trans(0,0,b)``.
+    """S-Model link matrix (3.2).
+
+    ``B = Rot(z,β) Trans(0,0,d̄) Trans(ā,0,0) Rot(x,ᾱ) Rot(z,γ) Trans(0,0,b)``.
 
     Parameters
     ----------
@@ -119,7 +121,9 @@ def smodel_from_matrix(B: ArrayLike) -> SModelParams:
     a_bar = px * cb + py * sb  # Eq. (3.30)
     sa = np.sin(alpha)
     safe = np.abs(sa) >= PARALLEL_TOL
-    b = np.where(safe, (px * sb - py * cb) / np.where(safe, sa, 1.0), 0.0)  # Eq. (3.32), ERRATA sign
+    b = np.where(
+        safe, (px * sb - py * cb) / np.where(safe, sa, 1.0), 0.0
+    )  # Eq. (3.32), ERRATA sign
     d_bar = pz - b * np.cos(alpha)  # Eq. (3.33)
     return SModelParams(
         beta=np.asarray(beta),

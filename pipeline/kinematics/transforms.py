@@ -190,8 +190,11 @@ def transform_from_xyz_rpy(xyz: ArrayLike, rpy: ArrayLike) -> Array:
     """
     p = np.asarray(xyz, float)
     r = np.asarray(rpy, float)
-    return trans(p[..., 0], p[..., 1], p[..., 2]) @ rot_z(r[..., 2]) @ rot_y(r[..., 1]) @ rot_x(
-        r[..., 0]
+    return (
+        trans(p[..., 0], p[..., 1], p[..., 2])
+        @ rot_z(r[..., 2])
+        @ rot_y(r[..., 1])
+        @ rot_x(r[..., 0])
     )
 
 

@@ -8,7 +8,13 @@ from pathlib import Path
 from pipeline.errors import UnknownRobotError
 from pipeline.robots.description import RobotDescription, description_from_dict, load_description
 
-__all__ = ["RobotDescription", "builtin_names", "get_robot", "load_description", "description_from_dict"]
+__all__ = [
+    "RobotDescription",
+    "builtin_names",
+    "get_robot",
+    "load_description",
+    "description_from_dict",
+]
 
 
 def builtin_names() -> list[str]:

@@ -180,7 +180,9 @@ def description_from_dict(data: dict[str, Any], source: str = "<dict>") -> Robot
         jtype = _field(jt, "type", where, str)
         if jtype not in JOINT_TYPES:
             raise RobotDescriptionError(
-                f"{where}: field 'type' is unknown", expected=" or ".join(JOINT_TYPES), got=repr(jtype)
+                f"{where}: field 'type' is unknown",
+                expected=" or ".join(JOINT_TYPES),
+                got=repr(jtype),
             )
         limits = _field(jt, "limits", where, list)
         if len(limits) != 2 or not all(isinstance(x, int | float) for x in limits):
@@ -200,7 +202,10 @@ def description_from_dict(data: dict[str, Any], source: str = "<dict>") -> Robot
             )
         dh = _field(jt, "dh", where, dict)
         row = DHRow(
-            *(float(_field(dh, key, f"{where}.dh", float)) for key in ("theta_deg", "d_cm", "a_cm", "alpha_deg"))
+            *(
+                float(_field(dh, key, f"{where}.dh", float))
+                for key in ("theta_deg", "d_cm", "a_cm", "alpha_deg")
+            )
         )
         joints.append(JointSpec(jname, jtype, float(limits[0]), float(limits[1]), res, row))
     return RobotDescription(

@@ -35,7 +35,23 @@ from pipeline.kinematics.transforms import (
 
 #: Table 7-2: nominal design parameters x1..x15 (cm, or degrees for x3, x10, x12, x13).
 X_NOMINAL = np.array(
-    [58.5, 8.9, -90.0, 17.75, 2.5, 43.18, -2.032, -33.32, -5.341, 90.0, 10.05, -90.0, 90.0, 4.445, 1.27]
+    [
+        58.5,
+        8.9,
+        -90.0,
+        17.75,
+        2.5,
+        43.18,
+        -2.032,
+        -33.32,
+        -5.341,
+        90.0,
+        10.05,
+        -90.0,
+        90.0,
+        4.445,
+        1.27,
+    ]
 )
 _X_ANGULAR = {3, 10, 12, 13}
 
@@ -87,31 +103,57 @@ def simulator_chain(eps: ArrayLike | None = None) -> SerialChain:
         return float(x[k - 1])
 
     K0 = chain_product(  # Eq. (7.2)
-        trans(eps_(1), eps_(2), eps_(3)), rot_x(eps_(4)), rot_y(eps_(5)), trans_z(x_(1)),
-        rot_x(eps_(6)), rot_y(eps_(7)), rot_z(eps_(8)),
+        trans(eps_(1), eps_(2), eps_(3)),
+        rot_x(eps_(4)),
+        rot_y(eps_(5)),
+        trans_z(x_(1)),
+        rot_x(eps_(6)),
+        rot_y(eps_(7)),
+        rot_z(eps_(8)),
     )
     K1 = chain_product(  # Eq. (7.3), after Rot(z, θ1)
-        trans_z(eps_(9)), rot_x(eps_(10)), rot_y(eps_(11)), trans(eps_(12), 0.0, x_(2)),
-        rot_x(eps_(13) + x_(3)), trans_z(x_(4)), rot_z(eps_(14)),
+        trans_z(eps_(9)),
+        rot_x(eps_(10)),
+        rot_y(eps_(11)),
+        trans(eps_(12), 0.0, x_(2)),
+        rot_x(eps_(13) + x_(3)),
+        trans_z(x_(4)),
+        rot_z(eps_(14)),
     )
     K2 = chain_product(  # Eq. (7.4), after Rot(z, θ2)
-        trans_z(eps_(15) + x_(5)), rot_x(eps_(16)), rot_y(eps_(17)),
-        trans(eps_(18) + x_(6), 0.0, 0.0), rot_x(eps_(19)), rot_y(eps_(20)), rot_z(eps_(21)),
+        trans_z(eps_(15) + x_(5)),
+        rot_x(eps_(16)),
+        rot_y(eps_(17)),
+        trans(eps_(18) + x_(6), 0.0, 0.0),
+        rot_x(eps_(19)),
+        rot_y(eps_(20)),
+        rot_z(eps_(21)),
     )
     K3 = chain_product(  # Eq. (7.5), after Rot(z, θ3)
-        trans_z(eps_(22)), rot_x(eps_(23)), rot_y(eps_(24)),
-        trans(x_(7) + eps_(25), x_(8) + eps_(26), x_(9) + eps_(27)), rot_x(x_(10) + eps_(28)),
-        rot_y(eps_(29)), rot_z(eps_(30)),
+        trans_z(eps_(22)),
+        rot_x(eps_(23)),
+        rot_y(eps_(24)),
+        trans(x_(7) + eps_(25), x_(8) + eps_(26), x_(9) + eps_(27)),
+        rot_x(x_(10) + eps_(28)),
+        rot_y(eps_(29)),
+        rot_z(eps_(30)),
     )
     K4 = chain_product(  # Eq. (7.6), after Rot(z, θ4)
-        trans(eps_(31), 0.0, x_(11) + eps_(32)), rot_x(x_(12) + eps_(33)), rot_z(eps_(34)),
+        trans(eps_(31), 0.0, x_(11) + eps_(32)),
+        rot_x(x_(12) + eps_(33)),
+        rot_z(eps_(34)),
     )
     K5 = chain_product(  # Eq. (7.7), after Rot(z, θ5)
-        trans_z(eps_(35)), rot_x(x_(13) + eps_(36)), trans(eps_(37), 0.0, x_(14)), rot_z(eps_(38)),
+        trans_z(eps_(35)),
+        rot_x(x_(13) + eps_(36)),
+        trans(eps_(37), 0.0, x_(14)),
+        rot_z(eps_(38)),
     )
     K6 = trans_z(x_(15) + eps_(39))  # Eq. (7.8), after Rot(z, θ6)
     batch = e.shape[:-1]
-    links = np.stack([np.broadcast_to(K, (*batch, 4, 4)) for K in (K1, K2, K3, K4, K5, K6)], axis=-3)
+    links = np.stack(
+        [np.broadcast_to(K, (*batch, 4, 4)) for K in (K1, K2, K3, K4, K5, K6)], axis=-3
+    )
     return SerialChain(links=links, prismatic=np.zeros(6, bool), base=K0)
 
 
@@ -224,7 +266,10 @@ def branch_of(q: ArrayLike) -> Array:
 
 
 def inverse_kinematics(
-    T: ArrayLike, tool: ArrayLike | None = None, base: ArrayLike | None = None, q4_singular: float = 0.0
+    T: ArrayLike,
+    tool: ArrayLike | None = None,
+    base: ArrayLike | None = None,
+    q4_singular: float = 0.0,
 ) -> tuple[Array, Array]:
     """All eight closed-form inverse solutions of the Puma 560 design model.
 
