@@ -81,5 +81,49 @@ def fk(
         typer.echo(f"warning: outside joint limits: {', '.join(pose.outside_limits)}", err=True)
 
 
+@app.command()
+@_errors_to_exit
+def simulate(
+    name: Annotated[str, typer.Argument(help="Session name (sessions/NAME) or a folder path.")],
+    robot: Annotated[str, typer.Option(help="Built-in robot or .toml description.")] = "puma560",
+    seed: Annotated[int, typer.Option(help="Seed of every random draw.")] = 1,
+    sigma_p: Annotated[float, typer.Option(help="Positional manufacturing error σ_p (cm).")] = 0.03,
+    sigma_o: Annotated[float, typer.Option(help="Orientational error σ_o (deg).")] = 0.03,
+    sigma_e: Annotated[float, typer.Option(help="Encoder calibration error σ_e (deg).")] = 0.3,
+    noise_factor: Annotated[
+        float, typer.Option(help="Multiplier of slant-range noise (7.9).")
+    ] = 1.0,
+    points: Annotated[int, typer.Option(help="Positions per joint sweep, N_i.")] = 100,
+    repeats: Annotated[int, typer.Option(help="Digitize cycles per position, N_avg.")] = 10,
+    faults: Annotated[str, typer.Option(help="Comma-separated: bias, dropouts, outliers.")] = "",
+    wac_error_cm: Annotated[
+        float, typer.Option(help="Error of the recorded W_AC calibration (cm), Section 7.3.")
+    ] = 0.0,
+    noiseless: Annotated[
+        bool, typer.Option(help="No range noise or quantization, uniform 70 °F, perfect servo.")
+    ] = False,
+) -> None:
+    """Record a simulated session: recording.mcap plus rig-truth.json."""
+    from pathlib import Path
+
+    from pipeline.rig.simulate import SimulationOptions, simulate_session
+    from pipeline.rig.true_robot import ErrorSigmas
+
+    folder = Path(name) if ("/" in name or Path(name).is_absolute()) else Path("sessions") / name
+    opts = SimulationOptions(
+        robot=robot,
+        seed=seed,
+        sigmas=ErrorSigmas(sigma_p, sigma_o, sigma_e),
+        noise_factor=noise_factor,
+        points=points,
+        repeats=repeats,
+        faults=tuple(f.strip() for f in faults.split(",") if f.strip()),
+        wac_error_cm=wac_error_cm,
+        noiseless=noiseless,
+    )
+    path = simulate_session(folder, opts)
+    typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     app()

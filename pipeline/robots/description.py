@@ -217,6 +217,31 @@ def description_from_dict(data: dict[str, Any], source: str = "<dict>") -> Robot
     )
 
 
+def description_to_dict(robot: RobotDescription) -> dict[str, Any]:
+    """The TOML document of ``robot`` as a dict; inverse of :func:`description_from_dict`."""
+    return {
+        "name": robot.name,
+        "notes": robot.notes,
+        "base": {"xyz_cm": list(robot.base.xyz_cm), "rpy_deg": list(robot.base.rpy_deg)},
+        "tool": {"xyz_cm": list(robot.tool.xyz_cm), "rpy_deg": list(robot.tool.rpy_deg)},
+        "joints": [
+            {
+                "name": j.name,
+                "type": j.type,
+                "limits": [j.lower, j.upper],
+                "encoder_resolution": j.encoder_resolution,
+                "dh": {
+                    "theta_deg": j.dh.theta_deg,
+                    "d_cm": j.dh.d_cm,
+                    "a_cm": j.dh.a_cm,
+                    "alpha_deg": j.dh.alpha_deg,
+                },
+            }
+            for j in robot.joints
+        ],
+    }
+
+
 def load_description(path: str | Path) -> RobotDescription:
     """Read and validate a TOML robot description file."""
     p = Path(path)
