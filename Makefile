@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SESSION ?= robot3
 
-.PHONY: install test lint bench identify clean
+.PHONY: install test lint bench identify sessions clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,6 +24,10 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m bench
+
+# The seven committed sessions: seeds 1-7, every other option at its default.
+sessions: $(STAMP)
+	for i in 1 2 3 4 5 6 7; do $(BIN)/pipeline simulate robot$$i --seed $$i || exit 1; done
 
 identify: $(STAMP)
 	$(BIN)/pipeline identify sessions/$(SESSION)
