@@ -36,3 +36,19 @@ class SchemaError(ArmsigError):
 
 class KinematicsError(ArmsigError):
     """Bad arguments to a kinematics routine (shapes, joint counts)."""
+
+
+class FeatureError(ArmsigError):
+    """Target points cannot define a feature (too few, non-finite, or degenerate)."""
+
+
+class RecordingError(ArmsigError):
+    """A session recording is missing, foreign, truncated, or breaks the channel contract."""
+
+
+class StageError(ArmsigError):
+    """A pipeline stage cannot run on its inputs (names the session and the stage)."""
+
+
+class SessionLockedError(ArmsigError):
+    """Another pipeline run holds the session's lock."""

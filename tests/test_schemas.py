@@ -35,7 +35,9 @@ def _joint_states(**overrides):
         "sweep": [1],
         "step": [0],
         "joint": [1],
+        "q_cmd_deg": [10.0],
         "q_deg": [10.0],
+        "q_cmd_cm": [None],
         "q_cm": [None],
         "t_s": [0.5],
     }
@@ -44,17 +46,17 @@ def _joint_states(**overrides):
 
 
 def test_validate_casts_and_checks() -> None:
-    t = schemas.validate_table(_joint_states(), "joint_states")
+    t = schemas.validate_table(_joint_states(), "joints")
     assert t.schema.field("q_deg").metadata[b"unit"] == b"deg"
     assert t.schema.field("sweep").type == pa.int32()
 
 
 def test_validate_rejects_mismatch() -> None:
     with pytest.raises(SchemaError, match="columns do not match"):
-        schemas.validate_table(_joint_states().drop(["t_s"]), "joint_states")
+        schemas.validate_table(_joint_states().drop(["t_s"]), "joints")
     with pytest.raises(SchemaError, match="nulls"):
-        schemas.validate_table(_joint_states(t_s=[None]), "joint_states")
+        schemas.validate_table(_joint_states(t_s=[None]), "joints")
     with pytest.raises(SchemaError, match="cannot cast"):
-        schemas.validate_table(_joint_states(sweep=["one"]), "joint_states")
+        schemas.validate_table(_joint_states(sweep=["one"]), "joints")
     with pytest.raises(SchemaError, match="no schema file"):
         schemas.arrow_schema("no_such_table")

@@ -112,8 +112,12 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions) -> Path:
         q_reached = q_cmd.copy()
         q_enc = q_cmd.copy()
     else:
-        # Joint servo: steady-state error within ±1 encoder count; encoder quantizes.
+        # Joint servo: each joint that is commanded to move settles within ±1 encoder
+        # count of its command; a joint that is not commanded to move stays put.
         q_reached = q_cmd + rng_servo.uniform(-1.0, 1.0, q_cmd.shape) * res
+        for k in range(1, len(q_cmd)):
+            held = q_cmd[k] == q_cmd[k - 1]
+            q_reached[k, held] = q_reached[k - 1, held]
         q_enc = np.round(q_reached / res) * res
 
     # Timing: move, settle, N_avg cycles; a pause to swap fixtures between sweeps.

@@ -1,0 +1,147 @@
+"""From identified frames to a signature model (Sections 4.3.3-4.3.5).
+
+The signature model is (ERRATA.md)
+``T(q) = S̄_0 · Π_i M_i(q_i − q̄_i^s) · B_i · tool`` with ``B_i = S̄_{i−1}⁻¹ S̄_i``
+(4.51) and ``M_i`` a rotation about (or translation along) z. It is a
+:class:`SerialChain` with ``base = S̄_0``, ``links = B``, ``joint_offsets = q̄^s``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.kinematics.chain import SerialChain
+from pipeline.kinematics.smodel import SModelParams, smodel_from_matrix
+from pipeline.kinematics.transforms import Array, ArrayLike, invert_transform, rot_z, trans_z
+
+
+def frame_from_features(axis: ArrayLike, origin: ArrayLike, toward: ArrayLike) -> Array:
+    """S-Model link frame ``S̄_i`` from joint ``i+1``'s features, (4.49)-(4.50).
+
+    Parameters
+    ----------
+    axis : array_like, shape (3,)
+        Unit plane normal (revolute) or line direction (prismatic), in the
+        positive sense of the joint.
+    origin : array_like, shape (3,)
+        Centre of rotation (revolute) or a point on the line (prismatic), cm.
+    toward : array_like, shape (3,)
+        A point the X axis points to after projection onto the plane through
+        ``origin`` normal to ``axis``: the first target position (4.50).
+
+    Returns
+    -------
+    S : ndarray, shape (4, 4)
+    """
+    a = np.asarray(axis, float)
+    a = a / np.linalg.norm(a)
+    p = np.asarray(origin, float)
+    v = np.asarray(toward, float) - p
+    n = v - (v @ a) * a  # Eq. (4.50): the first target position projected onto the plane
+    n = n / np.linalg.norm(n)
+    S = np.eye(4)
+    S[:3, 0] = n
+    S[:3, 1] = np.cross(a, n)  # o = a × n
+    S[:3, 2] = a
+    S[:3, 3] = p  # Eq. (4.49)
+    return S
+
+
+def links_from_frames(frames: ArrayLike) -> Array:
+    """``B_i = S̄_{i−1}⁻¹ S̄_i`` (4.51) for frames of shape (..., n+1, 4, 4) -> (..., n, 4, 4)."""
+    F = np.asarray(frames, float)
+    B: Array = invert_transform(F[..., :-1, :, :]) @ F[..., 1:, :, :]
+    return B
+
+
+def signature_chain(
+    frames: ArrayLike, q_signature: ArrayLike, prismatic: ArrayLike, tool: ArrayLike | None = None
+) -> SerialChain:
+    """The signature model as a serial chain.
+
+    Parameters
+    ----------
+    frames : array_like, shape (n+1, 4, 4)
+        ``S̄_0 … S̄_n`` in the sensor frame (cm).
+    q_signature : array_like, shape (n,)
+        Encoder readings ``q̄^s`` at which each ``S̄_i`` holds (rad / cm).
+    prismatic : array_like of bool, shape (n,)
+    tool : array_like, shape (4, 4), optional
+        Tool in the last S-Model frame ``S_n``.
+    """
+    F = np.asarray(frames, float)
+    return SerialChain(
+        links=links_from_frames(F),
+        prismatic=np.asarray(prismatic, bool),
+        base=F[0],
+        tool=np.eye(4) if tool is None else np.asarray(tool, float),
+        joint_offsets=np.asarray(q_signature, float),
+    )
+
+
+@dataclass(frozen=True)
+class PseudoDH:
+    """Pseudo D-H model (4.71)-(4.73) that reproduces a signature chain exactly.
+
+    ``A_i = Rot(z, θ_i) Trans(0, 0, d_i) Trans(a_i, 0, 0) Rot(x, α_i)`` where for a
+    revolute joint ``θ_i = q_i + q_offset_i`` and for a prismatic joint
+    ``d_i = q_i + q_offset_i`` (q = encoder reading). ``T(q) = base · Π A_i · tool``.
+    Arrays of shape (n,); angles in radians, lengths in cm.
+    """
+
+    q_offset: Array
+    theta: Array  # constant θ_i of prismatic joints (NaN for revolute)
+    d: Array  # constant d_i of revolute joints (NaN for prismatic)
+    a: Array
+    alpha: Array
+    base: Array
+    tool: Array
+    smodel: SModelParams
+
+
+def pseudo_dh_from_chain(chain: SerialChain) -> PseudoDH:
+    """Encoder offsets (4.59)/(4.60) and D-H parameters (3.12)-(3.15) of a signature chain.
+
+    ``θ_i = β_i + γ_{i−1}`` and ``d_i = d̄_i + b_{i−1}`` with ``γ_0 = b_0 = 0``
+    because the identified base frame is ``S_0`` itself (4.71); the leftover
+    ``Rot(z, γ_n) Trans(0, 0, b_n)`` of the last link moves into the tool.
+    For prismatic joints the result is the *modified* D-H model (``a_i ≠ 0``).
+    """
+    sm = smodel_from_matrix(chain.links)
+    joint_offsets = np.asarray(chain.joint_offsets, float)
+    gamma_prev = np.concatenate([[0.0], sm.gamma[:-1]])
+    b_prev = np.concatenate([[0.0], sm.b[:-1]])
+    theta_dh = sm.beta + gamma_prev  # Eq. (3.12)
+    d_dh = sm.d_bar + b_prev  # Eq. (3.13)
+    pris = chain.prismatic
+    # Eq. (4.59): offset = D-H value at q^s minus the encoder reading there; (4.72)/(4.73)
+    q_offset = np.where(pris, d_dh, theta_dh) - joint_offsets
+    tail = rot_z(sm.gamma[-1]) @ trans_z(sm.b[-1])
+    return PseudoDH(
+        q_offset=q_offset,
+        theta=np.where(pris, theta_dh, np.nan),
+        d=np.where(pris, np.nan, d_dh),
+        a=np.asarray(sm.a_bar),  # Eq. (3.14)
+        alpha=np.asarray(sm.alpha_bar),  # Eq. (3.15)
+        base=np.asarray(chain.base, float),
+        tool=tail @ np.asarray(chain.tool, float),
+        smodel=sm,
+    )
+
+
+def chain_from_pseudo_dh(p: PseudoDH, prismatic: ArrayLike) -> SerialChain:
+    """The pseudo D-H model as a serial chain (for checking it against the signature)."""
+    from pipeline.kinematics.chain import chain_from_dh
+
+    pris = np.asarray(prismatic, bool)
+    return chain_from_dh(
+        theta=np.where(pris, p.theta, p.q_offset),
+        d=np.where(pris, p.q_offset, p.d),
+        a=p.a,
+        alpha=p.alpha,
+        prismatic=pris,
+        base=p.base,
+        tool=p.tool,
+    )

@@ -1,0 +1,206 @@
+"""Stage ``features``: plane, centre or line of every joint (Section 4.3.2) and their accuracy."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from pipeline.errors import StageError
+from pipeline.features.accuracy import revolute_accuracy
+from pipeline.features.circle import fit_circle
+from pipeline.features.line import fit_line
+from pipeline.features.plane import fit_plane_eigen, fit_plane_lsq, frame_about, orient_normal
+from pipeline.stages.base import Stage
+from pipeline.stages.frames import joint_readings
+from pipeline.stages.session import session_robot
+
+PLANE_METHODS = ("lsq", "eigen")
+
+
+@dataclass(frozen=True)
+class Params:
+    """``plane_method``: which plane fit defines the joint axis (both are reported)."""
+
+    plane_method: str = "lsq"
+
+
+def sweep_points(tri: pa.Table, joints: pa.Table, joint: int, n: int, prismatic: np.ndarray):
+    """Usable target positions (N, 3) of sweep ``joint`` by increasing reading; readings (N,)."""
+    sel = tri.filter(pa.compute.equal(tri.column("sweep"), joint))
+    q = joint_readings(joints, joint, n, prismatic)[:, joint - 1]
+    p = np.stack(
+        [sel.column(c).to_numpy(zero_copy_only=False) for c in ("x_cm", "y_cm", "z_cm")], axis=1
+    )
+    p = p.astype(float)
+    if len(q) != len(p):
+        raise StageError(
+            f"sweep {joint}: {len(p)} positions but {len(q)} joint states",
+            fix="re-record the sweep; the recording is inconsistent",
+        )
+    ok = ~np.isnan(p).any(axis=1)
+    order = np.argsort(q[ok], kind="stable")
+    return p[ok][order], q[ok][order]
+
+
+def _nan(v: Any) -> float | None:
+    return None if v is None or not np.isfinite(v) else float(v)
+
+
+def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
+    if params.plane_method not in PLANE_METHODS:
+        raise StageError(
+            f"unknown plane_method {params.plane_method!r}", expected=" or ".join(PLANE_METHODS)
+        )
+    robot = session_robot(inputs["session"])
+    n, pris = robot.n_joints, robot.prismatic
+    rows = []
+    for i in range(1, n + 1):
+        p, q = sweep_points(inputs["triangulate"], inputs["joints"], i, n, pris)
+        if len(p) < 3:
+            raise StageError(
+                f"sweep {i}: {len(p)} usable target positions",
+                expected="at least 3 (the thesis used 5 to 100)",
+                fix=f"re-record sweep {i} with more positions, or check its echoes in "
+                "stages/compensate.arrow",
+            )
+        row: dict[str, Any] = {"joint": i, "type": robot.joints[i - 1].type, "n_points": len(p)}
+        if pris[i - 1]:
+            line = fit_line(p)
+            x_dir = frame_about(line.direction)[:, 0]
+            row.update(
+                plane_method="line",
+                axis=line.direction,
+                eigen=None,
+                lsq=None,
+                angle=None,
+                center=line.point,
+                radius=None,
+                first=line.point + x_dir,
+                sweep_deg=None,
+                travel_cm=float(np.ptp(line.travel)),
+                sigma_normal_cm=float(np.std(line.residuals, ddof=1)),
+                sigma_radial_cm=None,
+                sigma_e_deg=None,
+                sigma_f_deg=None,
+                sigma_delta_deg=None,
+                sigma_delta_empirical_deg=None,
+                sigma_c_cm=None,
+                warnings=list(line.warnings),
+            )
+        else:
+            eig = fit_plane_eigen(p)
+            lsq = fit_plane_lsq(p)
+            n_eig = orient_normal(eig.normal, p)
+            n_lsq = orient_normal(lsq.normal, p)
+            plane = lsq if params.plane_method == "lsq" else eig
+            axis = n_lsq if params.plane_method == "lsq" else n_eig
+            circle = fit_circle(p, plane)
+            acc = revolute_accuracy(p, plane, circle)
+            angle = np.degrees(np.arctan2(np.linalg.norm(np.cross(n_eig, n_lsq)), n_eig @ n_lsq))
+            row.update(
+                plane_method=params.plane_method,
+                axis=axis,
+                eigen=n_eig,
+                lsq=n_lsq,
+                angle=float(angle),
+                center=circle.center,
+                radius=float(circle.radius),
+                first=p[0],
+                sweep_deg=float(np.degrees(circle.sweep)),
+                travel_cm=None,
+                sigma_normal_cm=float(np.sqrt(acc.normal_variance)),
+                sigma_radial_cm=float(np.sqrt(acc.radial_variance)),
+                sigma_e_deg=float(np.degrees(acc.sigma_E)),
+                sigma_f_deg=float(np.degrees(acc.sigma_F)),
+                sigma_delta_deg=float(np.degrees(acc.sigma_delta)),
+                sigma_delta_empirical_deg=_nan(np.degrees(acc.sigma_delta_empirical)),
+                sigma_c_cm=_nan(acc.sigma_c),
+                warnings=list(dict.fromkeys([*plane.warnings, *circle.warnings])),
+            )
+        rows.append(row)
+    out: dict[str, list[Any]] = {}
+
+    def put(name: str, value: Any) -> None:
+        out.setdefault(name, []).append(value)
+
+    for r in rows:
+        put("joint", r["joint"])
+        put("type", r["type"])
+        put("n_points", r["n_points"])
+        put("plane_method", r["plane_method"])
+        for pre, key in (("axis", "axis"), ("eigen_axis", "eigen"), ("lsq_axis", "lsq")):
+            for k, c in enumerate("xyz"):
+                put(f"{pre}_{c}", None if r[key] is None else float(r[key][k]))
+        put("methods_angle_deg", r["angle"])
+        for pre, key in (("center", "center"), ("first", "first")):
+            for k, c in enumerate("xyz"):
+                put(f"{pre}_{c}_cm", float(r[key][k]))
+        put("radius_cm", r["radius"])
+        for name in (
+            "sweep_deg",
+            "travel_cm",
+            "sigma_normal_cm",
+            "sigma_radial_cm",
+            "sigma_e_deg",
+            "sigma_f_deg",
+            "sigma_delta_deg",
+            "sigma_delta_empirical_deg",
+            "sigma_c_cm",
+        ):
+            put(name, r[name])
+        put("warnings", "; ".join(r["warnings"]))
+    order = [
+        "joint",
+        "type",
+        "n_points",
+        "plane_method",
+        "axis_x",
+        "axis_y",
+        "axis_z",
+        "eigen_axis_x",
+        "eigen_axis_y",
+        "eigen_axis_z",
+        "lsq_axis_x",
+        "lsq_axis_y",
+        "lsq_axis_z",
+        "methods_angle_deg",
+        "center_x_cm",
+        "center_y_cm",
+        "center_z_cm",
+        "radius_cm",
+        "first_x_cm",
+        "first_y_cm",
+        "first_z_cm",
+        "sweep_deg",
+        "travel_cm",
+        "sigma_normal_cm",
+        "sigma_radial_cm",
+        "sigma_e_deg",
+        "sigma_f_deg",
+        "sigma_delta_deg",
+        "sigma_delta_empirical_deg",
+        "sigma_c_cm",
+        "warnings",
+    ]
+    return pa.table(
+        {
+            k: pa.array(out[k], type=pa.float64())
+            if k not in ("joint", "type", "n_points", "plane_method", "warnings")
+            else out[k]
+            for k in order
+        }
+    )
+
+
+STAGE = Stage(
+    "features",
+    1,
+    ("triangulate", "joints", "session"),
+    Params(),
+    compute,
+    "plane, centre and line of every joint, with accuracy",
+)

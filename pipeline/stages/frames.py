@@ -1,0 +1,145 @@
+"""Stage ``frames``: S-Model link frames S̄_0 … S̄_n from the features (4.48)-(4.50), and the tool.
+
+``S̄_{i-1}`` comes from joint i's features: origin at the centre of rotation,
+Z along the oriented plane normal, X toward the first target position projected
+onto the plane (revolute); origin at the mean target position and Z along the
+line of translation (prismatic, Figure 4-6). ``S̄_n = S̄_{n-1}``.
+
+Signature readings: ``S̄_i`` (i < n) is measured while joint i holds still
+during sweep i+1, so q̄_i^s is joint i's reading there (median over the sweep);
+q̄_n^s is joint n's reading at the tool measurement, which also fixes the tool:
+``tool = T_sig(q_tool)^{-1} · p_tool`` with the orientation of ``S_n``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from pipeline.errors import StageError
+from pipeline.kinematics.chain import forward_kinematics
+from pipeline.kinematics.signature import frame_from_features, signature_chain
+from pipeline.stages.base import NoParams, Stage
+from pipeline.stages.recording import TOOL_SWEEP
+from pipeline.stages.session import session_robot
+from pipeline.units import joints_to_boundary, joints_to_internal
+
+MATRIX_COLUMNS = ("nx", "ny", "nz", "ox", "oy", "oz", "ax", "ay", "az", "px_cm", "py_cm", "pz_cm")
+
+
+def matrices_to_columns(T: np.ndarray) -> dict[str, np.ndarray]:
+    """(m, 4, 4) transforms -> the twelve (4.49)/(4.58) columns."""
+    cols = {}
+    for k, name in enumerate(MATRIX_COLUMNS):
+        cols[name] = T[:, k % 3, k // 3]
+    return cols
+
+
+def matrices_from_columns(table: pa.Table) -> np.ndarray:
+    """Inverse of :func:`matrices_to_columns`, shape (m, 4, 4)."""
+    m = table.num_rows
+    T = np.tile(np.eye(4), (m, 1, 1))
+    for k, name in enumerate(MATRIX_COLUMNS):
+        T[:, k % 3, k // 3] = table.column(name).to_numpy()
+    return T
+
+
+def joint_readings(joints: pa.Table, sweep: int, n: int, prismatic: np.ndarray) -> np.ndarray:
+    """Encoder readings (K, n) of the configurations of one sweep, boundary units."""
+    sel = joints.filter(pa.compute.equal(joints.column("sweep"), sweep))
+    if sel.num_rows == 0:
+        return np.zeros((0, n))
+    deg = sel.column("q_deg").to_numpy(zero_copy_only=False)
+    cm = sel.column("q_cm").to_numpy(zero_copy_only=False)
+    q = np.where(np.tile(prismatic, sel.num_rows // n), cm, deg)
+    return q.astype(float).reshape(-1, n)
+
+
+def signature_readings(joints: pa.Table, prismatic: np.ndarray, source: str) -> np.ndarray:
+    """q̄^s (n,) in boundary units, per the module docstring."""
+    n = len(prismatic)
+    qs = np.zeros(n)
+    for i in range(1, n + 1):
+        sweep = i + 1 if i < n else TOOL_SWEEP
+        q = joint_readings(joints, sweep, n, prismatic)
+        if len(q) == 0:
+            what = f"sweep {sweep}" if sweep else "the tool measurement"
+            raise StageError(
+                f"{source}: no joint states for {what}",
+                expected=f"every joint sweep 1..{n} and the tool measurement",
+                fix="re-record the missing sweep",
+            )
+        qs[i - 1] = np.median(q[:, i - 1])
+    return qs
+
+
+def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
+    robot = session_robot(inputs["session"])
+    n, pris = robot.n_joints, robot.prismatic
+    feat = inputs["features"]
+    if feat.num_rows != n:
+        raise StageError(
+            "features: not one row per joint", expected=f"{n} rows", got=str(feat.num_rows)
+        )
+    F = np.zeros((n + 1, 4, 4))
+    for row in feat.to_pylist():
+        i = row["joint"]
+        axis = [row["axis_x"], row["axis_y"], row["axis_z"]]
+        origin = [row["center_x_cm"], row["center_y_cm"], row["center_z_cm"]]
+        toward = [row["first_x_cm"], row["first_y_cm"], row["first_z_cm"]]
+        F[i - 1] = frame_from_features(axis, origin, toward)  # Eq. (4.49), (4.50)
+    F[n] = F[n - 1]  # S̄_n = S̄_{n-1}
+    qs = signature_readings(inputs["joints"], pris, "joints")
+    tri = inputs["triangulate"]
+    tool_rows = tri.filter(pa.compute.equal(tri.column("sweep"), TOOL_SWEEP))
+    if tool_rows.num_rows == 0 or tool_rows.column("x_cm").null_count:
+        raise StageError(
+            "no usable tool-probe measurement",
+            expected="sweep 'tool' with at least one usable cycle",
+            fix="re-record the tool measurement at the signature configuration",
+        )
+    p_tool = np.array([tool_rows.column(c)[0].as_py() for c in ("x_cm", "y_cm", "z_cm")])
+    q_tool = joint_readings(inputs["joints"], TOOL_SWEEP, n, pris)[0]
+    chain = signature_chain(F, joints_to_internal(qs, pris), pris)
+    flange = forward_kinematics(chain, joints_to_internal(q_tool, pris))
+    tool = np.eye(4)
+    tool[:3, 3] = flange[:3, :3].T @ (p_tool - flange[:3, 3])
+    T = np.concatenate([F, tool[None]], axis=0)
+    q_deg = np.full(n + 2, np.nan)
+    q_cm = np.full(n + 2, np.nan)
+    q_deg[1 : n + 1] = np.where(pris, np.nan, qs)
+    q_cm[1 : n + 1] = np.where(pris, qs, np.nan)
+    return pa.table(
+        {
+            "frame": np.arange(n + 2, dtype=np.int32),
+            "kind": ["link"] * (n + 1) + ["tool"],
+            "from_joint": np.r_[np.arange(1, n + 1), 0, 0].astype(np.int32),
+            **matrices_to_columns(T),
+            "q_signature_deg": pa.array(q_deg, mask=np.isnan(q_deg)),
+            "q_signature_cm": pa.array(q_cm, mask=np.isnan(q_cm)),
+        }
+    )
+
+
+def chain_from_frames(frames: pa.Table, prismatic: np.ndarray):  # -> SerialChain
+    """The signature chain (with tool) rebuilt from the ``frames`` table."""
+    T = matrices_from_columns(frames)
+    n = len(prismatic)
+    deg = frames.column("q_signature_deg").to_numpy(zero_copy_only=False)[1 : n + 1]
+    cm = frames.column("q_signature_cm").to_numpy(zero_copy_only=False)[1 : n + 1]
+    qs = np.where(prismatic, cm, deg).astype(float)
+    return signature_chain(T[: n + 1], joints_to_internal(qs, prismatic), prismatic, T[n + 1])
+
+
+STAGE = Stage(
+    "frames",
+    1,
+    ("features", "joints", "triangulate", "session"),
+    NoParams(),
+    compute,
+    "S-Model frames S̄_0..S̄_n and the tool",
+)
+del joints_to_boundary

@@ -1,0 +1,298 @@
+"""Run the stages of a session, caching each in ``stages/<name>.arrow``.
+
+A stage reruns only when its version, its parameters or the content hash of
+one of its inputs changed (or when forced); otherwise it is reported cached.
+Every output is validated against its schema and written atomically with its
+provenance; a failing stage leaves every earlier file untouched.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import datetime as dt
+import importlib
+import os
+import time
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pipeline import __version__
+from pipeline.errors import ArmsigError, SessionLockedError, StageError
+from pipeline.schemas import validate_table
+from pipeline.stages.base import RECORDING, Stage
+from pipeline.stages.recording import file_sha256, read_recording
+from pipeline.stages.tables import content_hash, read_provenance, read_table, write_table
+
+#: Stage modules in pipeline order (each defines ``STAGE``).
+STAGE_MODULES = (
+    "session",
+    "ranges",
+    "joints",
+    "compensate",
+    "triangulate",
+    "features",
+    "residuals",
+    "frames",
+    "smodel",
+    "dh",
+)
+LOCK_NAME = ".pipeline.lock"
+
+
+def stages() -> list[Stage]:
+    """All stages, in order."""
+    return [importlib.import_module(f"pipeline.stages.{m}").STAGE for m in STAGE_MODULES]
+
+
+def stage_path(session_dir: Path, name: str) -> Path:
+    return session_dir / "stages" / f"{name}.arrow"
+
+
+@dataclass(frozen=True)
+class StageStatus:
+    """``state`` is fresh, stale or missing; ``reason`` says why."""
+
+    name: str
+    state: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class StageRun:
+    """What the runner did with one stage: ``ran`` or ``cached``, and how long it took."""
+
+    name: str
+    action: str
+    seconds: float
+    rows: int
+
+
+def _params(stage: Stage, overrides: Mapping[str, Mapping[str, Any]]) -> Any:
+    over = dict(overrides.get(stage.name, {}))
+    if not over:
+        return stage.params
+    known = {f.name: f for f in dataclasses.fields(stage.params)}
+    for key, value in over.items():
+        if key not in known:
+            raise ArmsigError(
+                f"stage '{stage.name}' has no parameter '{key}'",
+                expected=", ".join(known) or "no parameters",
+                fix="`pipeline status SESSION` lists the stages; see their modules for parameters",
+            )
+        default = getattr(stage.params, key)
+        try:
+            over[key] = (
+                type(default)(value)
+                if not isinstance(default, bool)
+                else (
+                    value if isinstance(value, bool) else str(value).lower() in ("1", "true", "yes")
+                )
+            )
+        except (TypeError, ValueError) as exc:
+            raise ArmsigError(
+                f"parameter {stage.name}.{key} has the wrong type",
+                expected=type(default).__name__,
+                got=repr(value),
+            ) from exc
+    return dataclasses.replace(stage.params, **over)
+
+
+class _Hashes:
+    """Content hashes of the recording and of stage files, computed once per run."""
+
+    def __init__(self, session_dir: Path) -> None:
+        self.session_dir = session_dir
+        self._cache: dict[str, str | None] = {}
+
+    def get(self, name: str) -> str | None:
+        if name not in self._cache:
+            if name == RECORDING:
+                rec = self.session_dir / "recording.mcap"
+                self._cache[name] = file_sha256(rec) if rec.is_file() else None
+            else:
+                path = stage_path(self.session_dir, name)
+                self._cache[name] = (
+                    read_provenance(path).get("content_hash") if path.is_file() else None
+                )
+        return self._cache[name]
+
+    def set(self, name: str, value: str) -> None:
+        self._cache[name] = value
+
+
+def _check(stage: Stage, params: Any, hashes: _Hashes, stale: set[str]) -> StageStatus:
+    path = stage_path(hashes.session_dir, stage.name)
+    if not path.is_file():
+        return StageStatus(stage.name, "missing", "never run")
+    try:
+        prov = read_provenance(path)
+    except StageError:
+        return StageStatus(stage.name, "stale", "file unreadable")
+    if prov.get("stage_version") != stage.version:
+        return StageStatus(
+            stage.name, "stale", f"version {prov.get('stage_version')} -> {stage.version}"
+        )
+    if prov.get("params") != stage.params_dict(params):
+        return StageStatus(stage.name, "stale", "parameters changed")
+    for inp in stage.inputs:
+        if inp in stale:
+            return StageStatus(stage.name, "stale", f"input {inp} is stale or missing")
+        if prov.get("inputs", {}).get(inp) != hashes.get(inp):
+            return StageStatus(stage.name, "stale", f"input {inp} changed")
+    return StageStatus(stage.name, "fresh", "inputs, parameters and version unchanged")
+
+
+def status(
+    session_dir: str | Path, overrides: Mapping[str, Mapping[str, Any]] | None = None
+) -> list[StageStatus]:
+    """Freshness of every stage of a session, and why."""
+    sdir = Path(session_dir)
+    hashes = _Hashes(sdir)
+    out: list[StageStatus] = []
+    stale: set[str] = set()
+    for stage in stages():
+        st = _check(stage, _params(stage, overrides or {}), hashes, stale)
+        if st.state != "fresh":
+            stale.add(stage.name)
+        out.append(st)
+    return out
+
+
+@contextlib.contextmanager
+def session_lock(session_dir: Path) -> Iterator[None]:
+    """Exclusive lock on a session folder; a second run gets a clear error."""
+    lock = session_dir / LOCK_NAME
+    for _ in range(2):
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+            break
+        except FileExistsError:
+            try:
+                pid = int(lock.read_text().strip() or 0)
+            except (OSError, ValueError):
+                pid = 0
+            alive = pid > 0 and _pid_alive(pid)
+            if alive:
+                raise SessionLockedError(
+                    f"{session_dir}: another pipeline run (pid {pid}) is working on this session",
+                    fix=f"wait for it to finish; if it died, delete {lock}",
+                ) from None
+            with contextlib.suppress(FileNotFoundError):
+                lock.unlink()  # a dead run's lock
+    else:  # pragma: no cover - lost a race twice
+        raise SessionLockedError(f"{session_dir}: could not take the session lock")
+    try:
+        os.write(fd, str(os.getpid()).encode())
+        os.close(fd)
+        yield
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            lock.unlink()
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def run(
+    session_dir: str | Path,
+    *,
+    force: bool = False,
+    from_stage: str | None = None,
+    only: str | None = None,
+    overrides: Mapping[str, Mapping[str, Any]] | None = None,
+) -> list[StageRun]:
+    """Bring every stage of a session up to date.
+
+    Parameters
+    ----------
+    force : rerun every stage.
+    from_stage : rerun this stage and every later one.
+    only : rerun just this stage (its inputs must exist).
+    overrides : ``{stage: {param: value}}``.
+    """
+    sdir = Path(session_dir)
+    if not (sdir / "recording.mcap").is_file():
+        raise StageError(
+            f"{sdir}: no recording.mcap",
+            expected="a session folder holding recording.mcap",
+            fix="`pipeline simulate NAME` records a simulated session",
+        )
+    all_stages = stages()
+    names = [s.name for s in all_stages]
+    for opt, value in (("--from", from_stage), ("--only", only)):
+        if value is not None and value not in names:
+            raise ArmsigError(f"{opt}: unknown stage {value!r}", expected=", ".join(names))
+    overrides = overrides or {}
+    for key in overrides:
+        if key not in names:
+            raise ArmsigError(f"unknown stage {key!r} in parameters", expected=", ".join(names))
+    runs: list[StageRun] = []
+    with session_lock(sdir):
+        hashes = _Hashes(sdir)
+        stale: set[str] = set()
+        forced_from = names.index(from_stage) if from_stage else None
+        for k, stage in enumerate(all_stages):
+            params = _params(stage, overrides)
+            if only is not None and stage.name != only:
+                runs.append(StageRun(stage.name, "skipped", 0.0, 0))
+                continue
+            st = _check(stage, params, hashes, stale)
+            must = (
+                force
+                or only == stage.name
+                or (forced_from is not None and k >= forced_from)
+                or st.state != "fresh"
+            )
+            if not must:
+                runs.append(StageRun(stage.name, "cached", 0.0, -1))
+                continue
+            t0 = time.perf_counter()
+            # Dependants compare their recorded input hash with the new one in `hashes`.
+            table = _run_one(sdir, stage, params, hashes)
+            runs.append(StageRun(stage.name, "ran", time.perf_counter() - t0, table.num_rows))
+    return runs
+
+
+def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
+    inputs: dict[str, Any] = {}
+    for inp in stage.inputs:
+        if inp == RECORDING:
+            inputs[inp] = read_recording(sdir / "recording.mcap")
+        else:
+            path = stage_path(sdir, inp)
+            if not path.is_file():
+                raise StageError(
+                    f"{sdir}: stage '{stage.name}' needs '{inp}', which has not run",
+                    fix=f"run `pipeline identify {sdir}` without --only",
+                )
+            inputs[inp] = read_table(path)
+    try:
+        table = stage.compute(inputs, params)
+    except StageError:
+        raise
+    except ArmsigError as exc:
+        raise StageError(f"{sdir}: stage '{stage.name}' failed: {exc}") from exc
+    table = validate_table(table, stage.name, source=f"{sdir}: stage '{stage.name}'")
+    digest = content_hash(table)
+    provenance = {
+        "stage": stage.name,
+        "stage_version": stage.version,
+        "params": stage.params_dict(params),
+        "inputs": {inp: hashes.get(inp) for inp in stage.inputs},
+        "content_hash": digest,
+        "package_version": __version__,
+        "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+    }
+    write_table(stage_path(sdir, stage.name), table, provenance)
+    hashes.set(stage.name, digest)
+    return table

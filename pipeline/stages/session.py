@@ -1,0 +1,45 @@
+"""Stage ``session``: the recording's description messages, verbatim."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from typing import Any
+
+import pyarrow as pa
+
+from pipeline.stages.base import RECORDING, NoParams, Stage
+
+
+def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
+    rec = inputs[RECORDING]
+    robot = rec.robot["robot"]
+    return pa.table(
+        {
+            "robot_name": [str(robot.get("name", "?"))],
+            "n_joints": [len(robot.get("joints", []))],
+            "mode": [str(rec.robot.get("mode"))],
+            "recording_sha256": [rec.sha256],
+            "rig_json": [json.dumps(rec.rig, sort_keys=True)],
+            "robot_json": [json.dumps(rec.robot, sort_keys=True)],
+        }
+    )
+
+
+STAGE = Stage(
+    "session", 1, (RECORDING,), NoParams(), compute, "description messages of the recording"
+)
+
+
+def session_robot(session: pa.Table):  # -> RobotDescription
+    """The design robot description recorded in the session."""
+    from pipeline.robots.description import description_from_dict
+
+    doc = json.loads(session.column("robot_json")[0].as_py())
+    return description_from_dict(doc["robot"], source="/robot/description")
+
+
+def session_plan(session: pa.Table) -> dict[str, Any]:
+    """The recorded measurement plan and signature configuration."""
+    doc = json.loads(session.column("robot_json")[0].as_py())
+    return {"signature_q": doc["signature_q"], **doc["plan"]}
