@@ -125,5 +125,126 @@ def simulate(
     typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")
 
 
+def _parse_params(values: list[str] | None) -> dict[str, dict[str, str]]:
+    out: dict[str, dict[str, str]] = {}
+    for item in values or []:
+        key, sep, value = item.partition("=")
+        stage, dot, name = key.partition(".")
+        if not sep or not dot:
+            raise ArmsigError(
+                f"--param {item!r} is not STAGE.NAME=VALUE",
+                fix="--param features.plane_method=eigen",
+            )
+        out.setdefault(stage, {})[name] = value
+    return out
+
+
+SessionArg = Annotated[str, typer.Argument(help="Session folder, e.g. sessions/robot3.")]
+
+
+@app.command()
+@_errors_to_exit
+def identify(
+    session: SessionArg,
+    force: Annotated[bool, typer.Option(help="Rerun every stage.")] = False,
+    from_: Annotated[
+        str | None, typer.Option("--from", help="Rerun this stage and every later one.")
+    ] = None,
+    only: Annotated[str | None, typer.Option(help="Rerun just this stage.")] = None,
+    param: Annotated[
+        list[str] | None, typer.Option(help="Stage parameter, STAGE.NAME=VALUE (repeatable).")
+    ] = None,
+    report: Annotated[bool, typer.Option(help="Write report/report.md.")] = True,
+) -> None:
+    """Identify the arm signature of a recorded session (stages, signature.json, report)."""
+    from pipeline.identify import identify as run_identify
+
+    result = run_identify(
+        session,
+        force=force,
+        from_stage=from_,
+        only=only,
+        overrides=_parse_params(param),
+        report=report,
+    )
+    for r in result.runs:
+        if r.action == "ran":
+            typer.echo(f"  {r.name:12s} ran     {r.seconds * 1e3:7.1f} ms  {r.rows} rows")
+        else:
+            typer.echo(f"  {r.name:12s} {r.action}")
+    typer.echo(f"signature: {result.signature}")
+    if result.report:
+        typer.echo(f"report:    {result.report}")
+
+
+@app.command()
+@_errors_to_exit
+def status(session: SessionArg) -> None:
+    """Show every stage of a session as fresh, stale or missing, and why."""
+    from pipeline.stages.runner import status as stage_status
+
+    for st in stage_status(session):
+        typer.echo(f"  {st.name:12s} {st.state:8s} {st.reason}")
+
+
+@app.command()
+@_errors_to_exit
+def show(
+    session: SessionArg,
+    stage: Annotated[str, typer.Argument(help="Stage name, e.g. features.")],
+    rows: Annotated[int, typer.Option(help="Rows to print.")] = 20,
+    columns: Annotated[
+        str | None, typer.Option(help="Comma-separated columns to print (default: all).")
+    ] = None,
+) -> None:
+    """Print a stage table (polars) with its provenance."""
+    import json
+    from pathlib import Path
+
+    import polars as pl
+
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.tables import read_provenance
+
+    path = stage_path(Path(session), stage)
+    if not path.is_file():
+        raise ArmsigError(f"{path}: no such stage output", fix=f"`pipeline status {session}`")
+    typer.echo(json.dumps(read_provenance(path), indent=1, sort_keys=True))
+    df = pl.read_ipc(path)
+    if columns:
+        wanted = [c.strip() for c in columns.split(",") if c.strip()]
+        unknown = [c for c in wanted if c not in df.columns]
+        if unknown:
+            raise ArmsigError(f"{path}: no column {unknown[0]!r}", expected=", ".join(df.columns))
+        df = df.select(wanted)
+    with pl.Config(tbl_rows=rows, tbl_cols=-1, tbl_width_chars=4000, fmt_str_lengths=60):
+        typer.echo(df.head(rows))
+
+
+@app.command()
+@_errors_to_exit
+def audit(
+    session: SessionArg,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON for machines.")] = False,
+    configurations: Annotated[int, typer.Option(help="Random configurations.")] = 1000,
+) -> None:
+    """Compare the signature and the design model with a simulated session's truth."""
+    import json
+
+    from pipeline.audit import audit as run_audit
+
+    r = run_audit(session, configurations=configurations)
+    if as_json:
+        typer.echo(json.dumps(r.to_dict(), indent=1))
+        return
+    typer.echo(f"{r.session}: {r.configurations} random configurations, best-fit base and tool")
+    for name, e in (("signature", r.signature), ("design", r.design)):
+        typer.echo(
+            f"  {name:9s} position max {e.max_position_cm:.3e} cm  rms {e.rms_position_cm:.3e} cm"
+            f"   orientation max {e.max_orientation_deg:.3e} deg  rms {e.rms_orientation_deg:.3e} deg"
+        )
+    typer.echo(f"  design / signature RMS position error: {r.improvement:.1f}x")
+
+
 if __name__ == "__main__":  # pragma: no cover
     app()

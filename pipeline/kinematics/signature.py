@@ -14,7 +14,14 @@ import numpy as np
 
 from pipeline.kinematics.chain import SerialChain
 from pipeline.kinematics.smodel import SModelParams, smodel_from_matrix
-from pipeline.kinematics.transforms import Array, ArrayLike, invert_transform, rot_z, trans_z
+from pipeline.kinematics.transforms import (
+    Array,
+    ArrayLike,
+    invert_transform,
+    rot_z,
+    trans_z,
+    wrap_angle,
+)
 
 
 def frame_from_features(axis: ArrayLike, origin: ArrayLike, toward: ArrayLike) -> Array:
@@ -117,7 +124,7 @@ def pseudo_dh_from_chain(chain: SerialChain) -> PseudoDH:
     d_dh = sm.d_bar + b_prev  # Eq. (3.13)
     pris = chain.prismatic
     # Eq. (4.59): offset = D-H value at q^s minus the encoder reading there; (4.72)/(4.73)
-    q_offset = np.where(pris, d_dh, theta_dh) - joint_offsets
+    q_offset = np.where(pris, d_dh - joint_offsets, wrap_angle(theta_dh - joint_offsets))
     tail = rot_z(sm.gamma[-1]) @ trans_z(sm.b[-1])
     return PseudoDH(
         q_offset=q_offset,

@@ -222,3 +222,10 @@ def xyz_rpy_from_transform(T: ArrayLike) -> tuple[Array, Array]:
     )
     rx = np.where(locked, 0.0, np.arctan2(R[..., 2, 1], R[..., 2, 2]))
     return M[..., :3, 3].copy(), np.stack([rx, ry, rz], axis=-1)
+
+
+def wrap_angle(theta: ArrayLike) -> Array:
+    """Wrap radians to (-π, π], any shape."""
+    t = np.asarray(theta, float)
+    out: Array = np.pi - np.mod(np.pi - t, 2.0 * np.pi)
+    return out

@@ -31,6 +31,7 @@ from pipeline.kinematics.transforms import (
     rot_z,
     trans,
     trans_z,
+    wrap_angle,
 )
 
 #: Table 7-2: nominal design parameters x1..x15 (cm, or degrees for x3, x10, x12, x13).
@@ -363,8 +364,3 @@ def _arm_rotation(t123: Array) -> Array:
     R[..., 2, 2] = c23
     return R
 
-
-def wrap_angle(theta: ArrayLike) -> Array:
-    """Wrap radians to (-π, π], any shape."""
-    t = np.asarray(theta, float)
-    return np.pi - np.mod(np.pi - t, 2.0 * np.pi)

@@ -1,0 +1,39 @@
+"""``identify``: recording -> cached stages -> signature.json -> report."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pipeline.signature_file import write_signature
+from pipeline.stages.runner import StageRun, run
+
+
+@dataclass(frozen=True)
+class IdentifyResult:
+    runs: list[StageRun]
+    signature: Path
+    report: Path | None
+
+
+def identify(
+    session_dir: str | Path,
+    *,
+    force: bool = False,
+    from_stage: str | None = None,
+    only: str | None = None,
+    overrides: Mapping[str, Mapping[str, Any]] | None = None,
+    report: bool = True,
+) -> IdentifyResult:
+    """Bring the session's stages up to date, then write its signature and report."""
+    sdir = Path(session_dir)
+    runs = run(sdir, force=force, from_stage=from_stage, only=only, overrides=overrides)
+    sig = write_signature(sdir)
+    rep = None
+    if report:
+        from pipeline.report.identification import write_report
+
+        rep = write_report(sdir)
+    return IdentifyResult(runs, sig, rep)

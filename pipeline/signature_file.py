@@ -1,0 +1,194 @@
+"""The arm signature file ``sessions/NAME/signature.json`` (format in schemas/signature.md).
+
+Written from the stage tables at the end of ``identify``; read by controllers.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline import __version__
+from pipeline.atomic import write_text_atomic
+from pipeline.errors import ArmsigError
+from pipeline.kinematics.chain import SerialChain
+from pipeline.kinematics.signature import pseudo_dh_from_chain
+from pipeline.stages.frames import chain_from_frames
+from pipeline.stages.runner import stage_path, stages
+from pipeline.stages.session import session_robot
+from pipeline.stages.tables import read_provenance, read_table
+from pipeline.units import joints_to_boundary, joints_to_internal
+
+FORMAT = "armsig.signature"
+FORMAT_VERSION = 1
+
+
+def _m(T: np.ndarray) -> list[list[float]]:
+    return [[float(v) for v in row] for row in T]
+
+
+def signature_document(session_dir: Path) -> dict[str, Any]:
+    """The signature as a JSON-ready dict, built from the session's stage tables."""
+    session = read_table(stage_path(session_dir, "session"))
+    robot = session_robot(session)
+    pris = robot.prismatic
+    chain = chain_from_frames(read_table(stage_path(session_dir, "frames")), pris)
+    pdh = pseudo_dh_from_chain(chain)
+    sm = pdh.smodel
+    qs = joints_to_boundary(chain.joint_offsets, pris)
+    off = joints_to_boundary(pdh.q_offset, pris)
+    features = read_table(stage_path(session_dir, "features")).to_pylist()
+    pseudo = []
+    for i, j in enumerate(robot.joints):
+        if j.prismatic:
+            pseudo.append(
+                {
+                    "type": "prismatic",
+                    "q_offset_cm": float(off[i]),
+                    "theta_deg": float(np.degrees(pdh.theta[i])),
+                    "a_cm": float(pdh.a[i]),
+                    "alpha_deg": float(np.degrees(pdh.alpha[i])),
+                }
+            )
+        else:
+            pseudo.append(
+                {
+                    "type": "revolute",
+                    "q_offset_deg": float(off[i]),
+                    "d_cm": float(pdh.d[i]),
+                    "a_cm": float(pdh.a[i]),
+                    "alpha_deg": float(np.degrees(pdh.alpha[i])),
+                }
+            )
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "robot": robot.name,
+        "session": session_dir.name,
+        "frame": "sensor",
+        "length_unit": "cm",
+        "angle_unit": "deg",
+        "joint_names": [j.name for j in robot.joints],
+        "joint_types": [j.type for j in robot.joints],
+        "joint_limits": robot.limits.tolist(),
+        "encoder_resolution": robot.encoder_resolution.tolist(),
+        "signature_configuration": [float(v) for v in qs],
+        "smodel": {
+            "base": _m(chain.base),
+            "links": [_m(B) for B in chain.links],
+            "tool": _m(chain.tool),
+            "parameters": [
+                {
+                    "beta_deg": float(np.degrees(sm.beta[i])),
+                    "d_bar_cm": float(sm.d_bar[i]),
+                    "a_bar_cm": float(sm.a_bar[i]),
+                    "alpha_bar_deg": float(np.degrees(sm.alpha_bar[i])),
+                    "gamma_deg": float(np.degrees(sm.gamma[i])),
+                    "b_cm": float(sm.b[i]),
+                }
+                for i in range(robot.n_joints)
+            ],
+        },
+        "pseudo_dh": pseudo,
+        "pseudo_dh_base": _m(pdh.base),
+        "pseudo_dh_tool": _m(pdh.tool),
+        "feature_accuracy": [
+            {
+                k: f[k]
+                for k in (
+                    "joint",
+                    "n_points",
+                    "sweep_deg",
+                    "travel_cm",
+                    "radius_cm",
+                    "sigma_normal_cm",
+                    "sigma_radial_cm",
+                    "sigma_delta_deg",
+                    "sigma_c_cm",
+                    "methods_angle_deg",
+                )
+            }
+            for f in features
+        ],
+        "warnings": [
+            f"joint {f['joint']}: {w}" for f in features for w in f["warnings"].split("; ") if w
+        ],
+        "provenance": {
+            "recording_sha256": session.column("recording_sha256")[0].as_py(),
+            "stages": {
+                s.name: read_provenance(stage_path(session_dir, s.name)).get("content_hash")
+                for s in stages()
+            },
+            "package_version": __version__,
+            "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        },
+    }
+
+
+def write_signature(session_dir: str | Path) -> Path:
+    """Write ``signature.json`` beside the recording (atomically)."""
+    sdir = Path(session_dir)
+    doc = signature_document(sdir)
+    path = sdir / "signature.json"
+    write_text_atomic(path, json.dumps(doc, indent=1) + "\n")
+    return path
+
+
+@dataclass(frozen=True)
+class Signature:
+    """A loaded signature: the S-Model chain (sensor frame, encoder readings in rad / cm)."""
+
+    robot: str
+    chain: SerialChain
+    joint_types: tuple[str, ...]
+    limits: np.ndarray  # (n, 2) deg / cm
+    encoder_resolution: np.ndarray  # (n,) deg / cm
+
+    @property
+    def prismatic(self) -> np.ndarray:
+        return np.array([t == "prismatic" for t in self.joint_types])
+
+
+def load_signature(path: str | Path) -> Signature:
+    """Read a signature file; a clear error for a missing, foreign or broken file."""
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ArmsigError(
+            f"cannot read signature {p}",
+            got=str(exc),
+            fix="run `pipeline identify SESSION` to write it",
+        ) from exc
+    if doc.get("format") != FORMAT:
+        raise ArmsigError(
+            f"{p}: not an armsig signature", expected=FORMAT, got=repr(doc.get("format"))
+        )
+    try:
+        pris = np.array([t == "prismatic" for t in doc["joint_types"]])
+        sm = doc["smodel"]
+        chain = SerialChain(
+            links=np.array(sm["links"], float),
+            prismatic=pris,
+            base=np.array(sm["base"], float),
+            tool=np.array(sm["tool"], float),
+            joint_offsets=joints_to_internal(np.array(doc["signature_configuration"], float), pris),
+        )
+        return Signature(
+            doc["robot"],
+            chain,
+            tuple(doc["joint_types"]),
+            np.array(doc["joint_limits"], float),
+            np.array(doc["encoder_resolution"], float),
+        )
+    except (KeyError, ValueError, TypeError) as exc:
+        raise ArmsigError(
+            f"{p}: signature is incomplete",
+            got=f"{type(exc).__name__}: {exc}",
+            fix="re-run `pipeline identify` on its session",
+        ) from exc
