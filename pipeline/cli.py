@@ -102,6 +102,9 @@ def simulate(
     noiseless: Annotated[
         bool, typer.Option(help="No range noise or quantization, uniform 70 °F, perfect servo.")
     ] = False,
+    max_sweep_deg: Annotated[
+        float, typer.Option(help="Cap of every revolute sweep (deg); under 180 violates B-3.")
+    ] = 300.0,
 ) -> None:
     """Record a simulated session: recording.mcap plus rig-truth.json."""
     from pathlib import Path
@@ -120,6 +123,7 @@ def simulate(
         faults=tuple(f.strip() for f in faults.split(",") if f.strip()),
         wac_error_cm=wac_error_cm,
         noiseless=noiseless,
+        max_sweep_deg=max_sweep_deg,
     )
     path = simulate_session(folder, opts)
     typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")
@@ -172,6 +176,8 @@ def identify(
             typer.echo(f"  {r.name:12s} ran     {r.seconds * 1e3:7.1f} ms  {r.rows} rows")
         else:
             typer.echo(f"  {r.name:12s} {r.action}")
+    for w in result.warnings:
+        typer.echo(f"warning: {w}", err=True)
     typer.echo(f"signature: {result.signature}")
     if result.report:
         typer.echo(f"report:    {result.report}")
@@ -241,7 +247,8 @@ def audit(
     for name, e in (("signature", r.signature), ("design", r.design)):
         typer.echo(
             f"  {name:9s} position max {e.max_position_cm:.3e} cm  rms {e.rms_position_cm:.3e} cm"
-            f"   orientation max {e.max_orientation_deg:.3e} deg  rms {e.rms_orientation_deg:.3e} deg"
+            f"   orientation max {e.max_orientation_deg:.3e} deg"
+            f"  rms {e.rms_orientation_deg:.3e} deg"
         )
     typer.echo(f"  design / signature RMS position error: {r.improvement:.1f}x")
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,6 +17,7 @@ class IdentifyResult:
     runs: list[StageRun]
     signature: Path
     report: Path | None
+    warnings: list[str]
 
 
 def identify(
@@ -31,9 +33,10 @@ def identify(
     sdir = Path(session_dir)
     runs = run(sdir, force=force, from_stage=from_stage, only=only, overrides=overrides)
     sig = write_signature(sdir)
+    warnings = json.loads(sig.read_text())["warnings"]
     rep = None
     if report:
         from pipeline.report.identification import write_report
 
         rep = write_report(sdir)
-    return IdentifyResult(runs, sig, rep)
+    return IdentifyResult(runs, sig, rep, warnings)

@@ -176,8 +176,12 @@ def plan_measurements(
     n_avg: int = 10,
     candidates: int = 400,
     seed: int = 560,
+    max_sweep_deg: float = MAX_SWEEP_DEG,
 ) -> MeasurementPlan:
     """Choose q^s and the sweep of every joint on the design model.
+
+    ``max_sweep_deg`` caps every revolute sweep (default 300°); a smaller cap (say
+    90°) records a deliberately short sweep, as in the (B-3) experiments.
 
     Raises
     ------
@@ -215,7 +219,7 @@ def plan_measurements(
     need = np.where(
         pris,
         0.5 * travel,
-        np.minimum(MIN_SWEEP_DEG + 2 * SWEEP_END_MARGIN_DEG, travel - step),
+        np.minimum(min(MIN_SWEEP_DEG, max_sweep_deg) + 2 * SWEEP_END_MARGIN_DEG, travel - step),
     )
     feasible = tool_ok & np.all(arcs >= need, axis=1)
     if not feasible.any():
@@ -226,7 +230,7 @@ def plan_measurements(
             got=f"at most {arcs[:, worst].max():g}",
             fix="move the sensor (sensor_from_base) or change the target radii",
         )
-    capped = np.minimum(arcs, np.where(pris, np.inf, MAX_SWEEP_DEG))
+    capped = np.minimum(arcs, np.where(pris, np.inf, max_sweep_deg))
     score = np.where(feasible, np.sum(capped / (lim[:, 1] - lim[:, 0]), axis=1), -np.inf)
     qs = cand[int(np.argmax(score))]
     sweeps = []
@@ -245,9 +249,9 @@ def plan_measurements(
         lo, hi = grid[start], grid[start + length - 1]
         margin = 0.5 if pris[i] else SWEEP_END_MARGIN_DEG
         lo, hi = lo + margin, hi - margin
-        if not pris[i] and hi - lo > MAX_SWEEP_DEG:
+        if not pris[i] and hi - lo > max_sweep_deg:
             mid = 0.5 * (lo + hi)
-            lo, hi = mid - MAX_SWEEP_DEG / 2, mid + MAX_SWEEP_DEG / 2
+            lo, hi = mid - max_sweep_deg / 2, mid + max_sweep_deg / 2
         values = np.round(np.linspace(lo, hi, n_points), 6)
         x, y, z = (float(v) for v in locals_[i])
         sweeps.append(Sweep(i + 1, (x, y, z), tuple(map(float, values))))

@@ -55,6 +55,7 @@ class SimulationOptions:
     faults: tuple[str, ...] = ()
     wac_error_cm: float = 0.0  # W_AC calibration error (Section 7.3)
     noiseless: bool = False
+    max_sweep_deg: float = 300.0  # cap of every revolute sweep (B-3 experiments)
 
 
 def _check(opts: SimulationOptions) -> None:
@@ -82,7 +83,14 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions) -> Path:
     geometry_true = default_geometry()
     geometry_recorded = default_geometry(W_AB_CM, W_BC_CM, W_AC_CM + opts.wac_error_cm)
     sensor_from_base = default_sensor_from_base(robot)
-    plan = plan_measurements(robot, geometry_recorded, sensor_from_base, opts.points, opts.repeats)
+    plan = plan_measurements(
+        robot,
+        geometry_recorded,
+        sensor_from_base,
+        opts.points,
+        opts.repeats,
+        max_sweep_deg=opts.max_sweep_deg,
+    )
     pris = robot.prismatic
     res = robot.encoder_resolution
 

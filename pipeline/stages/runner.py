@@ -2,8 +2,11 @@
 
 A stage reruns only when its version, its parameters or the content hash of
 one of its inputs changed (or when forced); otherwise it is reported cached.
-Every output is validated against its schema and written atomically with its
-provenance; a failing stage leaves every earlier file untouched.
+Every output is validated against its schema and written with its provenance.
+
+A run is all or nothing: outputs go to ``stages/.pending/`` and are renamed
+into ``stages/`` only when every stage of the run succeeded, so a failing
+run leaves the files of the last good run untouched.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ import dataclasses
 import datetime as dt
 import importlib
 import os
+import shutil
 import time
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
@@ -48,7 +52,12 @@ def stages() -> list[Stage]:
 
 
 def stage_path(session_dir: Path, name: str) -> Path:
+    """Where a stage's committed output lives."""
     return session_dir / "stages" / f"{name}.arrow"
+
+
+def _pending_dir(session_dir: Path) -> Path:
+    return session_dir / "stages" / ".pending"
 
 
 @dataclass(frozen=True)
@@ -106,6 +115,12 @@ class _Hashes:
     def __init__(self, session_dir: Path) -> None:
         self.session_dir = session_dir
         self._cache: dict[str, str | None] = {}
+        self.pending: set[str] = set()  # stages written in this run, not committed yet
+
+    def path(self, name: str) -> Path:
+        if name in self.pending:
+            return _pending_dir(self.session_dir) / f"{name}.arrow"
+        return stage_path(self.session_dir, name)
 
     def get(self, name: str) -> str | None:
         if name not in self._cache:
@@ -113,7 +128,7 @@ class _Hashes:
                 rec = self.session_dir / "recording.mcap"
                 self._cache[name] = file_sha256(rec) if rec.is_file() else None
             else:
-                path = stage_path(self.session_dir, name)
+                path = self.path(name)
                 self._cache[name] = (
                     read_provenance(path).get("content_hash") if path.is_file() else None
                 )
@@ -124,7 +139,7 @@ class _Hashes:
 
 
 def _check(stage: Stage, params: Any, hashes: _Hashes, stale: set[str]) -> StageStatus:
-    path = stage_path(hashes.session_dir, stage.name)
+    path = hashes.path(stage.name)
     if not path.is_file():
         return StageStatus(stage.name, "missing", "never run")
     try:
@@ -238,29 +253,52 @@ def run(
             raise ArmsigError(f"unknown stage {key!r} in parameters", expected=", ".join(names))
     runs: list[StageRun] = []
     with session_lock(sdir):
+        pending = _pending_dir(sdir)
+        shutil.rmtree(pending, ignore_errors=True)  # debris of a killed run
         hashes = _Hashes(sdir)
-        stale: set[str] = set()
-        forced_from = names.index(from_stage) if from_stage else None
-        for k, stage in enumerate(all_stages):
-            params = _params(stage, overrides)
-            if only is not None and stage.name != only:
-                runs.append(StageRun(stage.name, "skipped", 0.0, 0))
-                continue
-            st = _check(stage, params, hashes, stale)
-            must = (
-                force
-                or only == stage.name
-                or (forced_from is not None and k >= forced_from)
-                or st.state != "fresh"
-            )
-            if not must:
-                runs.append(StageRun(stage.name, "cached", 0.0, -1))
-                continue
-            t0 = time.perf_counter()
-            # Dependants compare their recorded input hash with the new one in `hashes`.
-            table = _run_one(sdir, stage, params, hashes)
-            runs.append(StageRun(stage.name, "ran", time.perf_counter() - t0, table.num_rows))
+        try:
+            _run_all(sdir, all_stages, names, hashes, runs, force, from_stage, only, overrides)
+            for name in names:  # commit: every stage of the run succeeded
+                if name in hashes.pending:
+                    os.replace(pending / f"{name}.arrow", stage_path(sdir, name))
+        finally:
+            shutil.rmtree(pending, ignore_errors=True)
     return runs
+
+
+def _run_all(
+    sdir: Path,
+    all_stages: list[Stage],
+    names: list[str],
+    hashes: _Hashes,
+    runs: list[StageRun],
+    force: bool,
+    from_stage: str | None,
+    only: str | None,
+    overrides: Mapping[str, Mapping[str, Any]],
+) -> None:
+    """Bring each stage up to date in order, writing outputs to the pending folder."""
+    stale: set[str] = set()
+    forced_from = names.index(from_stage) if from_stage else None
+    for k, stage in enumerate(all_stages):
+        params = _params(stage, overrides)
+        if only is not None and stage.name != only:
+            runs.append(StageRun(stage.name, "skipped", 0.0, 0))
+            continue
+        st = _check(stage, params, hashes, stale)
+        must = (
+            force
+            or only == stage.name
+            or (forced_from is not None and k >= forced_from)
+            or st.state != "fresh"
+        )
+        if not must:
+            runs.append(StageRun(stage.name, "cached", 0.0, -1))
+            continue
+        t0 = time.perf_counter()
+        # Dependants compare their recorded input hash with the new one in `hashes`.
+        table = _run_one(sdir, stage, params, hashes)
+        runs.append(StageRun(stage.name, "ran", time.perf_counter() - t0, table.num_rows))
 
 
 def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
@@ -269,7 +307,7 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
         if inp == RECORDING:
             inputs[inp] = read_recording(sdir / "recording.mcap")
         else:
-            path = stage_path(sdir, inp)
+            path = hashes.path(inp)
             if not path.is_file():
                 raise StageError(
                     f"{sdir}: stage '{stage.name}' needs '{inp}', which has not run",
@@ -278,10 +316,8 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
             inputs[inp] = read_table(path)
     try:
         table = stage.compute(inputs, params)
-    except StageError:
-        raise
-    except ArmsigError as exc:
-        raise StageError(f"{sdir}: stage '{stage.name}' failed: {exc}") from exc
+    except ArmsigError as exc:  # name the session and the stage, keep the cause's advice
+        raise StageError(f"{sdir}: stage '{stage.name}': {exc}") from exc
     table = validate_table(table, stage.name, source=f"{sdir}: stage '{stage.name}'")
     digest = content_hash(table)
     provenance = {
@@ -293,6 +329,7 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
         "package_version": __version__,
         "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
     }
-    write_table(stage_path(sdir, stage.name), table, provenance)
+    hashes.pending.add(stage.name)
+    write_table(hashes.path(stage.name), table, provenance)
     hashes.set(stage.name, digest)
     return table
