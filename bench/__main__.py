@@ -1,8 +1,10 @@
 """`make bench`: every benchmark, printed; never asserted in tests."""
 
-from bench import kinematics, simulate
+from bench import identify, kinematics, simulate
 
 if __name__ == "__main__":
     kinematics.main()
     print()
     simulate.main()
+    print()
+    identify.main()

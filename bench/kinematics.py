@@ -10,8 +10,7 @@ import numpy as np
 from pipeline.kinematics.chain import forward_kinematics
 from pipeline.kinematics.jacobian import geometric_jacobian
 from pipeline.kinematics.smodel import smodel_from_matrix
-from pipeline.robots import get_robot
-from pipeline.robots import puma560
+from pipeline.robots import get_robot, puma560
 
 
 def best_of(fn: Callable[[], object], repeats: int = 5) -> float:
@@ -35,11 +34,13 @@ def main() -> None:
     rows = [
         ("forward_kinematics (Puma, batch)", n, best_of(lambda: forward_kinematics(chain, q))),
         ("geometric_jacobian (Puma, batch)", n, best_of(lambda: geometric_jacobian(chain, q))),
-        ("puma560.inverse_kinematics, 8 branches", n, best_of(lambda: puma560.inverse_kinematics(T))),
+        (
+            "puma560.inverse_kinematics, 8 branches",
+            n,
+            best_of(lambda: puma560.inverse_kinematics(T)),
+        ),
         ("smodel_from_matrix", n, best_of(lambda: smodel_from_matrix(T))),
     ]
     print(f"{'benchmark':45s} {'items':>8s} {'best s':>9s} {'µs/item':>9s}")
     for name, items, sec in rows:
         print(f"{name:45s} {items:8d} {sec:9.4f} {1e6 * sec / items:9.3f}")
-
-

@@ -17,8 +17,11 @@ def main() -> None:
         inproc = best_of(lambda: simulate_session(Path(tmp) / "a", SimulationOptions(seed=3)), 3)
         exe = Path(sys.executable).with_name("pipeline")
         t0 = time.perf_counter()
-        subprocess.run([str(exe), "simulate", str(Path(tmp) / "b"), "--seed", "3"], check=True,
-                       capture_output=True)
+        subprocess.run(
+            [str(exe), "simulate", str(Path(tmp) / "b"), "--seed", "3"],
+            check=True,
+            capture_output=True,
+        )
         cli = time.perf_counter() - t0
     print(f"{'simulate_session (defaults, in process)':45s} {inproc:9.3f} s")
     print(f"{'pipeline simulate (defaults, with start-up)':45s} {cli:9.3f} s")

@@ -36,7 +36,22 @@ def identify(
     warnings = json.loads(sig.read_text())["warnings"]
     rep = None
     if report:
-        from pipeline.report.identification import write_report
-
-        rep = write_report(sdir)
+        rep = _report_if_stale(sdir)
     return IdentifyResult(runs, sig, rep, warnings)
+
+
+def _report_if_stale(sdir: Path) -> Path:
+    """Write the report unless the existing one was made from the same stage outputs."""
+    from pipeline.atomic import write_text_atomic
+    from pipeline.signature_file import stage_hashes
+
+    stamp = sdir / "report" / ".inputs.json"
+    current = json.dumps(stage_hashes(sdir), sort_keys=True)
+    report = sdir / "report" / "report.md"
+    if report.is_file() and stamp.is_file() and stamp.read_text() == current:
+        return report
+    from pipeline.report.identification import write_report  # matplotlib: only when needed
+
+    path = write_report(sdir)
+    write_text_atomic(stamp, current)
+    return path

@@ -19,6 +19,7 @@ _TYPES: dict[str, pa.DataType] = {
     "bool": pa.bool_(),
     "string": pa.string(),
     "list<float64>": pa.list_(pa.float64()),
+    "list<string>": pa.list_(pa.string()),
 }
 UNITS = ("", "cm", "deg", "s", "degF")
 

@@ -115,26 +115,40 @@ def signature_document(session_dir: Path) -> dict[str, Any]:
             }
             for f in features
         ],
-        "warnings": [
-            f"joint {f['joint']}: {w}" for f in features for w in f["warnings"].split("; ") if w
-        ],
+        "warnings": [f"joint {f['joint']}: {w}" for f in features for w in f["warnings"]],
         "provenance": {
             "recording_sha256": session.column("recording_sha256")[0].as_py(),
-            "stages": {
-                s.name: read_provenance(stage_path(session_dir, s.name)).get("content_hash")
-                for s in stages()
-            },
+            "stages": stage_hashes(session_dir),
             "package_version": __version__,
             "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         },
     }
 
 
+def stage_hashes(session_dir: Path) -> dict[str, str | None]:
+    """Content hash of every committed stage output."""
+    return {
+        s.name: read_provenance(stage_path(session_dir, s.name)).get("content_hash")
+        for s in stages()
+    }
+
+
 def write_signature(session_dir: str | Path) -> Path:
-    """Write ``signature.json`` beside the recording (atomically)."""
+    """Write ``signature.json`` beside the recording (atomically).
+
+    An existing file built from the same stage outputs is kept as it is, so a
+    warm run changes nothing on disk.
+    """
     sdir = Path(session_dir)
-    doc = signature_document(sdir)
     path = sdir / "signature.json"
+    current = stage_hashes(sdir)
+    try:
+        old = json.loads(path.read_text())
+        if old.get("format_version") == FORMAT_VERSION and old["provenance"]["stages"] == current:
+            return path
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    doc = signature_document(sdir)
     write_text_atomic(path, json.dumps(doc, indent=1) + "\n")
     return path
 

@@ -128,7 +128,7 @@ def pseudo_dh_from_chain(chain: SerialChain) -> PseudoDH:
     tail = rot_z(sm.gamma[-1]) @ trans_z(sm.b[-1])
     return PseudoDH(
         q_offset=q_offset,
-        theta=np.where(pris, theta_dh, np.nan),
+        theta=np.where(pris, wrap_angle(theta_dh), np.nan),
         d=np.where(pris, np.nan, d_dh),
         a=np.asarray(sm.a_bar),  # Eq. (3.14)
         alpha=np.asarray(sm.alpha_bar),  # Eq. (3.15)

@@ -46,5 +46,5 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 
 STAGE = Stage(
-    "dh", 1, ("frames", "session"), NoParams(), compute, "encoder offsets and pseudo D-H parameters"
+    "dh", 2, ("frames", "session"), NoParams(), compute, "encoder offsets and pseudo D-H parameters"
 )

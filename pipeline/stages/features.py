@@ -117,8 +117,11 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
                 sigma_e_deg=float(np.degrees(acc.sigma_E)),
                 sigma_f_deg=float(np.degrees(acc.sigma_F)),
                 sigma_delta_deg=float(np.degrees(acc.sigma_delta)),
-                sigma_delta_empirical_deg=_nan(np.degrees(acc.sigma_delta_empirical)),
-                sigma_c_cm=_nan(acc.sigma_c),
+                # (6.12)/(6.13) were fitted for sweeps of at least 180° (B-3): no value below.
+                sigma_delta_empirical_deg=_nan(np.degrees(acc.sigma_delta_empirical))
+                if circle.sweep >= np.pi
+                else None,
+                sigma_c_cm=_nan(acc.sigma_c) if circle.sweep >= np.pi else None,
                 warnings=list(dict.fromkeys([*plane.warnings, *circle.warnings])),
             )
         rows.append(row)
@@ -152,7 +155,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             "sigma_c_cm",
         ):
             put(name, r[name])
-        put("warnings", "; ".join(r["warnings"]))
+        put("warnings", [str(w) for w in r["warnings"]])
     order = [
         "joint",
         "type",
@@ -190,6 +193,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         {
             k: pa.array(out[k], type=pa.float64())
             if k not in ("joint", "type", "n_points", "plane_method", "warnings")
+            else pa.array(out[k], type=pa.list_(pa.string()))
+            if k == "warnings"
             else out[k]
             for k in order
         }
@@ -198,7 +203,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "features",
-    1,
+    2,
     ("triangulate", "joints", "session"),
     Params(),
     compute,

@@ -7,6 +7,11 @@ estimates σ, so k = 5 rejects essentially no good cycle; the floor (0.005 cm,
 half the digitizer's resolution) keeps quantized ranges, whose MAD can be 0,
 from rejecting honest cycles. The spurious echoes of the rig's fault model
 (5-50 cm) are far beyond that.
+
+With only two usable cycles the median cannot tell which one is wrong: when
+they disagree by more than ``pair_max_cm`` (1 cm, some 50 σ of a good pair,
+far less than a spurious echo moves a target) both are rejected and the
+configuration is left out rather than averaged into a wrong point.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from pipeline.stages.base import Stage
 class Params:
     reject_k: float = 5.0
     floor_cm: float = 0.005
+    pair_max_cm: float = 1.0
 
 
 def robust_mean(p: np.ndarray, k: float, floor_cm: float) -> tuple[np.ndarray, np.ndarray]:
@@ -74,6 +80,12 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             rows["n_rejected"].append(0)
             rows["n_used"].append(0)
             continue
+        if len(good) == 2 and np.linalg.norm(xyz[good[0]] - xyz[good[1]]) > params.pair_max_cm:
+            for c in ("x_cm", "y_cm", "z_cm", "scatter_cm"):
+                rows[c].append(None)
+            rows["n_rejected"].append(2)
+            rows["n_used"].append(0)
+            continue
         mean, keep = robust_mean(xyz[good], params.reject_k, params.floor_cm)
         kept = xyz[good][keep]
         rows["x_cm"].append(float(mean[0]))
@@ -88,7 +100,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "triangulate",
-    1,
+    2,
     ("compensate",),
     Params(),
     compute,

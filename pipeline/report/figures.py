@@ -1,0 +1,123 @@
+"""Figures of the identification report: residuals per joint (Figures 6-11 to 6-13).
+
+matplotlib is imported inside the functions, and only its object-oriented API
+(no pyplot, no global backend switch), so importing this module stays cheap.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class JointResiduals:
+    """Residuals of one joint's sweep (cm) against its encoder readings (deg or cm)."""
+
+    joint: int
+    name: str
+    unit: str
+    q: np.ndarray
+    normal: np.ndarray
+    radial: np.ndarray | None  # None for a prismatic joint
+
+
+def joint_residuals(rows: Sequence[dict[str, Any]], robot: Any) -> list[JointResiduals]:
+    """Rows of the ``residuals`` table grouped by joint of ``robot``, in step order."""
+    out = []
+    for i, j in enumerate(robot.joints, start=1):
+        r = sorted((x for x in rows if x["joint"] == i), key=lambda x: x["step"])
+        q = "q_cm" if j.prismatic else "q_deg"
+        radial = [x["radial_cm"] for x in r]
+        out.append(
+            JointResiduals(
+                joint=i,
+                name=j.name,
+                unit=j.unit,
+                q=np.array([x[q] for x in r], float),
+                normal=np.array([x["normal_cm"] for x in r], float),
+                radial=None if j.prismatic else np.array(radial, float),
+            )
+        )
+    return out
+
+
+def _grid(n: int) -> tuple[int, int]:
+    cols = min(3, n)
+    return math.ceil(n / cols), cols
+
+
+def _figure(n: int) -> tuple[Any, list[Any]]:
+    from matplotlib.figure import Figure
+
+    rows, cols = _grid(n)
+    fig = Figure(figsize=(4.2 * cols, 3.2 * rows), layout="constrained")
+    axes = fig.subplots(rows, cols, squeeze=False).ravel()
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    return fig, list(axes[:n])
+
+
+def save_png(fig: Any, path: Path) -> Path:
+    """Save ``fig`` to a temp file beside ``path``, then rename it over ``path``."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, format="png", dpi=110)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def residuals_vs_q(joints: Sequence[JointResiduals], path: Path) -> Path:
+    """Figure 6-11 for every joint: normal (*) and radial (o) residuals against the reading."""
+    fig, axes = _figure(len(joints))
+    for ax, j in zip(axes, joints, strict=True):
+        ax.axhline(0.0, color="0.6", lw=0.8)
+        ax.plot(j.q, j.normal, "*", ms=6, color="C0", label="normal")
+        if j.radial is not None:
+            ax.plot(j.q, j.radial, "o", ms=4, mfc="none", color="C3", label="radial")
+        ax.set_title(f"joint {j.joint} ({j.name})")
+        ax.set_xlabel(f"q{j.joint} ({j.unit})")
+        ax.set_ylabel("residual (cm)")
+        ax.grid(alpha=0.3)
+    handles, labels = max((ax.get_legend_handles_labels() for ax in axes), key=lambda h: len(h[0]))
+    fig.legend(handles, labels, loc="outside upper right", ncols=len(labels))
+    fig.suptitle("Residuals against the joint reading (cf. Figure 6-11)")
+    return save_png(fig, path)
+
+
+def residual_histograms(joints: Sequence[JointResiduals], kind: str, path: Path) -> Path:
+    """Figures 6-12 (``kind="normal"``) and 6-13 (``"radial"``) with a fitted normal curve."""
+    fig, axes = _figure(len(joints))
+    for ax, j in zip(axes, joints, strict=True):
+        values = j.normal if kind == "normal" else j.radial
+        ax.set_title(f"joint {j.joint} ({j.name})")
+        ax.set_xlabel(f"{kind} residual (cm)")
+        ax.set_ylabel("count")
+        if values is None or len(values) < 2:
+            ax.text(0.5, 0.5, f"no {kind} residuals", ha="center", transform=ax.transAxes)
+            continue
+        counts, edges, _ = ax.hist(values, bins="auto", color="C0", alpha=0.7, edgecolor="k")
+        mu, sd = float(np.mean(values)), float(np.std(values, ddof=1))
+        if sd > 0:
+            x = np.linspace(edges[0], edges[-1], 200)
+            pdf = np.exp(-0.5 * ((x - mu) / sd) ** 2) / (sd * math.sqrt(2 * math.pi))
+            ax.plot(x, pdf * len(values) * (edges[1] - edges[0]), color="C3", lw=1.2)
+        ax.text(0.02, 0.95, f"s = {sd:.4f} cm", transform=ax.transAxes, va="top", fontsize=8)
+    title = "plane-of-rotation (normal)" if kind == "normal" else "circle-of-rotation (radial)"
+    figure_no = "6-12" if kind == "normal" else "6-13"
+    fig.suptitle(f"Histograms of the {title} residuals (cf. Figure {figure_no})")
+    return save_png(fig, path)

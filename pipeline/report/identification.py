@@ -1,0 +1,264 @@
+"""The identification report of a session: ``report/report.md`` and its figures.
+
+Every number comes from the stage tables in ``stages/`` (Chapter 6 layout:
+Table 6-3 pseudo D-H parameters, Figures 6-11 to 6-13 residuals, Table 6-4
+residual variances, Table 6-5 feature accuracies) plus data quality, an optional
+audit against the simulator's truth, and the provenance of every stage.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import Counter
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.atomic import write_text_atomic
+from pipeline.errors import StageError
+from pipeline.report import figures
+from pipeline.stages.runner import STAGE_MODULES, stage_path
+from pipeline.stages.session import session_robot
+from pipeline.stages.tables import read_provenance, read_table
+
+Row = dict[str, Any]
+#: Stage tables the report reads (every stage's provenance is listed).
+USED = ("session", "compensate", "triangulate", "features", "residuals", "frames", "smodel", "dh")
+DASH = "—"
+
+
+def _fmt(spec: str) -> Callable[[Any], str]:
+    def fmt(v: Any) -> str:
+        if v is None or (isinstance(v, float) and math.isnan(v)):
+            return DASH
+        return format(v, spec)
+
+    return fmt
+
+
+cm, deg, sig, var = _fmt(".4f"), _fmt(".3f"), _fmt(".4g"), _fmt(".6f")
+
+
+def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    def cell(v: Any) -> str:
+        return str(v).replace("|", "\\|")
+
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    lines += ["| " + " | ".join(cell(v) for v in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _load(sdir: Path) -> tuple[dict[str, list[Row]], dict[str, dict[str, Any]], Any]:
+    missing = [n for n in STAGE_MODULES if not stage_path(sdir, n).is_file()]
+    if missing:
+        raise StageError(
+            f"{sdir}: no identification to report (stage(s) {', '.join(missing)} have not run)",
+            fix=f"run `pipeline identify {sdir}` first",
+        )
+    paths = {n: stage_path(sdir, n) for n in STAGE_MODULES}
+    tables = {n: read_table(paths[n]) for n in USED}
+    robot = session_robot(tables["session"])
+    rows = {n: t.to_pylist() for n, t in tables.items()}
+    return rows, {n: read_provenance(p) for n, p in paths.items()}, robot
+
+
+def _summary(name: str, t: dict[str, list[Row]], robot: Any, mode: str) -> str:
+    tri, feats = t["triangulate"], t["features"]
+    sweeps = sorted({r["sweep"] for r in tri if r["sweep"] > 0})
+    probe = sum(r["sweep"] == 0 for r in tri)
+    total = {k: sum(r[k] for r in tri) for k in ("n_cycles", "n_dropped", "n_rejected", "n_used")}
+    warned = [f for f in feats if f["warnings"]]
+    text = (
+        f"Session **{name}** ({mode}) identifies the arm signature of a {robot.name} with "
+        f"{robot.n_joints} joints from {len(tri)} configurations ({len(sweeps)} joint sweeps, "
+        f"{probe} tool-probe configuration(s)) and {total['n_cycles']} digitize cycles: "
+        f"{total['n_dropped']} cycles were dropped by the compensation, "
+        f"{total['n_rejected']} rejected as outliers, {total['n_used']} averaged. "
+    )
+    if not warned:
+        return text + "No feature warnings."
+    worst = max(warned, key=lambda f: f["sigma_normal_cm"])
+    return text + (
+        f"{len(warned)} joint(s) carry feature warnings; the largest residuals "
+        f"(σ_normal {cm(worst['sigma_normal_cm'])} cm) are on joint {worst['joint']}: "
+        f"“{'; '.join(worst['warnings'])}”"
+    )
+
+
+def _dh_section(rows: list[Row], robot: Any) -> str:
+    body = []
+    for r in rows:
+        j = robot.joints[r["joint"] - 1]
+        pris = r["type"] == "prismatic"
+        theta, d_design = (r["theta_deg"], j.dh.d_cm) if pris else (r["q_offset_deg"], None)
+        d = r["q_offset_cm"] if pris else r["d_cm"]
+        body.append(
+            [r["joint"], j.name, f"d{r['joint']}" if pris else f"θ{r['joint']}",
+             deg(theta), deg(j.dh.theta_deg), cm(d),
+             cm(d_design if pris else r["design_d_cm"]), cm(r["a_cm"]), cm(r["design_a_cm"]),
+             deg(r["alpha_deg"]), deg(r["design_alpha_deg"])]
+        )  # fmt: skip
+    head = ["Joint", "Name", "Variable", "θ (deg)", "design θ", "d (cm)", "design d"]
+    head += ["a (cm)", "design a", "α (deg)", "design α"]
+    return (
+        "## Identified pseudo Denavit-Hartenberg parameters (cf. Table 6-3)\n\n"
+        + _table(head, body)
+        + "\n\nFor the variable of each joint (θ revolute, d prismatic) the table gives its "
+        "encoder offset: θ = q + offset (d = q + offset). Nearly parallel consecutive axes put "
+        "their common normal far from the arm, so huge d values of opposite sign on such axes "
+        "are expected (ERRATA, convergence-angle problem), as are sign flips of a and α with "
+        "±180° in the offsets (the sense of x_i is a convention). These numbers are for people: "
+        "control uses the S-Model matrices B_i, not the D-H parameters."
+    )
+
+
+def _smodel_section(rows: list[Row], frames: list[Row], robot: Any) -> str:
+    qs = {f["frame"]: f for f in frames if f["kind"] == "link"}
+    body = []
+    for r in rows:
+        f, j = qs.get(r["link"], {}), robot.joints[r["link"] - 1]
+        q = cm(f.get("q_signature_cm")) if j.prismatic else deg(f.get("q_signature_deg"))
+        body.append(
+            [r["link"], j.name, r["type"], f"{q} {j.unit}", deg(r["beta_deg"]),
+             cm(r["d_bar_cm"]), cm(r["a_bar_cm"]), deg(r["alpha_bar_deg"]),
+             deg(r["gamma_deg"]), cm(r["b_cm"])]
+        )  # fmt: skip
+    head = ["Link", "Name", "Type", "q̄ˢ", "β (deg)", "d̄ (cm)", "ā (cm)", "ᾱ (deg)"]
+    return (
+        "## S-Model link parameters (4.52)-(4.57)\n\n"
+        + _table(head + ["γ (deg)", "b (cm)"], body)
+        + "\n\nβ and d̄ hold at the signature reading q̄ˢ of the joint."
+    )
+
+
+def _features_section(rows: list[Row], robot: Any) -> str:
+    body = []
+    for r in rows:
+        pris = r["type"] == "prismatic"
+        extent = f"{cm(r['travel_cm'])} cm" if pris else f"{deg(r['sweep_deg'])}°"
+        body.append(
+            [r["joint"], robot.joints[r["joint"] - 1].name, r["n_points"], extent,
+             cm(r["radius_cm"]), sig(r["sigma_normal_cm"]), sig(r["sigma_radial_cm"]),
+             sig(r["sigma_delta_deg"]), sig(r["sigma_delta_empirical_deg"]),
+             sig(r["sigma_c_cm"]), sig(r["methods_angle_deg"])]
+        )  # fmt: skip
+    head = ["Joint", "Name", "Points", "Sweep / travel", "Radius (cm)", "σ_normal (cm)"]
+    head += ["σ_radial (cm)", "σ_δ (deg)", "σ_δ (6.12) (deg)", "σ_c (cm)", "plane methods Δ (deg)"]
+    warned = [f"- Joint {r['joint']}: {w}" for r in rows for w in r["warnings"]]
+    return (
+        "## Feature accuracies (cf. Table 6-5)\n\n"
+        + _table(head, body)
+        + "\n\nσ_δ = max(σ_E, σ_F) from (6.9)-(6.10); σ_δ (6.12) and σ_c (6.13) use the "
+        'thesis\' empirical constants and need enough sweep. "plane methods Δ" is the angle '
+        "between the eigenvalue and repeated least-squares plane normals.\n\n"
+        "### Warnings\n\n" + ("\n".join(warned) if warned else "none")
+    )
+
+
+def _variance_section(res: list[figures.JointResiduals]) -> str:
+    def stats(v: np.ndarray | None) -> list[str]:
+        if v is None or len(v) < 2:
+            return [DASH, DASH]
+        s2 = float(np.var(v, ddof=1))
+        return [var(s2), cm(math.sqrt(s2))]
+
+    body = [[j.joint, j.name, len(j.normal), *stats(j.normal), *stats(j.radial)] for j in res]
+    head = ["Joint", "Name", "n", "normal variance (cm²)", "normal stdev (cm)"]
+    return (
+        "## Residual variances (cf. Table 6-4)\n\n"
+        + _table(head + ["radial variance (cm²)", "radial stdev (cm)"], body)
+        + "\n\nSample variances (n − 1) of the residuals table; prismatic joints have distances "
+        "from the line of translation as normal residuals and no radial residuals."
+    )
+
+
+def _figures_section(paths: dict[str, Path]) -> str:
+    captions = {
+        "residuals": "Normal (*) and radial (o) residuals against the joint reading "
+        "(cf. Figure 6-11).",
+        "hist_normal": "Histograms of the normal residuals (cf. Figure 6-12).",
+        "hist_radial": "Histograms of the radial residuals (cf. Figure 6-13).",
+    }
+    out = ["## Figures"]
+    out += [f"![{captions[k]}]({p.name})\n\n*{captions[k]}*" for k, p in paths.items()]
+    return "\n\n".join(out)
+
+
+def _quality_section(tri: list[Row], comp: list[Row]) -> str:
+    status = {s: Counter(r["status"] for r in comp if r["sweep"] == s) for s in {
+        r["sweep"] for r in comp}}  # fmt: skip
+    body = []
+    for s in sorted({r["sweep"] for r in tri}):
+        rows = [r for r in tri if r["sweep"] == s]
+        total = {k: sum(r[k] for r in rows) for k in ("n_cycles", "n_dropped", "n_rejected")}
+        bad = ", ".join(f"{k} {n}" for k, n in sorted(status.get(s, {}).items()) if k != "ok")
+        scatter = [r["scatter_cm"] for r in rows if r["scatter_cm"] is not None]
+        unusable = sum(r["x_cm"] is None for r in rows)
+        body.append(
+            ["tool probe" if s == 0 else f"joint {s}", len(rows), total["n_cycles"],
+             total["n_dropped"], bad or "none", total["n_rejected"], unusable,
+             cm(float(np.median(scatter))) if scatter else DASH,
+             cm(max(scatter)) if scatter else DASH]
+        )  # fmt: skip
+    head = ["Sweep", "Configurations", "Cycles", "Dropped", "Compensation status"]
+    head += ["Rejected outliers", "Unusable configurations", "Median scatter (cm)", "Max scatter"]
+    return "## Data quality\n\n" + _table(head, body)
+
+
+def _audit_section(audit: dict[str, Any]) -> str:
+    keys = ("max_position_cm", "rms_position_cm", "max_orientation_deg", "rms_orientation_deg")
+    body = [[name, *(sig(audit[name][k]) for k in keys)] for name in ("signature", "design")]
+    head = ["Model", "max position (cm)", "RMS position (cm)", "max orientation (deg)"]
+    return (
+        "## Audit against the simulator's truth\n\n"
+        + _table(head + ["RMS orientation (deg)"], body)
+        + f"\n\nOver {audit['configurations']} random configurations after the best-fit base "
+        f"and tool alignment, the design model's RMS position error is "
+        f"{audit['improvement_rms_position']:.1f}× the signature's."
+    )
+
+
+def _provenance_section(prov: dict[str, dict[str, Any]]) -> str:
+    body = [
+        [name, p.get("stage_version", DASH), f"`{json.dumps(p.get('params', {}), sort_keys=True)}`",
+         p.get("created", DASH), f"`{str(p.get('content_hash', ''))[:12]}`"]
+        for name, p in prov.items()
+    ]  # fmt: skip
+    head = ["Stage", "Version", "Parameters", "Created", "Content hash"]
+    return "## Stage provenance\n\n" + _table(head, body)
+
+
+def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -> Path:
+    """Write ``report/report.md`` and its PNG figures for an identified session.
+
+    ``audit`` is :meth:`pipeline.audit.AuditResult.to_dict` output, reported when given.
+    Raises :class:`StageError` when a stage output is missing. Returns the report path.
+    """
+    sdir = Path(session_dir)
+    t, prov, robot = _load(sdir)
+    out = sdir / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    res = figures.joint_residuals(t["residuals"], robot)
+    figs = {"residuals": figures.residuals_vs_q(res, out / "residuals.png")}
+    figs["hist_normal"] = figures.residual_histograms(res, "normal", out / "hist_normal.png")
+    if any(j.radial is not None for j in res):
+        figs["hist_radial"] = figures.residual_histograms(res, "radial", out / "hist_radial.png")
+    name, mode = sdir.resolve().name, t["session"][0]["mode"]
+    parts = [
+        f"# Arm signature identification: {name}\n\nRobot **{robot.name}**, mode **{mode}**.",
+        _summary(name, t, robot, mode),
+        _dh_section(t["dh"], robot),
+        _smodel_section(t["smodel"], t["frames"], robot),
+        _features_section(t["features"], robot),
+        _variance_section(res),
+        _figures_section(figs),
+        _quality_section(t["triangulate"], t["compensate"]),
+        *([_audit_section(audit)] if audit is not None else []),
+        _provenance_section(prov),
+    ]
+    path = out / "report.md"
+    write_text_atomic(path, "\n\n".join(parts) + "\n")
+    return path

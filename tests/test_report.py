@@ -1,0 +1,114 @@
+"""The identification report: contents from the stage tables, figures, errors."""
+
+from __future__ import annotations
+
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.audit import audit
+from pipeline.errors import StageError
+from pipeline.report.identification import write_report
+from pipeline.rig.simulate import SimulationOptions, simulate_session
+from pipeline.stages.runner import STAGE_MODULES, run, stage_path
+from pipeline.stages.session import session_robot
+from pipeline.stages.tables import read_provenance, read_table
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    sdir = tmp_path_factory.mktemp("robot")
+    simulate_session(sdir, SimulationOptions(seed=2, points=12, repeats=2))
+    run(sdir)
+    return sdir
+
+
+@pytest.fixture(scope="module")
+def report(session: Path) -> tuple[Path, str]:
+    path = write_report(session, audit(session, configurations=20).to_dict())
+    return path, path.read_text(encoding="utf-8")
+
+
+def test_report_written_in_session(session: Path, report: tuple[Path, str]) -> None:
+    path, text = report
+    assert path == session / "report" / "report.md"
+    assert text.startswith(f"# Arm signature identification: {session.name}")
+    assert "puma560" in text and "simulated" in text
+    # Atomic writes leave no temp files behind.
+    assert not [p.name for p in path.parent.iterdir() if p.name.startswith(".")]
+
+
+def test_sections_in_order(report: tuple[Path, str]) -> None:
+    _, text = report
+    headings = [
+        "pseudo Denavit-Hartenberg",
+        "S-Model link parameters",
+        "Feature accuracies",
+        "### Warnings",
+        "Residual variances",
+        "## Figures",
+        "## Data quality",
+        "Audit against the simulator's truth",
+        "Stage provenance",
+    ]
+    positions = [text.index(h) for h in headings]
+    assert positions == sorted(positions)
+
+
+def test_every_joint_and_dh_value(session: Path, report: tuple[Path, str]) -> None:
+    _, text = report
+    robot = session_robot(read_table(stage_path(session, "session")))
+    for i, joint in enumerate(robot.joints, start=1):
+        assert f"| {i} | {joint.name} |" in text
+    for row in read_table(stage_path(session, "dh")).to_pylist():
+        assert f"{row['a_cm']:.4f}" in text
+        assert f"{row['alpha_deg']:.3f}" in text
+        assert f"{row['q_offset_deg']:.3f}" in text
+        assert f"{row['d_cm']:.4f}" in text
+
+
+def test_tables_come_from_stage_files(session: Path, report: tuple[Path, str]) -> None:
+    _, text = report
+    for row in read_table(stage_path(session, "smodel")).to_pylist():
+        assert f"{row['b_cm']:.4f}" in text
+    res = read_table(stage_path(session, "residuals")).to_pylist()
+    normal = np.array([r["normal_cm"] for r in res if r["joint"] == 1])
+    assert f"{np.var(normal, ddof=1):.6f}" in text
+    tri = read_table(stage_path(session, "triangulate")).to_pylist()
+    assert f"{sum(r['n_cycles'] for r in tri)} digitize cycles" in text
+    for name in STAGE_MODULES:
+        assert read_provenance(stage_path(session, name))["content_hash"][:12] in text
+
+
+def test_figures_are_linked_pngs(report: tuple[Path, str]) -> None:
+    path, text = report
+    links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text)
+    assert len(links) == 3
+    for link in links:
+        png = path.parent / link
+        assert not Path(link).is_absolute() and png.is_file()
+        assert png.read_bytes()[:8] == PNG_MAGIC
+
+
+def test_audit_optional_and_rewrite(session: Path, report: tuple[Path, str]) -> None:
+    path = write_report(session)
+    text = path.read_text(encoding="utf-8")
+    assert "Audit against the simulator's truth" not in text
+    assert "Audit against the simulator's truth" in report[1]
+
+
+def test_missing_stage_names_session_and_fix(session: Path, tmp_path: Path) -> None:
+    with pytest.raises(StageError, match="pipeline identify") as err:
+        write_report(tmp_path)
+    assert str(tmp_path) in str(err.value)
+    partial = tmp_path / "partial"
+    shutil.copytree(session / "stages", partial / "stages")
+    stage_path(partial, "features").unlink()
+    with pytest.raises(StageError, match="features.*pipeline identify"):
+        write_report(partial)
+    assert not (partial / "report").exists()
