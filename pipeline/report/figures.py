@@ -59,7 +59,9 @@ def _figure(n: int) -> tuple[Any, list[Any]]:
     from matplotlib.figure import Figure
 
     rows, cols = _grid(n)
-    fig = Figure(figsize=(4.2 * cols, 3.2 * rows), layout="constrained")
+    fig = Figure(figsize=(4.2 * cols, 3.2 * rows))
+    # Fixed margins: constrained layout cost ~1.5 s of the report for the same look.
+    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.1, top=0.9, wspace=0.3, hspace=0.45)
     axes = fig.subplots(rows, cols, squeeze=False).ravel()
     for ax in axes[n:]:
         ax.set_visible(False)

@@ -363,4 +363,3 @@ def _arm_rotation(t123: Array) -> Array:
     R[..., 2, 1] = 0.0
     R[..., 2, 2] = c23
     return R
-
