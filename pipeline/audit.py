@@ -15,20 +15,16 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from pipeline.errors import ArmsigError
+from pipeline.kinematics.alignment import fit_alignment
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
-from pipeline.kinematics.transforms import invert_transform, pose_error, transform_from_xyz_rpy
+from pipeline.kinematics.transforms import pose_error
 from pipeline.stages.frames import chain_from_frames
 from pipeline.stages.runner import stage_path
 from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_table
 from pipeline.units import joints_to_internal
-
-#: Orientation residuals are weighted as positions on a 10 cm lever: errors of a tool
-#: 10 cm long, the scale of the evaluation probe.
-LEVER_CM = 10.0
 
 
 @dataclass(frozen=True)
@@ -64,21 +60,9 @@ def true_chain(truth: dict) -> SerialChain:
     return SerialChain(links=np.array(tk["links"]), prismatic=pris, base=np.array(tk["base"]))
 
 
-def _pose(x: np.ndarray) -> np.ndarray:
-    return transform_from_xyz_rpy(x[:3], x[3:6])
-
-
 def _aligned_errors(T_true: np.ndarray, T_model: np.ndarray) -> ModelError:
-    X0 = T_true[0] @ invert_transform(T_model[0])
-    lever = np.diag([LEVER_CM, LEVER_CM, LEVER_CM, 1.0])
-
-    def residual(x: np.ndarray) -> np.ndarray:
-        T = X0 @ _pose(x[:6]) @ T_model @ _pose(x[6:])
-        return ((T - T_true)[:, :3, :] @ lever).ravel()
-
-    fit = least_squares(residual, np.zeros(12), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    T = X0 @ _pose(fit.x[:6]) @ T_model @ _pose(fit.x[6:])
-    dp, dth = pose_error(T_true, T)
+    X, Y = fit_alignment(T_true, T_model)
+    dp, dth = pose_error(T_true, X @ T_model @ Y)
     dth = np.degrees(dth)
     return ModelError(
         float(dp.max()),

@@ -16,8 +16,11 @@ import numpy as np
 from pipeline import __version__
 from pipeline.atomic import write_text_atomic
 from pipeline.errors import ArmsigError
-from pipeline.kinematics.chain import SerialChain
+from pipeline.kinematics.alignment import fit_alignment
+from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.signature import pseudo_dh_from_chain
+from pipeline.kinematics.transforms import pose_error
+from pipeline.robots.description import RobotDescription, description_to_dict
 from pipeline.stages.frames import chain_from_frames
 from pipeline.stages.runner import stage_path, stages
 from pipeline.stages.session import session_robot
@@ -25,7 +28,28 @@ from pipeline.stages.tables import read_provenance, read_table
 from pipeline.units import joints_to_boundary, joints_to_internal
 
 FORMAT = "armsig.signature"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+ALIGNMENT_SAMPLES = 500
+
+
+def design_alignment(
+    signature_chain: SerialChain, robot: RobotDescription, samples: int = ALIGNMENT_SAMPLES
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Base ``X`` and tool ``Y`` with ``F_s(q) ≈ X · F_d(q) · Y``, and the RMS misfit (cm).
+
+    Uses only the signature and the design model (random configurations within
+    the joint limits, fixed seed): no ground truth.
+    """
+    rng = np.random.default_rng(0)  # fixed: the same signature gives the same file
+    lim = robot.limits
+    q = joints_to_internal(
+        rng.uniform(lim[:, 0], lim[:, 1], (samples, robot.n_joints)), robot.prismatic
+    )
+    T_s = forward_kinematics(signature_chain, q)
+    T_d = forward_kinematics(robot.design_chain(), q)
+    X, Y = fit_alignment(T_s, T_d)
+    dp, _ = pose_error(T_s, X @ T_d @ Y)
+    return X, Y, float(np.sqrt(np.mean(dp**2)))
 
 
 def _m(T: np.ndarray) -> list[list[float]]:
@@ -39,6 +63,7 @@ def signature_document(session_dir: Path) -> dict[str, Any]:
     pris = robot.prismatic
     chain = chain_from_frames(read_table(stage_path(session_dir, "frames")), pris)
     pdh = pseudo_dh_from_chain(chain)
+    X, Y, misfit = design_alignment(chain, robot)
     sm = pdh.smodel
     qs = joints_to_boundary(chain.joint_offsets, pris)
     off = joints_to_boundary(pdh.q_offset, pris)
@@ -95,6 +120,12 @@ def signature_document(session_dir: Path) -> dict[str, Any]:
             ],
         },
         "pseudo_dh": pseudo,
+        "design_alignment": {
+            "sensor_from_design_base": _m(X),
+            "design_flange_to_signature_tool": _m(Y),
+            "rms_misfit_cm": misfit,
+        },
+        "robot_description": description_to_dict(robot),
         "pseudo_dh_base": _m(pdh.base),
         "pseudo_dh_tool": _m(pdh.tool),
         "feature_accuracy": [

@@ -1,0 +1,77 @@
+"""Signature-based control of an identified session (Chapter 5)."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.control import Controller, parse_branch
+from pipeline.errors import ArmsigError
+from pipeline.identify import identify
+from pipeline.kinematics.chain import forward_kinematics
+from pipeline.kinematics.transforms import invert_transform
+from pipeline.robots import puma560
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def robot3(tmp_path_factory) -> Controller:
+    d = tmp_path_factory.mktemp("robot3")
+    shutil.copy(ROOT / "sessions/robot3/recording.mcap", d)
+    identify(d, report=False)
+    return Controller.from_session(d)
+
+
+def _targets(c: Controller, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    lim = np.deg2rad(c.robot.limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], (n, 6))
+    return q, invert_transform(c.sensor_from_base) @ forward_kinematics(c.signature.chain, q)
+
+
+@pytest.mark.parametrize("method", ["nr", "jacobi"])
+def test_solves_on_the_requested_branch(robot3: Controller, method: str) -> None:
+    q, T = _targets(robot3, 2000, 5)
+    flags = puma560.branch_of(q)
+    good = 0
+    for b in puma560.BRANCHES:
+        sel = np.all(flags == [b.shoulder, b.elbow, b.wrist], axis=1)
+        r = robot3.solve(T[sel], branch=b, method=method)
+        on_branch = np.all(puma560.branch_of(r.q) == [b.shoulder, b.elbow, b.wrist], axis=1)
+        ok = (
+            r.converged
+            & (r.position_error_cm <= 1e-6)
+            & (np.degrees(r.orientation_error_rad) <= 1e-7)
+        )
+        good += int((ok & on_branch).sum())
+        assert np.isfinite(r.q).all()
+    # Measured on 10,000 targets of robot3: NR 99.93 %, Jacobi 99.23 % (near-singular misses).
+    assert good / len(q) >= (0.998 if method == "nr" else 0.985)
+
+
+def test_batch_equals_loop(robot3: Controller) -> None:
+    q, T = _targets(robot3, 8, 6)
+    b = parse_branch("right-up-noflip")
+    batch = robot3.solve(T, branch=b)
+    for k in range(8):
+        one = robot3.solve(T[k], branch=b)
+        np.testing.assert_allclose(one.q[0], batch.q[k], atol=1e-12)
+
+
+def test_design_alignment_is_recorded(robot3: Controller) -> None:
+    # Design base frame -> sensor: the rig puts the Puma base about 88 cm in front of the wall.
+    assert 50.0 < robot3.sensor_from_base[2, 3] < 130.0
+    np.testing.assert_allclose(
+        robot3.sensor_from_base[:3, :3].T @ robot3.sensor_from_base[:3, :3], np.eye(3), atol=1e-12
+    )
+
+
+def test_bad_branch_and_method(robot3: Controller) -> None:
+    with pytest.raises(ArmsigError, match="unknown branch"):
+        parse_branch("sideways")
+    with pytest.raises(ArmsigError, match="unknown method"):
+        robot3.solve(np.eye(4), method="magic")
