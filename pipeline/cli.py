@@ -253,5 +253,67 @@ def audit(
     typer.echo(f"  design / signature RMS position error: {r.improvement:.1f}x")
 
 
+@app.command()
+@_errors_to_exit
+def ik(
+    session: SessionArg,
+    pose: Annotated[
+        tuple[float, float, float, float, float, float] | None,
+        typer.Option(help="x y z (cm) rx ry rz (deg, fixed axes) in the design base frame."),
+    ] = None,
+    branch: Annotated[
+        str | None, typer.Option(help="Puma branch, e.g. right-up-noflip (default: that of q^s).")
+    ] = None,
+    method: Annotated[str, typer.Option(help="nr (Newton-Raphson) or jacobi.")] = "nr",
+    targets: Annotated[
+        str | None, typer.Option(help="Arrow file: x_cm y_cm z_cm rx_deg ry_deg rz_deg [branch].")
+    ] = None,
+    out: Annotated[str | None, typer.Option(help="Arrow file for the joints of --targets.")] = None,
+) -> None:
+    """Joint readings that put the identified tool at a pose (signature-based control)."""
+    from pipeline.control import Controller, solve_arrow, solve_poses
+    from pipeline.kinematics.ik import STATUS_NAMES
+
+    ctl = Controller.from_session(session)
+    if targets is not None:
+        if out is None:
+            raise ArmsigError("--targets needs --out", fix="--out joints.arrow")
+        summary = solve_arrow(ctl, targets, out, method)
+        typer.echo(summary)
+        return
+    if pose is None:
+        raise ArmsigError("give --pose x y z rx ry rz, or --targets FILE --out FILE")
+    q, res = solve_poses(ctl, np.array(pose[:3]), np.array(pose[3:]), [branch], method)
+    units = [j.unit for j in ctl.robot.joints]
+    typer.echo("q = " + "  ".join(f"{v:.4f} {u}" for v, u in zip(q[0], units, strict=True)))
+    typer.echo(
+        f"{STATUS_NAMES[int(res.status[0])]} after {int(res.iterations[0])} iterations; "
+        f"residual {res.position_error_cm[0]:.2e} cm, "
+        f"{np.degrees(res.orientation_error_rad[0]):.2e} deg"
+    )
+    lim = ctl.robot.limits
+    outside = [
+        j.name
+        for j, v, (lo, hi) in zip(ctl.robot.joints, q[0], lim, strict=True)
+        if not lo <= v <= hi
+    ]
+    if outside:
+        typer.echo(f"warning: outside joint limits: {', '.join(outside)}", err=True)
+    if not res.converged[0]:
+        raise typer.Exit(1)
+
+
+@app.command("ik-convergence")
+@_errors_to_exit
+def ik_convergence(
+    session: SessionArg,
+    seed: Annotated[int, typer.Option(help="Seed of the target and the poor signature.")] = 3,
+) -> None:
+    """Per-iteration errors of Newton-Raphson and Jacobi (Tables 5-1, 5-2, Section 5.4)."""
+    from pipeline.convergence import convergence_tables, format_tables
+
+    typer.echo(format_tables(convergence_tables(session, seed=seed)))
+
+
 if __name__ == "__main__":  # pragma: no cover
     app()

@@ -13,8 +13,9 @@ signature's sensor frame with the base alignment stored in the signature file
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -122,9 +123,10 @@ class Controller:
             branch = self.default_branch()
         q0 = self.initial_estimate(T_sensor, branch)
         if method == "nr":
-            return newton_raphson(
+            res = newton_raphson(
                 self.signature.chain, T_sensor, q0, self.resolution, record_history=record_history
             )
+            return self._into_limits(res)
         if self.robot.name != "puma560":
             raise ArmsigError(
                 f"{self.robot.name}: Jacobi iteration needs a closed-form design inverse",
@@ -133,7 +135,7 @@ class Controller:
         from pipeline.robots.puma560_control import puma_design_inverse
 
         inv = puma_design_inverse(branch, tool=self.flange_to_tool, base=self.sensor_from_base)
-        return jacobi_iterative(
+        res = jacobi_iterative(
             self.signature.chain,
             self._design_in_sensor(),
             inv,
@@ -142,3 +144,99 @@ class Controller:
             self.resolution,
             record_history=record_history,
         )
+        return self._into_limits(res)
+
+    def _into_limits(self, res: IKResult) -> IKResult:
+        """Shift revolute joints by ±2π where that brings them inside their limits."""
+        lim = joints_to_internal(self.robot.limits.T, self.robot.prismatic).T  # (n, 2)
+        q = res.q.copy()
+        for shift in (2.0 * np.pi, -2.0 * np.pi):
+            moved = q + np.where(self.robot.prismatic, 0.0, shift)
+            inside = (moved >= lim[:, 0]) & (moved <= lim[:, 1])
+            outside = (q < lim[:, 0]) | (q > lim[:, 1])
+            q = np.where(inside & outside, moved, q)
+        return replace(res, q=q)
+
+
+def solve_poses(
+    controller: Controller,
+    xyz_cm: np.ndarray,
+    rpy_deg: np.ndarray,
+    branches: list[str | None] | None = None,
+    method: str = "nr",
+) -> tuple[np.ndarray, IKResult]:
+    """Solve poses given as position (m, 3) cm and fixed-axis rx, ry, rz (m, 3) deg.
+
+    Returns the joint readings in boundary units (m, n) and the raw result.
+    Targets are grouped by branch so every group is one batched solve.
+    """
+    from pipeline.kinematics.transforms import transform_from_xyz_rpy
+    from pipeline.units import joints_to_boundary
+
+    T = transform_from_xyz_rpy(np.atleast_2d(xyz_cm), np.deg2rad(np.atleast_2d(rpy_deg)))
+    m = T.shape[0]
+    labels = branches if branches is not None else [None] * m
+    results: dict[str | None, tuple[np.ndarray, IKResult]] = {}
+    for label in dict.fromkeys(labels):
+        sel = np.array([b == label for b in labels])
+        results[label] = (sel, controller.solve(T[sel], parse_branch(label), method))
+    n = controller.robot.n_joints
+    fields = {
+        "q": np.zeros((m, n)),
+        "converged": np.zeros(m, bool),
+        "iterations": np.zeros(m, int),
+        "position_error_cm": np.zeros(m),
+        "orientation_error_rad": np.zeros(m),
+        "status": np.zeros(m, int),
+    }
+    for sel, res in results.values():
+        for key, arr in fields.items():
+            arr[sel] = getattr(res, key)
+    out = IKResult(
+        q=fields["q"],
+        converged=fields["converged"],
+        iterations=fields["iterations"],
+        position_error_cm=fields["position_error_cm"],
+        orientation_error_rad=fields["orientation_error_rad"],
+        status=fields["status"],
+    )
+    return joints_to_boundary(out.q, controller.robot.prismatic), out
+
+
+def solve_arrow(controller: Controller, targets: str | Path, out: str | Path, method: str) -> str:
+    """Solve an Arrow file of poses and write the joints beside them (atomically)."""
+    import pyarrow as pa
+    import pyarrow.ipc as ipc
+
+    from pipeline.kinematics.ik import STATUS_NAMES
+    from pipeline.stages.tables import write_table
+
+    cols = ("x_cm", "y_cm", "z_cm", "rx_deg", "ry_deg", "rz_deg")
+    try:
+        with pa.OSFile(str(targets), "rb") as fh:
+            table = ipc.open_file(fh).read_all()
+    except (OSError, pa.ArrowInvalid) as exc:
+        raise ArmsigError(f"{targets}: not an Arrow IPC file", got=str(exc)) from exc
+    missing = [c for c in cols if c not in table.column_names]
+    if missing:
+        raise ArmsigError(
+            f"{targets}: missing column(s) {', '.join(missing)}", expected=", ".join(cols)
+        )
+    xyz = np.column_stack([table.column(c).to_numpy() for c in cols[:3]]).astype(float)
+    rpy = np.column_stack([table.column(c).to_numpy() for c in cols[3:]]).astype(float)
+    branches = table.column("branch").to_pylist() if "branch" in table.column_names else None
+    q, res = solve_poses(controller, xyz, rpy, branches, method)
+    extra: dict[str, Any] = {}
+    for i, j in enumerate(controller.robot.joints):
+        extra[f"q{i + 1}_{j.unit}"] = q[:, i]
+    extra.update(
+        converged=res.converged,
+        iterations=res.iterations.astype(np.int32),
+        position_error_cm=res.position_error_cm,
+        orientation_error_deg=np.degrees(res.orientation_error_rad),
+        status=[STATUS_NAMES[int(s)] for s in res.status],
+    )
+    for name, values in extra.items():
+        table = table.append_column(name, pa.array(values))
+    write_table(Path(out), table, {"method": method, "signature": str(controller.signature.robot)})
+    return f"{int(res.converged.sum())} of {len(q)} targets converged; wrote {out}"

@@ -75,3 +75,47 @@ def test_bad_branch_and_method(robot3: Controller) -> None:
         parse_branch("sideways")
     with pytest.raises(ArmsigError, match="unknown method"):
         robot3.solve(np.eye(4), method="magic")
+
+
+def test_cli_ik_pose_batch_and_convergence(robot3: Controller, tmp_path: Path) -> None:
+    import pyarrow as pa
+    import pyarrow.ipc as ipc
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+    from pipeline.convergence import convergence_tables
+
+    d = tmp_path / "s"
+    d.mkdir()
+    shutil.copy(ROOT / "sessions/robot3/recording.mcap", d)
+    identify(d, report=False)
+    runner = CliRunner()
+    r = runner.invoke(app, ["ik", str(d), "--pose", "40", "20", "60", "180", "0", "90"])
+    assert r.exit_code == 0 and "converged" in r.output
+    t = pa.table(
+        {
+            k: [v]
+            for k, v in zip(
+                ("x_cm", "y_cm", "z_cm", "rx_deg", "ry_deg", "rz_deg"),
+                (40.0, 20.0, 60.0, 180.0, 0.0, 90.0),
+                strict=True,
+            )
+        }
+    )
+    with ipc.new_file(str(tmp_path / "t.arrow"), t.schema) as w:
+        w.write_table(t)
+    r = runner.invoke(
+        app,
+        ["ik", str(d), "--targets", str(tmp_path / "t.arrow"), "--out", str(tmp_path / "q.arrow")],
+    )
+    assert r.exit_code == 0 and "1 of 1 targets converged" in r.output
+    import polars as pl
+
+    out = pl.read_ipc(tmp_path / "q.arrow")
+    assert out["status"][0] == "converged" and "q6_deg" in out.columns
+    tables = convergence_tables(d)
+    poor = [t for t in tables if t.signature.startswith("poor")]
+    assert abs(poor[0].rows[0, 4] - 6.8) < 0.05  # Table 5-1's 6.806 cm start
+    nr, jac = poor
+    assert nr.rows[-1, 4] < 1e-6 and jac.rows[-1, 4] < 1e-6
+    assert len(nr.rows) < len(jac.rows)  # quadratic versus linear convergence
