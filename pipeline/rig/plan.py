@@ -83,12 +83,12 @@ class MeasurementPlan:
         }
 
 
-def puma_sensor_from_base() -> np.ndarray:
-    """(F.3) re-based on the mounting surface of the design model.
+def wall_placement(shoulder_height_cm: float) -> np.ndarray:
+    """Sensor-to-base transform of (F.3) for a robot whose shoulder is this high.
 
     (F.3) ends in ``Trans(0, −20.30, −67.183)`` to a base 67.183 cm below the
-    shoulder (F.4); the design model's base is 67.4 cm below it (Section 7.2.2),
-    so the last factor here is ``Trans(0, −20.30, 0) · Trans(0, 0, −67.4)``.
+    shoulder (F.4). armsig's bases are the design models' mounting surfaces, so
+    the last factor is ``Trans(0, −20.30, 0) · Trans(0, 0, −shoulder_height)``.
     """
     d = np.deg2rad
     return chain_product(
@@ -97,24 +97,14 @@ def puma_sensor_from_base() -> np.ndarray:
         rot_x(d(-90.0)),
         rot_z(d(155.0)),
         trans(0.0, -20.30, 0.0),
-        trans(0.0, 0.0, -67.4),
+        trans(0.0, 0.0, -shoulder_height_cm),
     )
 
 
 def default_sensor_from_base(robot: RobotDescription) -> np.ndarray:
-    """Puma: (F.3). Other robots: the same placement with their own shoulder height."""
-    if robot.name == "puma560":
-        return puma_sensor_from_base()
-    d = np.deg2rad
-    shoulder = robot.joints[0].dh.d_cm
-    return chain_product(
-        trans(106.16, 56.98, 87.82),
-        rot_z(d(45.0)),
-        rot_x(d(-90.0)),
-        rot_z(d(155.0)),
-        trans(0.0, -20.30, 0.0),
-        trans(0.0, 0.0, -shoulder),
-    )
+    """(F.3) with the robot's shoulder height: 67.4 cm for the Puma (Section 7.2.2),
+    the first D-H ``d`` for other robots."""
+    return wall_placement(robot.joints[0].dh.d_cm)
 
 
 def nominal_target_local(robot: RobotDescription) -> list[tuple[float, float, float]]:

@@ -14,6 +14,7 @@ from pipeline.features.accuracy import revolute_accuracy
 from pipeline.features.circle import fit_circle
 from pipeline.features.line import fit_line
 from pipeline.features.plane import fit_plane_eigen, fit_plane_lsq, frame_about, orient_normal
+from pipeline.schemas import arrow_schema
 from pipeline.stages.base import Stage
 from pipeline.stages.frames import joint_readings
 from pipeline.stages.session import session_robot
@@ -156,39 +157,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         ):
             put(name, r[name])
         put("warnings", [str(w) for w in r["warnings"]])
-    order = [
-        "joint",
-        "type",
-        "n_points",
-        "plane_method",
-        "axis_x",
-        "axis_y",
-        "axis_z",
-        "eigen_axis_x",
-        "eigen_axis_y",
-        "eigen_axis_z",
-        "lsq_axis_x",
-        "lsq_axis_y",
-        "lsq_axis_z",
-        "methods_angle_deg",
-        "center_x_cm",
-        "center_y_cm",
-        "center_z_cm",
-        "radius_cm",
-        "first_x_cm",
-        "first_y_cm",
-        "first_z_cm",
-        "sweep_deg",
-        "travel_cm",
-        "sigma_normal_cm",
-        "sigma_radial_cm",
-        "sigma_e_deg",
-        "sigma_f_deg",
-        "sigma_delta_deg",
-        "sigma_delta_empirical_deg",
-        "sigma_c_cm",
-        "warnings",
-    ]
+    order = arrow_schema("features").names
     return pa.table(
         {
             k: pa.array(out[k], type=pa.float64())
