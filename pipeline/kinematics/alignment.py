@@ -9,7 +9,6 @@ audit, to compare models whose base and tool frames are conventions.
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from pipeline.kinematics.transforms import (
     Array,
@@ -48,6 +47,8 @@ def fit_alignment(T_ref: ArrayLike, T_model: ArrayLike) -> tuple[Array, Array]:
         T = X0 @ _pose(x[:6]) @ Tm @ _pose(x[6:])
         r: Array = ((T - Tr)[:, :3, :] @ lever).ravel()
         return r
+
+    from scipy.optimize import least_squares  # lazy: 0.4 s of import, needed only here
 
     # Tolerances at 1e-15: the noiseless audit must see 1e-13 cm agreement.
     fit = least_squares(residual, np.zeros(12), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
