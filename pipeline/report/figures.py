@@ -73,7 +73,7 @@ def save_png(fig: Any, path: Path) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
-        fig.savefig(tmp, format="png", dpi=110)
+        fig.savefig(tmp, format="png", dpi=90)
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:
@@ -112,7 +112,10 @@ def residual_histograms(joints: Sequence[JointResiduals], kind: str, path: Path)
         if values is None or len(values) < 2:
             ax.text(0.5, 0.5, f"no {kind} residuals", ha="center", transform=ax.transAxes)
             continue
-        counts, edges, _ = ax.hist(values, bins="auto", color="C0", alpha=0.7, edgecolor="k")
+        # One filled step patch, not a bar per bin: same look, a fraction of the drawing time.
+        counts, edges, _ = ax.hist(
+            values, bins="auto", color="C0", alpha=0.7, edgecolor="k", histtype="stepfilled"
+        )
         mu, sd = float(np.mean(values)), float(np.std(values, ddof=1))
         if sd > 0:
             x = np.linspace(edges[0], edges[-1], 200)
