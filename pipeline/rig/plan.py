@@ -187,7 +187,6 @@ def plan_measurements(
     cand = rng.uniform(lim[:, 0], lim[:, 1], (candidates, robot.n_joints))
     step = np.where(pris, 1.0, 2.0)  # coarse search grid: 2° or 1 cm
     tool_local = np.array([0.0, 0.0, PROBE_LENGTH_CM])
-    score = np.zeros(candidates)
     tool_ok = visible(
         tool_positions(chain, sensor_from_base, joints_to_internal(cand, pris), tool_local),
         geometry,

@@ -18,6 +18,7 @@ from pipeline.schemas import arrow_schema
 from pipeline.stages.base import Stage
 from pipeline.stages.frames import joint_readings
 from pipeline.stages.session import session_robot
+from pipeline.stages.triangulate import positions
 
 PLANE_METHODS = ("lsq", "eigen")
 
@@ -29,14 +30,15 @@ class Params:
     plane_method: str = "lsq"
 
 
-def sweep_points(tri: pa.Table, joints: pa.Table, joint: int, n: int, prismatic: np.ndarray):
-    """Usable target positions (N, 3) of sweep ``joint`` by increasing reading; readings (N,)."""
+def sweep_points(
+    tri: pa.Table, joints: pa.Table, joint: int, n: int, prismatic: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Usable target positions (N, 3) of sweep ``joint`` by increasing reading, the
+    readings (N,) and the configuration steps (N,)."""
     sel = tri.filter(pa.compute.equal(tri.column("sweep"), joint))
     q = joint_readings(joints, joint, n, prismatic)[:, joint - 1]
-    p = np.stack(
-        [sel.column(c).to_numpy(zero_copy_only=False) for c in ("x_cm", "y_cm", "z_cm")], axis=1
-    )
-    p = p.astype(float)
+    p = positions(sel)
+    steps = sel.column("step").to_numpy()
     if len(q) != len(p):
         raise StageError(
             f"sweep {joint}: {len(p)} positions but {len(q)} joint states",
@@ -44,7 +46,7 @@ def sweep_points(tri: pa.Table, joints: pa.Table, joint: int, n: int, prismatic:
         )
     ok = ~np.isnan(p).any(axis=1)
     order = np.argsort(q[ok], kind="stable")
-    return p[ok][order], q[ok][order]
+    return p[ok][order], q[ok][order], steps[ok][order]
 
 
 def _nan(v: Any) -> float | None:
@@ -60,7 +62,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     n, pris = robot.n_joints, robot.prismatic
     rows = []
     for i in range(1, n + 1):
-        p, q = sweep_points(inputs["triangulate"], inputs["joints"], i, n, pris)
+        p, _, _ = sweep_points(inputs["triangulate"], inputs["joints"], i, n, pris)
         if len(p) < 3:
             raise StageError(
                 f"sweep {i}: {len(p)} usable target positions",

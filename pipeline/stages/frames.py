@@ -25,7 +25,8 @@ from pipeline.kinematics.signature import frame_from_features, signature_chain
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.recording import TOOL_SWEEP
 from pipeline.stages.session import session_robot
-from pipeline.units import joints_to_boundary, joints_to_internal
+from pipeline.stages.triangulate import positions
+from pipeline.units import joints_to_internal
 
 MATRIX_COLUMNS = ("nx", "ny", "nz", "ox", "oy", "oz", "ax", "ay", "az", "px_cm", "py_cm", "pz_cm")
 
@@ -101,7 +102,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
             expected="sweep 'tool' with at least one usable cycle",
             fix="re-record the tool measurement at the signature configuration",
         )
-    p_tool = np.array([tool_rows.column(c)[0].as_py() for c in ("x_cm", "y_cm", "z_cm")])
+    p_tool = positions(tool_rows)[0]
     q_tool = joint_readings(inputs["joints"], TOOL_SWEEP, n, pris)[0]
     chain = signature_chain(F, joints_to_internal(qs, pris), pris)
     flange = forward_kinematics(chain, joints_to_internal(q_tool, pris))
@@ -142,4 +143,3 @@ STAGE = Stage(
     compute,
     "S-Model frames S̄_0..S̄_n and the tool",
 )
-del joints_to_boundary

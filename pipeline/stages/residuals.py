@@ -9,56 +9,32 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.stages.base import NoParams, Stage
+from pipeline.stages.features import sweep_points
 from pipeline.stages.session import session_robot
 
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     robot = session_robot(inputs["session"])
-    tri, joints, feat = inputs["triangulate"], inputs["joints"], inputs["features"]
-    n = robot.n_joints
+    n, pris = robot.n_joints, robot.prismatic
     out: dict[str, list[Any]] = {
         k: [] for k in ("joint", "step", "q_deg", "q_cm", "normal_cm", "radial_cm")
     }
-    for row in feat.to_pylist():
+    for row in inputs["features"].to_pylist():
         i = row["joint"]
-        sel = tri.filter(pa.compute.equal(tri.column("sweep"), i))
-        p = np.stack(
-            [sel.column(c).to_numpy(zero_copy_only=False) for c in ("x_cm", "y_cm", "z_cm")], 1
-        )
-        p = p.astype(float)
-        steps = sel.column("step").to_numpy()
-        js = joints.filter(
-            pa.compute.and_(
-                pa.compute.equal(joints.column("sweep"), i),
-                pa.compute.equal(joints.column("joint"), i),
-            )
-        )
-        col = "q_cm" if row["type"] == "prismatic" else "q_deg"
-        q_by_step = dict(
-            zip(js.column("step").to_pylist(), js.column(col).to_pylist(), strict=True)
-        )
-        ok = ~np.isnan(p).any(axis=1)
+        p, q, steps = sweep_points(inputs["triangulate"], inputs["joints"], i, n, pris)
         axis = np.array([row["axis_x"], row["axis_y"], row["axis_z"]])
         c = np.array([row["center_x_cm"], row["center_y_cm"], row["center_z_cm"]])
-        d = p[ok] - c
+        d = p - c
         along = d @ axis
-        inplane = d - along[:, None] * axis
-        if row["type"] == "prismatic":
-            normal = np.linalg.norm(inplane, axis=1)
-            radial = [None] * len(normal)
-        else:
-            normal = along
-            radial = list(np.linalg.norm(inplane, axis=1) - row["radius_cm"])
-        for k, s in enumerate(steps[ok]):
-            out["joint"].append(i)
-            out["step"].append(int(s))
-            q = q_by_step.get(int(s))
-            out["q_deg"].append(None if row["type"] == "prismatic" else q)
-            out["q_cm"].append(q if row["type"] == "prismatic" else None)
-            out["normal_cm"].append(float(normal[k]))
-            r = radial[k]
-            out["radial_cm"].append(None if r is None else float(r))
-    del n
+        inplane = np.linalg.norm(d - along[:, None] * axis, axis=1)
+        prismatic = row["type"] == "prismatic"
+        out["joint"] += [i] * len(p)
+        out["step"] += [int(s) for s in steps]
+        out["q_deg"] += [None] * len(p) if prismatic else list(q)
+        out["q_cm"] += list(q) if prismatic else [None] * len(p)
+        # Prismatic: distance from the line; revolute: signed plane distance and radial error.
+        out["normal_cm"] += list(inplane if prismatic else along)
+        out["radial_cm"] += [None] * len(p) if prismatic else list(inplane - row["radius_cm"])
     return pa.table(
         {
             "joint": pa.array(out["joint"], pa.int32()),

@@ -33,6 +33,13 @@ class Params:
     pair_max_cm: float = 1.0
 
 
+def positions(table: pa.Table) -> np.ndarray:
+    """The ``x_cm, y_cm, z_cm`` columns of a table as an (m, 3) array; null -> NaN."""
+    return np.stack(
+        [table.column(c).to_numpy(zero_copy_only=False) for c in ("x_cm", "y_cm", "z_cm")], axis=1
+    ).astype(float)
+
+
 def robust_mean(p: np.ndarray, k: float, floor_cm: float) -> tuple[np.ndarray, np.ndarray]:
     """Mean of the rows of ``p`` (m, 3) that pass the outlier rule, and the kept mask (m,)."""
     med = np.median(p, axis=0)
@@ -46,9 +53,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     sweep = t.column("sweep").to_numpy()
     step = t.column("step").to_numpy()
     ok = np.asarray(t.column("status").to_pylist()) == "ok"
-    xyz = np.stack(
-        [t.column(c).to_numpy(zero_copy_only=False) for c in ("x_cm", "y_cm", "z_cm")], axis=1
-    )
+    xyz = positions(t)
     keys = sweep.astype(np.int64) * 1_000_000 + step
     uniq, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
     rows: dict[str, list[Any]] = {
