@@ -115,6 +115,23 @@ def require_spread(points: Array, eigenvalues: ArrayLike, feature: str, plane: b
             )
 
 
+def principal_axes(
+    points: ArrayLike, feature: str, plane: bool
+) -> tuple[Array, Array, Array, Array, Array]:
+    """Validated points, centroid, centered points and the eigen-decomposition of their scatter.
+
+    Returns ``(p (..., N, 3), mean (..., 3), centered (..., N, 3), eigenvalues (..., 3)
+    ascending, eigenvectors (..., 3, 3) as columns)``; raises like :func:`point_sets`
+    and :func:`require_spread`.
+    """
+    p = point_sets(points, feature)
+    mean = p.mean(axis=-2)
+    centered = p - mean[..., None, :]
+    eig, vec = np.linalg.eigh(scatter(centered))
+    require_spread(p, eig, feature, plane=plane)
+    return p, mean, centered, eig, vec
+
+
 def label(index: tuple[int, ...]) -> str:
     """Prefix naming one point set of a batch ('' for an unbatched call)."""
     return f"point set {index}: " if index else ""

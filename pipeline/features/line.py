@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.features.checks import point_sets, require_spread, scatter, spacing_warnings
+from pipeline.features.checks import principal_axes, spacing_warnings
 from pipeline.kinematics.transforms import Array, ArrayLike
 
 
@@ -58,11 +58,8 @@ def fit_line(points: ArrayLike) -> LineFit:
     FeatureError
         Fewer than 3 points, non-finite values, or all points coinciding.
     """
-    p = point_sets(points, "line-of-translation")
-    u0 = p.mean(axis=-2)  # Eq. (4.45)
-    centered = p - u0[..., None, :]
-    eig, vec = np.linalg.eigh(scatter(centered))  # Eq. (4.46), M up to the factor 1/m
-    require_spread(p, eig, "line-of-translation", plane=False)
+    # Eq. (4.45): u0 is the mean; Eq. (4.46): M is the scatter up to the factor 1/m
+    p, u0, centered, _, vec = principal_axes(points, "line-of-translation", plane=False)
     v = vec[..., :, 2]  # largest eigenvalue
     ends = p[..., -1, :] - p[..., 0, :]
     # Eq. (4.47): only the sign matters, so |p_m − p_1| need not be divided out.

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.features.checks import collect, point_sets, require_spread, scatter
+from pipeline.features.checks import collect, principal_axes
 from pipeline.kinematics.transforms import Array, ArrayLike
 
 #: Stop the repeated regression when the normal moves by less than this angle
@@ -136,11 +136,8 @@ def fit_plane_eigen(points: ArrayLike) -> PlaneFit:
     FeatureError
         Fewer than 3 points, non-finite values, or collinear/coincident points.
     """
-    p = point_sets(points, "plane-of-rotation")
-    mean = p.mean(axis=-2)
-    centered = p - mean[..., None, :]
-    eig, vec = np.linalg.eigh(scatter(centered))  # Eq. (4.18), ascending eigenvalues
-    require_spread(p, eig, "plane-of-rotation", plane=True)
+    # Eq. (4.18): eigenvectors of the scatter, ascending eigenvalues
+    p, mean, centered, _, vec = principal_axes(points, "plane-of-rotation", plane=True)
     normal = orient_normal(vec[..., :, 0], p)  # smallest eigenvalue's eigenvector
     return _result(p, mean, centered, normal, np.zeros(p.shape[:-2], int), [])
 
@@ -179,11 +176,7 @@ def fit_plane_lsq(
     FeatureError
         Fewer than 3 points, non-finite values, or collinear/coincident points.
     """
-    p = point_sets(points, "plane-of-rotation")
-    mean = p.mean(axis=-2)
-    centered = p - mean[..., None, :]
-    eig = np.linalg.eigvalsh(scatter(centered))
-    require_spread(p, eig, "plane-of-rotation", plane=True)
+    p, mean, centered, _, _ = principal_axes(points, "plane-of-rotation", plane=True)
     R = _initial_frame(p)
     normal = R[..., :, 2]
     iterations = np.zeros(p.shape[:-2], int)
