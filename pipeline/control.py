@@ -53,24 +53,8 @@ class Controller:
     @classmethod
     def from_session(cls, session_dir: str | Path) -> Controller:
         """Load ``signature.json`` of an identified session."""
-        import json
-
-        from pipeline.robots.description import description_from_dict
-
-        path = Path(session_dir) / "signature.json"
-        sig = load_signature(path)
-        doc = json.loads(path.read_text())
-        try:
-            robot = description_from_dict(doc["robot_description"], source=str(path))
-            al = doc["design_alignment"]
-            X = np.array(al["sensor_from_design_base"], float)
-            Y = np.array(al["design_flange_to_signature_tool"], float)
-        except KeyError as exc:
-            raise ArmsigError(
-                f"{path}: no {exc} in the signature",
-                fix=f"re-run `pipeline identify {session_dir}`",
-            ) from exc
-        return cls(sig, robot, X, Y)
+        sig = load_signature(Path(session_dir) / "signature.json")
+        return cls(sig, sig.robot, sig.sensor_from_design_base, sig.design_flange_to_tool)
 
     @property
     def resolution(self) -> np.ndarray:
@@ -238,5 +222,5 @@ def solve_arrow(controller: Controller, targets: str | Path, out: str | Path, me
     )
     for name, values in extra.items():
         table = table.append_column(name, pa.array(values))
-    write_table(Path(out), table, {"method": method, "signature": str(controller.signature.robot)})
+    write_table(Path(out), table, {"method": method, "signature": controller.robot.name})
     return f"{int(res.converged.sum())} of {len(q)} targets converged; wrote {out}"

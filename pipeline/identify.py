@@ -32,21 +32,17 @@ def identify(
     """Bring the session's stages up to date, then write its signature and report."""
     sdir = Path(session_dir)
     runs = run(sdir, force=force, from_stage=from_stage, only=only, overrides=overrides)
-    sig = write_signature(sdir)
-    warnings = json.loads(sig.read_text())["warnings"]
-    rep = None
-    if report:
-        rep = _report_if_stale(sdir)
-    return IdentifyResult(runs, sig, rep, warnings)
+    sig, doc = write_signature(sdir)
+    rep = _report_if_stale(sdir, doc["provenance"]["stages"]) if report else None
+    return IdentifyResult(runs, sig, rep, doc["warnings"])
 
 
-def _report_if_stale(sdir: Path) -> Path:
+def _report_if_stale(sdir: Path, hashes: dict[str, str | None]) -> Path:
     """Write the report unless the existing one was made from the same stage outputs."""
     from pipeline.atomic import write_text_atomic
-    from pipeline.signature_file import stage_hashes
 
     stamp = sdir / "report" / ".inputs.json"
-    current = json.dumps(stage_hashes(sdir), sort_keys=True)
+    current = json.dumps(hashes, sort_keys=True)
     report = sdir / "report" / "report.md"
     if report.is_file() and stamp.is_file() and stamp.read_text() == current:
         return report

@@ -20,7 +20,11 @@ from pipeline.kinematics.alignment import fit_alignment
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.signature import pseudo_dh_from_chain
 from pipeline.kinematics.transforms import pose_error
-from pipeline.robots.description import RobotDescription, description_to_dict
+from pipeline.robots.description import (
+    RobotDescription,
+    description_from_dict,
+    description_to_dict,
+)
 from pipeline.stages.frames import chain_from_frames
 from pipeline.stages.runner import stage_path, stages
 from pipeline.stages.session import session_robot
@@ -56,8 +60,13 @@ def _m(T: np.ndarray) -> list[list[float]]:
     return [[float(v) for v in row] for row in T]
 
 
-def signature_document(session_dir: Path) -> dict[str, Any]:
-    """The signature as a JSON-ready dict, built from the session's stage tables."""
+def signature_document(
+    session_dir: Path, hashes: dict[str, str | None] | None = None
+) -> dict[str, Any]:
+    """The signature as a JSON-ready dict, built from the session's stage tables.
+
+    ``hashes`` are the stage content hashes when the caller already has them.
+    """
     session = read_table(stage_path(session_dir, "session"))
     robot = session_robot(session)
     pris = robot.prismatic
@@ -149,7 +158,7 @@ def signature_document(session_dir: Path) -> dict[str, Any]:
         "warnings": [f"joint {f['joint']}: {w}" for f in features for w in f["warnings"]],
         "provenance": {
             "recording_sha256": session.column("recording_sha256")[0].as_py(),
-            "stages": stage_hashes(session_dir),
+            "stages": hashes if hashes is not None else stage_hashes(session_dir),
             "package_version": __version__,
             "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         },
@@ -164,8 +173,8 @@ def stage_hashes(session_dir: Path) -> dict[str, str | None]:
     }
 
 
-def write_signature(session_dir: str | Path) -> Path:
-    """Write ``signature.json`` beside the recording (atomically).
+def write_signature(session_dir: str | Path) -> tuple[Path, dict[str, Any]]:
+    """Write ``signature.json`` beside the recording (atomically); return it and its document.
 
     An existing file built from the same stage outputs is kept as it is, so a
     warm run changes nothing on disk.
@@ -176,27 +185,31 @@ def write_signature(session_dir: str | Path) -> Path:
     try:
         old = json.loads(path.read_text())
         if old.get("format_version") == FORMAT_VERSION and old["provenance"]["stages"] == current:
-            return path
+            return path, old
     except (OSError, ValueError, KeyError, TypeError):
         pass
-    doc = signature_document(sdir)
+    doc = signature_document(sdir, current)
     write_text_atomic(path, json.dumps(doc, indent=1) + "\n")
-    return path
+    return path, doc
 
 
 @dataclass(frozen=True)
 class Signature:
-    """A loaded signature: the S-Model chain (sensor frame, encoder readings in rad / cm)."""
+    """A loaded signature.
 
-    robot: str
+    ``chain``: the S-Model chain (sensor frame, encoder readings in rad / cm);
+    ``robot``: the design robot description; ``sensor_from_design_base`` and
+    ``design_flange_to_tool``: the design alignment X, Y (4, 4) of the file.
+    """
+
+    robot: RobotDescription
     chain: SerialChain
-    joint_types: tuple[str, ...]
-    limits: np.ndarray  # (n, 2) deg / cm
-    encoder_resolution: np.ndarray  # (n,) deg / cm
+    sensor_from_design_base: np.ndarray
+    design_flange_to_tool: np.ndarray
 
     @property
     def prismatic(self) -> np.ndarray:
-        return np.array([t == "prismatic" for t in self.joint_types])
+        return self.robot.prismatic
 
 
 def load_signature(path: str | Path) -> Signature:
@@ -215,21 +228,23 @@ def load_signature(path: str | Path) -> Signature:
             f"{p}: not an armsig signature", expected=FORMAT, got=repr(doc.get("format"))
         )
     try:
-        pris = np.array([t == "prismatic" for t in doc["joint_types"]])
+        robot = description_from_dict(doc["robot_description"], source=str(p))
         sm = doc["smodel"]
+        al = doc["design_alignment"]
         chain = SerialChain(
             links=np.array(sm["links"], float),
-            prismatic=pris,
+            prismatic=robot.prismatic,
             base=np.array(sm["base"], float),
             tool=np.array(sm["tool"], float),
-            joint_offsets=joints_to_internal(np.array(doc["signature_configuration"], float), pris),
+            joint_offsets=joints_to_internal(
+                np.array(doc["signature_configuration"], float), robot.prismatic
+            ),
         )
         return Signature(
-            doc["robot"],
+            robot,
             chain,
-            tuple(doc["joint_types"]),
-            np.array(doc["joint_limits"], float),
-            np.array(doc["encoder_resolution"], float),
+            np.array(al["sensor_from_design_base"], float),
+            np.array(al["design_flange_to_signature_tool"], float),
         )
     except (KeyError, ValueError, TypeError) as exc:
         raise ArmsigError(
