@@ -266,6 +266,22 @@ def branch_of(q: ArrayLike) -> Array:
     return np.stack([np.where(v >= 0, 1, -1) for v in (reach, elbow, wrist)], axis=-1)
 
 
+def flange_and_wrist_centre(
+    T: ArrayLike, tool: ArrayLike | None = None, base: ArrayLike | None = None
+) -> tuple[Array, Array]:
+    """Flange poses in D-H frame 0 (..., 4, 4) and their wrist centres ``p − d6·a`` (..., 3).
+
+    ``T`` are tool poses in the world; ``tool`` is flange to tool, ``base`` world to
+    D-H frame 0 (identity when omitted).
+    """
+    Tw = np.asarray(T, float)
+    if tool is not None:
+        Tw = Tw @ invert_transform(tool)
+    if base is not None:
+        Tw = invert_transform(base) @ Tw
+    return Tw, Tw[..., :3, 3] - _D[5] * Tw[..., :3, 2]
+
+
 def inverse_kinematics(
     T: ArrayLike,
     tool: ArrayLike | None = None,
@@ -295,15 +311,9 @@ def inverse_kinematics(
         False where the pose is out of that branch's reach (rows are NaN there).
         Joint limits are not applied here.
     """
-    Tw = np.asarray(T, float)
-    if tool is not None:
-        Tw = Tw @ invert_transform(tool)
-    if base is not None:
-        Tw = invert_transform(base) @ Tw
-    d1, d3, d4, d6 = _D[0], _D[1], _D[3], _D[5]  # d3 here is the shoulder offset (d2 = d2+d3)
+    Tw, wc = flange_and_wrist_centre(T, tool, base)
+    d1, d3, d4 = _D[0], _D[1], _D[3]  # d3 here is the shoulder offset (d2 = d2+d3)
     a2, a3 = _A[1], _A[2]
-    approach = Tw[..., :3, 2]
-    wc = Tw[..., :3, 3] - d6 * approach  # wrist centre
     px, py, pz = wc[..., 0], wc[..., 1], wc[..., 2] - d1
     batch = Tw.shape[:-2]
     q = np.full((*batch, 8, 6), np.nan)

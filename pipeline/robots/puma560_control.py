@@ -10,7 +10,7 @@ import numpy as np
 
 from pipeline.errors import KinematicsError
 from pipeline.kinematics.ik import DesignInverse
-from pipeline.kinematics.transforms import Array, ArrayLike, invert_transform
+from pipeline.kinematics.transforms import Array, ArrayLike
 from pipeline.robots import puma560
 from pipeline.robots.puma560 import Branch
 
@@ -33,11 +33,9 @@ def _puma_clamp(T: Array, tool: Array | None, base: Array | None) -> Array:
     ``(r, pz)`` is scaled about the shoulder until ``|K| = ρ cos(margin)``; the
     orientation is unchanged.
     """
-    d1, d3, _, d4, _, d6 = puma560.DESIGN_D_CM
+    d1, d3, _, d4, _, _ = puma560.DESIGN_D_CM
     a2, a3 = puma560.DESIGN_A_CM[1], puma560.DESIGN_A_CM[2]
-    Tw = T if tool is None else T @ invert_transform(tool)
-    Tw = Tw if base is None else invert_transform(base) @ Tw
-    wc = Tw[:, :3, 3] - d6 * Tw[:, :3, 2]
+    Tw, wc = puma560.flange_and_wrist_centre(T, tool, base)
     px, py, pz = wc[:, 0], wc[:, 1], wc[:, 2] - d1
     rho2 = d4**2 + a3**2
     r = np.sqrt(np.maximum(px**2 + py**2 - d3**2, PUMA_SHOULDER_MARGIN_CM**2))
