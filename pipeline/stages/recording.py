@@ -73,8 +73,11 @@ def _sweep_id(value: Any, where: str) -> int:
     raise RecordingError(where, expected="sweep = a target number >= 1 or 'tool'", got=repr(value))
 
 
-def read_recording(path: str | Path) -> Recording:
-    """Parse ``recording.mcap``; cached per (path, content hash) within a process."""
+def read_recording(path: str | Path, sha256: str | None = None) -> Recording:
+    """Parse ``recording.mcap``; cached per (path, content hash) within a process.
+
+    ``sha256`` is the file's content hash when the caller has already computed it.
+    """
     p = Path(path)
     if not p.is_file():
         raise RecordingError(
@@ -82,7 +85,7 @@ def read_recording(path: str | Path) -> Recording:
             expected="a recording.mcap in the session folder",
             fix="record one, or simulate it with `pipeline simulate NAME`",
         )
-    return _read_cached(p.resolve(), file_sha256(p))
+    return _read_cached(p.resolve(), sha256 or file_sha256(p))
 
 
 @lru_cache(maxsize=4)

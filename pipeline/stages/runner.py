@@ -305,7 +305,7 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
     inputs: dict[str, Any] = {}
     for inp in stage.inputs:
         if inp == RECORDING:
-            inputs[inp] = read_recording(sdir / "recording.mcap")
+            inputs[inp] = read_recording(sdir / "recording.mcap", hashes.get(RECORDING))
         else:
             path = hashes.path(inp)
             if not path.is_file():
