@@ -90,3 +90,37 @@ def test_jacobian_random_mixed_chain_and_batch(rng) -> None:
     for k in range(10):
         np.testing.assert_allclose(J[k], _finite_difference_jacobian(chain, q[k]), atol=1e-6)
         np.testing.assert_array_equal(J[k], geometric_jacobian(chain, q[k]))
+
+
+@pytest.mark.parametrize("prismatic", [[0, 0, 0, 0, 0, 0], [0, 1, 0, 1, 1, 0], [1, 1, 0, 0, 0, 1]])
+def test_single_robot_fast_path_equals_general_path(rng, prismatic) -> None:
+    """The column-major path for one robot (frames_soa) equals the per-pose products."""
+    from pipeline.kinematics.jacobian import pose_and_jacobian
+
+    chain = _random_chain(rng, prismatic)
+    batched = SerialChain(  # a robot batch axis forces the general path
+        links=chain.links[None],
+        prismatic=chain.prismatic,
+        base=chain.base,
+        tool=chain.tool,
+        joint_offsets=chain.joint_offsets,
+    )
+    q = rng.uniform(-3.0, 3.0, (4, 5, 6))
+    # Round-off of a different summation order: ~1e-13 for these ~100 cm chains.
+    np.testing.assert_allclose(link_frames(chain, q), link_frames(batched, q), atol=1e-11)
+    np.testing.assert_allclose(
+        forward_kinematics(chain, q), forward_kinematics(batched, q), atol=1e-11
+    )
+    T1, J1 = pose_and_jacobian(chain, q)
+    T2, J2 = pose_and_jacobian(batched, q)
+    np.testing.assert_allclose(T1, T2, atol=1e-11)
+    np.testing.assert_allclose(J1, J2, atol=1e-11)
+    assert T1.shape == (4, 5, 4, 4) and J1.shape == (4, 5, 6, 6)
+
+
+def test_cross3_equals_numpy_cross(rng) -> None:
+    from pipeline.kinematics.transforms import cross3
+
+    a, b = rng.normal(size=(2, 3, 4, 3, 3))
+    for axis in (-1, -2, -4):  # the axes of length 3
+        np.testing.assert_array_equal(cross3(a, b, axis), np.cross(a, b, axis=axis))

@@ -120,7 +120,10 @@ def link_frames(chain: SerialChain, q: ArrayLike) -> Array:
         axis (``base · K_1 ⋯ K_i``); ``F[..., n]`` is the last link frame and
         ``F[..., n+1]`` the tool frame.
     """
-    M = joint_motion(chain, q)
+    qq = np.asarray(q, float)
+    if chain.links.ndim == 3 and chain.base.ndim == 2 and chain.tool.ndim == 2:
+        return _link_frames_shared(chain, qq)
+    M = joint_motion(chain, qq)
     K = M @ chain.links  # Eq. (5.2)/(5.3): K_i = Rot(z, q_i)·K̄_i
     batch = K.shape[:-3]
     n = chain.n_joints
@@ -132,6 +135,69 @@ def link_frames(chain: SerialChain, q: ArrayLike) -> Array:
         out[..., i + 1, :, :] = cur
     out[..., n + 1, :, :] = cur @ chain.tool
     return out
+
+
+def _link_frames_shared(chain: SerialChain, q: Array) -> Array:
+    """:func:`link_frames` for one robot (no batch axis on links, base, tool)."""
+    batch = q.shape[:-1]
+    n = chain.n_joints
+    F, tool = frames_soa(chain, q.reshape(-1, n))
+    out = np.zeros((F.shape[-1], n + 2, 4, 4))
+    out[:, : n + 1, :3, :] = np.moveaxis(F, (-1, 1), (0, -1))
+    out[:, n + 1, :3, :] = np.moveaxis(tool, (-1, 0), (0, -1))
+    out[:, :, 3, 3] = 1.0
+    return out.reshape(*batch, n + 2, 4, 4)
+
+
+def frames_soa(
+    chain: SerialChain, q: Array, columns: tuple[int, ...] = (0, 1, 2, 3)
+) -> tuple[Array, Array]:
+    """Frames of :func:`link_frames` for one robot, column-major, batch axis last.
+
+    The same products as the general path, arranged for large batches. A
+    frame is stored as its columns ``(4, 3, m)`` (top three rows; the fourth is
+    ``[0, 0, 0, 1]``), batch axis last: ``cur · Rot(z, θ)`` only mixes the first
+    two columns (``Trans(0, 0, d)`` adds ``d`` times the third to the fourth),
+    and ``cur · K̄_i`` with a constant ``K̄_i`` is one ``(4, 4) @ (4, 3m)``
+    matrix product instead of ``m`` small ones (several times faster for
+    100,000 poses; equal up to round-off).
+
+    Parameters
+    ----------
+    chain : SerialChain
+        Links, base and tool without batch axes.
+    q : ndarray, shape (m, n)
+        Joint readings (rad / cm).
+    columns : tuple of int
+        Columns of the frames ``0 … n`` to keep (``(2, 3)``: joint axes and
+        origins, all the Jacobian needs; ``()``: none, forward kinematics only).
+
+    Returns
+    -------
+    F : ndarray, shape (n + 1, len(columns), 3, m)
+        ``F[i, j, :, k]`` is ``link_frames(chain, q)[k, i, :3, columns[j]]``.
+    tool : ndarray, shape (4, 3, m)
+        Columns of the tool frames (top three rows).
+    """
+    n = chain.n_joints
+    qq = (q - np.asarray(chain.joint_offsets)).T  # (n, m)
+    m = qq.shape[1]
+    c, s = np.cos(qq), np.sin(qq)
+    cols = list(columns)
+    out = np.empty((n + 1, len(cols), 3, m))
+    cur = np.empty((4, 3, m))
+    cur[:] = chain.base[:3].T[:, :, None]
+    out[0] = cur[cols]
+    for i in range(n):
+        if chain.prismatic[i]:  # Eq. (5.3): cur · Trans(0, 0, q_i − q0_i)
+            cur[3] += qq[i] * cur[2]
+        else:  # Eq. (5.2): cur · Rot(z, q_i − q0_i)
+            x = cur[0].copy()
+            cur[0] = c[i] * x + s[i] * cur[1]
+            cur[1] = c[i] * cur[1] - s[i] * x
+        cur = (chain.links[i].T @ cur.reshape(4, -1)).reshape(4, 3, m)  # Eq. (5.1)
+        out[i + 1] = cur[cols]
+    return out, (chain.tool.T @ cur.reshape(4, -1)).reshape(4, 3, m)
 
 
 def forward_kinematics(chain: SerialChain, q: ArrayLike) -> Array:
@@ -146,4 +212,11 @@ def forward_kinematics(chain: SerialChain, q: ArrayLike) -> Array:
     -------
     T : ndarray, shape (..., 4, 4)
     """
-    return link_frames(chain, q)[..., -1, :, :]
+    qq = np.asarray(q, float)
+    if chain.links.ndim == 3 and chain.base.ndim == 2 and chain.tool.ndim == 2:
+        _, tool = frames_soa(chain, qq.reshape(-1, chain.n_joints), columns=())
+        out = np.zeros((tool.shape[-1], 4, 4))
+        out[:, :3, :] = np.moveaxis(tool, (-1, 0), (0, -1))
+        out[:, 3, 3] = 1.0
+        return out.reshape(*qq.shape[:-1], 4, 4)
+    return link_frames(chain, qq)[..., -1, :, :]

@@ -49,13 +49,12 @@ import numpy.typing as npt
 
 from pipeline.errors import KinematicsError
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
-from pipeline.kinematics.jacobian import geometric_jacobian
+from pipeline.kinematics.jacobian import geometric_jacobian, pose_and_jacobian
 from pipeline.kinematics.transforms import (
     Array,
     ArrayLike,
     differential_motion,
     invert_transform,
-    pose_error,
 )
 
 BoolArray = npt.NDArray[np.bool_]
@@ -306,13 +305,14 @@ def _errors(delta: Array) -> tuple[Array, Array]:
     return np.linalg.norm(delta[..., :3], axis=-1), np.linalg.norm(delta[..., 3:], axis=-1)
 
 
-StepFn = Callable[[IntArray, Array, Array], tuple[Array, BoolArray, Array]]
+StepFn = Callable[[IntArray, Array, Array], tuple[Array, BoolArray, Array, Array]]
 
 
 def _iterate(
     chain: SerialChain,
     T: Array,
     q: Array,
+    delta: Array,
     res: Array,
     max_iter: int,
     step: StepFn,
@@ -322,12 +322,14 @@ def _iterate(
 ) -> IKResult:
     """Shared loop: apply ``step`` to the active targets until each one stops.
 
+    ``delta`` is δ⁰ = ``differential_motion(T(q0), T*)``, shape (m, 6).
     ``step(rows, q_rows, delta_rows)`` returns the next iterate of those rows, a
-    mask of rows for which it exists (False: unreachable for the method) and the
+    mask of rows for which it exists (False: unreachable for the method), the
     method's own increment (the Newton step ``J⁻¹ δ`` of (5.4), the Jacobi step
-    of (5.8)), which the encoder rule tests. The two differ only where the
-    Newton-Raphson safeguard replaced an unsuccessful Newton step: a short
-    safeguard step says nothing about being near the solution.
+    of (5.8)), which the encoder rule tests, and δ at the next iterate. The
+    increments differ from the step taken only where the Newton-Raphson
+    safeguard replaced an unsuccessful Newton step: a short safeguard step says
+    nothing about being near the solution.
 
     A target *stalls* (unreachable) when the step actually taken is below one
     encoder count, the error is above tolerance and it fell by less than
@@ -337,7 +339,6 @@ def _iterate(
     length = _length_scale(chain)
     tol_cm = np.inf if position_tol_cm is None else position_tol_cm
     tol_rad = np.inf if orientation_tol_rad is None else orientation_tol_rad
-    delta = differential_motion(forward_kinematics(chain, q), T)  # δ⁰, base frame
     iterations = np.zeros(m, np.int64)
     converged = np.zeros(m, bool)
     unreachable = np.zeros(m, bool)
@@ -347,14 +348,13 @@ def _iterate(
         rows = np.flatnonzero(active)
         if rows.size == 0:
             break
-        q_next, ok, nominal = step(rows, q[rows], delta[rows])
+        q_next, ok, nominal, d_new = step(rows, q[rows], delta[rows])
         unreachable[rows[~ok]] = True
         active[rows[~ok]] = False
-        rows, q_next, nominal = rows[ok], q_next[ok], nominal[ok]
+        rows, q_next, nominal, d_new = rows[ok], q_next[ok], nominal[ok], d_new[ok]
         dq = q_next - q[rows]
         q[rows] = q_next
         iterations[rows] += 1
-        d_new = differential_motion(forward_kinematics(_take(chain, rows, m), q_next), T[rows])
         e_old = _scaled_error(delta[rows], length)
         p_new, r_new = _errors(d_new)
         delta[rows] = d_new
@@ -378,7 +378,7 @@ def _iterate(
         J = geometric_jacobian(_take(chain, left, m), q[left])
         s_min = _scaled_svd(J, length)[1][:, -1]
         status[left[s_min < SINGULAR_SIGMA]] = STATUS_SINGULAR
-    pos, rot = pose_error(T, forward_kinematics(chain, q))
+    pos, rot = _errors(delta)  # |dp| and the rotation angle of the final pose error
     history = None
     if record_history:
         hq, hd = np.stack(hist_q), np.stack(hist_d)
@@ -468,39 +468,122 @@ def newton_raphson(
     T, q, res = _prepare(chain, T_target, q0, resolution)
     m = T.shape[0]
     length = _length_scale(chain)
-    w = np.array([1.0 / length] * 3 + [1.0] * 3)  # cm -> length-scale units
+    T_q, J_cache = pose_and_jacobian(chain, q)  # Appendix C.1 steps 1-2 at q⁰
+    delta0 = differential_motion(T_q, T)
 
-    def step(rows: IntArray, q_rows: Array, delta_rows: Array) -> tuple[Array, BoolArray, Array]:
-        J = geometric_jacobian(_take(chain, rows, m), q_rows)  # Appendix C.1 step 1
-        U, sv, Vt = _scaled_svd(J, length)
+    def step(
+        rows: IntArray, q_rows: Array, delta_rows: Array
+    ) -> tuple[Array, BoolArray, Array, Array]:
+        J = J_cache[rows]  # J(q^k), from the pass that evaluated q^k
         e_old = _scaled_error(delta_rows, length)
-        d_scaled = delta_rows * w
-        q_out = q_rows.copy()
-        todo = np.arange(rows.size)
-        newton = _damped_step(U, sv, Vt, d_scaled, np.zeros(rows.size))  # Eq. (5.4): J⁻¹ δ
-        for kind, value in _trials(damping):
-            if kind == "newton":  # plain (value 1) or shortened Newton step
-                dq = value * newton[todo]
-            else:  # "lm": Levenberg-Marquardt step, λ = value
-                lam = np.full(todo.size, value)
-                dq = _damped_step(U[todo], sv[todo], Vt[todo], d_scaled[todo], lam)
-            dq = _cap_step(dq, chain.prismatic, max_step, length)
-            q_try = q_rows[todo] + dq  # Eq. (5.4): q^{k+1} = q^k + dq (C.1 step 7)
-            T_try = forward_kinematics(_take(chain, rows[todo], m), q_try)
-            e_try = _scaled_error(differential_motion(T_try, T[rows[todo]]), length)
-            better = e_try < e_old[todo]
-            q_out[todo[better]] = q_try[better]
-            todo = todo[~better]
-            if todo.size == 0:
-                break
-        # Rows still in `todo` found no descent at all: q is unchanged, which the
-        # shared loop reads as a stall (a local minimum of the residual) or, at
-        # round-off level, as convergence. The encoder rule tests the Newton step.
-        return q_out, np.ones(rows.size, bool), newton
+        newton = _newton_step(J, delta_rows, length)  # Eq. (5.4): J⁻¹ δ
+        q_try = q_rows + _cap_step(newton, chain.prismatic, max_step, length)  # C.1 step 7
+        T_try, J_try = pose_and_jacobian(_take(chain, rows, m), q_try)
+        d_out = differential_motion(T_try, T[rows])
+        better = _scaled_error(d_out, length) < e_old
+        q_out = np.where(better[:, None], q_try, q_rows)
+        J_cache[rows[better]] = J_try[better]
+        bad = np.flatnonzero(~better)
+        if bad.size:
+            sub = _take(chain, rows[bad], m)
+            q_out[bad] = _safeguard(
+                sub,
+                T[rows[bad]],
+                q_rows[bad],
+                delta_rows[bad],
+                J[bad],
+                newton[bad],
+                damping,
+                max_step,
+            )
+            T_bad, J_cache[rows[bad]] = pose_and_jacobian(sub, q_out[bad])
+            d_out[bad] = differential_motion(T_bad, T[rows[bad]])
+        return q_out, np.ones(rows.size, bool), newton, d_out
 
     return _iterate(
-        chain, T, q, res, max_iter, step, position_tol_cm, orientation_tol_rad, record_history
+        chain,
+        T,
+        q,
+        delta0,
+        res,
+        max_iter,
+        step,
+        position_tol_cm,
+        orientation_tol_rad,
+        record_history,
     )
+
+
+def _newton_step(J: Array, delta: Array, length: float) -> Array:
+    """The Newton increment ``dq = J⁻¹ δ`` of (5.4), rows (k, 6, n) and (k, 6).
+
+    A square Jacobian is solved by LU (row scaling does not change the
+    solution); an exactly singular or non-square one by the SVD pseudo-inverse
+    of the unit-scaled Jacobian (minimum-norm least squares, see
+    :func:`_damped_step`).
+    """
+    k, _, n = J.shape
+    if n == 6 and k:
+        try:
+            dq = np.asarray(np.linalg.solve(J, delta[..., None])[..., 0], float)
+            if np.isfinite(dq).all():
+                return dq
+        except np.linalg.LinAlgError:
+            pass
+    U, sv, Vt = _scaled_svd(J, length)
+    w = np.array([1.0 / length] * 3 + [1.0] * 3)
+    return _damped_step(U, sv, Vt, delta * w, np.zeros(k))
+
+
+def _safeguard(
+    chain: SerialChain,
+    T: Array,
+    q: Array,
+    delta: Array,
+    J: Array,
+    newton: Array,
+    damping: float,
+    max_step: float,
+) -> Array:
+    """Safeguarded steps for rows where the plain Newton step did not descend.
+
+    Tries the Newton step shortened by 2, 4, 8 (:data:`NEWTON_BACKTRACK`), then
+    Levenberg-Marquardt steps (:data:`LM_LAMBDAS`), and returns, per row, the
+    first candidate that reduces the error ``|dp|/L + |rotation|``. Rows for
+    which none does keep ``q``: the shared loop reads that as a stall (a local
+    minimum of the residual) or, at round-off level, as convergence.
+
+    Parameters
+    ----------
+    chain : SerialChain
+        The chain restricted to these rows.
+    T, q, delta, J, newton : ndarray, shapes (k, 4, 4), (k, n), (k, 6), (k, 6, n), (k, n)
+        Targets, current iterates, their δ, Jacobian and Newton increment.
+
+    Returns
+    -------
+    q_next : ndarray, shape (k, n)
+    """
+    length = _length_scale(chain)
+    U, sv, Vt = _scaled_svd(J, length)
+    d_scaled = delta * np.array([1.0 / length] * 3 + [1.0] * 3)
+    e_old = _scaled_error(delta, length)
+    q_out = q.copy()
+    todo = np.arange(q.shape[0])
+    for kind, value in _trials(damping)[1:]:  # [0] is the plain Newton step
+        if kind == "newton":  # shortened Newton step
+            dq = value * newton[todo]
+        else:  # "lm": Levenberg-Marquardt step, λ = value
+            lam = np.full(todo.size, value)
+            dq = _damped_step(U[todo], sv[todo], Vt[todo], d_scaled[todo], lam)
+        q_try = q[todo] + _cap_step(dq, chain.prismatic, max_step, length)
+        T_try = forward_kinematics(_take(chain, todo, q.shape[0]), q_try)
+        better = _scaled_error(differential_motion(T_try, T[todo]), length) < e_old[todo]
+        q_out[todo[better]] = q_try[better]
+        todo = todo[~better]
+        if todo.size == 0:
+            break
+    return q_out
 
 
 def jacobi_iterative(
@@ -569,8 +652,11 @@ def jacobi_iterative(
             got=str(design_chain.n_joints),
         )
 
-    def step(rows: IntArray, q_rows: Array, delta_rows: Array) -> tuple[Array, BoolArray, Array]:
-        F_s = forward_kinematics(_take(signature_chain, rows, m), q_rows)  # C.2 step 2
+    def step(
+        rows: IntArray, q_rows: Array, delta_rows: Array
+    ) -> tuple[Array, BoolArray, Array, Array]:
+        sig = _take(signature_chain, rows, m)
+        F_s = forward_kinematics(sig, q_rows)  # C.2 step 2
         F_d = forward_kinematics(_take(design_chain, rows, m), q_rows)  # C.2 step 3
         Delta = invert_transform(F_s) @ T[rows]  # Eq. (5.9), C.2 step 4
         T_k = F_d @ Delta  # Eq. (5.10), C.2 step 5
@@ -583,12 +669,14 @@ def jacobi_iterative(
             )
         ok = np.isfinite(q_next).all(axis=-1)
         q_next = np.where(ok[:, None], q_next, q_rows)
-        return q_next, ok, q_next - q_rows
+        d_next = differential_motion(forward_kinematics(sig, q_next), T[rows])
+        return q_next, ok, q_next - q_rows, d_next
 
     return _iterate(
         signature_chain,
         T,
         q,
+        differential_motion(forward_kinematics(signature_chain, q), T),
         res,
         max_iter,
         step,

@@ -7,6 +7,8 @@ radians, lengths in whatever unit the caller uses consistently (cm in armsig).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 
@@ -141,6 +143,29 @@ def pose_error(T_desired: ArrayLike, T_actual: ArrayLike) -> tuple[Array, Array]
     return dp, np.arctan2(sin_t, cos_t)
 
 
+def cross3(a: Array, b: Array, axis: int = -1) -> Array:
+    """Cross product of 3-vectors stored along ``axis`` (a negative axis).
+
+    Same as ``np.cross(a, b, axis=axis)`` for equal shapes, without its
+    per-call axis bookkeeping (which dominates for small stacks).
+    """
+    tail: tuple[slice, ...] = (slice(None),) * (-axis - 1)
+
+    def c(i: int, arr: Array) -> Array:
+        index: tuple[Any, ...] = (Ellipsis, i, *tail)
+        out: Array = arr[index]
+        return out
+
+    return np.stack(
+        [
+            c(1, a) * c(2, b) - c(2, a) * c(1, b),
+            c(2, a) * c(0, b) - c(0, a) * c(2, b),
+            c(0, a) * c(1, b) - c(1, a) * c(0, b),
+        ],
+        axis=axis,
+    )
+
+
 def differential_motion(T_from: ArrayLike, T_to: ArrayLike) -> Array:
     """Small-motion vector taking ``T_from`` to ``T_to``, in base coordinates.
 
@@ -159,13 +184,13 @@ def differential_motion(T_from: ArrayLike, T_to: ArrayLike) -> Array:
     """
     Tf = np.asarray(T_from, float)
     Tt = np.asarray(T_to, float)
-    R = Tt[..., :3, :3] @ np.swapaxes(Tf[..., :3, :3], -1, -2)
-    skew = np.stack(
-        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
-        axis=-1,
-    )
+    # R = R_to R_fromᵀ = Σ_k t_k f_kᵀ over the columns f_k, t_k of the two
+    # rotations, so its skew part is Σ_k f_k × t_k and its trace Σ_k f_k · t_k
+    # (no 3x3 product needed, which is slow for large stacks).
+    Rf, Rt = Tf[..., :3, :3], Tt[..., :3, :3]
+    skew = cross3(Rf, Rt, axis=-2).sum(axis=-1)
     sin_t = np.linalg.norm(skew, axis=-1) / 2.0
-    cos_t = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
+    cos_t = ((Rf * Rt).sum(axis=(-2, -1)) - 1.0) / 2.0
     angle = np.arctan2(sin_t, cos_t)
     # angle/sin(angle) -> 1 as angle -> 0; guard the division there.
     with np.errstate(invalid="ignore", divide="ignore"):

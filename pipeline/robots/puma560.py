@@ -287,6 +287,7 @@ def inverse_kinematics(
     tool: ArrayLike | None = None,
     base: ArrayLike | None = None,
     q4_singular: float = 0.0,
+    branches: tuple[Branch, ...] | None = None,
 ) -> tuple[Array, Array]:
     """All eight closed-form inverse solutions of the Puma 560 design model.
 
@@ -302,11 +303,14 @@ def inverse_kinematics(
     q4_singular : float
         θ4 (radians) chosen when the wrist is singular (|sin θ5| below
         :data:`WRIST_SINGULAR_TOL`); θ6 then takes the whole rotation.
+    branches : tuple of Branch, optional
+        Only these branches, in this order (default: all of :data:`BRANCHES`).
 
     Returns
     -------
     q : ndarray, shape (..., 8, 6)
-        Radians wrapped to (-π, π], one row per branch in :data:`BRANCHES` order.
+        Radians wrapped to (-π, π], one row per branch in :data:`BRANCHES` order
+        (``(..., len(branches), 6)`` when ``branches`` is given).
     reachable : ndarray of bool, shape (..., 8)
         False where the pose is out of that branch's reach (rows are NaN there).
         Joint limits are not applied here.
@@ -316,11 +320,12 @@ def inverse_kinematics(
     a2, a3 = _A[1], _A[2]
     px, py, pz = wc[..., 0], wc[..., 1], wc[..., 2] - d1
     batch = Tw.shape[:-2]
-    q = np.full((*batch, 8, 6), np.nan)
-    ok = np.zeros((*batch, 8), bool)
+    wanted = BRANCHES if branches is None else branches
+    q = np.full((*batch, len(wanted), 6), np.nan)
+    ok = np.zeros((*batch, len(wanted)), bool)
     rho2 = d4**2 + a3**2
     phi = np.arctan2(a3, d4)
-    for k, br in enumerate(BRANCHES):
+    for k, br in enumerate(wanted):
         rr = px**2 + py**2 - d3**2
         reach_ok = rr >= 0.0
         r = br.shoulder * np.sqrt(np.maximum(rr, 0.0))

@@ -97,7 +97,8 @@ def puma_design_inverse(
     if branch is not None and not isinstance(branch, puma560.Branch):
         raise KinematicsError("bad branch", expected="puma560.Branch or None", got=repr(branch))
     table = np.array([[b.shoulder, b.elbow, b.wrist] for b in puma560.BRANCHES])
-    fixed = None if branch is None else puma560.BRANCHES.index(branch)
+    fixed = branch is not None
+    wanted = None if branch is None else (branch,)
     tool_m = None if tool is None else np.asarray(tool, float)
     base_m = None if base is None else np.asarray(base, float)
 
@@ -106,16 +107,16 @@ def puma_design_inverse(
         q_near = np.asarray(q_near, float)
         k = T.shape[0]
         rows = np.arange(k)
-        sols, ok = puma560.inverse_kinematics(T, tool=tool_m, base=base_m)
+        sols, ok = puma560.inverse_kinematics(T, tool=tool_m, base=base_m, branches=wanted)
         if clamp and not ok.all():
             # Reachability does not depend on the branch for the Puma (the wrist
             # centre's distances decide it), so clamp whole rows.
             out = np.flatnonzero(~ok.all(axis=-1))
             sols[out], ok[out] = puma560.inverse_kinematics(
-                _puma_clamp(T[out], tool_m, base_m), tool=tool_m, base=base_m
+                _puma_clamp(T[out], tool_m, base_m), tool=tool_m, base=base_m, branches=wanted
             )
-        if fixed is not None:
-            col = np.full(k, fixed)
+        if fixed:
+            col = np.zeros(k, int)  # the one branch computed
         else:
             flags = puma560.branch_of(q_near)
             col = np.argmax(np.all(flags[:, None, :] == table[None], axis=-1), axis=-1)
