@@ -116,9 +116,15 @@ class Controller:
                 f"{self.robot.name}: Jacobi iteration needs a closed-form design inverse",
                 fix="use --method nr",
             )
-        from pipeline.robots.puma560_control import puma_design_inverse
+        from pipeline.robots import puma560_control as pc
 
-        inv = puma_design_inverse(branch, tool=self.flange_to_tool, base=self.sensor_from_base)
+        inv = pc.puma_design_inverse(
+            branch,
+            tool=self.flange_to_tool,
+            base=self.sensor_from_base,
+            elbow_margin_rad=pc.JACOBI_ELBOW_MARGIN_RAD,
+            shoulder_margin_cm=pc.JACOBI_SHOULDER_MARGIN_CM,
+        )
         res = jacobi_iterative(
             self.signature.chain,
             self._design_in_sensor(),

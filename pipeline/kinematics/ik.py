@@ -305,7 +305,7 @@ def _errors(delta: Array) -> tuple[Array, Array]:
     return np.linalg.norm(delta[..., :3], axis=-1), np.linalg.norm(delta[..., 3:], axis=-1)
 
 
-StepFn = Callable[[IntArray, Array, Array], tuple[Array, BoolArray, Array, Array]]
+StepFn = Callable[[IntArray, Array, Array], tuple[Array, BoolArray, Array, Array, BoolArray]]
 
 
 def _iterate(
@@ -319,6 +319,7 @@ def _iterate(
     position_tol_cm: float | None,
     orientation_tol_rad: float | None,
     record_history: bool,
+    stall_patience: int = 1,
 ) -> IKResult:
     """Shared loop: apply ``step`` to the active targets until each one stops.
 
@@ -326,14 +327,15 @@ def _iterate(
     ``step(rows, q_rows, delta_rows)`` returns the next iterate of those rows, a
     mask of rows for which it exists (False: unreachable for the method), the
     method's own increment (the Newton step ``J⁻¹ δ`` of (5.4), the Jacobi step
-    of (5.8)), which the encoder rule tests, and δ at the next iterate. The
-    increments differ from the step taken only where the Newton-Raphson
-    safeguard replaced an unsuccessful Newton step: a short safeguard step says
-    nothing about being near the solution.
+    of (5.8)), which the encoder rule tests, δ at the next iterate, and a mask
+    of rows that may be declared stalled (False while the method still has a
+    remedy to try). The increments differ from the step taken only where a
+    safeguard replaced the method's step: a short safeguard step says nothing
+    about being near the solution.
 
-    A target *stalls* (unreachable) when the step actually taken is below one
-    encoder count, the error is above tolerance and it fell by less than
-    ``1 − STALL_RATIO``.
+    A target *stalls* (unreachable) when, in ``stall_patience`` consecutive
+    iterations, the step actually taken is below one encoder count, the error
+    is above tolerance and it fell by less than ``1 − STALL_RATIO``.
     """
     m = T.shape[0]
     length = _length_scale(chain)
@@ -343,15 +345,17 @@ def _iterate(
     converged = np.zeros(m, bool)
     unreachable = np.zeros(m, bool)
     active = np.ones(m, bool)
+    idle = np.zeros(m, np.int64)  # consecutive iterations without progress
     hist_q, hist_d = [q.copy()], [delta.copy()]
     for _ in range(max_iter):
         rows = np.flatnonzero(active)
         if rows.size == 0:
             break
-        q_next, ok, nominal, d_new = step(rows, q[rows], delta[rows])
+        q_next, ok, nominal, d_new, may_stall = step(rows, q[rows], delta[rows])
         unreachable[rows[~ok]] = True
         active[rows[~ok]] = False
         rows, q_next, nominal, d_new = rows[ok], q_next[ok], nominal[ok], d_new[ok]
+        may_stall = may_stall[ok]
         dq = q_next - q[rows]
         q[rows] = q_next
         iterations[rows] += 1
@@ -362,7 +366,9 @@ def _iterate(
         accurate = (p_new <= tol_cm) & (r_new <= tol_rad)
         progress = p_new / length + r_new < STALL_RATIO * e_old
         done = small & accurate
-        stalled = np.all(np.abs(dq) < res, axis=-1) & ~accurate & ~progress
+        no_progress = np.all(np.abs(dq) < res, axis=-1) & ~accurate & ~progress & may_stall
+        idle[rows] = np.where(no_progress, idle[rows] + 1, 0)
+        stalled = idle[rows] >= stall_patience
         converged[rows[done]] = True
         unreachable[rows[stalled]] = True
         active[rows[done | stalled]] = False
@@ -393,6 +399,57 @@ def _iterate(
         status=status,
         history=history,
     )
+
+
+#: Plain Jacobi (5.8) converges linearly with a rate set by the design/signature
+#: mismatch, ~1e-2 per iteration for realistic signatures (Table 5-2). An
+#: iterate whose scaled error is above half the previous one marks a target on
+#: which the map barely contracts or expands: next to a singularity the design
+#: inverse amplifies the mismatch in one direction. Such targets are accelerated.
+JACOBI_SLOW_RATIO = 0.5
+
+#: Accelerated Jacobi iterates next to a singularity progress irregularly (the
+#: design inverse is not smooth there): a step with no progress is often followed
+#: by a large gain. A target is declared stalled only after this many
+#: consecutive iterations without progress (Newton-Raphson: after one).
+JACOBI_STALL_PATIENCE = 5
+
+#: Relative cut-off of the Anderson least-squares problem: history differences
+#: shrink geometrically, so directions below 1e-10 of the largest carry only
+#: round-off of the joint coordinates (~1e-16 rad) and are dropped.
+ANDERSON_RCOND = 1e-10
+
+
+def _anderson(Q: Array, G: Array, count: IntArray) -> Array:
+    """Anderson-accelerated fixed-point step from a history of the Jacobi map.
+
+    With ``f_j = G(q_j) − q_j`` over the stored iterates, find ``γ`` minimising
+    ``|f_k − ΔF γ|`` (``ΔF``, ``ΔG``: consecutive differences of ``f`` and ``G``)
+    and return ``G(q_k) − ΔG γ``. For an affine map with ``p`` stored
+    differences spanning the error this is the exact fixed point; near a
+    singularity it takes the secant information that the plain iteration
+    throws away. It uses only evaluations of (5.8).
+
+    Parameters
+    ----------
+    Q, G : ndarray, shape (k, h, n)
+        Iterates and their images, oldest first; the last ``count`` rows are valid.
+    count : ndarray of int, shape (k,)
+
+    Returns
+    -------
+    q_next : ndarray, shape (k, n)
+    """
+    F = G - Q
+    dF = np.diff(F, axis=1)  # (k, h - 1, n)
+    dG = np.diff(G, axis=1)
+    h = Q.shape[1]
+    valid = np.arange(h - 1)[None, :] >= (h - np.minimum(count, h))[:, None]
+    dF = dF * valid[..., None]
+    dG = dG * valid[..., None]
+    gamma = np.linalg.pinv(np.swapaxes(dF, 1, 2), rcond=ANDERSON_RCOND) @ F[:, -1, :, None]
+    out: Array = G[:, -1] - np.einsum("kjn,kj->kn", dG, gamma[..., 0])
+    return out
 
 
 # --------------------------------------------------------------------------- solvers
@@ -473,7 +530,7 @@ def newton_raphson(
 
     def step(
         rows: IntArray, q_rows: Array, delta_rows: Array
-    ) -> tuple[Array, BoolArray, Array, Array]:
+    ) -> tuple[Array, BoolArray, Array, Array, BoolArray]:
         J = J_cache[rows]  # J(q^k), from the pass that evaluated q^k
         e_old = _scaled_error(delta_rows, length)
         newton = _newton_step(J, delta_rows, length)  # Eq. (5.4): J⁻¹ δ
@@ -498,7 +555,8 @@ def newton_raphson(
             )
             T_bad, J_cache[rows[bad]] = pose_and_jacobian(sub, q_out[bad])
             d_out[bad] = differential_motion(T_bad, T[rows[bad]])
-        return q_out, np.ones(rows.size, bool), newton, d_out
+        everything = np.ones(rows.size, bool)
+        return q_out, everything, newton, d_out, everything
 
     return _iterate(
         chain,
@@ -598,6 +656,7 @@ def jacobi_iterative(
     position_tol_cm: float | None = 1e-7,
     orientation_tol_rad: float | None = 1e-10,
     record_history: bool = False,
+    accelerate: bool = True,
 ) -> IKResult:
     """Invert a signature model by the Jacobi iteration (5.8), Appendix C.2.
 
@@ -635,6 +694,14 @@ def jacobi_iterative(
         As for :func:`newton_raphson`.
     record_history : bool
         Keep the per-iteration :class:`IKHistory`.
+    accelerate : bool
+        Where the plain iteration stops contracting (the scaled error of an
+        iterate above :data:`JACOBI_SLOW_RATIO` times the previous one), later
+        iterations use Anderson acceleration of the same map (:func:`_anderson`)
+        whenever that gives a smaller error than (5.8) itself. Targets on which
+        (5.8) contracts normally (all realistic targets away from
+        singularities) iterate exactly (5.8). ``False``: the dissertation's
+        iteration only.
 
     Returns
     -------
@@ -652,9 +719,15 @@ def jacobi_iterative(
             got=str(design_chain.n_joints),
         )
 
+    depth = n if accelerate else 0
+    Q_hist = np.zeros((m, depth + 1, n))  # last iterates q^k ...
+    G_hist = np.zeros((m, depth + 1, n))  # ... and their images G(q^k) under (5.8)
+    count = np.zeros(m, np.int64)
+    slow = np.zeros(m, bool)  # plain (5.8) stopped contracting: accelerate
+
     def step(
         rows: IntArray, q_rows: Array, delta_rows: Array
-    ) -> tuple[Array, BoolArray, Array, Array]:
+    ) -> tuple[Array, BoolArray, Array, Array, BoolArray]:
         sig = _take(signature_chain, rows, m)
         F_s = forward_kinematics(sig, q_rows)  # C.2 step 2
         F_d = forward_kinematics(_take(design_chain, rows, m), q_rows)  # C.2 step 3
@@ -670,7 +743,27 @@ def jacobi_iterative(
         ok = np.isfinite(q_next).all(axis=-1)
         q_next = np.where(ok[:, None], q_next, q_rows)
         d_next = differential_motion(forward_kinematics(sig, q_next), T[rows])
-        return q_next, ok, q_next - q_rows, d_next
+        was_slow = slow[rows].copy()
+        if depth:
+            length = _length_scale(signature_chain)
+            e_old = _scaled_error(delta_rows, length)
+            e_next = _scaled_error(d_next, length)
+            Q_hist[rows] = np.roll(Q_hist[rows], -1, axis=1)
+            G_hist[rows] = np.roll(G_hist[rows], -1, axis=1)
+            Q_hist[rows, -1], G_hist[rows, -1] = q_rows, q_next
+            count[rows] += 1
+            acc = np.flatnonzero(was_slow & ok)
+            if acc.size:
+                r = rows[acc]
+                q_acc = _anderson(Q_hist[r], G_hist[r], count[r])
+                d_acc = differential_motion(
+                    forward_kinematics(_take(sig, acc, rows.size), q_acc), T[r]
+                )
+                take = _scaled_error(d_acc, length) < e_next[acc]  # never worse than (5.8)
+                q_next[acc[take]] = q_acc[take]
+                d_next[acc[take]] = d_acc[take]
+            slow[rows] |= e_next > JACOBI_SLOW_RATIO * e_old
+        return q_next, ok, q_next - q_rows, d_next, was_slow | (depth == 0)
 
     return _iterate(
         signature_chain,
@@ -683,4 +776,5 @@ def jacobi_iterative(
         position_tol_cm,
         orientation_tol_rad,
         record_history,
+        stall_patience=JACOBI_STALL_PATIENCE,
     )
