@@ -51,12 +51,16 @@ def _target(c: Controller, seed: int) -> np.ndarray:
 
 
 def _tables(c: Controller, q_true: np.ndarray, label: str) -> list[ConvergenceTable]:
-    from pipeline.robots.puma560 import Branch, branch_of
-
     T_base = invert_transform(c.sensor_from_base) @ forward_kinematics(c.signature.chain, q_true)
-    branch = Branch(*(int(v) for v in branch_of(q_true)))
+    branch = None
+    methods: tuple[str, ...] = ("nr",)  # Jacobi needs a closed-form design inverse
+    if c.robot.name == "puma560":
+        from pipeline.robots.puma560 import Branch, branch_of
+
+        branch = Branch(*(int(v) for v in branch_of(q_true)))
+        methods = ("nr", "jacobi")
     out = []
-    for method in ("nr", "jacobi"):
+    for method in methods:
         res = c.solve(T_base, branch=branch, method=method, record_history=True)
         h = res.history
         assert h is not None
@@ -65,6 +69,12 @@ def _tables(c: Controller, q_true: np.ndarray, label: str) -> list[ConvergenceTa
         rows = np.column_stack([np.arange(k), d, h.position_error_cm[:k, 0]])
         out.append(ConvergenceTable(label, method, rows))
     return out
+
+
+def realistic_tables(session_dir: str | Path, seed: int = 3) -> list[ConvergenceTable]:
+    """Tables 5-1/5-2 for the session's own signature only (cheap: two solves)."""
+    c = Controller.from_session(session_dir)
+    return _tables(c, _target(c, seed), "realistic")
 
 
 def _controller_for(c: Controller, chain: SerialChain) -> Controller:

@@ -13,6 +13,7 @@ from pipeline.audit import audit
 from pipeline.errors import StageError
 from pipeline.report.identification import write_report
 from pipeline.rig.simulate import SimulationOptions, simulate_session
+from pipeline.signature_file import write_signature
 from pipeline.stages.runner import STAGE_MODULES, run, stage_path
 from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_provenance, read_table
@@ -25,6 +26,7 @@ def session(tmp_path_factory: pytest.TempPathFactory) -> Path:
     sdir = tmp_path_factory.mktemp("robot")
     simulate_session(sdir, SimulationOptions(seed=2, points=12, repeats=2))
     run(sdir)
+    write_signature(sdir)
     return sdir
 
 
@@ -53,11 +55,26 @@ def test_sections_in_order(report: tuple[Path, str]) -> None:
         "Residual variances",
         "## Figures",
         "## Data quality",
+        "Control: convergence on this signature",
         "Audit against the simulator's truth",
         "Stage provenance",
     ]
     positions = [text.index(h) for h in headings]
     assert positions == sorted(positions)
+
+
+def test_convergence_tables_reach_the_tolerance(report: tuple[Path, str]) -> None:
+    """Both methods' tables (5-1, 5-2) end at a radial error below 1e-6 cm."""
+    _, text = report
+    block = text[text.index("Control: convergence") :].split("```")[1]
+    tables = [t for t in block.strip().split("\n\n") if t.strip()]
+    assert [t.splitlines()[0].split(" (")[0] for t in tables] == [
+        "Newton-Raphson",
+        "Jacobi iterative",
+    ]
+    for t in tables:
+        last = t.splitlines()[-1].split()
+        assert float(last[4]) <= 1e-6
 
 
 def test_every_joint_and_dh_value(session: Path, report: tuple[Path, str]) -> None:

@@ -221,6 +221,22 @@ def _audit_section(audit: dict[str, Any]) -> str:
     )
 
 
+def _convergence_section(sdir: Path) -> str:
+    from pipeline.convergence import format_tables, realistic_tables
+
+    head = "## Control: convergence on this signature (cf. Tables 5-1, 5-2)\n\n"
+    if not (sdir / "signature.json").is_file():
+        return head + "No `signature.json` yet: `pipeline identify` writes it, then this table."
+    return (
+        head + "Per-iteration base-frame error (desired minus reached) of one target pose "
+        "inverted on this signature, starting from the design model's inverse "
+        "(Section 5.4). `pipeline ik-convergence SESSION` adds the deliberately poor "
+        "signature (6.8 cm at iteration 0); it refits a base alignment per candidate "
+        "(~1.5 s), too slow to run on every identification.\n\n"
+        "```\n" + format_tables(realistic_tables(sdir)).rstrip() + "\n```"
+    )
+
+
 def _provenance_section(prov: dict[str, dict[str, Any]]) -> str:
     body = [
         [name, p.get("stage_version", DASH), f"`{json.dumps(p.get('params', {}), sort_keys=True)}`",
@@ -256,6 +272,7 @@ def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -
         _variance_section(res),
         _figures_section(figs),
         _quality_section(t["triangulate"], t["compensate"]),
+        _convergence_section(sdir),
         *([_audit_section(audit)] if audit is not None else []),
         _provenance_section(prov),
     ]
