@@ -1,0 +1,60 @@
+"""Signature-based control on robot3 (issue 5): batch throughput and single-target latency.
+
+Issue 5 targets: batched Newton-Raphson >= 200,000 targets/s for a batch of
+100,000; single-target latency <= 200 µs. Targets are random configurations of
+one branch (right-up-noflip) inside the joint limits, posed by the signature
+itself, so every one is reachable.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench.kinematics import best_of
+from pipeline.control import Controller
+from pipeline.identify import identify
+from pipeline.kinematics.chain import forward_kinematics
+from pipeline.kinematics.transforms import invert_transform
+from pipeline.robots import puma560
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _targets(c: Controller, n: int, branch: puma560.Branch) -> np.ndarray:
+    rng = np.random.default_rng(1)
+    lim = np.deg2rad(c.robot.limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], (4 * n, 6))
+    on = np.all(puma560.branch_of(q) == [branch.shoulder, branch.elbow, branch.wrist], axis=1)
+    q = q[on][:n]
+    q = np.resize(q, (n, 6))  # repeat if the branch took fewer than n
+    return invert_transform(c.sensor_from_base) @ forward_kinematics(c.signature.chain, q)
+
+
+def main() -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp) / "robot3"
+        d.mkdir()
+        shutil.copy(ROOT / "sessions/robot3/recording.mcap", d)
+        identify(d, report=False)
+        c = Controller.from_session(d)
+    branch = puma560.BRANCHES[0]
+    n = 100_000
+    T = _targets(c, n, branch)
+    rows = []
+    for method in ("nr", "jacobi"):
+        sec = best_of(lambda m=method: c.solve(T, branch=branch, method=m), repeats=3)
+        rows.append((f"Controller.solve {method}, batch", n, sec))
+    single = []
+    for k in range(300):
+        t0 = time.perf_counter()
+        c.solve(T[k], branch=branch, method="nr")
+        single.append(time.perf_counter() - t0)
+    print(f"{'benchmark':45s} {'items':>8s} {'best s':>9s} {'targets/s':>10s}")
+    for name, items, sec in rows:
+        print(f"{name:45s} {items:8d} {sec:9.3f} {items / sec:10.0f}")
+    print(f"{'Controller.solve nr, one target (median)':45s} {np.median(single) * 1e6:9.0f} µs")
