@@ -666,9 +666,10 @@ def jacobi_iterative(
     with a rate set by the design/signature mismatch (5.12) amplified by the
     design inverse's sensitivity: next to a singularity (Puma: wrist within ~1°,
     elbow within ~1° of stretched, wrist centre within ~1 cm of the shoulder
-    axis) the map stops contracting and the target ends ``MAX_ITER``,
-    ``SINGULAR`` or ``UNREACHABLE`` (measured: 0.5-1 % of targets uniform in
-    the joint limits; none farther away).
+    axis) the plain map stops contracting (measured: 0.5-1 % of targets uniform
+    in the joint limits fail with ``accelerate=False``; none farther away).
+    Anderson acceleration of the same map (``accelerate=True``) brings the
+    failures on robot3's signature to 0.02-0.03 % of 10,000 targets.
 
     Parameters
     ----------
