@@ -315,5 +315,67 @@ def ik_convergence(
     typer.echo(format_tables(convergence_tables(session, seed=seed)))
 
 
+@app.command()
+@_errors_to_exit
+def evaluate(
+    session: SessionArg,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    perfect_servo: Annotated[
+        bool, typer.Option(help="Simulated rig: no servo error, no encoder rounding.")
+    ] = False,
+    exact_instruments: Annotated[
+        bool, typer.Option(help="Simulated rig: instrument readings not quantized.")
+    ] = False,
+    report: Annotated[bool, typer.Option(help="Write report/evaluation.md.")] = True,
+) -> None:
+    """Grid-touching tasks under design-model and signature control, recorded and scored."""
+    import json
+
+    from pipeline.evaluation.evaluate import evaluate as run_evaluate
+
+    rig = None
+    if perfect_servo or exact_instruments:
+        from pipeline.rig.evaluation import EvaluationRigOptions
+
+        rig = EvaluationRigOptions(perfect_servo, exact_instruments)
+    r = run_evaluate(session, rig=rig, report=report)
+    if as_json:
+        typer.echo(json.dumps(r.summary, indent=1))
+        return
+    for run in r.runs:
+        typer.echo(f"  {run.name:22s} {run.action}")
+    if r.recorded:
+        typer.echo(f"  rig recorded: {', '.join(r.recorded)}")
+    for name, task in r.summary["tasks"].items():
+        med = task["median_improvement"]
+        text = "inf" if med is None else f"{med:.2f}"
+        typer.echo(f"{name:8s} {len(task['indices']):3d} indices, median improvement {text}")
+    for name, why in r.summary["skipped"].items():
+        typer.echo(f"warning: {name} skipped: {why}", err=True)
+    if r.report:
+        typer.echo(f"report: {r.report}")
+
+
+@app.command()
+@_errors_to_exit
+def montecarlo(
+    study: Annotated[
+        str,
+        typer.Option(
+            help="encoder, machining, noise, points, radius, misalignment, features or all."
+        ),
+    ],
+    robots: Annotated[int, typer.Option(help="Simulated robots per setting.")] = 500,
+    seed: Annotated[int, typer.Option(help="Study seed (same seed, same numbers).")] = 0,
+    out: Annotated[str, typer.Option(help="Output folder.")] = "montecarlo",
+    workers: Annotated[int, typer.Option(help="Worker processes.")] = 1,
+) -> None:
+    """Monte-Carlo study of design-model and signature control (Chapter 7, Appendix G)."""
+    from pipeline.montecarlo.studies import run_montecarlo
+
+    for line in run_montecarlo(study, robots=robots, seed=seed, out=out, workers=workers):
+        typer.echo(line)
+
+
 if __name__ == "__main__":  # pragma: no cover
     app()

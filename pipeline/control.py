@@ -137,15 +137,19 @@ class Controller:
         return self._into_limits(res)
 
     def _into_limits(self, res: IKResult) -> IKResult:
-        """Shift revolute joints by ±2π where that brings them inside their limits."""
-        lim = joints_to_internal(self.robot.limits.T, self.robot.prismatic).T  # (n, 2)
-        q = res.q.copy()
-        for shift in (2.0 * np.pi, -2.0 * np.pi):
-            moved = q + np.where(self.robot.prismatic, 0.0, shift)
-            inside = (moved >= lim[:, 0]) & (moved <= lim[:, 1])
-            outside = (q < lim[:, 0]) | (q > lim[:, 1])
-            q = np.where(inside & outside, moved, q)
-        return replace(res, q=q)
+        return replace(res, q=into_limits(self.robot, res.q))
+
+
+def into_limits(robot: RobotDescription, q: np.ndarray) -> np.ndarray:
+    """Revolute joints (m, n) in rad shifted by ±2π where that brings them inside the limits."""
+    lim = joints_to_internal(robot.limits.T, robot.prismatic).T  # (n, 2)
+    out = np.array(q, float)
+    for shift in (2.0 * np.pi, -2.0 * np.pi):
+        moved = out + np.where(robot.prismatic, 0.0, shift)
+        inside = (moved >= lim[:, 0]) & (moved <= lim[:, 1])
+        outside = (out < lim[:, 0]) | (out > lim[:, 1])
+        out = np.where(inside & outside, moved, out)
+    return out
 
 
 def solve_poses(

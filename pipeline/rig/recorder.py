@@ -23,6 +23,13 @@ CHANNELS = {
     "/robot/joint_state": "joint_state",
     "/sonic/ranges": "sonic_ranges",
 }
+#: topic -> schema file of the evaluation recording ``evaluation.mcap`` (docs/evaluation.md)
+EVAL_CHANNELS = {
+    "/eval/description": "eval_description",
+    "/eval/teach": "eval_teach",
+    "/eval/program": "eval_program",
+    "/eval/measurement": "eval_measurement",
+}
 PROFILE = "armsig"
 LIBRARY = "armsig-rig"  # fixed so that the same seed gives the same bytes
 
@@ -36,13 +43,15 @@ class Message:
     payload: dict[str, Any]
 
 
-def write_recording(path: str | Path, messages: list[Message]) -> None:
-    """Write ``messages`` (in time order) to ``path`` atomically."""
+def write_recording(
+    path: str | Path, messages: list[Message], channels: dict[str, str] = CHANNELS
+) -> None:
+    """Write ``messages`` (in time order) to ``path`` atomically; ``channels``: topic -> schema."""
     with atomic_write(path, "wb") as fh:
         writer = Writer(fh, compression=CompressionType.ZSTD, chunk_size=1 << 20)  # type: ignore[arg-type]
         writer.start(profile=PROFILE, library=LIBRARY)
         channel_ids: dict[str, int] = {}
-        for topic, schema_name in CHANNELS.items():
+        for topic, schema_name in channels.items():
             schema = mcap_json_schema(schema_name)
             sid = writer.register_schema(
                 name=schema["title"],
@@ -52,7 +61,7 @@ def write_recording(path: str | Path, messages: list[Message]) -> None:
             channel_ids[topic] = writer.register_channel(
                 topic=topic, message_encoding="json", schema_id=sid
             )
-        sequence: dict[str, int] = dict.fromkeys(CHANNELS, 0)
+        sequence: dict[str, int] = dict.fromkeys(channels, 0)
         for msg in messages:
             writer.add_message(
                 channel_id=channel_ids[msg.topic],

@@ -43,12 +43,38 @@ STAGE_MODULES = (
     "smodel",
     "dh",
 )
+#: Stage modules of ``pipeline evaluate`` (run after the identification, same runner).
+EVALUATE_STAGE_MODULES = (
+    "evaluate_teach",
+    "evaluate_program",
+    "evaluate_measurements",
+    "evaluate_indices",
+)
+#: Stage inputs that are files of the session folder other than stage outputs:
+#: name -> (file name, ``module:function`` that loads it from its path).
+#: They are hashed by content, like the recording.
+FILE_INPUTS = {
+    "signature": ("signature.json", "pipeline.signature_file:load_signature"),
+    "evaluation": ("evaluation.mcap", "pipeline.evaluation.recording:read_evaluation"),
+}
 LOCK_NAME = ".pipeline.lock"
 
 
-def stages() -> list[Stage]:
-    """All stages, in order."""
-    return [importlib.import_module(f"pipeline.stages.{m}").STAGE for m in STAGE_MODULES]
+def stages(modules: tuple[str, ...] = STAGE_MODULES) -> list[Stage]:
+    """All stages of a stage list (default: the identification), in order."""
+    return [importlib.import_module(f"pipeline.stages.{m}").STAGE for m in modules]
+
+
+def _load_file_input(sdir: Path, name: str) -> Any:
+    """Load a :data:`FILE_INPUTS` file of a session with its loader."""
+    fname, loader = FILE_INPUTS[name]
+    path = sdir / fname
+    if not path.is_file():
+        raise StageError(
+            f"{sdir}: no {fname}", fix="run `pipeline identify` / `pipeline evaluate` first"
+        )
+    module, func = loader.split(":")
+    return getattr(importlib.import_module(module), func)(path)
 
 
 def stage_path(session_dir: Path, name: str) -> Path:
@@ -127,6 +153,9 @@ class _Hashes:
             if name == RECORDING:
                 rec = self.session_dir / "recording.mcap"
                 self._cache[name] = file_sha256(rec) if rec.is_file() else None
+            elif name in FILE_INPUTS:
+                f = self.session_dir / FILE_INPUTS[name][0]
+                self._cache[name] = file_sha256(f) if f.is_file() else None
             else:
                 path = self.path(name)
                 self._cache[name] = (
@@ -225,11 +254,13 @@ def run(
     from_stage: str | None = None,
     only: str | None = None,
     overrides: Mapping[str, Mapping[str, Any]] | None = None,
+    modules: tuple[str, ...] = STAGE_MODULES,
 ) -> list[StageRun]:
     """Bring every stage of a session up to date.
 
     Parameters
     ----------
+    modules : the stage list (:data:`STAGE_MODULES` or :data:`EVALUATE_STAGE_MODULES`).
     force : rerun every stage.
     from_stage : rerun this stage and every later one.
     only : rerun just this stage (its inputs must exist).
@@ -242,7 +273,7 @@ def run(
             expected="a session folder holding recording.mcap",
             fix="`pipeline simulate NAME` records a simulated session",
         )
-    all_stages = stages()
+    all_stages = stages(modules)
     names = [s.name for s in all_stages]
     for opt, value in (("--from", from_stage), ("--only", only)):
         if value is not None and value not in names:
@@ -306,6 +337,8 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
     for inp in stage.inputs:
         if inp == RECORDING:
             inputs[inp] = read_recording(sdir / "recording.mcap", hashes.get(RECORDING))
+        elif inp in FILE_INPUTS:
+            inputs[inp] = _load_file_input(sdir, inp)
         else:
             path = hashes.path(inp)
             if not path.is_file():

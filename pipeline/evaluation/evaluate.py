@@ -1,0 +1,195 @@
+"""``evaluate``: identification (cached) -> teach -> programs -> run -> indices -> report.
+
+For a simulated session (``rig-truth.json`` beside the recording) the
+evaluation rig (:mod:`pipeline.rig.evaluation`) records ``evaluation.mcap``:
+the teaching first, and the programs and instrument readings whenever the
+programs differ from those recorded (a new signature). A hardware session
+brings its own ``evaluation.mcap``. Scoring reads only the recording.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.errors import ArmsigError
+from pipeline.evaluation.recording import read_evaluation
+from pipeline.evaluation.tasks import TASK_NAMES, reading_resolution
+from pipeline.stages.runner import EVALUATE_STAGE_MODULES, StageRun, run, stage_path
+from pipeline.stages.session import session_robot
+from pipeline.stages.tables import read_provenance, read_table
+
+#: Section 7.2.1 acceptance: signature radial errors at these vertices, below this (cm).
+RADIAL_VERTICES = (1, 4, 5, 8)
+
+
+@dataclass(frozen=True)
+class EvaluateResult:
+    """What ``evaluate`` did and found."""
+
+    identify_runs: list[StageRun]
+    runs: list[StageRun]
+    recorded: list[str]  # "teach" and/or "program" when the rig (re)recorded them
+    report: Path | None
+    summary: dict[str, Any]
+
+
+def _program_payloads(program: Any, units: list[str]) -> list[dict[str, Any]]:
+    from pipeline.stages.evaluate_measurements import recorded_program_rows
+
+    return [
+        {"task": t, "controller": c, "point": p, "q_commanded": list(q), "units": units}
+        for t, c, p, q in recorded_program_rows(program)
+    ]
+
+
+def evaluate(
+    session_dir: str | Path, *, rig: Any | None = None, report: bool = True
+) -> EvaluateResult:
+    """Evaluate a session's signature against its design model on the grid-touching tasks.
+
+    Parameters
+    ----------
+    session_dir : the session folder.
+    rig : :class:`pipeline.rig.evaluation.EvaluationRigOptions` or None
+        Simulated sessions only: the rig's switches. A recording made with
+        other switches is redone; None keeps whatever was recorded (defaults
+        for a first recording).
+    report : write ``report/evaluation.md`` (when its inputs changed).
+    """
+    from pipeline.identify import identify
+
+    sdir = Path(session_dir)
+    ident = identify(sdir, report=report)
+    robot = session_robot(read_table(stage_path(sdir, "session")))
+    if robot.n_joints < 6:
+        raise ArmsigError(
+            f"{sdir}: {robot.name} has {robot.n_joints} joints; the grid-touching tasks "
+            "prescribe full tool poses (position and orientation), which need 6",
+            fix="evaluate a 6-joint arm; position-only tasks for SCARA-like arms are not "
+            "implemented (docs/evaluation.md)",
+        )
+    path = sdir / "evaluation.mcap"
+    simulated = (sdir / "rig-truth.json").is_file()
+    recorded: list[str] = []
+    if simulated:
+        from pipeline.rig.evaluation import EvaluationRigOptions, record_evaluation
+
+        opts = rig or EvaluationRigOptions()
+        if not path.is_file() or (
+            rig is not None and _recorded_options(read_evaluation(path).description) != rig
+        ):
+            record_evaluation(sdir, None, opts)
+            recorded.append("teach")
+        else:
+            opts = _recorded_options(read_evaluation(path).description)
+    first = {r.name: r for r in run(sdir, modules=EVALUATE_STAGE_MODULES[:2]) if r.action == "ran"}
+    if simulated:
+        from pipeline.stages.evaluate_measurements import program_matches
+
+        program = read_table(stage_path(sdir, "evaluate_program"))
+        rec = read_evaluation(path)
+        if not program_matches(rec.program, program):  # exact: the rig logs full precision
+            units = rec.teach[0]["units"]
+            record_evaluation(sdir, _program_payloads(program, units), opts)
+            recorded.append("program")
+    runs = [first.get(r.name, r) for r in run(sdir, modules=EVALUATE_STAGE_MODULES)]
+    summary = summarize(sdir)
+    rep = _report_if_stale(sdir) if report else None
+    return EvaluateResult(ident.runs, runs, recorded, rep, summary)
+
+
+def _recorded_options(description: dict[str, Any]) -> Any:
+    from pipeline.rig.evaluation import EvaluationRigOptions
+
+    return EvaluationRigOptions(
+        perfect_servo=description.get("servo") == "perfect",
+        exact_instruments=description.get("instruments") == "exact",
+    )
+
+
+def summarize(session_dir: str | Path) -> dict[str, Any]:
+    """Machine-readable summary of the indices of a session's evaluation."""
+    sdir = Path(session_dir)
+    ind = read_table(stage_path(sdir, "evaluate_indices")).to_pylist()
+    prog = read_table(stage_path(sdir, "evaluate_program"))
+    rec = read_evaluation(sdir / "evaluation.mcap")
+    taught = {r["task"] for r in rec.teach}
+    ok: dict[str, bool] = {}
+    for t, o in zip(prog.column("task").to_pylist(), prog.column("ok").to_pylist(), strict=True):
+        ok[t] = ok.get(t, True) and bool(o)
+    tasks: dict[str, Any] = {}
+    skipped: dict[str, str] = {}
+    for name in TASK_NAMES:
+        rows = [r for r in ind if r["task"] == name]
+        if not rows:
+            skipped[name] = (
+                "not taught: the rig could not put the probe on its teach points"
+                if name not in taught
+                else "a controller has no valid solution (unreachable or outside the joint limits)"
+                if not ok.get(name, True)
+                else "not measured"
+            )
+            continue
+        items = []
+        for r in rows:
+            u = r["unit"]
+            d, sg = r[f"design_{u}"], r[f"signature_{u}"]
+            res = reading_resolution(name, r["name"])
+            # A signature reading within half a resolution step of zero reads as zero:
+            # the factor is then only known to be at least |design| / resolution.
+            bound = bool(res and abs(sg) < 0.5 * res)
+            items.append(
+                {
+                    "name": r["name"],
+                    "unit": u,
+                    "signed": r["signed"],
+                    "design": d,
+                    "signature": sg,
+                    "improvement": abs(d) / res if bound else r["improvement"],
+                    "improvement_is_lower_bound": bound,
+                }
+            )
+        imp = np.array([i["improvement"] for i in items], float)
+        for i in items:  # JSON has no infinity: null means "signature error exactly 0"
+            i["improvement"] = i["improvement"] if np.isfinite(i["improvement"]) else None
+        median = float(np.median(imp))
+        tasks[name] = {
+            "indices": items,
+            "median_improvement": median if np.isfinite(median) else None,
+        }
+    out: dict[str, Any] = {
+        "session": str(sdir),
+        "rig": rec.description,
+        "tasks": tasks,
+        "skipped": skipped,
+    }
+    if "grid12" in tasks:
+        rad = {i["name"]: i["signature"] for i in tasks["grid12"]["indices"]}
+        out["grid12_signature_radial_cm"] = {
+            str(v): rad[f"vertex{v}_radial_error_cm"] for v in RADIAL_VERTICES
+        }
+    return out
+
+
+def _report_if_stale(sdir: Path) -> Path:
+    """Write ``report/evaluation.md`` unless it was made from the same stage outputs."""
+    from pipeline.atomic import write_text_atomic
+
+    hashes = {
+        m: read_provenance(stage_path(sdir, m)).get("content_hash") for m in EVALUATE_STAGE_MODULES
+    }
+    stamp = sdir / "report" / ".evaluation-inputs.json"
+    current = json.dumps(hashes, sort_keys=True)
+    path = sdir / "report" / "evaluation.md"
+    if path.is_file() and stamp.is_file() and stamp.read_text() == current:
+        return path
+    from pipeline.report.evaluation import write_evaluation_report  # matplotlib: only when needed
+
+    out = write_evaluation_report(sdir)
+    write_text_atomic(stamp, current)
+    return out
