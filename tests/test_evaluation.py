@@ -24,9 +24,10 @@ EXACT_RIG = EvaluationRigOptions(perfect_servo=True, exact_instruments=True)
 EXACT_TOL = 1e-5
 
 
-def _copy_session(dst: Path) -> Path:
-    """A copy of robot1 with its identification but without any evaluation."""
-    shutil.copytree(ROBOT1, dst, ignore=shutil.ignore_patterns("evaluat*", ".evaluation*"))
+def _copy_session(dst: Path, src: Path = ROBOT1) -> Path:
+    """A copy of a session (default robot1) with whatever identification it has, but
+    without any evaluation: no recording, no ``evaluate_*`` stages."""
+    shutil.copytree(src, dst, ignore=shutil.ignore_patterns("evaluat*", ".evaluation*"))
     return dst
 
 
@@ -140,8 +141,20 @@ def test_cli_json(session) -> None:
     assert out["tasks"]["grid12"]["median_improvement"] >= 3.0
 
 
-def test_arm_with_fewer_than_six_joints_is_refused(tmp_path) -> None:
-    sdir = tmp_path / "scara"
-    simulate_session(sdir, SimulationOptions(robot="scara", noiseless=True, points=12, repeats=1))
-    with pytest.raises(ArmsigError, match="4 joints"):
-        evaluate(sdir, report=False)
+def test_status_lists_the_evaluate_stages(session, tmp_path) -> None:
+    from pipeline.stages.runner import EVALUATE_STAGE_MODULES, STAGE_MODULES
+    from pipeline.stages.runner import status as stage_status
+
+    sdir, _ = session
+    both = STAGE_MODULES + EVALUATE_STAGE_MODULES
+    assert {s.state for s in stage_status(sdir, modules=both)} == {"fresh"}
+    other = _copy_session(tmp_path / "robot1", src=sdir)  # identified, never evaluated
+    states = {s.name: s.state for s in stage_status(other, modules=both)}
+    assert all(states[m] == "missing" for m in EVALUATE_STAGE_MODULES)
+    assert all(states[m] == "fresh" for m in STAGE_MODULES)
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+
+    res = CliRunner().invoke(app, ["status", str(sdir)])
+    assert res.exit_code == 0 and "evaluate_indices" in res.output
