@@ -3,8 +3,12 @@
 Target ``i`` sits on link ``i`` at ``(R_i, 0, z_i)`` in the frame that follows
 joint ``i``'s motion (``F_{i-1} · Rot(z, q_i)``), which is (F.5)-(F.6): the
 ``Rot(x, rx_i)`` of Offset_i turns the sparker, not its position. The Puma uses
-the radii of Table 6-1 and the offsets ``z_i`` of Table F-1; other robots a
-default radius.
+the radii of Table 6-1 and the offsets ``z_i`` of Table F-1; other robots
+:data:`DEFAULT_RADIUS_CM`. When a joint has no visible sweep with its first
+radius, the planner falls back, joint by joint, to the other radii of
+:data:`RADIUS_FALLBACKS_CM` (larger first: Section 7.4.5, a larger radius gives
+better features), and when none works it raises an error naming the joint, why
+its targets are lost (too near, too far, behind the wall) and what to change.
 
 The thesis's signature configuration (155, 179, 178, 0, 0, 0)° is in the Puma
 controller's joint convention, not in this D-H zero, so it cannot be copied.
@@ -31,6 +35,8 @@ from pipeline.units import joints_to_internal
 TABLE_6_1_RADII_CM = (40.87, 41.62, 43.71, 33.30, 45.13, 33.30)
 TABLE_F_1_Z_CM = (20.300, 33.309, 18.500, 53.531, 3.200, 10.225)
 DEFAULT_RADIUS_CM = 30.0
+#: Radii tried, in this order, for a joint whose first radius has no visible sweep.
+RADIUS_FALLBACKS_CM = (40.0, 30.0, 20.0, 45.0, 15.0, 10.0)
 PROBE_LENGTH_CM = 15.0  # evaluation tool: a pointed probe on the flange axis
 #: Keep planned ranges this far inside the 30-250 cm limits and targets this far in
 #: front of the wall, so that manufacturing errors (mm) never push a target out.
@@ -108,10 +114,34 @@ def default_sensor_from_base(robot: RobotDescription) -> np.ndarray:
 
 
 def nominal_target_local(robot: RobotDescription) -> list[tuple[float, float, float]]:
-    """Nominal target positions on each link (cm)."""
+    """First-choice target positions on each link (cm)."""
     if robot.name == "puma560":
         return [(r, 0.0, z) for r, z in zip(TABLE_6_1_RADII_CM, TABLE_F_1_Z_CM, strict=True)]
     return [(DEFAULT_RADIUS_CM, 0.0, 0.0)] * robot.n_joints
+
+
+def target_candidates(robot: RobotDescription) -> np.ndarray:
+    """Target positions (n, K, 3) tried on each link, in order of preference (cm).
+
+    The first is :func:`nominal_target_local`; the others keep its offset along the
+    joint axis and take the radii of :data:`RADIUS_FALLBACKS_CM`.
+    """
+    out = []
+    for r0, _, z in nominal_target_local(robot):
+        radii = [r0, *(r for r in RADIUS_FALLBACKS_CM if r != r0)]
+        out.append([(r, 0.0, z) for r in radii])
+    return np.array(out, float)
+
+
+def target_frames(
+    chain: SerialChain, sensor_from_base: np.ndarray, q: np.ndarray, joint: int
+) -> np.ndarray:
+    """Sensor-frame poses (..., 4, 4) of the frame ``F_{joint-1} · M_joint(q)`` that
+    carries target ``joint`` (1-based), at joint readings ``q`` (..., n)."""
+    F = link_frames(chain, q)[..., joint - 1, :, :]
+    M = joint_motion(chain, q)[..., joint - 1, :, :]
+    out: np.ndarray = sensor_from_base @ F @ M
+    return out
 
 
 def target_positions(
@@ -121,10 +151,8 @@ def target_positions(
 
     ``local`` (..., 3) is the target in the frame ``F_{joint-1} · M_joint(q)``.
     """
-    F = link_frames(chain, q)[..., joint - 1, :, :]
-    M = joint_motion(chain, q)[..., joint - 1, :, :]
-    p = np.concatenate([np.asarray(local, float), np.ones((*np.shape(local)[:-1], 1))], axis=-1)
-    return (sensor_from_base @ F @ M @ p[..., None])[..., :3, 0]
+    T = target_frames(chain, sensor_from_base, q, joint)
+    return (T[..., :3, :3] @ np.asarray(local, float)[..., None])[..., 0] + T[..., :3, 3]
 
 
 def tool_positions(
@@ -145,17 +173,33 @@ def visible(p: np.ndarray, geometry: DigitizerGeometry) -> np.ndarray:
     )
 
 
-def _longest_run(ok: np.ndarray) -> tuple[int, int]:
-    """Start and length of the longest run of True in a 1-D mask."""
-    best, best_start, start = 0, 0, None
-    for k, v in enumerate(np.append(ok, False)):
-        if v and start is None:
-            start = k
-        elif not v and start is not None:
-            if k - start > best:
-                best, best_start = k - start, start
-            start = None
-    return best_start, best
+def _longest_runs(ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start and length of the longest run of True along the last axis of a mask.
+
+    Returns integer arrays of shape ``ok.shape[:-1]`` (start 0 and length 0 when
+    there is no True).
+    """
+    count = np.cumsum(ok, axis=-1)
+    # Run length ending at each position: the count minus the count at the last False.
+    run = count - np.maximum.accumulate(np.where(ok, 0, count), axis=-1)
+    end = np.argmax(run, axis=-1)
+    length = np.take_along_axis(run, end[..., None], axis=-1)[..., 0]
+    return end - length + 1, length
+
+
+def _why_lost(p: np.ndarray, geometry: DigitizerGeometry) -> str:
+    """Which visibility condition the targets ``p`` (..., 3) break most often."""
+    dist = np.linalg.norm(p[..., None, :] - geometry.microphones[:3], axis=-1)
+    reasons = {
+        f"nearer than {geometry.range_min_cm + RANGE_MARGIN_CM:g} cm to a microphone": (
+            dist.min(-1) <= geometry.range_min_cm + RANGE_MARGIN_CM
+        ),
+        f"farther than {geometry.range_max_cm - RANGE_MARGIN_CM:g} cm from a microphone": (
+            dist.max(-1) >= geometry.range_max_cm - RANGE_MARGIN_CM
+        ),
+        f"less than {WALL_MARGIN_CM:g} cm in front of the wall": p[..., 2] <= WALL_MARGIN_CM,
+    }
+    return max(reasons, key=lambda k: int(reasons[k].sum()))
 
 
 def plan_measurements(
@@ -167,42 +211,40 @@ def plan_measurements(
     candidates: int = 400,
     seed: int = 560,
     max_sweep_deg: float = MAX_SWEEP_DEG,
+    target_local: list[tuple[float, float, float]] | None = None,
 ) -> MeasurementPlan:
-    """Choose q^s and the sweep of every joint on the design model.
+    """Choose q^s, the target of every link and the sweep of every joint on the design model.
 
     ``max_sweep_deg`` caps every revolute sweep (default 300°); a smaller cap (say
     90°) records a deliberately short sweep, as in the (B-3) experiments.
+    ``target_local`` replaces :func:`target_candidates` by exactly these targets,
+    with no fallback radius (the Monte-Carlo radius study of Section 7.4.5 puts
+    every target at ``R_nom``).
 
     Raises
     ------
     ArmsigError
         When no signature configuration keeps every target visible over at least
-        180° (revolute) or half the travel (prismatic).
+        180° (revolute; all of a shorter travel) or half the travel (prismatic),
+        with the tool probe visible; the message names the joint and the reason.
     """
     chain = robot.design_chain()
+    n = robot.n_joints
     lim = robot.limits
     pris = robot.prismatic
-    locals_ = [np.array(v) for v in nominal_target_local(robot)]
+    options = (
+        np.array(target_local, float)[:, None, :]
+        if target_local is not None
+        else target_candidates(robot)
+    )  # (n, K, 3)
     rng = np.random.default_rng(seed)
-    cand = rng.uniform(lim[:, 0], lim[:, 1], (candidates, robot.n_joints))
+    cand = rng.uniform(lim[:, 0], lim[:, 1], (candidates, n))
     step = np.where(pris, 1.0, 2.0)  # coarse search grid: 2° or 1 cm
     tool_local = np.array([0.0, 0.0, PROBE_LENGTH_CM])
     tool_ok = visible(
         tool_positions(chain, sensor_from_base, joints_to_internal(cand, pris), tool_local),
         geometry,
     )
-    arcs = np.zeros((candidates, robot.n_joints))
-    for i in range(robot.n_joints):
-        grid = np.arange(lim[i, 0], lim[i, 1] + 1e-9, step[i])
-        q = np.repeat(cand[:, None, :], len(grid), axis=1)
-        q[:, :, i] = grid
-        ok = visible(
-            target_positions(
-                chain, sensor_from_base, joints_to_internal(q, pris), i + 1, locals_[i]
-            ),
-            geometry,
-        )
-        arcs[:, i] = [_longest_run(row)[1] * step[i] for row in ok]
     travel = lim[:, 1] - lim[:, 0]
     # A joint whose whole travel is under 180° (B-3 then warns) needs all of it.
     need = np.where(
@@ -210,20 +252,45 @@ def plan_measurements(
         0.5 * travel,
         np.minimum(min(MIN_SWEEP_DEG, max_sweep_deg) + 2 * SWEEP_END_MARGIN_DEG, travel - step),
     )
-    feasible = tool_ok & np.all(arcs >= need, axis=1)
-    if not feasible.any():
-        worst = int(np.argmin(arcs.max(axis=0) - need))
-        raise ArmsigError(
-            f"{robot.name}: no signature configuration keeps every target visible",
-            expected=f"a visible sweep of at least {need[worst]:g} on joint {worst + 1}",
-            got=f"at most {arcs[:, worst].max():g}",
-            fix="move the sensor (sensor_from_base) or change the target radii",
+    frames = []  # per joint, the frames carrying its target, (candidates, grid, 4, 4)
+    for i in range(n):
+        grid = np.arange(lim[i, 0], lim[i, 1] + 1e-9, step[i])
+        q = np.repeat(cand[:, None, :], len(grid), axis=1)
+        q[:, :, i] = grid
+        frames.append(target_frames(chain, sensor_from_base, joints_to_internal(q, pris), i + 1))
+
+    def targets(i: int, k: slice) -> np.ndarray:
+        """Sensor-frame positions (candidates, K, grid, 3) of joint i's targets k."""
+        T = frames[i]
+        return np.einsum("cgij,kj->ckgi", T[..., :3, :3], options[i, k]) + T[:, None, :, :3, 3]
+
+    def visible_sweeps(k: slice) -> np.ndarray:
+        """Longest visible sweep (candidates, n, K) of targets k, deg / cm."""
+        return np.stack(
+            [_longest_runs(visible(targets(i, k), geometry))[1] * step[i] for i in range(n)],
+            axis=1,
         )
-    capped = np.minimum(arcs, np.where(pris, np.inf, max_sweep_deg))
-    score = np.where(feasible, np.sum(capped / (lim[:, 1] - lim[:, 0]), axis=1), -np.inf)
-    qs = cand[int(np.argmax(score))]
+
+    # The first target of every joint if any q^s allows it; else, joint by joint, the
+    # first target (in order of preference) that sweeps enough.
+    arcs = visible_sweeps(slice(0, 1))
+    good = arcs >= need[None, :, None]
+    if not np.any(tool_ok & np.all(good.any(axis=-1), axis=1)) and options.shape[1] > 1:
+        arcs = np.concatenate([arcs, visible_sweeps(slice(1, None))], axis=-1)
+        good = arcs >= need[None, :, None]
+    choice = np.argmax(good, axis=-1)  # (candidates, n)
+    arc = np.take_along_axis(arcs, choice[..., None], axis=-1)[..., 0]
+    feasible = tool_ok & np.all(good.any(axis=-1), axis=1)
+    if not feasible.any():
+        lost = [_why_lost(targets(i, slice(None)), geometry) for i in range(n)]
+        raise _no_placement(robot, arcs, need, tool_ok, lost)
+    capped = np.minimum(arc, np.where(pris, np.inf, max_sweep_deg))
+    score = np.where(feasible, np.sum(capped / travel, axis=1), -np.inf)
+    best = int(np.argmax(score))
+    qs = cand[best]
+    locals_ = options[np.arange(n), choice[best]]  # (n, 3)
     sweeps = []
-    for i in range(robot.n_joints):
+    for i in range(n):
         fine = 0.1 if pris[i] else 0.5
         grid = np.arange(lim[i, 0], lim[i, 1] + 1e-9, fine)
         q = np.tile(qs, (len(grid), 1))
@@ -234,7 +301,7 @@ def plan_measurements(
             ),
             geometry,
         )
-        start, length = _longest_run(ok)
+        start, length = (int(v) for v in _longest_runs(ok))
         lo, hi = grid[start], grid[start + length - 1]
         margin = 0.5 if pris[i] else SWEEP_END_MARGIN_DEG
         lo, hi = lo + margin, hi - margin
@@ -249,4 +316,40 @@ def plan_measurements(
         sweeps=tuple(reversed(sweeps)),  # Figure 6-7: target n first, target 1 last
         n_avg=n_avg,
         tool_local_cm=(0.0, 0.0, PROBE_LENGTH_CM),
+    )
+
+
+def _no_placement(
+    robot: RobotDescription,
+    arcs: np.ndarray,
+    need: np.ndarray,
+    tool_ok: np.ndarray,
+    lost: list[str],
+) -> ArmsigError:
+    """The error of :func:`plan_measurements` when no signature configuration works."""
+    reach = arcs.max(axis=(0, 2))  # best visible sweep of each joint, any q^s and target
+    short = reach < need
+    if not short.any():
+        what = (
+            "the tool probe is never visible"
+            if not tool_ok.any()
+            else "no single signature configuration suits every joint at once"
+        )
+        return ArmsigError(
+            f"{robot.name}: no signature configuration keeps every target visible: {what}",
+            expected=f"every target visible over its sweep ({', '.join(f'{v:g}' for v in need)})",
+            fix="widen the joint limits in the description, or put the digitizer elsewhere "
+            "(plan_measurements' sensor_from_base)",
+        )
+    k = int(np.argmax(need - reach))  # the joint that misses by most
+    j = robot.joints[k]
+    return ArmsigError(
+        f"{robot.name}: joint {k + 1} ({j.name}) has no visible sweep: its targets are "
+        f"{lost[k]} over most of its travel",
+        expected=f"a visible sweep of at least {need[k]:g} {j.unit}, with target radii of "
+        f"{', '.join(f'{r:g}' for r in RADIUS_FALLBACKS_CM)} cm",
+        got=f"at most {reach[k]:g} {j.unit}",
+        fix=f"check joint {k + 1}'s limits and the link lengths in the description (cm); the "
+        "digitizer covers 30-250 cm from its microphones in front of the wall, placed as in "
+        "(F.3) for the robot's first d (pass sensor_from_base to plan_measurements to move it)",
     )

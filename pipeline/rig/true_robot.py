@@ -49,18 +49,32 @@ def _small_rigid(rng: np.random.Generator, sig: ErrorSigmas) -> np.ndarray:
     return trans(*p) @ rot_x(r[0]) @ rot_y(r[1]) @ rot_z(r[2])
 
 
+def draw_puma_eps(rng: np.random.Generator, sigmas: ErrorSigmas = ErrorSigmas()) -> np.ndarray:
+    """Manufacturing errors ε1..ε39 of one Puma 560 (7.2)-(7.8), math units (cm / rad).
+
+    Drawn category by category (positional, orientational, encoder), each a
+    zero-mean Gaussian with its σ; this order fixes the random stream.
+
+    Returns
+    -------
+    eps : ndarray, shape (39,)
+    """
+    eps = np.zeros(puma560.N_EPS)
+    for idx, sigma in (
+        (puma560.EPS_POSITIONAL, sigmas.position_cm),
+        (puma560.EPS_ORIENTATIONAL, np.deg2rad(sigmas.orientation_deg)),
+        (puma560.EPS_ENCODER, np.deg2rad(sigmas.encoder_deg)),
+    ):
+        eps[np.array(idx) - 1] = rng.normal(0.0, sigma, len(idx))
+    return eps
+
+
 def draw_true_robot(
     robot: RobotDescription, rng: np.random.Generator, sigmas: ErrorSigmas = ErrorSigmas()
 ) -> TrueRobot:
     """Draw one manufactured instance of ``robot``."""
     if robot.name == "puma560":
-        eps = np.zeros(puma560.N_EPS)
-        for idx, sigma in (
-            (puma560.EPS_POSITIONAL, sigmas.position_cm),
-            (puma560.EPS_ORIENTATIONAL, np.deg2rad(sigmas.orientation_deg)),
-            (puma560.EPS_ENCODER, np.deg2rad(sigmas.encoder_deg)),
-        ):
-            eps[np.array(idx) - 1] = rng.normal(0.0, sigma, len(idx))
+        eps = draw_puma_eps(rng, sigmas)
         errors: dict[str, object] = {
             "model": "puma560 (7.1)-(7.8)",
             "eps_math_units": eps.tolist(),

@@ -142,16 +142,38 @@ def _field(table: dict[str, Any], key: str, where: str, kind: type | tuple[type,
             expected=getattr(kind, "__name__", "a number"),
             got=repr(value),
         )
+    if isinstance(value, int | float) and not np.isfinite(value):
+        raise RobotDescriptionError(
+            f"{where}: field '{key}' is not a finite number", expected="a number", got=repr(value)
+        )
     return value
+
+
+def _known(table: dict[str, Any], allowed: tuple[str, ...], where: str) -> None:
+    """Reject keys outside ``allowed``: a misspelt optional field would be ignored."""
+    for key in table:
+        if key not in allowed:
+            raise RobotDescriptionError(
+                f"{where}: unknown field '{key}'",
+                expected=", ".join(allowed),
+                fix="see schemas/robot_description.md",
+            )
 
 
 def _pose(table: dict[str, Any] | None, where: str) -> Pose:
     if table is None:
         return Pose()
+    if not isinstance(table, dict):
+        raise RobotDescriptionError(f"{where} is not a table", got=repr(table))
+    _known(table, ("xyz_cm", "rpy_deg"), where)
     out = []
     for key in ("xyz_cm", "rpy_deg"):
         v = table.get(key, [0.0, 0.0, 0.0])
-        if not (isinstance(v, list) and len(v) == 3 and all(isinstance(x, int | float) for x in v)):
+        if not (
+            isinstance(v, list)
+            and len(v) == 3
+            and all(isinstance(x, int | float) and np.isfinite(x) for x in v)
+        ):
             raise RobotDescriptionError(
                 f"{where}: field '{key}' must be a list of three numbers", got=repr(v)
             )
@@ -167,16 +189,22 @@ def description_from_dict(data: dict[str, Any], source: str = "<dict>") -> Robot
     RobotDescriptionError
         Naming the source and the offending field.
     """
+    _known(data, ("name", "notes", "base", "tool", "joints"), source)
     name = _field(data, "name", source, str)
     joints_raw = _field(data, "joints", source, list)
     if not joints_raw:
         raise RobotDescriptionError(f"{source}: 'joints' is empty", expected="at least one joint")
-    joints = []
+    joints: list[JointSpec] = []
     for k, jt in enumerate(joints_raw):
         where = f"{source}: joints[{k}]"
         if not isinstance(jt, dict):
             raise RobotDescriptionError(f"{where} is not a table", got=repr(jt))
+        _known(jt, ("name", "type", "limits", "encoder_resolution", "dh"), where)
         jname = _field(jt, "name", where, str)
+        if jname in (j.name for j in joints):
+            raise RobotDescriptionError(
+                f"{where}: field 'name' repeats joint name {jname!r}", expected="unique joint names"
+            )
         jtype = _field(jt, "type", where, str)
         if jtype not in JOINT_TYPES:
             raise RobotDescriptionError(
@@ -185,7 +213,10 @@ def description_from_dict(data: dict[str, Any], source: str = "<dict>") -> Robot
                 got=repr(jtype),
             )
         limits = _field(jt, "limits", where, list)
-        if len(limits) != 2 or not all(isinstance(x, int | float) for x in limits):
+        if len(limits) != 2 or not all(
+            isinstance(x, int | float) and not isinstance(x, bool) and np.isfinite(x)
+            for x in limits
+        ):
             raise RobotDescriptionError(
                 f"{where}: field 'limits' must be [lower, upper]", got=repr(limits)
             )
@@ -201,6 +232,7 @@ def description_from_dict(data: dict[str, Any], source: str = "<dict>") -> Robot
                 f"{where}: field 'encoder_resolution' must be positive", got=repr(res)
             )
         dh = _field(jt, "dh", where, dict)
+        _known(dh, ("theta_deg", "d_cm", "a_cm", "alpha_deg"), f"{where}.dh")
         row = DHRow(
             *(
                 float(_field(dh, key, f"{where}.dh", float))

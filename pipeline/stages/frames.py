@@ -20,7 +20,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.errors import StageError
-from pipeline.kinematics.chain import forward_kinematics
+from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.signature import frame_from_features, signature_chain
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.recording import TOOL_SWEEP
@@ -77,6 +77,31 @@ def signature_readings(joints: pa.Table, prismatic: np.ndarray, source: str) -> 
     return qs
 
 
+def tool_from_probe(chain: SerialChain, q_tool: np.ndarray, p_tool: np.ndarray) -> np.ndarray:
+    """Tool of a signature chain from the probe measurement (module docstring).
+
+    Parameters
+    ----------
+    chain : SerialChain
+        Signature chain without tool, optionally with a batch of robots.
+    q_tool : ndarray, shape (n,)
+        Readings at the tool measurement (rad / cm).
+    p_tool : ndarray, shape (..., 3)
+        Measured probe position, sensor frame (cm).
+
+    Returns
+    -------
+    tool : ndarray, shape (..., 4, 4)
+        Translation only: the probe in the last S-Model frame, its orientation.
+    """
+    flange = forward_kinematics(chain, q_tool)
+    d = np.asarray(p_tool, float) - flange[..., :3, 3]
+    tool = np.zeros((*d.shape[:-1], 4, 4))
+    tool[..., :, :] = np.eye(4)
+    tool[..., :3, 3] = (np.swapaxes(flange[..., :3, :3], -1, -2) @ d[..., None])[..., 0]
+    return tool
+
+
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     robot = session_robot(inputs["session"])
     n, pris = robot.n_joints, robot.prismatic
@@ -105,9 +130,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     p_tool = positions(tool_rows)[0]
     q_tool = joint_readings(inputs["joints"], TOOL_SWEEP, n, pris)[0]
     chain = signature_chain(F, joints_to_internal(qs, pris), pris)
-    flange = forward_kinematics(chain, joints_to_internal(q_tool, pris))
-    tool = np.eye(4)
-    tool[:3, 3] = flange[:3, :3].T @ (p_tool - flange[:3, 3])
+    tool = tool_from_probe(chain, joints_to_internal(q_tool, pris), p_tool)
     T = np.concatenate([F, tool[None]], axis=0)
     q_deg = np.full(n + 2, np.nan)
     q_cm = np.full(n + 2, np.nan)
