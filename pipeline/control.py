@@ -9,6 +9,9 @@ signature's sensor frame with the base alignment stored in the signature file
 - Newton-Raphson (5.4) starts from the closed-form design inverse on the
   requested branch (Puma) or from a damped least-squares design inverse.
 - Jacobi iterative (5.8) needs a closed-form design inverse: Puma only.
+- Arms with fewer than six joints control only some pose components
+  (:func:`task_axes_for`: position and rotation about the base Z for a
+  SCARA-like arm); ``Controller.solve(..., task_axes=...)`` solves those.
 """
 
 from __future__ import annotations
@@ -21,7 +24,14 @@ import numpy as np
 
 from pipeline.errors import ArmsigError
 from pipeline.kinematics.chain import SerialChain
-from pipeline.kinematics.ik import IKResult, jacobi_iterative, newton_raphson
+from pipeline.kinematics.ik import (
+    ALL_AXES,
+    IKResult,
+    controllable_axes,
+    jacobi_iterative,
+    newton_raphson,
+)
+from pipeline.kinematics.transforms import invert_transform
 from pipeline.robots.description import RobotDescription
 from pipeline.signature_file import Signature, load_signature
 from pipeline.units import joints_to_internal
@@ -96,12 +106,26 @@ class Controller:
         return res.q
 
     def solve(
-        self, T_base: np.ndarray, branch=None, method: str = "nr", record_history: bool = False
+        self,
+        T_base: np.ndarray,
+        branch=None,
+        method: str = "nr",
+        record_history: bool = False,
+        task_axes: tuple[int, ...] | None = None,
     ) -> IKResult:
-        """Encoder readings (rad / cm) that put the signature tool at ``T_base`` (m, 4, 4)."""
+        """Encoder readings (rad / cm) that put the signature tool at ``T_base`` (m, 4, 4).
+
+        ``task_axes``: controlled components of δ = [dx, dy, dz, rx, ry, rz] in
+        the design base frame (e.g. :func:`task_axes_for`); Newton-Raphson only.
+        None: the full pose.
+        """
         if method not in METHODS:
             raise ArmsigError(f"unknown method {method!r}", expected=" or ".join(METHODS))
         T = np.asarray(T_base, float).reshape(-1, 4, 4)
+        if task_axes is not None:
+            if method != "nr":
+                raise ArmsigError("task axes need Newton-Raphson", fix="use --method nr")
+            return self._solve_task_axes(T, branch, tuple(task_axes), record_history)
         T_sensor = self.sensor_from_base @ T
         if self.robot.name == "puma560" and branch is None:
             branch = self.default_branch()
@@ -139,6 +163,50 @@ class Controller:
     def _into_limits(self, res: IKResult) -> IKResult:
         return replace(res, q=into_limits(self.robot, res.q))
 
+    def _solve_task_axes(
+        self, T_base: np.ndarray, branch, axes: tuple[int, ...], record_history: bool
+    ) -> IKResult:
+        """Newton-Raphson on the ``axes`` components of δ, in the design base frame
+        (the chain re-based there, so the axes are the base's)."""
+        sig = self.signature.chain
+        base_from_sensor = invert_transform(self.sensor_from_base)
+        chain = SerialChain(
+            sig.links, sig.prismatic, base_from_sensor @ sig.base, sig.tool, sig.joint_offsets
+        )
+        if self.robot.name == "puma560":
+            q0 = self.initial_estimate(self.sensor_from_base @ T_base, branch)
+        else:
+            d = self.robot.design_chain()
+            design = SerialChain(
+                d.links, d.prismatic, d.base, d.tool @ self.flange_to_tool, d.joint_offsets
+            )
+            m = T_base.shape[0]
+            q_sig = np.broadcast_to(np.asarray(sig.joint_offsets, float), (m, self.robot.n_joints))
+            q0 = newton_raphson(
+                design, T_base, q_sig, self.resolution, max_iter=100, damping=1e-2, task_axes=axes
+            ).q
+        res = newton_raphson(
+            chain, T_base, q0, self.resolution, record_history=record_history, task_axes=axes
+        )
+        return self._into_limits(res)
+
+
+#: Sample configurations :func:`task_axes_for` tests the design Jacobian at.
+AXES_SAMPLES = 16
+
+
+def task_axes_for(robot: RobotDescription) -> tuple[int, ...]:
+    """The pose components a robot can control, indices into δ = [dx, dy, dz, rx, ry, rz]
+    in its design base frame: all six for six or more joints, otherwise those the
+    design model moves (:func:`pipeline.kinematics.ik.controllable_axes`), e.g.
+    ``(0, 1, 2, 5)`` for a SCARA-like arm whose joint axes are parallel to the base Z."""
+    if robot.n_joints >= 6:
+        return ALL_AXES
+    rng = np.random.default_rng(0)  # fixed: the same robot gets the same axes
+    lim = joints_to_internal(robot.limits.T, robot.prismatic).T
+    q = rng.uniform(lim[:, 0], lim[:, 1], (AXES_SAMPLES, robot.n_joints))
+    return controllable_axes(robot.design_chain(), q)
+
 
 def into_limits(robot: RobotDescription, q: np.ndarray) -> np.ndarray:
     """Revolute joints (m, n) in rad shifted by ±2π where that brings them inside the limits."""
@@ -162,7 +230,8 @@ def solve_poses(
     """Solve poses given as position (m, 3) cm and fixed-axis rx, ry, rz (m, 3) deg.
 
     Returns the joint readings in boundary units (m, n) and the raw result.
-    Targets are grouped by branch so every group is one batched solve.
+    Targets are grouped by branch so every group is one batched solve. An arm with
+    fewer than six joints solves the components it controls (:func:`task_axes_for`).
     """
     from pipeline.kinematics.transforms import transform_from_xyz_rpy
     from pipeline.units import joints_to_boundary
@@ -170,10 +239,13 @@ def solve_poses(
     T = transform_from_xyz_rpy(np.atleast_2d(xyz_cm), np.deg2rad(np.atleast_2d(rpy_deg)))
     m = T.shape[0]
     labels = branches if branches is not None else [None] * m
+    axes = task_axes_for(controller.robot)  # arms with < 6 joints: the components they control
+    task_axes = None if axes == ALL_AXES else axes
     results: dict[str | None, tuple[np.ndarray, IKResult]] = {}
     for label in dict.fromkeys(labels):
         sel = np.array([b == label for b in labels])
-        results[label] = (sel, controller.solve(T[sel], parse_branch(label), method))
+        res = controller.solve(T[sel], parse_branch(label), method, task_axes=task_axes)
+        results[label] = (sel, res)
     n = controller.robot.n_joints
     fields = {
         "q": np.zeros((m, n)),
@@ -193,6 +265,7 @@ def solve_poses(
         position_error_cm=fields["position_error_cm"],
         orientation_error_rad=fields["orientation_error_rad"],
         status=fields["status"],
+        task_axes=axes,
     )
     return joints_to_boundary(out.q, controller.robot.prismatic), out
 

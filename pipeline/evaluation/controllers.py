@@ -13,6 +13,12 @@ frame). Both controllers work in the design base frame:
   (4.50), so E is that frame turned about the joint axis by the mean angle
   ``δ`` of the last target in it over its sweep (:func:`flange_angle`):
   measured, not assumed.
+
+Arms with fewer than six joints control the pose components of
+:func:`pipeline.control.task_axes_for` only (a SCARA: position and the
+rotation about Z); both controllers then solve in the taught workspace frame,
+so the controlled rotation is about the workspace's axes, the ones the
+instruments read.
 """
 
 from __future__ import annotations
@@ -24,10 +30,10 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
-from pipeline.control import Controller, into_limits
+from pipeline.control import Controller, into_limits, task_axes_for
 from pipeline.evaluation.tasks import Task
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
-from pipeline.kinematics.ik import newton_raphson
+from pipeline.kinematics.ik import ALL_AXES, newton_raphson
 from pipeline.kinematics.transforms import Array, invert_transform, rot_z
 from pipeline.robots.description import RobotDescription
 from pipeline.signature_file import Signature
@@ -66,18 +72,31 @@ class DesignModel:
 
     @property
     def chain(self) -> SerialChain:
+        """Design links with the probe on the flange (the last link frame: where the
+        rig mounts it, ``true_tool_in_last_link_cm``), not on the description's tool."""
         d = self.robot.design_chain()
-        return SerialChain(d.links, d.prismatic, d.base, d.tool @ self.tool, d.joint_offsets)
+        return SerialChain(d.links, d.prismatic, d.base, self.tool, d.joint_offsets)
 
     def fk(self, q: Array) -> Array:
         """E in the design base frame, q (..., n) rad / cm -> (..., 4, 4)."""
         return forward_kinematics(self.chain, q)
 
-    def solve(self, T: Array, branches: list, q_near: Array) -> tuple[Array, BoolArray]:
-        """Joint vectors (m, n) reaching E poses T (m, 4, 4); and which are valid (m,)."""
-        return solve_with_wrist_flip(self._solve, self.robot, T, branches, q_near)
+    def solve(
+        self, T: Array, branches: list, q_near: Array, workspace: Array | None = None
+    ) -> tuple[Array, BoolArray]:
+        """Joint vectors (m, n) reaching E poses T (m, 4, 4); and which are valid (m,).
 
-    def _solve(self, T: Array, branches: list, q_near: Array) -> tuple[Array, BoolArray]:
+        ``workspace`` (4, 4): the frame whose axes the task axes of an arm with
+        fewer than six joints refer to (default: the base frame)."""
+
+        def one(T_: Array, b: list, q: Array) -> tuple[Array, BoolArray]:
+            return self._solve(T_, b, q, workspace)
+
+        return solve_with_wrist_flip(one, self.robot, T, branches, q_near)
+
+    def _solve(
+        self, T: Array, branches: list, q_near: Array, workspace: Array | None
+    ) -> tuple[Array, BoolArray]:
         m = len(T)
         q = np.full((m, self.robot.n_joints), np.nan)
         if self.robot.name == "puma560":
@@ -90,7 +109,7 @@ class DesignModel:
                 q[sel] = inv(T[sel], np.broadcast_to(q_near, (int(sel.sum()), len(q_near))))
             ok = np.isfinite(q).all(axis=1)
         else:
-            q, ok = nr_multistart(self.chain, self.robot, T, q_near)
+            q, ok = nr_multistart(self.chain, self.robot, T, q_near, workspace)
         q = into_limits(self.robot, np.where(np.isfinite(q), q, 0.0))
         return q, ok & within_limits(self.robot, q)
 
@@ -118,14 +137,24 @@ class SignatureModel:
         """E in the design base frame, q (..., n) rad / cm -> (..., 4, 4)."""
         return forward_kinematics(self.chain, q)
 
-    def solve(self, T: Array, branches: list, q_near: Array) -> tuple[Array, BoolArray]:
-        """Joint vectors (m, n) reaching E poses T (m, 4, 4) by Newton-Raphson; valid mask (m,)."""
-        return solve_with_wrist_flip(self._solve, self.robot, T, branches, q_near)
+    def solve(
+        self, T: Array, branches: list, q_near: Array, workspace: Array | None = None
+    ) -> tuple[Array, BoolArray]:
+        """Joint vectors (m, n) reaching E poses T (m, 4, 4) by Newton-Raphson; valid mask (m,).
 
-    def _solve(self, T: Array, branches: list, q_near: Array) -> tuple[Array, BoolArray]:
+        ``workspace`` as for :meth:`DesignModel.solve`."""
+
+        def one(T_: Array, b: list, q: Array) -> tuple[Array, BoolArray]:
+            return self._solve(T_, b, q, workspace)
+
+        return solve_with_wrist_flip(one, self.robot, T, branches, q_near)
+
+    def _solve(
+        self, T: Array, branches: list, q_near: Array, workspace: Array | None
+    ) -> tuple[Array, BoolArray]:
         s = self.signature
         if s.robot.name != "puma560":  # Controller.solve cannot start near the task
-            q, ok = nr_multistart(self.chain, s.robot, T, q_near)
+            q, ok = nr_multistart(self.chain, s.robot, T, q_near, workspace)
             return q, ok & within_limits(s.robot, q)
         ctrl = Controller(s, s.robot, s.sensor_from_design_base, s.design_flange_to_tool)
         T_tool = T @ rot_z(-self.delta)  # the controller's tool is the S-Model tool
@@ -144,11 +173,23 @@ RESTARTS = 10
 
 
 def nr_multistart(
-    chain: SerialChain, robot: RobotDescription, T: Array, q_near: Array
+    chain: SerialChain,
+    robot: RobotDescription,
+    T: Array,
+    q_near: Array,
+    workspace: Array | None = None,
 ) -> tuple[Array, BoolArray]:
     """Damped Newton-Raphson (5.4) from ``q_near`` (the taught configuration), then
     from the middle of the joint limits and seeded draws for the targets that did
-    not converge inside the limits (robots without a closed-form inverse)."""
+    not converge inside the limits (robots without a closed-form inverse).
+
+    An arm with fewer than six joints solves its task axes
+    (:func:`pipeline.control.task_axes_for`) in ``workspace`` coordinates
+    (chain and targets mapped by its inverse; default: the chain's base frame)."""
+    axes = task_axes_for(robot)
+    if axes != ALL_AXES and workspace is not None:
+        chain, T = in_frame(chain, workspace), invert_transform(workspace) @ T
+    task_axes = None if axes == ALL_AXES else axes
     res_q = joints_to_internal(robot.encoder_resolution, robot.prismatic)
     lim = joints_to_internal(robot.limits.T, robot.prismatic).T
     rng = np.random.default_rng(0)  # fixed: the same targets get the same program
@@ -162,11 +203,17 @@ def nr_multistart(
         if not len(todo):
             break
         r = newton_raphson(chain, T[todo], np.broadcast_to(q0, (len(todo), len(q0))), res_q,
-                           max_iter=100, damping=1e-2)  # fmt: skip
+                           max_iter=100, damping=1e-2, task_axes=task_axes)  # fmt: skip
         qq = into_limits(robot, r.q)
         good = r.converged & within_limits(robot, qq)
         q[todo[good]], ok[todo[good]] = qq[good], True
     return q, ok
+
+
+def in_frame(chain: SerialChain, frame: Array) -> SerialChain:
+    """``chain`` with its world frame moved to ``frame`` (4, 4), given in the old world."""
+    base = invert_transform(frame) @ chain.base
+    return SerialChain(chain.links, chain.prismatic, base, chain.tool, chain.joint_offsets)
 
 
 def solve_with_wrist_flip(

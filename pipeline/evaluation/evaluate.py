@@ -16,8 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.errors import ArmsigError
+from pipeline.control import task_axes_for
 from pipeline.evaluation.recording import read_evaluation
+from pipeline.evaluation.score import AXIS_LETTERS, dropped_indices
 from pipeline.evaluation.tasks import TASK_NAMES, reading_resolution
 from pipeline.stages.runner import EVALUATE_STAGE_MODULES, StageRun, run, stage_path
 from pipeline.stages.session import session_robot
@@ -65,14 +66,6 @@ def evaluate(
 
     sdir = Path(session_dir)
     ident = identify(sdir, report=report)
-    robot = session_robot(read_table(stage_path(sdir, "session")))
-    if robot.n_joints < 6:
-        raise ArmsigError(
-            f"{sdir}: {robot.name} has {robot.n_joints} joints; the grid-touching tasks "
-            "prescribe full tool poses (position and orientation), which need 6",
-            fix="evaluate a 6-joint arm; position-only tasks for SCARA-like arms are not "
-            "implemented (docs/evaluation.md)",
-        )
     path = sdir / "evaluation.mcap"
     simulated = (sdir / "rig-truth.json").is_file()
     recorded: list[str] = []
@@ -119,6 +112,7 @@ def summarize(session_dir: str | Path) -> dict[str, Any]:
     prog = read_table(stage_path(sdir, "evaluate_program"))
     rec = read_evaluation(sdir / "evaluation.mcap")
     taught = {r["task"] for r in rec.teach}
+    axes = task_axes_for(session_robot(read_table(stage_path(sdir, "session"))))
     ok: dict[str, bool] = {}
     for t, o in zip(prog.column("task").to_pylist(), prog.column("ok").to_pylist(), strict=True):
         ok[t] = ok.get(t, True) and bool(o)
@@ -161,10 +155,12 @@ def summarize(session_dir: str | Path) -> dict[str, Any]:
         tasks[name] = {
             "indices": items,
             "median_improvement": median if np.isfinite(median) else None,
+            "not_applicable": dropped_indices(name, axes),
         }
     out: dict[str, Any] = {
         "session": str(sdir),
         "rig": rec.description,
+        "controlled": [("x", "y", "z", *("r" + a for a in AXIS_LETTERS))[a] for a in axes],
         "tasks": tasks,
         "skipped": skipped,
     }

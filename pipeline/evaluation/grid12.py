@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from pipeline.evaluation.geometry import angle_between
 from pipeline.kinematics.transforms import invert_transform, pose_error, rot_y, rot_z
 
 Array = npt.NDArray[np.float64]
@@ -131,11 +132,6 @@ def _line_vectors(p: Array, pairs: tuple[tuple[int, int], ...]) -> Array:
     return out
 
 
-def _angle(u: Array, v: Array) -> Array:
-    """Angle (rad, [0, π]) between vectors, shape (..., 3) -> (...); atan2 is exact near 90°."""
-    return np.arctan2(np.linalg.norm(np.cross(u, v), axis=-1), np.sum(u * v, axis=-1))
-
-
 def indices34(T_actual: npt.ArrayLike, T_desired: npt.ArrayLike) -> Array:
     """The 34 performance indices of Section 7.2.1.
 
@@ -181,7 +177,7 @@ def indices34(T_actual: npt.ArrayLike, T_desired: npt.ArrayLike) -> Array:
     # 6. Perpendicularity: actual angle between the two lines minus the desired angle (90°).
     ia = [a - 1 for _, a, _ in PERPENDICULAR_LINES]
     ib = [b - 1 for _, _, b in PERPENDICULAR_LINES]
-    perp = _angle(va[..., ia, :], va[..., ib, :]) - _angle(vd[ia], vd[ib])
+    perp = angle_between(va[..., ia, :], va[..., ib, :]) - angle_between(vd[ia], vd[ib])
     return np.concatenate(
         [
             length,

@@ -36,6 +36,10 @@ Other robots: the layout is mapped from the Puma's reach with the probe
 pointing down onto the robot's (:func:`down_workspace`, :func:`tasks_for`);
 whether a mapped task fits is decided when it is taught and solved (tasks
 that do not fit are skipped with the reason in the summary and the report).
+Arms with fewer than six joints hold the probe only as their joint axes allow
+(a SCARA: straight down, yaw free); their down-pointing workspace is their
+whole workspace and its edge is hard, so each mapped task is also fitted
+inside it (:func:`fit_task`).
 """
 
 from __future__ import annotations
@@ -103,6 +107,10 @@ TOOL_TILT_DEG = {
 REACH_SAMPLES = 4000
 #: A probe counts as pointing down within this angle of -Z (deg).
 DOWN_CONE_DEG = 30.0
+#: :func:`fit_task` keeps tasks this far inside the down workspace's radius (cm): the
+#: 90th percentile of a SCARA's radius is 0.5 cm from its hard edge (elbow stretched),
+#: and the evaluation rig places fixtures with σ = 0.5 cm; 5 σ keeps every point reachable.
+FIT_MARGIN_CM = 2.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -203,7 +211,7 @@ def down_workspace(robot: RobotDescription, tool: Array) -> DownWorkspace:
     """:class:`DownWorkspace` from random configurations within the joint limits (fixed
     seed) whose tool Z axis is within :data:`DOWN_CONE_DEG` of straight down."""
     d = robot.design_chain()
-    chain = SerialChain(d.links, d.prismatic, d.base, d.tool @ tool, d.joint_offsets)
+    chain = SerialChain(d.links, d.prismatic, d.base, tool, d.joint_offsets)  # probe on the flange
     rng = np.random.default_rng(0)  # fixed: the same robot gets the same tasks
     lim = robot.limits
     q = rng.uniform(lim[:, 0], lim[:, 1], (REACH_SAMPLES, robot.n_joints))
@@ -225,6 +233,8 @@ def tasks_for(robot: RobotDescription, tool: Array) -> tuple[Task, ...]:
     """
     if robot.name == "puma560":
         return puma_tasks()
+    from pipeline.control import task_axes_for
+    from pipeline.kinematics.ik import ALL_AXES
     from pipeline.robots import get_robot
 
     w, wp = down_workspace(robot, tool), down_workspace(get_robot("puma560"), tool)
@@ -237,7 +247,35 @@ def tasks_for(robot: RobotDescription, tool: Array) -> tuple[Task, ...]:
         F = t.fixture_in_base.copy()
         F[:2, 3] *= s_xy
         F[2, 3] = mid + s_z * (F[2, 3] - mid_p)
-        out.append(
-            Task(t.name, t.instrument, F, t.teach_cm * scale, t.points_cm * scale, t.tool_rotation)
-        )
+        task = Task(t.name, t.instrument, F, t.teach_cm * scale, t.points_cm * scale,
+                    t.tool_rotation)  # fmt: skip
+        out.append(task if task_axes_for(robot) == ALL_AXES else fit_task(task, w))
     return tuple(out)
+
+
+def fit_task(task: Task, w: DownWorkspace) -> Task:
+    """``task`` shrunk, where it leaves ``w``, to lie inside it (arms that cannot tilt).
+
+    Horizontally the task is scaled about the base Z axis until its farthest
+    point is :data:`FIT_MARGIN_CM` inside ``w.radius_cm``; vertically it is
+    scaled about its lowest point until it is no taller than the height band,
+    then shifted into the band.
+    A task already inside is returned unchanged. The fixture's Z axis is the
+    base's (every fixture is level, turned about Z only), so both scalings are
+    scalings of fixture coordinates.
+    """
+    pts = np.concatenate([task.teach_cm, task.points_cm])
+    F = task.fixture_in_base.copy()
+    p = pts @ F[:3, :3].T + F[:3, 3]
+    k = min(1.0, (w.radius_cm - FIT_MARGIN_CM) / float(np.hypot(p[:, 0], p[:, 1]).max()))
+    z_min, height = float(p[:, 2].min()), float(np.ptp(p[:, 2]))
+    band = w.z_high_cm - w.z_low_cm
+    s = min(1.0, band / height) if height > 0.0 else 1.0
+    dz = max(w.z_low_cm - z_min, min(0.0, w.z_high_cm - (z_min + s * height)))
+    if k == 1.0 and s == 1.0 and dz == 0.0:
+        return task
+    F[:2, 3] *= k
+    F[2, 3] = z_min + s * (F[2, 3] - z_min) + dz
+    scale = np.array([k, k, s])
+    return Task(task.name, task.instrument, F, task.teach_cm * scale, task.points_cm * scale,
+                task.tool_rotation)  # fmt: skip

@@ -23,6 +23,18 @@ Stopping rule
     iterations are the "polishing" steps (at most one for Newton-Raphson).
     Pass ``None`` for both to get the dissertation's rule unchanged.
 
+Task axes (Newton-Raphson only)
+    A robot with fewer than six joints cannot reach a full 6-D pose: a
+    SCARA-like arm moves its tool in x, y, z and turns it about the vertical
+    axis only. ``task_axes`` selects the controlled components of
+    ``δ = [dx, dy, dz, rx, ry, rz]`` (indices, in the chain's world frame); the
+    other components are dropped from δ and from the Jacobian's rows, so the
+    iteration solves the selected equations (least squares / minimum norm when
+    they are not square) and the tolerances, the encoder rule, the safeguard
+    and the reported errors all refer to the selected components only
+    (:attr:`IKResult.task_axes`). :func:`controllable_axes` derives the
+    selection from a (design) chain. Default: all six, the dissertation's (5.4).
+
 Status codes (:attr:`IKResult.status`, names in :data:`STATUS_NAMES`)
     ``STATUS_CONVERGED`` (0)
         Encoder rule met and pose error within tolerance.
@@ -41,7 +53,7 @@ Status codes (:attr:`IKResult.status`, names in :data:`STATUS_NAMES`)
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -142,7 +154,13 @@ class IKResult:
     status : ndarray of int, shape (m,)
         One of the ``STATUS_*`` codes (see the module docstring).
     history : IKHistory or None
-        Per-iteration record when the solver ran with ``record_history=True``.
+        Per-iteration record when the solver ran with ``record_history=True``
+        (with task axes, δ's unselected components are recorded as 0).
+    task_axes : tuple of int
+        Components of δ the errors and tolerances refer to (module docstring,
+        "Task axes"): ``position_error_cm`` is the norm of the selected
+        position components, ``orientation_error_rad`` of the selected
+        rotation components. All six unless the solve selected fewer.
     """
 
     q: Array
@@ -152,9 +170,40 @@ class IKResult:
     orientation_error_rad: Array
     status: IntArray
     history: IKHistory | None = None
+    task_axes: tuple[int, ...] = (0, 1, 2, 3, 4, 5)
 
 
 # --------------------------------------------------------------------------- helpers
+
+ALL_AXES = (0, 1, 2, 3, 4, 5)
+
+
+def _task_mask(task_axes: Sequence[int] | None) -> tuple[tuple[int, ...], Array | None]:
+    """Validated task axes and the 0/1 mask of δ's components (None: all six)."""
+    if task_axes is None:
+        return ALL_AXES, None
+    axes = tuple(sorted({int(a) for a in task_axes}))
+    if not axes or axes[0] < 0 or axes[-1] > 5 or len(axes) != len(tuple(task_axes)):
+        raise KinematicsError(
+            "bad task axes",
+            expected="distinct indices 0-5 into δ = [dx, dy, dz, rx, ry, rz]",
+            got=repr(task_axes),
+        )
+    if axes == ALL_AXES:
+        return ALL_AXES, None
+    mask = np.zeros(6)
+    mask[list(axes)] = 1.0
+    return axes, mask
+
+
+def _masked(delta: Array, mask: Array | None) -> Array:
+    """δ (..., 6) with the unselected components set to 0 (unchanged without a mask)."""
+    return delta if mask is None else delta * mask
+
+
+def _masked_rows(J: Array, mask: Array | None) -> Array:
+    """Jacobians (..., 6, n) with the unselected rows set to 0."""
+    return J if mask is None else J * mask[:, None]
 
 
 def _prepare(
@@ -320,6 +369,7 @@ def _iterate(
     orientation_tol_rad: float | None,
     record_history: bool,
     stall_patience: int = 1,
+    task_axes: tuple[int, ...] = ALL_AXES,
 ) -> IKResult:
     """Shared loop: apply ``step`` to the active targets until each one stops.
 
@@ -336,6 +386,8 @@ def _iterate(
     A target *stalls* (unreachable) when, in ``stall_patience`` consecutive
     iterations, the step actually taken is below one encoder count, the error
     is above tolerance and it fell by less than ``1 − STALL_RATIO``.
+    With ``task_axes`` (δ already restricted to them by ``step``) the singular
+    test uses the selected Jacobian rows only.
     """
     m = T.shape[0]
     length = _length_scale(chain)
@@ -381,8 +433,10 @@ def _iterate(
     status[unreachable] = STATUS_UNREACHABLE
     left = np.flatnonzero(status == STATUS_MAX_ITER)
     if left.size:
-        J = geometric_jacobian(_take(chain, left, m), q[left])
-        s_min = _scaled_svd(J, length)[1][:, -1]
+        _, mask = _task_mask(task_axes)
+        J = _masked_rows(geometric_jacobian(_take(chain, left, m), q[left]), mask)
+        rank = min(len(task_axes), chain.n_joints)  # the masked rows add zero singular values
+        s_min = _scaled_svd(J, length)[1][:, rank - 1]
         status[left[s_min < SINGULAR_SIGMA]] = STATUS_SINGULAR
     pos, rot = _errors(delta)  # |dp| and the rotation angle of the final pose error
     history = None
@@ -398,6 +452,7 @@ def _iterate(
         orientation_error_rad=rot,
         status=status,
         history=history,
+        task_axes=task_axes,
     )
 
 
@@ -467,6 +522,7 @@ def newton_raphson(
     orientation_tol_rad: float | None = 1e-10,
     max_step: float = 0.5,
     record_history: bool = False,
+    task_axes: Sequence[int] | None = None,
 ) -> IKResult:
     """Invert a (signature) model by the Newton-Raphson iteration (5.4), Appendix C.1.
 
@@ -517,26 +573,32 @@ def newton_raphson(
         Newton step from flinging the iterate onto another branch.
     record_history : bool
         Keep the per-iteration :class:`IKHistory`.
+    task_axes : sequence of int or None
+        Controlled components of δ = [dx, dy, dz, rx, ry, rz] in the chain's
+        world frame, e.g. ``(0, 1, 2, 5)`` (position and rotation about Z) for
+        a SCARA-like arm whose joint axes are parallel to the world Z (module
+        docstring, "Task axes"; :func:`controllable_axes`). None: all six.
 
     Returns
     -------
     IKResult
     """
     T, q, res = _prepare(chain, T_target, q0, resolution)
+    axes, mask = _task_mask(task_axes)
     m = T.shape[0]
     length = _length_scale(chain)
     T_q, J_cache = pose_and_jacobian(chain, q)  # Appendix C.1 steps 1-2 at q⁰
-    delta0 = differential_motion(T_q, T)
+    delta0 = _masked(differential_motion(T_q, T), mask)
 
     def step(
         rows: IntArray, q_rows: Array, delta_rows: Array
     ) -> tuple[Array, BoolArray, Array, Array, BoolArray]:
-        J = J_cache[rows]  # J(q^k), from the pass that evaluated q^k
+        J = _masked_rows(J_cache[rows], mask)  # J(q^k), from the pass that evaluated q^k
         e_old = _scaled_error(delta_rows, length)
         newton = _newton_step(J, delta_rows, length)  # Eq. (5.4): J⁻¹ δ
         q_try = q_rows + _cap_step(newton, chain.prismatic, max_step, length)  # C.1 step 7
         T_try, J_try = pose_and_jacobian(_take(chain, rows, m), q_try)
-        d_out = differential_motion(T_try, T[rows])
+        d_out = _masked(differential_motion(T_try, T[rows]), mask)
         better = _scaled_error(d_out, length) < e_old
         q_out = np.where(better[:, None], q_try, q_rows)
         J_cache[rows[better]] = J_try[better]
@@ -552,9 +614,10 @@ def newton_raphson(
                 newton[bad],
                 damping,
                 max_step,
+                mask,
             )
             T_bad, J_cache[rows[bad]] = pose_and_jacobian(sub, q_out[bad])
-            d_out[bad] = differential_motion(T_bad, T[rows[bad]])
+            d_out[bad] = _masked(differential_motion(T_bad, T[rows[bad]]), mask)
         everything = np.ones(rows.size, bool)
         return q_out, everything, newton, d_out, everything
 
@@ -569,6 +632,7 @@ def newton_raphson(
         position_tol_cm,
         orientation_tol_rad,
         record_history,
+        task_axes=axes,
     )
 
 
@@ -602,6 +666,7 @@ def _safeguard(
     newton: Array,
     damping: float,
     max_step: float,
+    mask: Array | None = None,
 ) -> Array:
     """Safeguarded steps for rows where the plain Newton step did not descend.
 
@@ -616,7 +681,10 @@ def _safeguard(
     chain : SerialChain
         The chain restricted to these rows.
     T, q, delta, J, newton : ndarray, shapes (k, 4, 4), (k, n), (k, 6), (k, 6, n), (k, n)
-        Targets, current iterates, their δ, Jacobian and Newton increment.
+        Targets, current iterates, their δ, Jacobian and Newton increment
+        (δ and J already restricted to the task axes).
+    mask : ndarray, shape (6,), or None
+        0/1 selection of δ's components (task axes); None: all six.
 
     Returns
     -------
@@ -636,7 +704,8 @@ def _safeguard(
             dq = _damped_step(U[todo], sv[todo], Vt[todo], d_scaled[todo], lam)
         q_try = q[todo] + _cap_step(dq, chain.prismatic, max_step, length)
         T_try = forward_kinematics(_take(chain, todo, q.shape[0]), q_try)
-        better = _scaled_error(differential_motion(T_try, T[todo]), length) < e_old[todo]
+        d_try = _masked(differential_motion(T_try, T[todo]), mask)
+        better = _scaled_error(d_try, length) < e_old[todo]
         q_out[todo[better]] = q_try[better]
         todo = todo[~better]
         if todo.size == 0:
@@ -779,3 +848,60 @@ def jacobi_iterative(
         record_history,
         stall_patience=JACOBI_STALL_PATIENCE,
     )
+
+
+#: A row of the unit-scaled Jacobian counts as identically zero below this fraction
+#: of the largest entry over the samples: exact design geometry (α = 0° or 180°)
+#: leaves ~1e-16 of round-off in the rows it cannot move, a real coupling (an axis
+#: tilted by even 1e-6 rad) is orders of magnitude above 1e-9.
+DEAD_ROW_FRACTION = 1e-9
+
+
+def controllable_axes(chain: SerialChain, q: ArrayLike) -> tuple[int, ...]:
+    """Components of δ = [dx, dy, dz, rx, ry, rz] a chain can move (task axes).
+
+    A row of the geometric Jacobian (world frame, position rows divided by
+    the length scale) that vanishes at every sample configuration is a pose
+    component no joint motion changes: for a SCARA-like arm whose revolute
+    axes are parallel to the world Z, ``rx`` and ``ry``. The remaining
+    components are the task axes, e.g. ``(0, 1, 2, 5)``. Where more
+    components move than the chain has joints (a 5-joint arm moves all six),
+    no component is free of the others and only the position is controlled,
+    ``(0, 1, 2)``. Evaluate on the *design* model: identified models have
+    slightly tilted axes, which move every component a little.
+
+    Parameters
+    ----------
+    chain : SerialChain
+        Unbatched chain.
+    q : array_like, shape (k, n)
+        Sample configurations (rad / cm), generic (not all singular).
+
+    Returns
+    -------
+    axes : tuple of int
+        Sorted indices into δ; all six for an arm that moves all six with six
+        or more joints.
+
+    Raises
+    ------
+    KinematicsError
+        When even the moving position components outnumber the joints (a
+        two-joint arm that moves x, y and z): choose ``task_axes`` by hand.
+    """
+    J = geometric_jacobian(chain, np.atleast_2d(np.asarray(q, float)))
+    w = np.array([1.0 / _length_scale(chain)] * 3 + [1.0] * 3)
+    size = np.abs(J * w[:, None]).max(axis=(0, 2))  # (6,): largest entry of each row
+    live = tuple(int(i) for i in np.flatnonzero(size > DEAD_ROW_FRACTION * size.max()))
+    n = chain.n_joints
+    if len(live) <= n:
+        return live
+    position = tuple(i for i in live if i < 3)
+    if len(position) > n:
+        raise KinematicsError(
+            f"cannot choose task axes for a {n}-joint chain",
+            expected=f"at most {n} independent pose components",
+            got=f"{len(position)} position components move",
+            fix="pass task_axes explicitly",
+        )
+    return position

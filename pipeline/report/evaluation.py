@@ -14,6 +14,7 @@ import numpy as np
 
 from pipeline.atomic import write_text_atomic
 from pipeline.evaluation.evaluate import summarize
+from pipeline.evaluation.indices import GRID3D_INDICES
 from pipeline.evaluation.tasks import CATHETOMETER_CM, GRID2D_SHAPE
 from pipeline.report import evaluation_figures as figs
 from pipeline.report.identification import _table
@@ -49,15 +50,40 @@ def _index_table(task: str, items: list[dict[str, Any]]) -> str:
     if task == "grid3d":
         headers += ["thesis Robot 3 (Table 6-10)", "thesis Robot 5 (Table 6-11)"]
     rows = []
+    grid3d_row = {name: k for k, (name, _, _) in enumerate(GRID3D_INDICES)}
     for k, it in enumerate(items):
         row = [it["name"], it["unit"], f"{it['design']:.4f}", f"{it['signature']:.4f}"]
         row.append(_factor(it))
         if task == "grid3d":
-            row += [" / ".join(f"{v:g}" for v in t[k]) for t in (THESIS_6_10, THESIS_6_11)]
+            j = grid3d_row[it["name"]]  # rows an arm cannot control are left out
+            row += [" / ".join(f"{v:g}" for v in t[j]) for t in (THESIS_6_10, THESIS_6_11)]
         if task == "lines1d":
             row.append(" / ".join(f"{v:g}" for v in THESIS_6_6[k]) if k < len(THESIS_6_6) else "")
         rows.append(row)
     return _table(headers, rows)
+
+
+def _restricted_note(s: dict[str, Any]) -> str:
+    """Why the orientation indices of an arm with fewer than six joints differ."""
+    rot = [c for c in s["controlled"] if c.startswith("r")]
+    dropped = [f"{t}: {', '.join(v['not_applicable'])}" for t, v in s["tasks"].items()
+               if v["not_applicable"]]  # fmt: skip
+    text = (
+        f"This arm controls only {', '.join(s['controlled'])} of the tool pose (its task "
+        "axes); both controllers solve those components in the taught workspace frame and "
+        "the other rotation components are set by the arm's geometry and the fixture's "
+        "tilt, alike for both. "
+    )
+    if rot:
+        text += (
+            f"Orientation indices use the controlled component(s) ({', '.join(rot)}) of the "
+            "measured rotation vectors only (`_orientation_error_"
+            + "".join(c[1] for c in rot)
+            + "_deg`; relative ones as differences of those components). "
+        )
+    if dropped:
+        text += "Not applicable, left out: " + "; ".join(dropped) + "."
+    return text
 
 
 def _positions(meas: list[dict[str, Any]], task: str, controller: str) -> np.ndarray:
@@ -112,6 +138,8 @@ def write_evaluation_report(session_dir: str | Path) -> Path:
         lines += [f"Signature radial errors of the 12-vertex grid (cm): {rad}.", ""]
     for name, why in s["skipped"].items():
         lines += [f"- **{name} skipped**: {why}.", ""]
+    if len(s["controlled"]) < 6:
+        lines += [_restricted_note(s), ""]
     titles = {
         "lines1d": "One-dimensional task (Table 6-6)",
         "grid2d": "Two-dimensional grid (Tables 6-8/6-9)",

@@ -18,9 +18,11 @@ from typing import Any
 import numpy as np
 
 from pipeline.audit import true_chain
+from pipeline.control import task_axes_for
 from pipeline.errors import ArmsigError
 from pipeline.evaluation.controllers import (
     DesignModel,
+    in_frame,
     task_branches,
     task_poses,
     within_limits,
@@ -35,7 +37,7 @@ from pipeline.evaluation.tasks import (
     tasks_for,
 )
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
-from pipeline.kinematics.ik import newton_raphson
+from pipeline.kinematics.ik import ALL_AXES, newton_raphson
 from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans
 from pipeline.rig.plan import PROBE_LENGTH_CM
 from pipeline.rig.recorder import EVAL_CHANNELS, Message, write_recording
@@ -101,7 +103,14 @@ class SimulatedRig:
         self.nominal_tool = trans(0.0, 0.0, PROBE_LENGTH_CM)
         c = true_chain(truth)
         base = invert_transform(np.array(truth["sensor_from_base"])) @ c.base
-        probe = trans(*truth["true_tool_in_last_link_cm"])
+        # E: origin at the probe tip, axes of the frame the last joint's targets are
+        # mounted in (F_{n-1}·M_n, pipeline.rig.plan.target_positions), whose X axis
+        # points at the nominal mount (R, 0, z). The last link frame is that frame
+        # times the constant K̄_n, whose rotation the generic true-robot model perturbs
+        # (the Puma's is the identity), so the probe's rotation undoes it.
+        probe = np.eye(4)
+        probe[:3, :3] = c.links[-1][:3, :3].T
+        probe[:3, 3] = truth["true_tool_in_last_link_cm"]
         self.chain = SerialChain(c.links, c.prismatic, base, c.tool @ probe)
         self.res = joints_to_internal(self.robot.encoder_resolution, self.robot.prismatic)
         rng = np.random.default_rng([int(truth["seed"]), 6])  # issue 6's own stream
@@ -119,15 +128,23 @@ class SimulatedRig:
         return [j.unit for j in self.robot.joints]
 
     def teach(self, task: Task) -> np.ndarray | None:
-        """Encoder readings (3, n) in rad / cm with the true probe on the teach points."""
+        """Encoder readings (3, n) in rad / cm with the true probe on the teach points.
+
+        An arm with fewer than six joints puts the probe tip on the point with the
+        yaw (its task axes) about the fixture's axes; it cannot follow the fixture's tilt."""
         poses, _ = task_poses(task)
         nominal = task.fixture_in_base @ poses
         branches, _ = task_branches(self.robot, self.nominal_tool, task)
         design = DesignModel(self.robot, self.nominal_tool)
+        axes = task_axes_for(self.robot)
+        chain, targets = self.chain, self.fixture[task.name] @ poses
+        if axes != ALL_AXES:
+            chain, targets = in_frame(self.chain, self.fixture[task.name]), poses
         q = np.full((3, self.robot.n_joints), np.nan)
         for q_near in self._starts():  # the operator jogs from a few configurations
-            q0, ok0 = design.solve(nominal, branches, q_near)
-            res = newton_raphson(self.chain, self.fixture[task.name] @ poses, q0, self.res)
+            q0, ok0 = design.solve(nominal, branches, q_near, task.fixture_in_base)
+            res = newton_raphson(chain, targets, q0, self.res,
+                                 task_axes=None if axes == ALL_AXES else axes)  # fmt: skip
             good = ok0 & res.converged & within_limits(self.robot, res.q) & np.isnan(q[:, 0])
             q[good] = res.q[good]
             if not np.isnan(q).any():

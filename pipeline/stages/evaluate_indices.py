@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from pipeline.control import task_axes_for
 from pipeline.evaluation.indices import improvement
 from pipeline.evaluation.score import task_indices
 from pipeline.evaluation.tasks import tasks_for
@@ -27,7 +28,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     for task in tasks_for(robot, nominal_tool(inputs["session"])):
         if task.name not in measured:
             continue
-        names, values = task_indices(task, meas, inputs["evaluate_program"])
+        names, values = task_indices(task, meas, inputs["evaluate_program"], task_axes_for(robot))
         for k, (name, unit, signed) in enumerate(names):
             cols["task"].append(task.name)
             cols["index"].append(k + 1)

@@ -3,7 +3,8 @@
 Per controller (design, signature; :mod:`pipeline.evaluation.controllers`):
 teach the workspace frame from the recorded readings with the controller's own
 forward kinematics (Section 6.5), put the task's points in it with the
-constant tool orientation, and solve for the joints on the planned Puma branch.
+constant tool orientation, and solve for the joints on the planned Puma branch
+(arms with fewer than six joints: for their task axes about the taught frame's axes).
 """
 
 from __future__ import annotations
@@ -60,7 +61,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         for model in models:
             P = model.fk(q_teach)[:, :3, 3]
             W = workspace_from_points(P[0], P[1], P[2])  # Section 6.5
-            q, ok = model.solve(W @ task.targets(), branches, q_teach[0])
+            q, ok = model.solve(W @ task.targets(), branches, q_teach[0], W)
             m = len(q)
             cols["task"] += [task.name] * m
             cols["controller"] += [model.name] * m

@@ -190,14 +190,17 @@ def _check(stage: Stage, params: Any, hashes: _Hashes, stale: set[str]) -> Stage
 
 
 def status(
-    session_dir: str | Path, overrides: Mapping[str, Mapping[str, Any]] | None = None
+    session_dir: str | Path,
+    overrides: Mapping[str, Mapping[str, Any]] | None = None,
+    modules: tuple[str, ...] = STAGE_MODULES,
 ) -> list[StageStatus]:
-    """Freshness of every stage of a session, and why."""
+    """Freshness of every stage of a session, and why (``modules``: the stage list,
+    e.g. ``STAGE_MODULES + EVALUATE_STAGE_MODULES``; staleness propagates along it)."""
     sdir = Path(session_dir)
     hashes = _Hashes(sdir)
     out: list[StageStatus] = []
     stale: set[str] = set()
-    for stage in stages():
+    for stage in stages(modules):
         st = _check(stage, _params(stage, overrides or {}), hashes, stale)
         if st.state != "fresh":
             stale.add(stage.name)
