@@ -1,6 +1,6 @@
 """`make bench`: every benchmark, printed; never asserted in tests."""
 
-from bench import identify, ik, kinematics, simulate
+from bench import evaluate, identify, ik, kinematics, montecarlo, simulate
 
 if __name__ == "__main__":
     kinematics.main()
@@ -10,3 +10,7 @@ if __name__ == "__main__":
     simulate.main()
     print()
     identify.main()
+    print()
+    evaluate.main()
+    print()
+    montecarlo.main()

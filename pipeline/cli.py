@@ -85,7 +85,13 @@ def fk(
 @_errors_to_exit
 def simulate(
     name: Annotated[str, typer.Argument(help="Session name (sessions/NAME) or a folder path.")],
-    robot: Annotated[str, typer.Option(help="Built-in robot or .toml description.")] = "puma560",
+    robot: Annotated[
+        str,
+        typer.Option(
+            help="Built-in robot (`pipeline robots`) or path to a .toml description file "
+            "(schemas/robot_description.md)."
+        ),
+    ] = "puma560",
     seed: Annotated[int, typer.Option(help="Seed of every random draw.")] = 1,
     sigma_p: Annotated[float, typer.Option(help="Positional manufacturing error σ_p (cm).")] = 0.03,
     sigma_o: Annotated[float, typer.Option(help="Orientational error σ_o (deg).")] = 0.03,
@@ -186,11 +192,13 @@ def identify(
 @app.command()
 @_errors_to_exit
 def status(session: SessionArg) -> None:
-    """Show every stage of a session as fresh, stale or missing, and why."""
+    """Show every stage of a session as fresh, stale or missing, and why
+    (identification, then the `pipeline evaluate` stages)."""
+    from pipeline.stages.runner import EVALUATE_STAGE_MODULES, STAGE_MODULES
     from pipeline.stages.runner import status as stage_status
 
-    for st in stage_status(session):
-        typer.echo(f"  {st.name:12s} {st.state:8s} {st.reason}")
+    for st in stage_status(session, modules=STAGE_MODULES + EVALUATE_STAGE_MODULES):
+        typer.echo(f"  {st.name:21s} {st.state:8s} {st.reason}")
 
 
 @app.command()

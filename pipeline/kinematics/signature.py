@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.kinematics.chain import SerialChain
-from pipeline.kinematics.smodel import SModelParams, smodel_from_matrix
+from pipeline.kinematics.smodel import SModelParams, dh_from_smodel, smodel_from_matrix
 from pipeline.kinematics.transforms import (
     Array,
     ArrayLike,
@@ -29,30 +29,32 @@ def frame_from_features(axis: ArrayLike, origin: ArrayLike, toward: ArrayLike) -
 
     Parameters
     ----------
-    axis : array_like, shape (3,)
+    axis : array_like, shape (..., 3)
         Unit plane normal (revolute) or line direction (prismatic), in the
         positive sense of the joint.
-    origin : array_like, shape (3,)
+    origin : array_like, shape (..., 3)
         Centre of rotation (revolute) or a point on the line (prismatic), cm.
-    toward : array_like, shape (3,)
+    toward : array_like, shape (..., 3)
         A point the X axis points to after projection onto the plane through
         ``origin`` normal to ``axis``: the first target position (4.50).
 
     Returns
     -------
-    S : ndarray, shape (4, 4)
+    S : ndarray, shape (..., 4, 4)
     """
     a = np.asarray(axis, float)
-    a = a / np.linalg.norm(a)
+    a = a / np.linalg.norm(a, axis=-1, keepdims=True)
     p = np.asarray(origin, float)
     v = np.asarray(toward, float) - p
-    n = v - (v @ a) * a  # Eq. (4.50): the first target position projected onto the plane
-    n = n / np.linalg.norm(n)
-    S = np.eye(4)
-    S[:3, 0] = n
-    S[:3, 1] = np.cross(a, n)  # o = a × n
-    S[:3, 2] = a
-    S[:3, 3] = p  # Eq. (4.49)
+    # Eq. (4.50): the first target position projected onto the plane
+    n = v - (v[..., None, :] @ a[..., :, None])[..., 0] * a
+    n = n / np.linalg.norm(n, axis=-1, keepdims=True)
+    S = np.zeros((*n.shape[:-1], 4, 4))
+    S[..., 3, 3] = 1.0
+    S[..., :3, 0] = n
+    S[..., :3, 1] = np.cross(a, n)  # o = a × n
+    S[..., :3, 2] = a
+    S[..., :3, 3] = p  # Eq. (4.49)
     return S
 
 
@@ -70,19 +72,20 @@ def signature_chain(
 
     Parameters
     ----------
-    frames : array_like, shape (n+1, 4, 4)
-        ``S̄_0 … S̄_n`` in the sensor frame (cm).
+    frames : array_like, shape (..., n+1, 4, 4)
+        ``S̄_0 … S̄_n`` in the sensor frame (cm); a leading batch shape gives
+        a batch of robots sharing ``q_signature``.
     q_signature : array_like, shape (n,)
         Encoder readings ``q̄^s`` at which each ``S̄_i`` holds (rad / cm).
     prismatic : array_like of bool, shape (n,)
-    tool : array_like, shape (4, 4), optional
+    tool : array_like, shape (..., 4, 4), optional
         Tool in the last S-Model frame ``S_n``.
     """
     F = np.asarray(frames, float)
     return SerialChain(
         links=links_from_frames(F),
         prismatic=np.asarray(prismatic, bool),
-        base=F[0],
+        base=F[..., 0, :, :],
         tool=np.eye(4) if tool is None else np.asarray(tool, float),
         joint_offsets=np.asarray(q_signature, float),
     )
@@ -95,7 +98,8 @@ class PseudoDH:
     ``A_i = Rot(z, θ_i) Trans(0, 0, d_i) Trans(a_i, 0, 0) Rot(x, α_i)`` where for a
     revolute joint ``θ_i = q_i + q_offset_i`` and for a prismatic joint
     ``d_i = q_i + q_offset_i`` (q = encoder reading). ``T(q) = base · Π A_i · tool``.
-    Arrays of shape (n,); angles in radians, lengths in cm.
+    Arrays of shape (..., n) (``base``, ``tool``: (..., 4, 4)); angles in radians,
+    lengths in cm. ``smodel`` holds the S-Model links the parameters come from.
     """
 
     q_offset: Array
@@ -108,33 +112,60 @@ class PseudoDH:
     smodel: SModelParams
 
 
-def pseudo_dh_from_chain(chain: SerialChain) -> PseudoDH:
-    """Encoder offsets (4.59)/(4.60) and D-H parameters (3.12)-(3.15) of a signature chain.
+def pseudo_dh_from_smodel(
+    sm: SModelParams,
+    prismatic: ArrayLike,
+    joint_offsets: ArrayLike,
+    base: ArrayLike,
+    tool: ArrayLike,
+) -> PseudoDH:
+    """Encoder offsets (4.59)/(4.60) and D-H parameters (3.12)-(3.15) of S-Model links.
 
     ``θ_i = β_i + γ_{i−1}`` and ``d_i = d̄_i + b_{i−1}`` with ``γ_0 = b_0 = 0``
-    because the identified base frame is ``S_0`` itself (4.71); the leftover
+    because the base frame is ``S_0`` itself (4.71); the leftover
     ``Rot(z, γ_n) Trans(0, 0, b_n)`` of the last link moves into the tool.
-    For prismatic joints the result is the *modified* D-H model (``a_i ≠ 0``).
+
+    Parameters
+    ----------
+    sm : SModelParams
+        Arrays of shape (..., n), link ``i`` in the last axis.
+    prismatic : array_like of bool, shape (n,)
+    joint_offsets : array_like, shape (n,)
+        Encoder readings ``q̄^s`` at the signature configuration (rad / cm).
+    base, tool : array_like, shape (..., 4, 4)
+        ``S̄_0`` and the tool in ``S_n``.
     """
-    sm = smodel_from_matrix(chain.links)
-    joint_offsets = np.asarray(chain.joint_offsets, float)
-    gamma_prev = np.concatenate([[0.0], sm.gamma[:-1]])
-    b_prev = np.concatenate([[0.0], sm.b[:-1]])
-    theta_dh = sm.beta + gamma_prev  # Eq. (3.12)
-    d_dh = sm.d_bar + b_prev  # Eq. (3.13)
-    pris = chain.prismatic
+    dh = dh_from_smodel(sm)  # Eq. (3.12)-(3.15)
+    pris = np.asarray(prismatic, bool)
+    qs = np.asarray(joint_offsets, float)
     # Eq. (4.59): offset = D-H value at q^s minus the encoder reading there; (4.72)/(4.73)
-    q_offset = np.where(pris, d_dh - joint_offsets, wrap_angle(theta_dh - joint_offsets))
-    tail = rot_z(sm.gamma[-1]) @ trans_z(sm.b[-1])
+    q_offset = np.where(pris, dh.d - qs, wrap_angle(dh.theta - qs))
+    tail = rot_z(sm.gamma[..., -1]) @ trans_z(sm.b[..., -1])
     return PseudoDH(
         q_offset=q_offset,
-        theta=np.where(pris, wrap_angle(theta_dh), np.nan),
-        d=np.where(pris, np.nan, d_dh),
-        a=np.asarray(sm.a_bar),  # Eq. (3.14)
-        alpha=np.asarray(sm.alpha_bar),  # Eq. (3.15)
-        base=np.asarray(chain.base, float),
-        tool=tail @ np.asarray(chain.tool, float),
+        theta=np.where(pris, wrap_angle(dh.theta), np.nan),
+        d=np.where(pris, np.nan, dh.d),
+        a=dh.a,  # Eq. (3.14)
+        alpha=dh.alpha,  # Eq. (3.15)
+        base=np.asarray(base, float),
+        tool=tail @ np.asarray(tool, float),
         smodel=sm,
+    )
+
+
+def pseudo_dh_from_chain(chain: SerialChain) -> PseudoDH:
+    """Pseudo D-H model (4.71) of a signature chain, its S-Model links taken as they are.
+
+    For prismatic joints the result is the *modified* D-H model (``a_i ≠ 0``);
+    :func:`pipeline.kinematics.true_dh.true_dh_from_chain` gives the true one.
+    Batched: ``chain.links`` may have shape (..., n, 4, 4).
+    """
+    return pseudo_dh_from_smodel(
+        smodel_from_matrix(chain.links),
+        chain.prismatic,
+        np.asarray(chain.joint_offsets, float),
+        chain.base,
+        chain.tool,
     )
 
 

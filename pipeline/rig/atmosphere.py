@@ -78,6 +78,12 @@ class Atmosphere:
         src = np.asarray(src, float)
         dst = np.asarray(dst, float)
         length = np.linalg.norm(dst - src, axis=-1)
+        if self.gradient_f_per_cm == 0.0 and self.drift_f == 0.0:
+            # Uniform still air: every node has the same speed, so the quadrature
+            # below reduces to one scalar factor (bit for bit the same sum).
+            h = np.full(_NODES.shape, self.h_ref_cm)
+            c0 = speed_of_sound_cm_s(self.temperature_f(h, np.zeros(())))
+            return length * 0.5 * np.sum(_WEIGHTS / c0)
         h0, h1 = src @ up, dst @ up
         u = 0.5 * (_NODES + 1.0)  # nodes mapped to [0, 1]
         h = h0[..., None] + (h1 - h0)[..., None] * u

@@ -67,6 +67,7 @@ def digitize(
     target_cm: np.ndarray,
     t_s: np.ndarray,
     rng: np.random.Generator,
+    standard_normal: np.ndarray | None = None,
 ) -> np.ndarray:
     """Raw slant ranges of many digitize cycles.
 
@@ -76,6 +77,10 @@ def digitize(
         Target sparker (5) position per cycle, sensor frame.
     t_s : ndarray, shape (M,)
         Time of each cycle.
+    standard_normal : ndarray, shape (M, 5, 4), optional
+        Standard normal deviates of the range noise; drawn from ``rng`` when
+        omitted. The Monte-Carlo study passes each robot's own stream here, so
+        its results do not depend on how robots are batched.
 
     Returns
     -------
@@ -83,21 +88,34 @@ def digitize(
         Reported ranges in cm (sparker 1-5 × microphone A-D); NaN = no echo.
     """
     g = model.geometry
-    sparks = sparker_positions(g, target_cm)  # (M, 5, 3)
     mics = g.microphones  # (4, 3)
-    src = sparks[:, :, None, :]
-    dst = np.broadcast_to(mics, (*sparks.shape[:2], 4, 3))
-    tof = atmosphere.time_of_flight_s(src, dst, g.up, np.asarray(t_s, float)[:, None, None])
+    target = np.asarray(target_cm, float)
+    t = np.asarray(t_s, float)
+    # Rods (sparkers 1-4) and target (5) apart: the rods do not move, so in still air
+    # their flight times are computed once, not once per cycle (same numbers).
+    rods = g.rod_sparkers[:, None, :]  # (4, 1, 3)
+    tof_rods = atmosphere.time_of_flight_s(rods, mics, g.up, t[:, None, None])
+    tof_target = atmosphere.time_of_flight_s(target[:, None, :], mics, g.up, t[:, None])
+    m = len(target)
+    tof = np.concatenate(
+        [np.broadcast_to(tof_rods, (m, 4, 4)), tof_target[:, None, :]], axis=1
+    )  # (M, 5, 4)
     raw = g.nominal_speed_cm_s * tof + np.asarray(model.mic_bias_cm)
     sigma = model.noise_factor * (NOISE_SLOPE * raw + NOISE_FLOOR_CM)  # Eq. (7.9)
-    raw = raw + sigma * rng.standard_normal(raw.shape)
+    z = rng.standard_normal(raw.shape) if standard_normal is None else standard_normal
+    raw = raw + sigma * z
     if model.outlier_prob > 0:
         hit = rng.random(raw.shape) < model.outlier_prob
         jump = rng.uniform(5.0, 50.0, raw.shape) * rng.choice([-1.0, 1.0], raw.shape)
         raw = np.where(hit, raw + jump, raw)
     if model.quantize:
         raw = np.round(raw / g.resolution_cm) * g.resolution_cm
-    true_dist = np.linalg.norm(src - dst, axis=-1)
+    dist_rods = np.linalg.norm(rods - mics, axis=-1)  # (4, 4)
+    dist_target = np.linalg.norm(target[:, None, :] - mics, axis=-1)  # (M, 4)
+    true_dist = np.concatenate(
+        [np.broadcast_to(dist_rods, (m, 4, 4)), dist_target[:, None, :]], axis=1
+    )
+    sparks = sparker_positions(g, target)  # (M, 5, 3)
     heard = (
         (true_dist >= g.range_min_cm)
         & (true_dist <= g.range_max_cm)

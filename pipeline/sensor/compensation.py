@@ -188,19 +188,26 @@ def compensate(
     valid = np.array(np.isfinite(p).all(axis=-1) & np.isfinite(s).all(axis=-1))
     iterations = np.zeros(valid.shape, np.int64)
     converged = np.zeros(valid.shape, bool)
+    # Flat views of the per-cycle arrays; while every cycle is still iterating the
+    # whole arrays are used instead of copies selected by the mask (same numbers).
+    pf, sf = p.reshape(-1, 3), s.reshape(-1, 3)
+    s_raw_f, f_abc_f = s_raw.reshape(-1, 3), f_abc.reshape(-1, 3)
+    f_b_f, f_d_f = np.reshape(f_b, -1), np.reshape(f_d, -1)
+    valid_f, converged_f, iterations_f = (a.reshape(-1) for a in (valid, converged, iterations))
     for _ in range(max_iter):
-        active = valid & ~converged
+        active = valid_f & ~converged_f
         if not active.any():
             break
-        f_t = speed_ratio_at_height(geometry.height(p[active]), f_b[active], f_d[active], h_b, h_d)
-        s_new = line_of_sight_length(s_raw[active], f_abc[active], f_t[:, None])  # Eq. (E.3)
+        sel = slice(None) if active.all() else active
+        f_t = speed_ratio_at_height(geometry.height(pf[sel]), f_b_f[sel], f_d_f[sel], h_b, h_d)
+        s_new = line_of_sight_length(s_raw_f[sel], f_abc_f[sel], f_t[:, None])  # Eq. (E.3)
         p_new = triangulate(s_new, *w)  # Eqs. (6.1)-(6.6)
-        step = np.linalg.norm(p_new - p[active], axis=-1)
-        s[active], p[active] = s_new, p_new
-        iterations[active] += 1
+        step = np.linalg.norm(p_new - pf[sel], axis=-1)
+        sf[sel], pf[sel] = s_new, p_new
+        iterations_f[sel] += 1
         ok = np.isfinite(step)
-        valid[active] = ok
-        converged[active] = ok & (step < tol_cm)
+        valid_f[sel] = ok
+        converged_f[sel] = ok & (step < tol_cm)
     s[~valid] = np.nan
     p[~valid] = np.nan
     iterations[~valid] = 0

@@ -41,11 +41,19 @@ def positions(table: pa.Table) -> np.ndarray:
 
 
 def robust_mean(p: np.ndarray, k: float, floor_cm: float) -> tuple[np.ndarray, np.ndarray]:
-    """Mean of the rows of ``p`` (m, 3) that pass the outlier rule, and the kept mask (m,)."""
-    med = np.median(p, axis=0)
-    d = np.linalg.norm(p - med, axis=1)
-    keep = d <= k * max(1.4826 * float(np.median(d)), floor_cm)
-    return p[keep].mean(axis=0), keep
+    """Mean of the rows of ``p`` (..., m, 3) that pass the outlier rule, and the kept mask (..., m).
+
+    A leading batch shape (Monte-Carlo robots and configurations) applies the
+    rule to every set of m cycles on its own.
+    """
+    med = np.median(p, axis=-2, keepdims=True)
+    d = np.linalg.norm(p - med, axis=-1)
+    scale = np.maximum(1.4826 * np.median(d, axis=-1, keepdims=True), floor_cm)
+    keep = d <= k * scale
+    if p.ndim == 2:  # one set: the mean of the kept rows as such
+        return p[keep].mean(axis=0), keep
+    mean = np.sum(np.where(keep[..., None], p, 0.0), axis=-2) / keep.sum(-1)[..., None]
+    return mean, keep
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:

@@ -1,0 +1,153 @@
+"""The studies of Chapter 7 and the ``pipeline montecarlo`` entry point.
+
+=============  ==========================================  ======================
+study          swept parameter                              controller
+=============  ==========================================  ======================
+encoder        σ_e = 0.1 … 0.5° (σ_p = .01 cm, σ_o = .01°)  design model (7.4.1)
+machining      σ_p = σ_o = 0.01 … 0.05 (σ_e = 0.1°)         design model (7.4.2)
+noise          k = 1, 2.8, 4.6, 6.4, 8.2, 10 times (7.9)    signature (7.4.3)
+points         N_i = 20, 40, 60, 80, 100                    signature (7.4.4)
+radius         R_nom = 30, 35, 40, 45, 50 cm                signature (7.4.5)
+misalignment   W_AC error −1 … +1 cm (11 values)            signature (7.3)
+features       sweep X, N, noise (Section 6.6)              feature fits only
+=============  ==========================================  ======================
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import TextIO
+
+from pipeline.errors import ArmsigError
+from pipeline.evaluation.grid12 import INDEX_NAMES, INDEX_SIGNED, INDEX_UNITS
+from pipeline.montecarlo import design
+from pipeline.montecarlo.engine import Evaluate, Study, run_study
+
+
+def _grid_study(
+    name: str,
+    title: str,
+    parameter: str,
+    unit: str,
+    values: tuple[float, ...],
+    evaluate: Evaluate,
+    batch: int = 500,
+) -> Study:
+    """A study scored by the 34 indices of the 12-vertex grid."""
+    return Study(
+        name, title, parameter, unit, values, evaluate, INDEX_NAMES, INDEX_UNITS, INDEX_SIGNED,
+        batch=batch,
+    )  # fmt: skip
+
+
+def _registry() -> dict[str, Study]:
+    from pipeline.montecarlo import control
+
+    return {
+        "encoder": _grid_study(
+            "encoder",
+            "encoder calibration error std σ_e (deg)",
+            "sigma_e_deg",
+            "deg",
+            (0.1, 0.2, 0.3, 0.4, 0.5),
+            design.encoder_setting,
+        ),
+        "machining": _grid_study(
+            "machining",
+            "machining error std σ_p = σ_o (cm, deg)",
+            "sigma_po",
+            "",
+            (0.01, 0.02, 0.03, 0.04, 0.05),
+            design.machining_setting,
+        ),
+        "noise": _grid_study(
+            "noise",
+            "slant-range noise factor k (times (7.9))",
+            "noise_factor",
+            "",
+            (1.0, 2.8, 4.6, 6.4, 8.2, 10.0),
+            control.noise_setting,
+            batch=control.BATCH,
+        ),
+        "points": _grid_study(
+            "points",
+            "points per circle N_i",
+            "points",
+            "",
+            (20.0, 40.0, 60.0, 80.0, 100.0),
+            control.points_setting,
+            batch=control.BATCH,
+        ),
+        "radius": _grid_study(
+            "radius",
+            "target radius R_nom (cm)",
+            "radius_cm",
+            "cm",
+            (30.0, 35.0, 40.0, 45.0, 50.0),
+            control.radius_setting,
+            batch=control.BATCH,
+        ),
+        "misalignment": Study(
+            "misalignment",
+            "W_AC calibration error (cm)",
+            "wac_error_cm",
+            "cm",
+            tuple(round(-1.0 + 0.2 * k, 1) for k in range(11)),
+            control.misalignment_setting,
+            index_names=control.LINE3_NAMES,
+            index_units=("cm",) * 3,
+            index_signed=(True,) * 3,
+            batch=control.BATCH,
+            evaluate_all=control.misalignment_all,
+        ),
+    }
+
+
+#: Swept studies in the order ``--study all`` runs them (``features`` runs last).
+SWEPT = ("encoder", "machining", "noise", "points", "radius", "misalignment")
+STUDY_NAMES = (*SWEPT, "features", "all")
+
+
+def get_study(name: str) -> Study:
+    """The registered swept study ``name``."""
+    reg = _registry()
+    if name not in reg:
+        raise ArmsigError(f"unknown study {name!r}", expected=", ".join(STUDY_NAMES))
+    return reg[name]
+
+
+def run_montecarlo(
+    study: str,
+    robots: int = 500,
+    seed: int = 0,
+    out: str | Path = "montecarlo",
+    workers: int = 1,
+    progress: TextIO | None = sys.stderr,
+) -> list[str]:
+    """Run ``study`` (or ``all``), write tables, figures and ``montecarlo.md`` under ``out``.
+
+    Returns the lines to print: one per study with its wall time.
+    """
+    from pipeline.montecarlo import features_study, output, report
+
+    if study not in STUDY_NAMES:
+        raise ArmsigError(f"unknown study {study!r}", expected=", ".join(STUDY_NAMES))
+    if robots < 2:
+        raise ArmsigError("too few robots", expected="--robots >= 2", got=str(robots))
+    names = [*SWEPT, "features"] if study == "all" else [study]
+    out_dir = Path(out)
+    lines = []
+    for name in names:
+        if name == "features":
+            feat = features_study.run_features(seed=seed, progress=progress)
+            output.write_features(out_dir, feat)
+            lines.append(f"features: 36 configurations, {feat.wall_s:.1f} s")
+            continue
+        res = run_study(get_study(name), robots, seed, workers, progress)
+        output.write_study(out_dir, res)
+        lines.append(
+            f"{name}: {robots} robots x {len(res.study.values)} settings, {res.wall_s:.1f} s"
+        )
+    lines.append(f"wrote {report.write_report(out_dir)}")
+    return lines
