@@ -158,3 +158,26 @@ def test_status_lists_the_evaluate_stages(session, tmp_path) -> None:
 
     res = CliRunner().invoke(app, ["status", str(sdir)])
     assert res.exit_code == 0 and "evaluate_indices" in res.output
+
+
+def test_fresh_process_with_cached_stages(session, tmp_path) -> None:
+    """A new signature evaluated in a new interpreter, every other stage cached: the
+    program stage must not rely on a module (pyarrow.compute) that only an earlier
+    stage of the same process imported."""
+    import subprocess
+    import sys
+
+    sdir, _ = session
+    other = tmp_path / "robot1"
+    shutil.copytree(sdir, other)
+    doc = json.loads((other / "signature.json").read_text())
+    doc["smodel"]["links"][1][0][3] += 0.05  # a different signature, same stage provenance
+    (other / "signature.json").write_text(json.dumps(doc))
+    res = subprocess.run(
+        [sys.executable, "-m", "pipeline.cli", "evaluate", str(other), "--json", "--no-report"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert set(json.loads(res.stdout)["tasks"]) == {"lines1d", "grid2d", "grid3d", "grid12"}

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from pipeline.control import Controller, into_limits, task_axes_for
 from pipeline.evaluation.tasks import Task
@@ -251,7 +252,7 @@ def flange_angle(chain: SerialChain, joints: pa.Table, tri: pa.Table) -> float:
 
     n = chain.n_joints
     q = joint_readings(joints, n, n, chain.prismatic)
-    p = positions(tri.filter(pa.compute.equal(tri.column("sweep"), n)))
+    p = positions(tri.filter(pc.equal(tri.column("sweep"), n)))
     ok = np.isfinite(p).all(axis=1)
     bare = SerialChain(chain.links, chain.prismatic, chain.base, np.eye(4), chain.joint_offsets)
     L = forward_kinematics(bare, joints_to_internal(q[ok], chain.prismatic))

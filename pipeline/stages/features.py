@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from pipeline.errors import StageError
 from pipeline.features.accuracy import revolute_accuracy
@@ -35,7 +36,7 @@ def sweep_points(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Usable target positions (N, 3) of sweep ``joint`` by increasing reading, the
     readings (N,) and the configuration steps (N,)."""
-    sel = tri.filter(pa.compute.equal(tri.column("sweep"), joint))
+    sel = tri.filter(pc.equal(tri.column("sweep"), joint))
     q = joint_readings(joints, joint, n, prismatic)[:, joint - 1]
     p = positions(sel)
     steps = sel.column("step").to_numpy()

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from pipeline.errors import StageError
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
@@ -50,7 +51,7 @@ def matrices_from_columns(table: pa.Table) -> np.ndarray:
 
 def joint_readings(joints: pa.Table, sweep: int, n: int, prismatic: np.ndarray) -> np.ndarray:
     """Encoder readings (K, n) of the configurations of one sweep, boundary units."""
-    sel = joints.filter(pa.compute.equal(joints.column("sweep"), sweep))
+    sel = joints.filter(pc.equal(joints.column("sweep"), sweep))
     if sel.num_rows == 0:
         return np.zeros((0, n))
     deg = sel.column("q_deg").to_numpy(zero_copy_only=False)
@@ -120,7 +121,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     F[n] = F[n - 1]  # S̄_n = S̄_{n-1}
     qs = signature_readings(inputs["joints"], pris, "joints")
     tri = inputs["triangulate"]
-    tool_rows = tri.filter(pa.compute.equal(tri.column("sweep"), TOOL_SWEEP))
+    tool_rows = tri.filter(pc.equal(tri.column("sweep"), TOOL_SWEEP))
     if tool_rows.num_rows == 0 or tool_rows.column("x_cm").null_count:
         raise StageError(
             "no usable tool-probe measurement",
