@@ -32,7 +32,9 @@ from pipeline.stages.tables import read_provenance, read_table
 from pipeline.units import joints_to_boundary, joints_to_internal
 
 FORMAT = "armsig.signature"
-FORMAT_VERSION = 2
+#: 3: the design alignment stays put along symmetries of the design model
+#: (:mod:`pipeline.kinematics.alignment`); files of format 2 are rewritten on identify.
+FORMAT_VERSION = 3
 ALIGNMENT_SAMPLES = 500
 
 

@@ -76,6 +76,28 @@ def test_default_noise_signature_beats_design(sessions, robot: str) -> None:
     assert r.improvement >= 5.0, (r.signature, r.design)
 
 
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_design_alignment_takes_no_share_of_a_symmetry(sessions, robot: str) -> None:
+    from pipeline.control import Controller, solve_poses
+
+    c = Controller.from_session(sessions[robot, False])
+    # Y: design tool -> signature tool (the probe). The probe is at most 15 cm from
+    # the design tool (Puma: the probe on the flange); a SCARA's shift along its
+    # parallel axes, free in the fit, once put 1,400 cm here (alignment.GAUGE_RCOND).
+    assert np.linalg.norm(c.flange_to_tool[:3, 3]) < 20.0
+    if robot != "scara":
+        return
+    # A pose of the design tool: the signature puts the probe there, so the quill
+    # reading is the design's within the manufacturing error (mm).
+    from pipeline.kinematics.transforms import xyz_rpy_from_transform
+
+    q_design = np.array([[30.0, 45.0, 10.0, 20.0]])  # deg, deg, cm, deg
+    T = forward_kinematics(c.robot.design_chain(), joints_to_internal(q_design, c.robot.prismatic))
+    xyz, rpy = xyz_rpy_from_transform(T)
+    q, res = solve_poses(c, xyz, np.degrees(rpy))
+    assert res.converged.all() and abs(q[0, 2] - q_design[0, 2]) < 0.5, q
+
+
 def _dh_models(d: Path):
     """Signature chain of a session and its true and modified pseudo D-H models."""
     robot = session_robot(read_table(stage_path(d, "session")))

@@ -8,6 +8,8 @@ audit, to compare models whose base and tool frames are conventions.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from pipeline.kinematics.transforms import (
@@ -20,6 +22,15 @@ from pipeline.kinematics.transforms import (
 #: Orientation residuals are weighted as positions on a 10 cm lever: the scale of
 #: a tool, so 1e-3 rad weighs like 0.01 cm.
 LEVER_CM = 10.0
+#: Directions of the 12 alignment parameters whose singular value is below this
+#: fraction of the largest are symmetries of the model, not information: a SCARA's
+#: design model commutes with a shift and a turn along its parallel axes, which the
+#: base and the tool can share in any split (measured: 1.7e-12 of the largest, i.e.
+#: round-off). Genuinely observable directions are far above it (Puma 560: 5.5e-3).
+GAUGE_RCOND = 1e-8
+#: Central-difference step for the Jacobian at the start (cm and rad): the residual
+#: is smooth and of order 1-100, so 1e-6 keeps truncation and round-off near 1e-10.
+JACOBIAN_STEP = 1e-6
 
 
 def _pose(x: Array) -> Array:
@@ -37,6 +48,17 @@ def fit_alignment(T_ref: ArrayLike, T_model: ArrayLike) -> tuple[Array, Array]:
     Returns
     -------
     X, Y : ndarray, shape (4, 4)
+
+    Notes
+    -----
+    Where the model has a symmetry (a motion of the base that a motion of the
+    tool undoes, for every q: a SCARA's shift and turn along its axes), X and
+    Y are not unique. The fit then moves only in the parameter directions the
+    data determine (:data:`GAUGE_RCOND`), so those shared motions stay where
+    the start puts them: the models coincide at the first configuration, and
+    the tool transform ``Y`` takes no share of a symmetry. Without this, the
+    solver drifts along the symmetry (1,400 cm seen), a base and tool that fit
+    just as well but put a pose given for the design tool far from its place.
     """
     Tr = np.asarray(T_ref, float)
     Tm = np.asarray(T_model, float)
@@ -50,6 +72,26 @@ def fit_alignment(T_ref: ArrayLike, T_model: ArrayLike) -> tuple[Array, Array]:
 
     from scipy.optimize import least_squares  # lazy: 0.4 s of import, needed only here
 
+    V = _observable_directions(residual)  # (12, k)
     # Tolerances at 1e-15: the noiseless audit must see 1e-13 cm agreement.
-    fit = least_squares(residual, np.zeros(12), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    return X0 @ _pose(fit.x[:6]), _pose(fit.x[6:])
+    fit = least_squares(
+        lambda z: residual(V @ z), np.zeros(V.shape[1]), method="lm",
+        xtol=1e-15, ftol=1e-15, gtol=1e-15,
+    )  # fmt: skip
+    x = V @ fit.x
+    return X0 @ _pose(x[:6]), _pose(x[6:])
+
+
+def _observable_directions(residual: Callable[[Array], Array]) -> Array:
+    """Orthonormal basis (12, k) of the parameter directions the residual determines
+    at the start x = 0: right singular vectors above :data:`GAUGE_RCOND`."""
+    h = JACOBIAN_STEP
+    J = np.stack(
+        [(residual(h * e) - residual(-h * e)) / (2.0 * h) for e in np.eye(12)], axis=1
+    )
+    _, s, Vt = np.linalg.svd(J, full_matrices=False)
+    keep = s > GAUGE_RCOND * s[0]
+    if keep.all():  # no symmetry: the parameters as they are (same iterates as before)
+        return np.eye(12)
+    out: Array = Vt[keep].T
+    return out
