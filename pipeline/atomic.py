@@ -7,9 +7,10 @@ version untouched.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO
 
@@ -39,3 +40,17 @@ def write_text_atomic(path: str | Path, text: str) -> None:
     """Atomically write ``text`` (UTF-8) to ``path``."""
     with atomic_write(path, "wb") as fh:
         fh.write(text.encode("utf-8"))  # type: ignore[arg-type]
+
+
+def write_unless_same_inputs(
+    path: Path, stamp: Path, inputs: dict[str, str | None], write: Callable[[], Path]
+) -> Path:
+    """Call ``write`` (which writes ``path``) unless ``stamp`` records the same ``inputs``
+    (e.g. stage content hashes) as the run that wrote the existing ``path``; then record
+    them. A warm run leaves the file, and its figures, untouched."""
+    current = json.dumps(inputs, sort_keys=True)
+    if path.is_file() and stamp.is_file() and stamp.read_text() == current:
+        return path
+    out = write()
+    write_text_atomic(stamp, current)
+    return out

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,15 +38,12 @@ def identify(
 
 def _report_if_stale(sdir: Path, hashes: dict[str, str | None]) -> Path:
     """Write the report unless the existing one was made from the same stage outputs."""
-    from pipeline.atomic import write_text_atomic
+    from pipeline.atomic import write_unless_same_inputs
 
-    stamp = sdir / "report" / ".inputs.json"
-    current = json.dumps(hashes, sort_keys=True)
-    report = sdir / "report" / "report.md"
-    if report.is_file() and stamp.is_file() and stamp.read_text() == current:
-        return report
-    from pipeline.report.identification import write_report  # matplotlib: only when needed
+    def write() -> Path:
+        from pipeline.report.identification import write_report  # matplotlib: when needed
 
-    path = write_report(sdir)
-    write_text_atomic(stamp, current)
-    return path
+        return write_report(sdir)
+
+    report = sdir / "report"
+    return write_unless_same_inputs(report / "report.md", report / ".inputs.json", hashes, write)

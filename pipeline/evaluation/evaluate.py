@@ -9,7 +9,6 @@ brings its own ``evaluation.mcap``. Scoring reads only the recording.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -174,18 +173,18 @@ def summarize(session_dir: str | Path) -> dict[str, Any]:
 
 def _report_if_stale(sdir: Path) -> Path:
     """Write ``report/evaluation.md`` unless it was made from the same stage outputs."""
-    from pipeline.atomic import write_text_atomic
+    from pipeline.atomic import write_unless_same_inputs
 
     hashes = {
         m: read_provenance(stage_path(sdir, m)).get("content_hash") for m in EVALUATE_STAGE_MODULES
     }
-    stamp = sdir / "report" / ".evaluation-inputs.json"
-    current = json.dumps(hashes, sort_keys=True)
-    path = sdir / "report" / "evaluation.md"
-    if path.is_file() and stamp.is_file() and stamp.read_text() == current:
-        return path
-    from pipeline.report.evaluation import write_evaluation_report  # matplotlib: only when needed
 
-    out = write_evaluation_report(sdir)
-    write_text_atomic(stamp, current)
-    return out
+    def write() -> Path:
+        from pipeline.report.evaluation import write_evaluation_report  # matplotlib: when needed
+
+        return write_evaluation_report(sdir)
+
+    report = sdir / "report"
+    return write_unless_same_inputs(
+        report / "evaluation.md", report / ".evaluation-inputs.json", hashes, write
+    )

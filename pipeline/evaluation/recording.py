@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.errors import RecordingError
+from pipeline.stages.recording import check_required_fields
 
 TOPICS = ("/eval/description", "/eval/teach", "/eval/program", "/eval/measurement")
 _REQUIRED = {
@@ -53,16 +54,9 @@ def read_evaluation(path: str | Path) -> EvaluationRecording:
             got=f"{type(exc).__name__}: {exc}",
             fix="delete it and run `pipeline evaluate` again (a simulated session re-records it)",
         ) from exc
-    for topic, keys in _REQUIRED.items():
+    for topic in _REQUIRED:
         msgs[topic].sort(key=lambda tm: tm[0])
-        for k, (_, m) in enumerate(msgs[topic]):
-            absent = [key for key in keys if key not in m]
-            if absent:
-                raise RecordingError(
-                    f"{p}: {topic} message {k} does not match its schema",
-                    expected="fields " + ", ".join(keys),
-                    got="missing " + ", ".join(absent),
-                )
+    check_required_fields(p, msgs, _REQUIRED)
     if len(msgs["/eval/description"]) != 1 or not msgs["/eval/teach"]:
         raise RecordingError(
             f"{p}: no /eval/description or /eval/teach",

@@ -56,6 +56,24 @@ class Recording:
     ranges_cm: np.ndarray  # (M, 5, 4), NaN = no echo
 
 
+def check_required_fields(
+    path: Path,
+    msgs: dict[str, list[tuple[int, dict[str, Any]]]],
+    required: dict[str, tuple[str, ...]],
+) -> None:
+    """Raise :class:`RecordingError` naming the first message of ``msgs`` (topic ->
+    (log time, decoded JSON)) that lacks a field its channel's schema requires."""
+    for topic, keys in required.items():
+        for k, (_, m) in enumerate(msgs[topic]):
+            absent = [key for key in keys if key not in m]
+            if absent:
+                raise RecordingError(
+                    f"{path}: {topic} message {k} does not match its schema",
+                    expected="fields " + ", ".join(keys),
+                    got="missing " + ", ".join(absent),
+                )
+
+
 def file_sha256(path: Path) -> str:
     """Content hash of a file (hex)."""
     h = hashlib.sha256()
@@ -135,15 +153,7 @@ def _read_cached(p: Path, sha: str) -> Recording:
             expected="channels " + ", ".join(TOPICS),
             fix="record every channel of schemas/mcap/ (see schemas/README.md)",
         )
-    for topic, keys in _REQUIRED.items():
-        for k, (_, m) in enumerate(msgs[topic]):
-            absent = [key for key in keys if key not in m]
-            if absent:
-                raise RecordingError(
-                    f"{p}: {topic} message {k} does not match its schema",
-                    expected="fields " + ", ".join(keys),
-                    got="missing " + ", ".join(absent),
-                )
+    check_required_fields(p, msgs, _REQUIRED)
     js = msgs["/robot/joint_state"]
     rg = msgs["/sonic/ranges"]
     try:
