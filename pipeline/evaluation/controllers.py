@@ -23,6 +23,7 @@ instruments read.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -90,9 +91,7 @@ class DesignModel:
         ``workspace`` (4, 4): the frame whose axes the task axes of an arm with
         fewer than six joints refer to (default: the base frame)."""
 
-        def one(T_: Array, b: list, q: Array) -> tuple[Array, BoolArray]:
-            return self._solve(T_, b, q, workspace)
-
+        one = functools.partial(self._solve, workspace=workspace)
         return solve_with_wrist_flip(one, self.robot, T, branches, q_near)
 
     def _solve(
@@ -145,9 +144,7 @@ class SignatureModel:
 
         ``workspace`` as for :meth:`DesignModel.solve`."""
 
-        def one(T_: Array, b: list, q: Array) -> tuple[Array, BoolArray]:
-            return self._solve(T_, b, q, workspace)
-
+        one = functools.partial(self._solve, workspace=workspace)
         return solve_with_wrist_flip(one, self.robot, T, branches, q_near)
 
     def _solve(
