@@ -9,7 +9,9 @@ serve them all.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -56,6 +58,46 @@ class SerialChain:
     @property
     def n_joints(self) -> int:
         return int(self.links.shape[-3])
+
+    @cached_property
+    def length_scale(self) -> float:
+        """Characteristic length (cm): total length of the link and tool translations.
+
+        Dividing the position rows of the Jacobian and of δ by it makes cm and
+        rad commensurate for the singular-value tests and the damping of the
+        inverse kinematics (:mod:`pipeline.kinematics.ik`). It does not change a
+        full-rank Newton step of a 6-joint arm. The largest over a robot batch;
+        at least 1.
+        """
+        lengths = np.linalg.norm(self.links[..., :3, 3], axis=-1).sum(axis=-1)
+        total = np.max(lengths + np.linalg.norm(self.tool[..., :3, 3], axis=-1))
+        return max(float(total), 1.0)
+
+    @cached_property
+    def motion_basis(self) -> tuple[Array, Array, bool]:
+        """Constant matrices with ``K_i = a_i · P_i + b_i · Q_i + R_i`` (:func:`joint_transforms`).
+
+        ``Rot(z, θ) · K̄`` replaces rows 0 and 1 of ``K̄`` by ``c K̄₀ − s K̄₁`` and
+        ``s K̄₀ + c K̄₁``: ``(a, b) = (cos θ, sin θ)``, ``P = [K̄₀; K̄₁; 0; 0]``,
+        ``Q = [−K̄₁; K̄₀; 0; 0]``, ``R = [0; 0; K̄₂; K̄₃]``. ``Trans(0, 0, d) · K̄``
+        adds ``d K̄₃`` to row 2: ``(a, b) = (d, 0)``, ``P = [0; 0; K̄₃; 0]``,
+        ``Q = 0``, ``R = K̄``. Computed once per chain (the chain is immutable).
+
+        Returns
+        -------
+        PQ : ndarray, shape (..., n, 2, 16)
+            ``P_i`` and ``Q_i`` flattened.
+        R : ndarray, shape (..., n, 4, 4)
+        any_prismatic : bool
+        """
+        L, pris = self.links, np.asarray(self.prismatic, bool)
+        P, Q, R = np.zeros_like(L), np.zeros_like(L), L.copy()
+        P[..., ~pris, :2, :] = L[..., ~pris, :2, :]
+        Q[..., ~pris, 0, :], Q[..., ~pris, 1, :] = -L[..., ~pris, 1, :], L[..., ~pris, 0, :]
+        R[..., ~pris, :2, :] = 0.0
+        P[..., pris, 2, :] = L[..., pris, 3, :]
+        PQ = np.stack([P, Q], axis=-3).reshape(*L.shape[:-2], 2, 16)
+        return PQ, R, bool(pris.any())
 
 
 def chain_from_dh(
@@ -105,6 +147,37 @@ def joint_motion(chain: SerialChain, q: ArrayLike) -> Array:
     return np.where(chain.prismatic[:, None, None], trans_z(qq), rot_z(qq))
 
 
+def joint_transforms(chain: SerialChain, q: ArrayLike) -> Array:
+    """Link transforms ``K_i = M_i(q_i − q0_i) · K̄_i`` of every joint, (5.2)-(5.3).
+
+    ``M_i`` is ``Rot(z, ·)`` for a revolute joint, ``Trans(0, 0, ·)`` for a
+    prismatic one.
+
+    Evaluated as ``a_i P_i + b_i Q_i + R_i`` (:attr:`SerialChain.motion_basis`):
+    one small matrix product for all joints.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., n)
+        Radians (revolute) / cm (prismatic).
+
+    Returns
+    -------
+    K : ndarray, shape (..., n, 4, 4)
+    """
+    PQ, R, any_prismatic = chain.motion_basis
+    qq = np.asarray(q, float) - chain.joint_offsets
+    W = np.empty((*qq.shape, 1, 2))  # (a_i, b_i)
+    np.cos(qq, out=W[..., 0, 0])
+    np.sin(qq, out=W[..., 0, 1])
+    if any_prismatic:
+        W[..., chain.prismatic, 0, 0] = qq[..., chain.prismatic]
+        W[..., chain.prismatic, 0, 1] = 0.0
+    K = W @ PQ  # (..., n, 1, 16)
+    out: Array = K.reshape(*K.shape[:-2], 4, 4) + R
+    return out
+
+
 def link_frames(chain: SerialChain, q: ArrayLike) -> Array:
     """World poses of every frame along the chain.
 
@@ -121,32 +194,95 @@ def link_frames(chain: SerialChain, q: ArrayLike) -> Array:
         ``F[..., n+1]`` the tool frame.
     """
     qq = np.asarray(q, float)
-    if chain.links.ndim == 3 and chain.base.ndim == 2 and chain.tool.ndim == 2:
+    if use_soa(chain, qq):
         return _link_frames_shared(chain, qq)
-    M = joint_motion(chain, qq)
-    K = M @ chain.links  # Eq. (5.2)/(5.3): K_i = Rot(z, q_i)·K̄_i
-    batch = K.shape[:-3]
+    K = joint_transforms(chain, qq)  # Eq. (5.2)/(5.3)
     n = chain.n_joints
+    batch = K.shape[:-3]
+    if chain.base.ndim > 2 or chain.tool.ndim > 2:
+        batch = np.broadcast_shapes(batch, chain.base.shape[:-2], chain.tool.shape[:-2])
     out = np.empty((*batch, n + 2, 4, 4))
-    cur = np.broadcast_to(chain.base, (*batch, 4, 4))
-    out[..., 0, :, :] = cur
-    for i in range(n):
-        cur = cur @ K[..., i, :, :]  # Eq. (5.1)
-        out[..., i + 1, :, :] = cur
-    out[..., n + 1, :, :] = cur @ chain.tool
+    out[..., 0, :, :] = chain.base
+    if math.prod(batch) > DOUBLING_MAX_BATCH:
+        for i in range(n):  # Eq. (5.1)
+            np.matmul(out[..., i, :, :], K[..., i, :, :], out=out[..., i + 1, :, :])
+        np.matmul(out[..., n, :, :], chain.tool, out=out[..., n + 1, :, :])
+        return out
+    # Eq. (5.1) as prefix products of [base, K_1, ..., K_n, tool] by recursive
+    # doubling: after the pass with shift s, out[i] is the product of the last
+    # 2s factors up to i.
+    out[..., 1 : n + 1, :, :] = K
+    out[..., n + 1, :, :] = chain.tool
+    shift = 1
+    while shift < n + 2:
+        out[..., shift:, :, :] = out[..., :-shift, :, :] @ out[..., shift:, :, :]
+        shift *= 2
     return out
+
+
+#: Batches of up to this many poses take the prefix products of :func:`link_frames`
+#: by recursive doubling: ⌈log₂(n + 2)⌉ stacked products instead of n + 1, which
+#: is faster while numpy's per-call overhead dominates (measured: 12 µs instead
+#: of 19 µs for one 6-joint pose, equal at ~16 poses, 2x slower at 64).
+DOUBLING_MAX_BATCH = 32
+
+
+#: Batches of poses from which one robot's frames are computed column-major
+#: (:func:`frames_soa`). Below it the per-call overhead of the column-major
+#: path's ~10 numpy operations per joint outweighs its faster arithmetic, and
+#: one (m, 4, 4) product per joint (:func:`link_frames`) is quicker (measured
+#: crossover ~50 poses for a 6-joint chain).
+SOA_MIN_BATCH = 64
+
+
+def use_soa(chain: SerialChain, q: Array) -> bool:
+    """Whether frames of poses ``q`` (..., n) take the column-major path :func:`frames_soa`."""
+    return (
+        chain.links.ndim == 3
+        and chain.base.ndim == 2
+        and chain.tool.ndim == 2
+        and q.size >= SOA_MIN_BATCH * chain.n_joints
+    )
 
 
 def _link_frames_shared(chain: SerialChain, q: Array) -> Array:
     """:func:`link_frames` for one robot (no batch axis on links, base, tool)."""
     batch = q.shape[:-1]
     n = chain.n_joints
-    F, tool = frames_soa(chain, q.reshape(-1, n))
-    out = np.zeros((F.shape[-1], n + 2, 4, 4))
-    out[:, : n + 1, :3, :] = np.moveaxis(F, (-1, 1), (0, -1))
-    out[:, n + 1, :3, :] = np.moveaxis(tool, (-1, 0), (0, -1))
+    q2 = q.reshape(-1, n)
+    out = np.zeros((q2.shape[0], n + 2, 4, 4))
+    for block in soa_blocks(q2.shape[0]):
+        F, tool = frames_soa(chain, q2[block])
+        out[block, : n + 1, :3, :] = np.moveaxis(F, (-1, 1), (0, -1))
+        out[block, n + 1, :3, :] = np.moveaxis(tool, (-1, 0), (0, -1))
     out[:, :, 3, 3] = 1.0
     return out.reshape(*batch, n + 2, 4, 4)
+
+
+#: Poses per block of the column-major path: a block's frames (4 x 3 x 8192
+#: doubles, 0.8 MB) and temporaries stay in a 2 MB L2 cache. Measured for
+#: 100,000 poses: the pose and Jacobian 1.5-2x faster than in one pass.
+SOA_BLOCK = 8192
+
+
+def soa_blocks(m: int) -> list[slice]:
+    """Slices of ``m`` rows into blocks of at most :data:`SOA_BLOCK`."""
+    return [slice(i, i + SOA_BLOCK) for i in range(0, m, SOA_BLOCK)]
+
+
+def _cos_sin(theta: Array) -> tuple[Array, Array]:
+    """``cos θ`` and ``sin θ`` from ``t = tan(θ/2)``: ``((1 − t²), 2t) / (1 + t²)``.
+
+    One vectorised tangent instead of a cosine and a sine (numpy's float64
+    tangent is SIMD-accelerated, its sine and cosine are not: ~4x faster for
+    large arrays). Measured against ``np.cos``/``np.sin`` on 10⁷ angles in
+    [−10, 10] rad: absolute difference ≤ 2.2e-16 (one ulp of 1); at θ = ±π,
+    ``t ≈ 1.6e16`` and the formulas still give (−1, ~1e-16).
+    """
+    t = np.tan(0.5 * theta)
+    t2 = t * t
+    inv = 1.0 / (1.0 + t2)
+    return (1.0 - t2) * inv, (t + t) * inv
 
 
 def frames_soa(
@@ -182,7 +318,7 @@ def frames_soa(
     n = chain.n_joints
     qq = (q - np.asarray(chain.joint_offsets)).T  # (n, m)
     m = qq.shape[1]
-    c, s = np.cos(qq), np.sin(qq)
+    c, s = _cos_sin(qq)
     cols = list(columns)
     out = np.empty((n + 1, len(cols), 3, m))
     cur = np.empty((4, 3, m))
@@ -192,11 +328,15 @@ def frames_soa(
         if chain.prismatic[i]:  # Eq. (5.3): cur · Trans(0, 0, q_i − q0_i)
             cur[3] += qq[i] * cur[2]
         else:  # Eq. (5.2): cur · Rot(z, q_i − q0_i)
-            x = cur[0].copy()
-            cur[0] = c[i] * x + s[i] * cur[1]
-            cur[1] = c[i] * cur[1] - s[i] * x
+            x, y = cur[0], cur[1]
+            sx = s[i] * x
+            x *= c[i]
+            x += s[i] * y
+            y *= c[i]
+            y -= sx
         cur = (chain.links[i].T @ cur.reshape(4, -1)).reshape(4, 3, m)  # Eq. (5.1)
-        out[i + 1] = cur[cols]
+        if cols:
+            np.take(cur, cols, axis=0, out=out[i + 1])
     return out, (chain.tool.T @ cur.reshape(4, -1)).reshape(4, 3, m)
 
 
@@ -213,10 +353,12 @@ def forward_kinematics(chain: SerialChain, q: ArrayLike) -> Array:
     T : ndarray, shape (..., 4, 4)
     """
     qq = np.asarray(q, float)
-    if chain.links.ndim == 3 and chain.base.ndim == 2 and chain.tool.ndim == 2:
-        _, tool = frames_soa(chain, qq.reshape(-1, chain.n_joints), columns=())
-        out = np.zeros((tool.shape[-1], 4, 4))
-        out[:, :3, :] = np.moveaxis(tool, (-1, 0), (0, -1))
-        out[:, 3, 3] = 1.0
+    if use_soa(chain, qq):
+        q2 = qq.reshape(-1, chain.n_joints)
+        out = np.empty((q2.shape[0], 4, 4))
+        for block in soa_blocks(q2.shape[0]):
+            _, tool = frames_soa(chain, q2[block], columns=())
+            out[block, :3, :] = np.moveaxis(tool, (-1, 0), (0, -1))
+        out[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
         return out.reshape(*qq.shape[:-1], 4, 4)
     return link_frames(chain, qq)[..., -1, :, :]
