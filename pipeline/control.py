@@ -240,6 +240,8 @@ def _shift_into(
 ) -> np.ndarray:
     """:func:`into_limits` with the limits of :func:`_limit_arrays`."""
     out = np.array(q, float)
+    if ((out >= lower) & (out <= upper)).all():  # nothing to shift (the common case)
+        return out
     for shift in (turn, -turn):
         moved = out + shift
         inside = (moved >= lower) & (moved <= upper)

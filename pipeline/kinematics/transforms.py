@@ -184,6 +184,7 @@ def cross3(a: Array, b: Array, axis: int = -1) -> Array:
 
 #: Flat indices into a 3x3 matrix: R21, R02, R10, R12, R20, R01, R00, R11, R22.
 _SKEW_TRACE = np.array([7, 2, 3, 5, 6, 1, 0, 4, 8])
+_ONES3 = np.ones(3)
 
 
 def differential_motion(T_from: ArrayLike, T_to: ArrayLike) -> Array:
@@ -208,8 +209,9 @@ def differential_motion(T_from: ArrayLike, T_to: ArrayLike) -> Array:
     # One gather: R21, R02, R10 | R12, R20, R01 (the skew part) | R00, R11, R22.
     g = R.reshape(*R.shape[:-2], 9).take(_SKEW_TRACE, axis=-1)
     skew = g[..., :3] - g[..., 3:6]  # 2 sin(θ) · axis
-    two_sin = np.sqrt((skew * skew).sum(axis=-1))
-    angle = np.arctan2(two_sin, g[..., 6:].sum(axis=-1) - 1.0)  # tr R − 1 = 2 cos(θ)
+    # Sums over 3 components as products with ones: numpy reduces short axes slowly.
+    two_sin = np.sqrt((skew * skew) @ _ONES3)
+    angle = np.arctan2(two_sin, g[..., 6:] @ _ONES3 - 1.0)  # tr R − 1 = 2 cos(θ)
     # θ / (2 sin θ) = 1/2 + θ²/12 + …: for sin θ below 1e-12 (round-off of R) the
     # limit 1/2 is exact to double precision, and the division is guarded.
     scale = np.divide(angle, two_sin, out=np.full_like(angle, 0.5), where=two_sin > 2e-12)
