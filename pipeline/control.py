@@ -240,7 +240,7 @@ def _shift_into(
 ) -> np.ndarray:
     """:func:`into_limits` with the limits of :func:`_limit_arrays`."""
     out = np.array(q, float)
-    if ((out >= lower) & (out <= upper)).all():  # nothing to shift (the common case)
+    if np.count_nonzero((out >= lower) & (out <= upper)) == out.size:  # nothing to shift
         return out
     for shift in (turn, -turn):
         moved = out + shift

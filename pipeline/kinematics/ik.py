@@ -218,21 +218,25 @@ def _prepare(
             "bad target poses", expected="shape (m, 4, 4) or (4, 4)", got=f"shape {T.shape}"
         )
     m, n = T.shape[0], chain.n_joints
-    q = np.asarray(q0, float)
-    if q.ndim == 1:
-        q = np.broadcast_to(q, (m, q.shape[0]))
-    if q.shape != (m, n):
+    q_start = np.asarray(q0, float)
+    if q_start.shape not in ((n,), (m, n)):
         raise KinematicsError(
-            "bad start configurations", expected=f"shape ({m}, {n}) or ({n},)", got=f"{q.shape}"
+            "bad start configurations",
+            expected=f"shape ({m}, {n}) or ({n},)",
+            got=f"{q_start.shape}",
         )
-    if not (np.isfinite(T).all() and np.isfinite(q).all()):
+    q = np.empty((m, n))
+    q[...] = q_start
+    if np.count_nonzero(np.isfinite(T)) < T.size or np.count_nonzero(np.isfinite(q)) < q.size:
         raise KinematicsError(
             "non-finite target pose or start configuration",
             fix="replace NaN rows (e.g. where the design inverse is unreachable) "
             "by a finite guess such as the home configuration",
         )
-    res = np.broadcast_to(np.asarray(resolution, float), (n,)).copy()
-    if not (res > 0).all():
+    res = np.asarray(resolution, float)
+    if res.shape != (n,):
+        res = np.broadcast_to(res, (n,))
+    if np.count_nonzero(res > 0) < n:
         raise KinematicsError("encoder resolution must be positive", got=repr(res))
     parts = (("links", chain.links, 3), ("base", chain.base, 2), ("tool", chain.tool, 2))
     for name, arr, core in parts:
@@ -242,7 +246,7 @@ def _prepare(
                 expected=f"no batch or a batch of 1 or {m}",
                 got=f"shape {arr.shape}",
             )
-    return T, q.copy(), res
+    return T, q, res
 
 
 def _take(chain: SerialChain, rows: IntArray, m: int) -> SerialChain:
@@ -322,7 +326,7 @@ def _trials(damping: float) -> list[tuple[str, float]]:
     return out
 
 
-def _cap_step(dq: Array, limit: Array) -> Array:
+def _cap_step(dq: Array, limit: Array | float) -> Array:
     """Scale each step so no increment exceeds its ``limit`` (n,).
 
     The limit is ``max_step`` rad for a revolute joint and ``max_step · length``
@@ -331,15 +335,18 @@ def _cap_step(dq: Array, limit: Array) -> Array:
     iterate onto another branch; a uniform scale keeps its direction.
     """
     size = np.abs(dq)
-    if (size <= limit).all():  # the common case: nothing to scale
+    if np.count_nonzero(size <= limit) == size.size:  # the common case: nothing to scale
         return dq
     worst = np.max(size / limit, axis=-1)
     capped: Array = dq / np.maximum(worst, 1.0)[:, None]
     return capped
 
 
-def _step_limit(chain: SerialChain, max_step: float, length: float) -> Array:
-    """Per-joint step limits (n,) of :func:`_cap_step`: rad, or cm for prismatic joints."""
+def _step_limit(chain: SerialChain, max_step: float, length: float) -> Array | float:
+    """Per-joint step limits (n,) of :func:`_cap_step`: rad, or cm for prismatic joints
+    (one number for a chain of revolute joints)."""
+    if not chain.motion_basis[2]:
+        return max_step
     return np.where(chain.prismatic, max_step * length, max_step)
 
 
@@ -355,14 +362,15 @@ _HALVES = np.repeat(np.eye(2), 3, axis=0)
 
 def _scaled_error(errors: Array, length: float) -> Array:
     """Scalar pose error ``|dp| / length + |rotation|`` from :func:`_errors` (..., 2)."""
-    out: Array = errors[..., 0] / length + errors[..., 1]
+    out: Array = errors @ np.array((1.0 / length, 1.0))
     return out
 
 
 #: ``step(rows, q, δ, e) -> (q_next, ok, increment, δ_next, errors_next, may_stall)``
-#: (see :func:`_iterate`).
+#: (see :func:`_iterate`); ``ok`` or ``may_stall`` None: all rows.
 StepFn = Callable[
-    [IntArray, Array, Array, Array], tuple[Array, BoolArray, Array, Array, Array, BoolArray]
+    [IntArray, Array, Array, Array],
+    tuple[Array, BoolArray | None, Array, Array, Array, BoolArray | None],
 ]
 
 
@@ -392,7 +400,8 @@ def _iterate(
     method's own increment (the Newton step ``J⁻¹ δ`` of (5.4), the Jacobi step
     of (5.8)), which the encoder rule tests, δ at the next iterate and its
     :func:`_errors`, and a mask of rows that may be declared stalled (False
-    while the method still has a remedy to try). The increments differ from the
+    while the method still has a remedy to try); either mask None stands for
+    all rows. The increments differ from the
     step taken only where a safeguard replaced the method's step: a short
     safeguard step says nothing about being near the solution. ``step`` must
     not modify its arguments.
@@ -418,30 +427,34 @@ def _iterate(
     q_a, d_a = q, delta
     e_a = _scaled_error(_errors(delta), length)
     idle = np.zeros(m, np.int64)  # consecutive iterations without progress
-    hist_q, hist_d = [q.copy()], [delta.copy()]
+    hist_q, hist_d = ([q.copy()], [delta.copy()]) if record_history else ([], [])
     done_iterations = 0
     while done_iterations < max_iter and rows.size:
         q_next, ok, nominal, d_new, err_new, may_stall = step(rows, q_a, d_a, e_a)
-        if not ok.all():  # no next iterate: unreachable, at the last iterate that had one
+        # (np.count_nonzero: the cheapest whole-array test on a few rows)
+        if ok is not None and np.count_nonzero(ok) < ok.size:  # unreachable, at its last q
             gone, keep = rows[~ok], ok
             q[gone], delta[gone], iterations[gone] = q_a[~ok], d_a[~ok], done_iterations
             status[gone] = STATUS_UNREACHABLE
             rows, q_a, e_a, idle = rows[keep], q_a[keep], e_a[keep], idle[keep]
-            q_next, nominal, may_stall = q_next[keep], nominal[keep], may_stall[keep]
-            d_new, err_new = d_new[keep], err_new[keep]
+            q_next, nominal, d_new = q_next[keep], nominal[keep], d_new[keep]
+            err_new = err_new[keep]
+            may_stall = None if may_stall is None else may_stall[keep]
         done_iterations += 1
         e_new = _scaled_error(err_new, length)
         small = (np.abs(nominal) < res).all(axis=-1)  # Appendix C.1 step 8
         accurate = (err_new <= tol).all(axis=-1)
         done = small & accurate
-        stuck = ~(accurate | (e_new < STALL_RATIO * e_a)) & may_stall
-        if stuck.any():  # and the step taken is below one count: no progress
+        stuck = ~(accurate | (e_new < STALL_RATIO * e_a))
+        if may_stall is not None:
+            stuck &= may_stall
+        if np.count_nonzero(stuck):  # and the step taken is below one count: no progress
             stuck &= (np.abs(q_next - q_a) < res).all(axis=-1)
         idle = (idle + 1) * stuck
         stalled = idle >= stall_patience
         q_a, d_a, e_a = q_next, d_new, e_new
         stop = done | stalled
-        if stop.any():
+        if np.count_nonzero(stop):
             fin = rows[stop]
             q[fin], delta[fin], iterations[fin] = q_a[stop], d_a[stop], done_iterations
             status[rows[stalled]] = STATUS_UNREACHABLE
@@ -621,7 +634,7 @@ def newton_raphson(
 
     def step(
         rows: IntArray, q_rows: Array, delta_rows: Array, e_rows: Array
-    ) -> tuple[Array, BoolArray, Array, Array, Array, BoolArray]:
+    ) -> tuple[Array, BoolArray | None, Array, Array, Array, BoolArray | None]:
         last_rows, J, T_rows = evaluated[0]
         if rows.size != last_rows.size:
             keep = np.searchsorted(last_rows, rows)
@@ -633,7 +646,7 @@ def newton_raphson(
         d_out = _masked(differential_motion(T_out, T_rows), mask)
         err_out = _errors(d_out)
         better = _scaled_error(err_out, length) < e_rows
-        if not better.all():  # the Newton step did not descend: safeguard
+        if np.count_nonzero(better) < better.size:  # the Newton step did not descend
             bad = np.flatnonzero(~better)
             sub = _take(chain, rows[bad], m)
             q_out[bad] = _safeguard(
@@ -651,8 +664,7 @@ def newton_raphson(
             d_out[bad] = _masked(differential_motion(T_bad, T_rows[bad]), mask)
             err_out[bad] = _errors(d_out[bad])
         evaluated[0] = rows, J_out, T_rows
-        everything = np.ones(rows.size, bool)
-        return q_out, everything, newton, d_out, err_out, everything
+        return q_out, None, newton, d_out, err_out, None
 
     return _iterate(
         chain,
@@ -682,7 +694,7 @@ def _newton_step(J: Array, delta: Array, length: float) -> Array:
     if n == 6 and k:
         try:
             dq = np.linalg.solve(J, delta[..., None])[..., 0]
-            if np.isfinite(dq).all():
+            if np.count_nonzero(np.isfinite(dq)) == dq.size:
                 return np.asarray(dq, float)
         except np.linalg.LinAlgError:
             pass

@@ -55,7 +55,7 @@ def pose_and_jacobian(chain: SerialChain, q: ArrayLike) -> tuple[Array, Array]:
         pris = chain.prismatic[:, None]
         lin, z = np.where(pris, z, lin), np.where(pris, 0.0, z)
     J = np.concatenate([lin, z], axis=-1)  # (..., n, 6)
-    return Fr[..., n + 1, :, :], np.swapaxes(J, -1, -2)
+    return Fr[..., n + 1, :, :], J.swapaxes(-1, -2)
 
 
 def _pose_and_jacobian_soa(chain: SerialChain, q: Array) -> tuple[Array, Array]:

@@ -205,7 +205,7 @@ def differential_motion(T_from: ArrayLike, T_to: ArrayLike) -> Array:
     """
     Tf = np.asarray(T_from, float)
     Tt = np.asarray(T_to, float)
-    R = Tt[..., :3, :3] @ np.swapaxes(Tf[..., :3, :3], -1, -2)  # R_to R_fromᵀ
+    R = Tt[..., :3, :3] @ Tf[..., :3, :3].swapaxes(-1, -2)  # R_to R_fromᵀ
     # One gather: R21, R02, R10 | R12, R20, R01 (the skew part) | R00, R11, R22.
     g = R.reshape(*R.shape[:-2], 9).take(_SKEW_TRACE, axis=-1)
     skew = g[..., :3] - g[..., 3:6]  # 2 sin(θ) · axis

@@ -16,6 +16,7 @@ Inverse
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -317,18 +318,18 @@ def inverse_kinematics(
         Joint limits are not applied here.
     """
     Tw, wc = flange_and_wrist_centre(T, tool, base)
-    d1, d3, d4 = _D[0], _D[1], _D[3]  # d3 here is the shoulder offset (d2 = d2+d3)
-    a2, a3 = _A[1], _A[2]
+    d1, d3, _, d4, _, _ = DESIGN_D_CM  # d3 here is the shoulder offset (d2 = d2+d3)
+    a2, a3 = DESIGN_A_CM[1], DESIGN_A_CM[2]
     px, py, pz = wc[..., 0], wc[..., 1], wc[..., 2] - d1
     wanted = BRANCHES if branches is None else branches
     # The branch flags only choose signs: r = ±√rr and the elbow's ±√disc.
     rr = px**2 + py**2 - d3**2
     root_rr = np.sqrt(np.maximum(rr, 0.0))
-    Kc = (root_rr**2 + pz**2 - d4**2 - a3**2 - a2**2) / (2.0 * a2)  # r2 / (2 a2), (B.22)
-    disc = d4**2 + a3**2 - Kc**2
+    Kc = (root_rr**2 + pz**2 - (d4**2 + a3**2 + a2**2)) / (2.0 * a2)  # r2 / (2 a2), (B.22)
+    disc = (d4**2 + a3**2) - Kc**2
     valid = (rr >= 0.0) & (disc >= 0.0)
     root_disc = np.sqrt(np.maximum(disc, 0.0))
-    phi = np.arctan2(a3, d4)
+    phi = math.atan2(a3, d4)
     t1_base = np.arctan2(py, px)
     q = np.empty((*Tw.shape[:-2], len(wanted), 6))
     for k, br in enumerate(wanted):
@@ -339,16 +340,17 @@ def inverse_kinematics(
         u = a2 + d4 * S3 + a3 * C3
         v = d4 * C3 - a3 * S3
         t2 = np.arctan2(v * r - u * pz, u * r + v * pz)  # r = u C2 + v S2, pz = v C2 - u S2
-        # Wrist: R36 = R03ᵀ R06 = Rot(z,θ4) Rot(y,θ5) Rot(z,θ6) for α4 = -90°, α5 = 90°.
+        # Wrist: R36 = R03ᵀ R06 = Rot(z,θ4) Rot(y,θ5) Rot(z,θ6) for α4 = -90°, α5 = 90°;
+        # the wrist flag is the sign of sin θ5, which multiplies the atan2 arguments.
         R36 = _wrist_rotation(t1, t2 + t3, Tw[..., :3, :3])
+        Rw = R36 if br.wrist > 0 else -R36
         s5 = np.hypot(R36[..., 0, 2], R36[..., 1, 2])
-        w = br.wrist
         q[..., k, 0], q[..., k, 1], q[..., k, 2] = t1, t2, t3
-        q[..., k, 4] = np.arctan2(w * s5, R36[..., 2, 2])
-        q[..., k, 3] = np.arctan2(w * R36[..., 1, 2], w * R36[..., 0, 2])
-        q[..., k, 5] = np.arctan2(w * R36[..., 2, 1], -w * R36[..., 2, 0])
+        q[..., k, 4] = np.arctan2(s5 if br.wrist > 0 else -s5, R36[..., 2, 2])
+        q[..., k, 3] = np.arctan2(Rw[..., 1, 2], Rw[..., 0, 2])
+        q[..., k, 5] = np.arctan2(Rw[..., 2, 1], -Rw[..., 2, 0])
         singular = s5 < WRIST_SINGULAR_TOL
-        if singular.any():
+        if np.count_nonzero(singular):
             # cos θ5 = +1 gives Rot(z, θ4 + θ6); cos θ5 = -1 gives θ6 - θ4 = atan2(r21, -r11).
             t6_sing = np.where(
                 R36[..., 2, 2] > 0,
@@ -357,8 +359,11 @@ def inverse_kinematics(
             )
             q[..., k, 3] = np.where(singular, q4_singular, q[..., k, 3])
             q[..., k, 5] = np.where(singular, t6_sing, q[..., k, 5])
-    q = np.where(valid[..., None, None], wrap_angle(q), np.nan)
-    ok = np.repeat(valid[..., None], len(wanted), axis=-1)
+    q = wrap_angle(q)
+    if np.count_nonzero(valid) < valid.size:
+        q[~valid] = np.nan
+    ok = np.empty((*valid.shape, len(wanted)), bool)
+    ok[...] = valid[..., None]
     return q, ok
 
 

@@ -131,7 +131,7 @@ def puma_design_inverse(
         if tool_inv is not None:
             Tw = Tw @ tool_inv
         sols, ok = puma560.inverse_kinematics(Tw, branches=wanted)
-        if clamp and not ok.all():
+        if clamp and np.count_nonzero(ok) < ok.size:
             # Reachability does not depend on the branch for the Puma (the wrist
             # centre's distances decide it), so clamp whole rows.
             out = np.flatnonzero(~ok.all(axis=-1))
@@ -145,16 +145,20 @@ def puma_design_inverse(
             q, reach = sols[rows, col], ok[rows, col]
         else:
             q, reach = sols[:, 0], ok[:, 0]  # the one branch computed
-        q = np.where(reach[:, None], q, q_near)  # keep NaN out of the arithmetic below
+        unreached = np.count_nonzero(reach) < reach.size
+        if unreached:
+            q = np.where(reach[:, None], q, q_near)  # keep NaN out of the arithmetic below
         # Wrist singular: inverse_kinematics set θ4 = 0; θ4 + θ6 (cos θ5 > 0) or
         # θ6 − θ4 (cos θ5 < 0) is what the pose fixes. Keep θ4 from q_near.
         sing = reach & (np.abs(np.sin(q[:, 4])) < puma560.WRIST_SINGULAR_TOL)
-        if sing.any():
+        if np.count_nonzero(sing):
             t4 = q_near[:, 3]
             t6 = np.where(np.cos(q[:, 4]) > 0, q[:, 5] + q[:, 3] - t4, q[:, 5] - q[:, 3] + t4)
             q[:, 3] = np.where(sing, t4, q[:, 3])
             q[:, 5] = np.where(sing, t6, q[:, 5])
         q = q_near + puma560.wrap_angle(q - q_near)  # nearest 2π class
-        return np.where(reach[:, None], q, np.nan)
+        if unreached:
+            q[~reach] = np.nan
+        return q
 
     return inverse
