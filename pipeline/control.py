@@ -16,7 +16,7 @@ signature's sensor frame with the base alignment stored in the signature file
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -177,7 +177,8 @@ class Controller:
         return self._into_limits(res)
 
     def _into_limits(self, res: IKResult) -> IKResult:
-        return replace(res, q=_shift_into(res.q, *self._limits))
+        _shift_into(res.q, *self._limits)  # the solver's own array
+        return res
 
     def _solve_task_axes(
         self, T_base: np.ndarray, branch, axes: tuple[int, ...], record_history: bool
@@ -226,7 +227,9 @@ def task_axes_for(robot: RobotDescription) -> tuple[int, ...]:
 
 def into_limits(robot: RobotDescription, q: np.ndarray) -> np.ndarray:
     """Revolute joints (m, n) in rad shifted by ±2π where that brings them inside the limits."""
-    return _shift_into(q, *_limit_arrays(robot))
+    out = np.array(q, float)
+    _shift_into(out, *_limit_arrays(robot))
+    return out
 
 
 def _limit_arrays(robot: RobotDescription) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -235,19 +238,16 @@ def _limit_arrays(robot: RobotDescription) -> tuple[np.ndarray, np.ndarray, np.n
     return lower, upper, np.where(robot.prismatic, 0.0, 2.0 * np.pi)
 
 
-def _shift_into(
-    q: np.ndarray, lower: np.ndarray, upper: np.ndarray, turn: np.ndarray
-) -> np.ndarray:
-    """:func:`into_limits` with the limits of :func:`_limit_arrays`."""
-    out = np.array(q, float)
-    if np.count_nonzero((out >= lower) & (out <= upper)) == out.size:  # nothing to shift
-        return out
+def _shift_into(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, turn: np.ndarray) -> None:
+    """:func:`into_limits` in place on ``q`` (m, n), with the limits of :func:`_limit_arrays`."""
+    outside = (q < lower) | (q > upper)
+    if not np.count_nonzero(outside):  # the common case
+        return
     for shift in (turn, -turn):
-        moved = out + shift
-        inside = (moved >= lower) & (moved <= upper)
-        outside = (out < lower) | (out > upper)
-        out = np.where(inside & outside, moved, out)
-    return out
+        moved = q + shift
+        take = outside & (moved >= lower) & (moved <= upper)
+        np.copyto(q, moved, where=take)
+        outside &= ~take
 
 
 def solve_poses(

@@ -9,7 +9,6 @@ serve them all.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -72,6 +71,12 @@ class SerialChain:
         lengths = np.linalg.norm(self.links[..., :3, 3], axis=-1).sum(axis=-1)
         total = np.max(lengths + np.linalg.norm(self.tool[..., :3, 3], axis=-1))
         return max(float(total), 1.0)
+
+    @cached_property
+    def soa_constants(self) -> tuple[list[Array], list[bool]]:
+        """``K̄_iᵀ`` of every joint and the prismatic flags as Python bools, for
+        :func:`frames_soa` (computed once per chain; the chain is immutable)."""
+        return [L.T for L in self.links], [bool(p) for p in self.prismatic]
 
     @cached_property
     def motion_basis(self) -> tuple[Array, Array, bool]:
@@ -194,55 +199,24 @@ def link_frames(chain: SerialChain, q: ArrayLike) -> Array:
         ``F[..., n+1]`` the tool frame.
     """
     qq = np.asarray(q, float)
-    if use_soa(chain, qq):
+    if is_single_robot(chain):
         return _link_frames_shared(chain, qq)
     K = joint_transforms(chain, qq)  # Eq. (5.2)/(5.3)
     n = chain.n_joints
-    batch = K.shape[:-3]
-    if chain.base.ndim > 2 or chain.tool.ndim > 2:
-        batch = np.broadcast_shapes(batch, chain.base.shape[:-2], chain.tool.shape[:-2])
+    batch = np.broadcast_shapes(K.shape[:-3], chain.base.shape[:-2], chain.tool.shape[:-2])
     out = np.empty((*batch, n + 2, 4, 4))
     out[..., 0, :, :] = chain.base
-    if math.prod(batch) > DOUBLING_MAX_BATCH:
-        for i in range(n):  # Eq. (5.1)
-            np.matmul(out[..., i, :, :], K[..., i, :, :], out=out[..., i + 1, :, :])
-        np.matmul(out[..., n, :, :], chain.tool, out=out[..., n + 1, :, :])
-        return out
-    # Eq. (5.1) as prefix products of [base, K_1, ..., K_n, tool] by recursive
-    # doubling: after the pass with shift s, out[i] is the product of the last
-    # 2s factors up to i.
-    out[..., 1 : n + 1, :, :] = K
-    out[..., n + 1, :, :] = chain.tool
-    shift = 1
-    while shift < n + 2:
-        out[..., shift:, :, :] = out[..., :-shift, :, :] @ out[..., shift:, :, :]
-        shift *= 2
+    for i in range(n):  # Eq. (5.1)
+        np.matmul(out[..., i, :, :], K[..., i, :, :], out=out[..., i + 1, :, :])
+    np.matmul(out[..., n, :, :], chain.tool, out=out[..., n + 1, :, :])
     return out
 
 
-#: Batches of up to this many poses take the prefix products of :func:`link_frames`
-#: by recursive doubling: ⌈log₂(n + 2)⌉ stacked products instead of n + 1, which
-#: is faster while numpy's per-call overhead dominates (measured: 12 µs instead
-#: of 19 µs for one 6-joint pose, equal at ~16 poses, 2x slower at 64).
-DOUBLING_MAX_BATCH = 32
-
-
-#: Batches of poses from which one robot's frames are computed column-major
-#: (:func:`frames_soa`). Below it the per-call overhead of the column-major
-#: path's ~10 numpy operations per joint outweighs its faster arithmetic, and
-#: one (m, 4, 4) product per joint (:func:`link_frames`) is quicker (measured
-#: crossover ~50 poses for a 6-joint chain).
-SOA_MIN_BATCH = 64
-
-
-def use_soa(chain: SerialChain, q: Array) -> bool:
-    """Whether frames of poses ``q`` (..., n) take the column-major path :func:`frames_soa`."""
-    return (
-        chain.links.ndim == 3
-        and chain.base.ndim == 2
-        and chain.tool.ndim == 2
-        and q.size >= SOA_MIN_BATCH * chain.n_joints
-    )
+def is_single_robot(chain: SerialChain) -> bool:
+    """Whether the chain has no robot batch axis: its poses take the column-major
+    path :func:`frames_soa`, whatever their number (so one pose gives the same
+    bits alone as in a batch)."""
+    return chain.links.ndim == 3 and chain.base.ndim == 2 and chain.tool.ndim == 2
 
 
 def _link_frames_shared(chain: SerialChain, q: Array) -> Array:
@@ -290,13 +264,17 @@ def frames_soa(
 ) -> tuple[Array, Array]:
     """Frames of :func:`link_frames` for one robot, column-major, batch axis last.
 
-    The same products as the general path, arranged for large batches. A
-    frame is stored as its columns ``(4, 3, m)`` (top three rows; the fourth is
-    ``[0, 0, 0, 1]``), batch axis last: ``cur · Rot(z, θ)`` only mixes the first
-    two columns (``Trans(0, 0, d)`` adds ``d`` times the third to the fourth),
-    and ``cur · K̄_i`` with a constant ``K̄_i`` is one ``(4, 4) @ (4, 3m)``
-    matrix product instead of ``m`` small ones (several times faster for
-    100,000 poses; equal up to round-off).
+    The same products as the robot-batch path of :func:`link_frames`, arranged
+    for large batches, and the path of one robot's poses at every batch size
+    (callers split large batches into :func:`soa_blocks`), so a pose gives the
+    same bits alone as in a batch. A frame is stored as its columns
+    ``(4, 3, m)`` (top three rows; the fourth is ``[0, 0, 0, 1]``), batch axis
+    last: ``cur · Rot(z, θ)`` only mixes the first two columns
+    (``Trans(0, 0, d)`` adds ``d`` times the third to the fourth), and
+    ``cur · K̄_i`` with a constant ``K̄_i`` is one ``(4, 4) @ (4, 3m)`` matrix
+    product instead of ``m`` small ones (several times faster for 100,000
+    poses; equal up to round-off). Cosines and sines come from
+    :func:`_cos_sin`.
 
     Parameters
     ----------
@@ -318,26 +296,34 @@ def frames_soa(
     n = chain.n_joints
     qq = (q - np.asarray(chain.joint_offsets)).T  # (n, m)
     m = qq.shape[1]
-    c, s = _cos_sin(qq)
-    cols = list(columns)
-    out = np.empty((n + 1, len(cols), 3, m))
+    # A frame's columns as (4, 3m), the three rows side by side; cos and sin
+    # tiled to match, so one (4, 4) @ (4, 3m) product applies K̄_i.
+    c, s = (np.concatenate((v, v, v), axis=1) for v in _cos_sin(qq))
+    a = columns[0] if columns else 0
+    contiguous = columns == tuple(range(a, a + len(columns)))
+    cols: slice | list[int] = slice(a, a + len(columns)) if contiguous else list(columns)
+    out = np.empty((n + 1, len(columns), 3 * m))
     cur = np.empty((4, 3, m))
     cur[:] = chain.base[:3].T[:, :, None]
-    out[0] = cur[cols]
-    for i in range(n):
-        if chain.prismatic[i]:  # Eq. (5.3): cur · Trans(0, 0, q_i − q0_i)
-            cur[3] += qq[i] * cur[2]
+    cur = cur.reshape(4, 3 * m)
+    links_t, prismatic = chain.soa_constants
+    for i, (L_t, ci, si) in enumerate(zip(links_t, c, s, strict=True)):
+        if columns:
+            out[i] = cur[cols]
+        if prismatic[i]:  # Eq. (5.3): cur · Trans(0, 0, q_i − q0_i)
+            cur[3] += np.concatenate((qq[i], qq[i], qq[i])) * cur[2]
         else:  # Eq. (5.2): cur · Rot(z, q_i − q0_i)
             x, y = cur[0], cur[1]
-            sx = s[i] * x
-            x *= c[i]
-            x += s[i] * y
-            y *= c[i]
+            sx = si * x
+            x *= ci
+            x += si * y
+            y *= ci
             y -= sx
-        cur = (chain.links[i].T @ cur.reshape(4, -1)).reshape(4, 3, m)  # Eq. (5.1)
-        if cols:
-            np.take(cur, cols, axis=0, out=out[i + 1])
-    return out, (chain.tool.T @ cur.reshape(4, -1)).reshape(4, 3, m)
+        cur = L_t @ cur  # Eq. (5.1)
+    if columns:
+        out[n] = cur[cols]
+    tool = chain.tool.T @ cur
+    return out.reshape(n + 1, len(columns), 3, m), tool.reshape(4, 3, m)
 
 
 def forward_kinematics(chain: SerialChain, q: ArrayLike) -> Array:
@@ -353,7 +339,7 @@ def forward_kinematics(chain: SerialChain, q: ArrayLike) -> Array:
     T : ndarray, shape (..., 4, 4)
     """
     qq = np.asarray(q, float)
-    if use_soa(chain, qq):
+    if is_single_robot(chain):
         q2 = qq.reshape(-1, chain.n_joints)
         out = np.empty((q2.shape[0], 4, 4))
         for block in soa_blocks(q2.shape[0]):

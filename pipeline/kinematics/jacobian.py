@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.kinematics.chain import SerialChain, frames_soa, link_frames, soa_blocks, use_soa
+from pipeline.kinematics.chain import (
+    SerialChain,
+    frames_soa,
+    is_single_robot,
+    link_frames,
+    soa_blocks,
+)
 from pipeline.kinematics.transforms import Array, ArrayLike, cross3
 
 
@@ -46,7 +52,7 @@ def pose_and_jacobian(chain: SerialChain, q: ArrayLike) -> tuple[Array, Array]:
     """
     qq = np.asarray(q, float)
     n = chain.n_joints
-    if use_soa(chain, qq):
+    if is_single_robot(chain):
         return _pose_and_jacobian_soa(chain, qq)
     Fr = link_frames(chain, qq)
     z = Fr[..., :n, :3, 2]
@@ -63,19 +69,31 @@ def _pose_and_jacobian_soa(chain: SerialChain, q: Array) -> tuple[Array, Array]:
     n = chain.n_joints
     q2 = q.reshape(-1, n)
     m = q2.shape[0]
-    T = np.empty((m, 4, 4))
-    J = np.empty((m, 6, n))
-    for block in soa_blocks(m):
-        F, tool = frames_soa(chain, q2[block], columns=(2, 3))
-        z, p = F[:n, 0].swapaxes(0, 1), F[:n, 1].swapaxes(0, 1)  # (3, n, k): axes, origins
-        Jb = np.empty((6, *z.shape[1:]))
-        Jb[:3] = cross3(z, tool[3][:, None] - p, axis=-3)
-        Jb[3:] = z
-        if chain.motion_basis[2]:  # prismatic columns are [z_i; 0]
-            Jb[:3, chain.prismatic] = z[:, chain.prismatic]
-            Jb[3:, chain.prismatic] = 0.0
-        T[block, :3, :] = np.moveaxis(tool, (-1, 0), (0, -1))
-        J[block] = Jb.reshape(6 * n, -1).T.reshape(-1, 6, n)  # to the batch-first layout
-    T[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
+    blocks = soa_blocks(m)
+    if len(blocks) == 1:
+        T, J = _pose_and_jacobian_block(chain, q2)
+    else:
+        T, J = np.empty((m, 4, 4)), np.empty((m, 6, n))
+        for block in blocks:
+            T[block], J[block] = _pose_and_jacobian_block(chain, q2[block])
     batch = q.shape[:-1]
     return T.reshape(*batch, 4, 4), J.reshape(*batch, 6, n)
+
+
+def _pose_and_jacobian_block(chain: SerialChain, q: Array) -> tuple[Array, Array]:
+    """Poses (k, 4, 4) and Jacobians (k, 6, n) of one block of poses ``q`` (k, n)."""
+    n = chain.n_joints
+    F, tool = frames_soa(chain, q, columns=(2, 3))
+    z, p = F[:n, 0].swapaxes(0, 1), F[:n, 1].swapaxes(0, 1)  # (3, n, k): axes, origins
+    J = np.empty((6, n, q.shape[0]))
+    J[:3] = cross3(z, tool[3][:, None] - p, axis=-3)
+    J[3:] = z
+    if chain.motion_basis[2]:  # prismatic columns are [z_i; 0]
+        J[:3, chain.prismatic] = z[:, chain.prismatic]
+        J[3:, chain.prismatic] = 0.0
+    T = np.empty((q.shape[0], 4, 4))
+    T[:, :3, :] = tool.transpose(2, 1, 0)
+    T[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
+    # One transposing copy to the batch-first layout (a strided view would slow
+    # down every later gather and solve about as much as this copy costs).
+    return T, J.reshape(6 * n, -1).T.reshape(-1, 6, n)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.errors import KinematicsError
-from pipeline.kinematics.chain import SOA_BLOCK, soa_blocks
+from pipeline.kinematics.chain import soa_blocks
 from pipeline.kinematics.ik import DesignInverse
 from pipeline.kinematics.transforms import Array, ArrayLike, invert_transform
 from pipeline.robots import puma560
@@ -123,9 +123,9 @@ def puma_design_inverse(
     def inverse(T: Array, q_near: Array) -> Array:
         Tw = np.asarray(T, float)
         q_near = np.asarray(q_near, float)
-        if len(Tw) > SOA_BLOCK:  # in cache-sized blocks (as the forward kinematics)
-            parts = [inverse(Tw[b], q_near[b]) for b in soa_blocks(len(Tw))]
-            return np.concatenate(parts)
+        blocks = soa_blocks(len(Tw))
+        if len(blocks) > 1:  # in cache-sized blocks (as the forward kinematics)
+            return np.concatenate([inverse(Tw[b], q_near[b]) for b in blocks])
         if base_inv is not None:
             Tw = base_inv @ Tw
         if tool_inv is not None:
