@@ -296,9 +296,12 @@ def frames_soa(
     n = chain.n_joints
     qq = (q - np.asarray(chain.joint_offsets)).T  # (n, m)
     m = qq.shape[1]
-    # A frame's columns as (4, 3m), the three rows side by side; cos and sin
-    # tiled to match, so one (4, 4) @ (4, 3m) product applies K̄_i.
-    c, s = (np.concatenate((v, v, v), axis=1) for v in _cos_sin(qq))
+    # A frame's columns as (4, 3m), the three rows side by side, so one
+    # (4, 4) @ (4, 3m) product applies K̄_i; cos and sin tiled to match, as the
+    # factors of [x; y] and [y; x] in cur · Rot(z, θ) = [c x + s y; c y − s x].
+    c, s = _cos_sin(qq)
+    c_xy = np.concatenate((c, c, c, c, c, c), axis=1).reshape(n, 2, 3 * m)
+    s_yx = np.concatenate((s, s, s, -s, -s, -s), axis=1).reshape(n, 2, 3 * m)
     a = columns[0] if columns else 0
     contiguous = columns == tuple(range(a, a + len(columns)))
     cols: slice | list[int] = slice(a, a + len(columns)) if contiguous else list(columns)
@@ -307,18 +310,13 @@ def frames_soa(
     cur[:] = chain.base[:3].T[:, :, None]
     cur = cur.reshape(4, 3 * m)
     links_t, prismatic = chain.soa_constants
-    for i, (L_t, ci, si) in enumerate(zip(links_t, c, s, strict=True)):
+    for i, L_t in enumerate(links_t):
         if columns:
             out[i] = cur[cols]
         if prismatic[i]:  # Eq. (5.3): cur · Trans(0, 0, q_i − q0_i)
             cur[3] += np.concatenate((qq[i], qq[i], qq[i])) * cur[2]
         else:  # Eq. (5.2): cur · Rot(z, q_i − q0_i)
-            x, y = cur[0], cur[1]
-            sx = si * x
-            x *= ci
-            x += si * y
-            y *= ci
-            y -= sx
+            np.add(c_xy[i] * cur[:2], s_yx[i] * cur[1::-1], out=cur[:2])
         cur = L_t @ cur  # Eq. (5.1)
     if columns:
         out[n] = cur[cols]
