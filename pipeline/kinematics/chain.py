@@ -233,10 +233,13 @@ def _link_frames_shared(chain: SerialChain, q: Array) -> Array:
     return out.reshape(*batch, n + 2, 4, 4)
 
 
-#: Poses per block of the column-major path: a block's frames (4 x 3 x 8192
-#: doubles, 0.8 MB) and temporaries stay in a 2 MB L2 cache. Measured for
-#: 100,000 poses: the pose and Jacobian 1.5-2x faster than in one pass.
-SOA_BLOCK = 8192
+#: Poses per block of the column-major path: a block's frames (4 x 3 x 4000
+#: doubles, 0.4 MB) and temporaries stay in a 2 MB L2 cache, and its (4, 4) @
+#: (4, 12000) products stay below OpenBLAS's threading threshold (with two
+#: threads on two shared cores they ran slower). Not a power of two: rows 2^k
+#: doubles apart alias in the cache. Measured for 100,000 poses and Jacobians:
+#: 25 ms in blocks of 4000, 33 ms of 4096, 37 ms of 8192, ~80 ms in one pass.
+SOA_BLOCK = 4000
 
 
 def soa_blocks(m: int) -> list[slice]:
