@@ -742,7 +742,8 @@ def _safeguard(
     trials = _trials(damping)[1:]  # [0] is the plain Newton step
     q_out = q.copy()
     todo = np.arange(q.shape[0])
-    svd: tuple[IntArray, Array, Array, Array] | None = None  # of the rows reaching λ > 0
+    # JᵀJ and Jᵀδ (unit-scaled) of the rows reaching a damped step, made once.
+    normal: tuple[IntArray, Array, Array] | None = None
     start = 0
     while todo.size and start < len(trials):
         # Several candidates per row in one forward-kinematics call while the
@@ -754,11 +755,12 @@ def _safeguard(
             if kind == "newton":  # shortened Newton step
                 dq = value * newton[todo]
             else:  # "lm": Levenberg-Marquardt step, λ = value
-                if svd is None:
-                    svd = (todo, *_scaled_svd(J[todo], length))
-                at = np.searchsorted(svd[0], todo)
-                lam = np.full(todo.size, value)
-                dq = _damped_step(svd[1][at], svd[2][at], svd[3][at], d_scaled[todo], lam)
+                if normal is None:
+                    Js = J[todo] * _unit_weights(length)[:, None]
+                    Jst = Js.swapaxes(-1, -2)
+                    normal = (todo, Jst @ Js, (Jst @ d_scaled[todo, :, None])[..., 0])
+                at = np.searchsorted(normal[0], todo)
+                dq = _lm_step(normal[1][at], normal[2][at], value)
             steps.append(q[todo] + _cap_step(dq, limit))
         rows = np.tile(todo, len(chunk))  # candidate-major
         q_try = np.concatenate(steps)
@@ -771,6 +773,31 @@ def _safeguard(
         q_out[todo[found]] = q_try[first[found]]
         todo = todo[~found]
     return q_out
+
+
+def _lm_step(gram: Array, rhs: Array, lam: float) -> Array:
+    """Levenberg-Marquardt step ``(JᵀJ + λ² I)⁻¹ Jᵀ δ`` of the unit-scaled system.
+
+    Parameters
+    ----------
+    gram, rhs : ndarray, shapes (k, n, n), (k, n)
+        ``JᵀJ`` and ``Jᵀδ`` with J's and δ's position rows divided by the length
+        scale (see :func:`_scaled_svd`).
+    lam : float
+        Damping λ > 0. The safeguard's smallest, 1e-3, bounds the condition
+        number of ``JᵀJ + λ² I`` by ~1e7 (σ_max² ≲ 10 for the unit-scaled Puma
+        Jacobian), so the normal equations lose at most ~1e-9 of the step's
+        relative accuracy: immaterial for a trial step that is kept only if it
+        reduces the error.
+
+    Returns
+    -------
+    dq : ndarray, shape (k, n)
+        Equal to ``V diag(σ / (σ² + λ²)) Uᵀ δ`` of :func:`_damped_step`.
+    """
+    n = gram.shape[-1]
+    dq = np.linalg.solve(gram + lam**2 * np.eye(n), rhs[..., None])[..., 0]
+    return np.asarray(dq, float)
 
 
 #: Candidate poses the safeguard evaluates per forward-kinematics call: all
