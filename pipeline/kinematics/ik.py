@@ -567,8 +567,9 @@ def newton_raphson(
     Each iteration evaluates ``δ = differential_motion(T(q), T*)`` in base
     coordinates (as (5.4) defines it; Appendix C.1 steps 3-5 express it in tool
     coordinates instead, with the Jacobian to match) and the geometric Jacobian
-    ``J(q)`` (same base frame, rows ``v`` then ``ω``), solves ``J dq = δ`` by SVD
-    and sets ``q ← q + dq``. Where that Newton step does not reduce the error
+    ``J(q)`` (same base frame, rows ``v`` then ``ω``), solves ``J dq = δ`` by LU
+    (the SVD pseudo-inverse where J is singular or not square) and sets
+    ``q ← q + dq``. Where that Newton step does not reduce the error
     (far from the solution, or next to a singularity) a safeguard replaces it
     by a shorter or damped step (see ``damping``); steps never contain NaN.
     Targets stop independently (module docstring: stopping rule and status).
