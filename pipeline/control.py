@@ -16,7 +16,8 @@ signature's sensor frame with the base alignment stored in the signature file
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +27,7 @@ from pipeline.errors import ArmsigError
 from pipeline.kinematics.chain import SerialChain
 from pipeline.kinematics.ik import (
     ALL_AXES,
+    DesignInverse,
     IKResult,
     controllable_axes,
     jacobi_iterative,
@@ -66,10 +68,39 @@ class Controller:
         sig = load_signature(Path(session_dir) / "signature.json")
         return cls(sig, sig.robot, sig.sensor_from_design_base, sig.design_flange_to_tool)
 
-    @property
+    @cached_property
     def resolution(self) -> np.ndarray:
         """Encoder resolution in math units (rad / cm), shape (n,)."""
         return joints_to_internal(self.robot.encoder_resolution, self.robot.prismatic)
+
+    @cached_property
+    def _limits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Lower and upper joint limits (rad / cm) and the 2π turn of each joint (0: prismatic)."""
+        return _limit_arrays(self.robot)
+
+    @cached_property
+    def _design_inverses(self) -> dict[tuple[Any, bool], DesignInverse]:
+        """Puma design inverses by (branch, for Jacobi), made on first use."""
+        return {}
+
+    def _design_inverse(self, branch, jacobi: bool = False) -> DesignInverse:  # branch: Branch
+        """The Puma design inverse on ``branch`` (the initial estimate's clamp margins, or
+        the Jacobi iteration's), in the sensor frame."""
+        inv = self._design_inverses.get((branch, jacobi))
+        if inv is None:
+            from pipeline.robots import puma560_control as pc
+
+            inv = pc.puma_design_inverse(
+                branch,
+                tool=self.flange_to_tool,
+                base=self.sensor_from_base,
+                elbow_margin_rad=pc.JACOBI_ELBOW_MARGIN_RAD if jacobi else pc.PUMA_ELBOW_MARGIN_RAD,
+                shoulder_margin_cm=(
+                    pc.JACOBI_SHOULDER_MARGIN_CM if jacobi else pc.PUMA_SHOULDER_MARGIN_CM
+                ),
+            )
+            self._design_inverses[branch, jacobi] = inv
+        return inv
 
     def _design_in_sensor(self) -> SerialChain:
         d = self.robot.design_chain()
@@ -91,16 +122,9 @@ class Controller:
         """q⁰: closed-form design inverse on ``branch`` (Puma) or damped least squares."""
         m = T_sensor.shape[0]
         q_sig = np.asarray(self.signature.chain.joint_offsets, float)
-        qs = np.broadcast_to(q_sig, (m, self.robot.n_joints)).copy()
+        qs = np.broadcast_to(q_sig, (m, self.robot.n_joints))
         if self.robot.name == "puma560":
-            from pipeline.robots.puma560_control import puma_design_inverse
-
-            inv = puma_design_inverse(
-                branch or self.default_branch(),
-                tool=self.flange_to_tool,
-                base=self.sensor_from_base,
-            )
-            return inv(T_sensor, qs)
+            return self._design_inverse(branch or self.default_branch())(T_sensor, qs)
         design = self._design_in_sensor()
         res = newton_raphson(design, T_sensor, qs, self.resolution, max_iter=100, damping=1e-2)
         return res.q
@@ -140,15 +164,7 @@ class Controller:
                 f"{self.robot.name}: Jacobi iteration needs a closed-form design inverse",
                 fix="use --method nr",
             )
-        from pipeline.robots import puma560_control as pc
-
-        inv = pc.puma_design_inverse(
-            branch,
-            tool=self.flange_to_tool,
-            base=self.sensor_from_base,
-            elbow_margin_rad=pc.JACOBI_ELBOW_MARGIN_RAD,
-            shoulder_margin_cm=pc.JACOBI_SHOULDER_MARGIN_CM,
-        )
+        inv = self._design_inverse(branch, jacobi=True)
         res = jacobi_iterative(
             self.signature.chain,
             self._design_in_sensor(),
@@ -161,7 +177,8 @@ class Controller:
         return self._into_limits(res)
 
     def _into_limits(self, res: IKResult) -> IKResult:
-        return replace(res, q=into_limits(self.robot, res.q))
+        _shift_into(res.q, *self._limits)  # the solver's own array
+        return res
 
     def _solve_task_axes(
         self, T_base: np.ndarray, branch, axes: tuple[int, ...], record_history: bool
@@ -210,14 +227,27 @@ def task_axes_for(robot: RobotDescription) -> tuple[int, ...]:
 
 def into_limits(robot: RobotDescription, q: np.ndarray) -> np.ndarray:
     """Revolute joints (m, n) in rad shifted by ±2π where that brings them inside the limits."""
-    lim = joints_to_internal(robot.limits.T, robot.prismatic).T  # (n, 2)
     out = np.array(q, float)
-    for shift in (2.0 * np.pi, -2.0 * np.pi):
-        moved = out + np.where(robot.prismatic, 0.0, shift)
-        inside = (moved >= lim[:, 0]) & (moved <= lim[:, 1])
-        outside = (out < lim[:, 0]) | (out > lim[:, 1])
-        out = np.where(inside & outside, moved, out)
+    _shift_into(out, *_limit_arrays(robot))
     return out
+
+
+def _limit_arrays(robot: RobotDescription) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lower and upper limits (n,) in rad / cm, and the turn (n,): 2π, or 0 for prismatic joints."""
+    lower, upper = joints_to_internal(robot.limits.T, robot.prismatic)
+    return lower, upper, np.where(robot.prismatic, 0.0, 2.0 * np.pi)
+
+
+def _shift_into(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, turn: np.ndarray) -> None:
+    """:func:`into_limits` in place on ``q`` (m, n), with the limits of :func:`_limit_arrays`."""
+    outside = (q < lower) | (q > upper)
+    if not np.count_nonzero(outside):  # the common case
+        return
+    for shift in (turn, -turn):
+        moved = q + shift
+        take = outside & (moved >= lower) & (moved <= upper)
+        np.copyto(q, moved, where=take)
+        outside &= ~take
 
 
 def solve_poses(

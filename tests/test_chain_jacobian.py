@@ -124,3 +124,24 @@ def test_cross3_equals_numpy_cross(rng) -> None:
     a, b = rng.normal(size=(2, 3, 4, 3, 3))
     for axis in (-1, -2, -4):  # the axes of length 3
         np.testing.assert_array_equal(cross3(a, b, axis), np.cross(a, b, axis=axis))
+
+
+@pytest.mark.parametrize("prismatic", [[0, 0, 0, 0, 0, 0], [0, 1, 0, 0, 1, 0]])
+def test_one_pose_gives_the_same_bits_as_in_a_batch(rng, monkeypatch, prismatic) -> None:
+    """One robot's poses take the column-major path at every batch size, in blocks:
+    a pose alone, in a batch and across blocks gives identical results (the IK's
+    batch-equals-loop property rests on this)."""
+    import pipeline.kinematics.chain as chain_module
+    from pipeline.kinematics.jacobian import pose_and_jacobian
+
+    monkeypatch.setattr(chain_module, "SOA_BLOCK", 7)  # 30 poses: 5 blocks
+    chain = _random_chain(rng, prismatic)
+    q = rng.uniform(-3.0, 3.0, (30, 6))
+    T, J = pose_and_jacobian(chain, q)
+    F, T_fk = link_frames(chain, q), forward_kinematics(chain, q)
+    for k in range(30):
+        T1, J1 = pose_and_jacobian(chain, q[k])
+        np.testing.assert_array_equal(T1, T[k])
+        np.testing.assert_array_equal(J1, J[k])
+        np.testing.assert_array_equal(link_frames(chain, q[k]), F[k])
+        np.testing.assert_array_equal(forward_kinematics(chain, q[k]), T_fk[k])

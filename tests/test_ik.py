@@ -218,7 +218,10 @@ def test_noiseless_from_perturbed_start(rng) -> None:
 
 
 @pytest.mark.parametrize("method", ["nr", "ji"])
-def test_batch_equals_loop(rng, method) -> None:
+def test_batch_equals_loop(rng, monkeypatch, method) -> None:
+    import pipeline.kinematics.chain as chain_module
+
+    monkeypatch.setattr(chain_module, "SOA_BLOCK", 8)  # the batch in blocks, as 100,000 are
     sig = P.simulator_chain(_eps(rng))
     q = rng.uniform(LIM[:, 0], LIM[:, 1], (25, 6))
     T = forward_kinematics(sig, q)

@@ -218,21 +218,25 @@ def _prepare(
             "bad target poses", expected="shape (m, 4, 4) or (4, 4)", got=f"shape {T.shape}"
         )
     m, n = T.shape[0], chain.n_joints
-    q = np.asarray(q0, float)
-    if q.ndim == 1:
-        q = np.broadcast_to(q, (m, q.shape[0]))
-    if q.shape != (m, n):
+    q_start = np.asarray(q0, float)
+    if q_start.shape not in ((n,), (m, n)):
         raise KinematicsError(
-            "bad start configurations", expected=f"shape ({m}, {n}) or ({n},)", got=f"{q.shape}"
+            "bad start configurations",
+            expected=f"shape ({m}, {n}) or ({n},)",
+            got=f"{q_start.shape}",
         )
-    if not (np.isfinite(T).all() and np.isfinite(q).all()):
+    q = np.empty((m, n))
+    q[...] = q_start
+    if np.count_nonzero(np.isfinite(T)) < T.size or np.count_nonzero(np.isfinite(q)) < q.size:
         raise KinematicsError(
             "non-finite target pose or start configuration",
             fix="replace NaN rows (e.g. where the design inverse is unreachable) "
             "by a finite guess such as the home configuration",
         )
-    res = np.broadcast_to(np.asarray(resolution, float), (n,)).copy()
-    if not (res > 0).all():
+    res = np.asarray(resolution, float)
+    if res.shape != (n,):
+        res = np.broadcast_to(res, (n,))
+    if np.count_nonzero(res > 0) < n:
         raise KinematicsError("encoder resolution must be positive", got=repr(res))
     parts = (("links", chain.links, 3), ("base", chain.base, 2), ("tool", chain.tool, 2))
     for name, arr, core in parts:
@@ -242,7 +246,7 @@ def _prepare(
                 expected=f"no batch or a batch of 1 or {m}",
                 got=f"shape {arr.shape}",
             )
-    return T, q.copy(), res
+    return T, q, res
 
 
 def _take(chain: SerialChain, rows: IntArray, m: int) -> SerialChain:
@@ -265,22 +269,14 @@ def _take(chain: SerialChain, rows: IntArray, m: int) -> SerialChain:
     )
 
 
-def _length_scale(chain: SerialChain) -> float:
-    """Characteristic length (cm): total length of the link and tool translations.
-
-    Dividing the position rows of the Jacobian and of δ by it makes cm and rad
-    commensurate for the singular-value tests and the damping. It does not
-    change a full-rank Newton step of a 6-joint arm.
-    """
-    lengths = np.linalg.norm(chain.links[..., :3, 3], axis=-1).sum(axis=-1)
-    total = np.max(lengths + np.linalg.norm(chain.tool[..., :3, 3], axis=-1))
-    return max(float(total), 1.0)
+def _unit_weights(length: float) -> Array:
+    """Row weights ``[1/L, 1/L, 1/L, 1, 1, 1]`` that make δ and J unit-scaled."""
+    return np.array([1.0 / length] * 3 + [1.0] * 3)
 
 
 def _scaled_svd(J: Array, length: float) -> tuple[Array, Array, Array]:
     """SVD of the Jacobian with its position rows divided by ``length``."""
-    w = np.array([1.0 / length] * 3 + [1.0] * 3)
-    U, s, Vt = np.linalg.svd(J * w[:, None], full_matrices=False)
+    U, s, Vt = np.linalg.svd(J * _unit_weights(length)[:, None], full_matrices=False)
     return U, s, Vt
 
 
@@ -330,31 +326,52 @@ def _trials(damping: float) -> list[tuple[str, float]]:
     return out
 
 
-def _cap_step(dq: Array, prismatic: ArrayLike, max_step: float, length: float) -> Array:
-    """Scale each step so no revolute increment exceeds ``max_step`` rad.
+def _cap_step(dq: Array, limit: Array | float) -> Array:
+    """Scale each step so no increment exceeds its ``limit`` (n,).
 
-    Prismatic increments are compared with ``max_step · length`` cm. Far from the
-    solution (or at a singularity) the linearisation is poor and a full step can
-    throw the iterate onto another branch; a uniform scale keeps its direction.
+    The limit is ``max_step`` rad for a revolute joint and ``max_step · length``
+    cm for a prismatic one (:func:`_step_limit`). Far from the solution (or at a
+    singularity) the linearisation is poor and a full step can throw the
+    iterate onto another branch; a uniform scale keeps its direction.
     """
-    limit = np.where(prismatic, max_step * length, max_step)
-    worst = np.max(np.abs(dq) / limit, axis=-1)
+    size = np.abs(dq)
+    if np.count_nonzero(size <= limit) == size.size:  # the common case: nothing to scale
+        return dq
+    worst = np.max(size / limit, axis=-1)
     capped: Array = dq / np.maximum(worst, 1.0)[:, None]
     return capped
 
 
-def _scaled_error(delta: Array, length: float) -> Array:
-    """Scalar pose error ``|dp| / length + |rotation|`` of δ vectors (..., 6)."""
-    p, r = _errors(delta)
-    return p / length + r
+def _step_limit(chain: SerialChain, max_step: float, length: float) -> Array | float:
+    """Per-joint step limits (n,) of :func:`_cap_step`: rad, or cm for prismatic joints
+    (one number for a chain of revolute joints)."""
+    if not chain.motion_basis[2]:
+        return max_step
+    return np.where(chain.prismatic, max_step * length, max_step)
 
 
-def _errors(delta: Array) -> tuple[Array, Array]:
-    """Radial position error (cm) and rotation angle (rad) of δ vectors (..., 6)."""
-    return np.linalg.norm(delta[..., :3], axis=-1), np.linalg.norm(delta[..., 3:], axis=-1)
+def _errors(delta: Array) -> Array:
+    """Radial position error (cm) and rotation angle (rad) of δ vectors (..., 6), as (..., 2)."""
+    out: Array = np.sqrt((delta * delta) @ _HALVES)  # a product: numpy sums short axes slowly
+    return out
 
 
-StepFn = Callable[[IntArray, Array, Array], tuple[Array, BoolArray, Array, Array, BoolArray]]
+#: Sums of δ's position and rotation components: ``δ² @ _HALVES``.
+_HALVES = np.repeat(np.eye(2), 3, axis=0)
+
+
+def _scaled_error(errors: Array, length: float) -> Array:
+    """Scalar pose error ``|dp| / length + |rotation|`` from :func:`_errors` (..., 2)."""
+    out: Array = errors @ np.array((1.0 / length, 1.0))
+    return out
+
+
+#: ``step(rows, q, δ, e) -> (q_next, ok, increment, δ_next, errors_next, may_stall)``
+#: (see :func:`_iterate`); ``ok`` or ``may_stall`` None: all rows.
+StepFn = Callable[
+    [IntArray, Array, Array, Array],
+    tuple[Array, BoolArray | None, Array, Array, Array, BoolArray | None],
+]
 
 
 def _iterate(
@@ -368,20 +385,26 @@ def _iterate(
     position_tol_cm: float | None,
     orientation_tol_rad: float | None,
     record_history: bool,
+    length: float,
     stall_patience: int = 1,
     task_axes: tuple[int, ...] = ALL_AXES,
 ) -> IKResult:
     """Shared loop: apply ``step`` to the active targets until each one stops.
 
-    ``delta`` is δ⁰ = ``differential_motion(T(q0), T*)``, shape (m, 6).
-    ``step(rows, q_rows, delta_rows)`` returns the next iterate of those rows, a
-    mask of rows for which it exists (False: unreachable for the method), the
+    ``delta`` is δ⁰ = ``differential_motion(T(q0), T*)``, shape (m, 6); ``length``
+    the chain's :attr:`~pipeline.kinematics.chain.SerialChain.length_scale`.
+    ``step(rows, q_rows, delta_rows, e_rows)`` gets the active rows (sorted; a
+    subset of the previous call's), their iterates, δ and scaled errors
+    (:func:`_scaled_error`), and returns the next iterate of those rows, a mask
+    of rows for which it exists (False: unreachable for the method), the
     method's own increment (the Newton step ``J⁻¹ δ`` of (5.4), the Jacobi step
-    of (5.8)), which the encoder rule tests, δ at the next iterate, and a mask
-    of rows that may be declared stalled (False while the method still has a
-    remedy to try). The increments differ from the step taken only where a
-    safeguard replaced the method's step: a short safeguard step says nothing
-    about being near the solution.
+    of (5.8)), which the encoder rule tests, δ at the next iterate and its
+    :func:`_errors`, and a mask of rows that may be declared stalled (False
+    while the method still has a remedy to try); either mask None stands for
+    all rows. The increments differ from the
+    step taken only where a safeguard replaced the method's step: a short
+    safeguard step says nothing about being near the solution. ``step`` must
+    not modify its arguments.
 
     A target *stalls* (unreachable) when, in ``stall_patience`` consecutive
     iterations, the step actually taken is below one encoder count, the error
@@ -390,47 +413,60 @@ def _iterate(
     test uses the selected Jacobian rows only.
     """
     m = T.shape[0]
-    length = _length_scale(chain)
-    tol_cm = np.inf if position_tol_cm is None else position_tol_cm
-    tol_rad = np.inf if orientation_tol_rad is None else orientation_tol_rad
+    tol = np.array(
+        [
+            np.inf if position_tol_cm is None else position_tol_cm,
+            np.inf if orientation_tol_rad is None else orientation_tol_rad,
+        ]
+    )
+    status = np.full(m, STATUS_MAX_ITER, np.int64)
     iterations = np.zeros(m, np.int64)
-    converged = np.zeros(m, bool)
-    unreachable = np.zeros(m, bool)
-    active = np.ones(m, bool)
+    # The active targets (sorted) and their state; q and delta receive a
+    # target's final state when it stops.
+    rows = np.arange(m)
+    q_a, d_a = q, delta
+    e_a = _scaled_error(_errors(delta), length)
     idle = np.zeros(m, np.int64)  # consecutive iterations without progress
-    hist_q, hist_d = [q.copy()], [delta.copy()]
-    for _ in range(max_iter):
-        rows = np.flatnonzero(active)
-        if rows.size == 0:
-            break
-        q_next, ok, nominal, d_new, may_stall = step(rows, q[rows], delta[rows])
-        unreachable[rows[~ok]] = True
-        active[rows[~ok]] = False
-        rows, q_next, nominal, d_new = rows[ok], q_next[ok], nominal[ok], d_new[ok]
-        may_stall = may_stall[ok]
-        dq = q_next - q[rows]
-        q[rows] = q_next
-        iterations[rows] += 1
-        e_old = _scaled_error(delta[rows], length)
-        p_new, r_new = _errors(d_new)
-        delta[rows] = d_new
-        small = np.all(np.abs(nominal) < res, axis=-1)  # Appendix C.1 step 8
-        accurate = (p_new <= tol_cm) & (r_new <= tol_rad)
-        progress = p_new / length + r_new < STALL_RATIO * e_old
+    hist_q, hist_d = ([q.copy()], [delta.copy()]) if record_history else ([], [])
+    done_iterations = 0
+    while done_iterations < max_iter and rows.size:
+        q_next, ok, nominal, d_new, err_new, may_stall = step(rows, q_a, d_a, e_a)
+        # (np.count_nonzero: the cheapest whole-array test on a few rows)
+        if ok is not None and np.count_nonzero(ok) < ok.size:  # unreachable, at its last q
+            gone, keep = rows[~ok], ok
+            q[gone], delta[gone], iterations[gone] = q_a[~ok], d_a[~ok], done_iterations
+            status[gone] = STATUS_UNREACHABLE
+            rows, q_a, e_a, idle = rows[keep], q_a[keep], e_a[keep], idle[keep]
+            q_next, nominal, d_new = q_next[keep], nominal[keep], d_new[keep]
+            err_new = err_new[keep]
+            may_stall = None if may_stall is None else may_stall[keep]
+        done_iterations += 1
+        e_new = _scaled_error(err_new, length)
+        small = (np.abs(nominal) < res).all(axis=-1)  # Appendix C.1 step 8
+        accurate = (err_new <= tol).all(axis=-1)
         done = small & accurate
-        no_progress = np.all(np.abs(dq) < res, axis=-1) & ~accurate & ~progress & may_stall
-        idle[rows] = np.where(no_progress, idle[rows] + 1, 0)
-        stalled = idle[rows] >= stall_patience
-        converged[rows[done]] = True
-        unreachable[rows[stalled]] = True
-        active[rows[done | stalled]] = False
+        stuck = ~(accurate | (e_new < STALL_RATIO * e_a))
+        if may_stall is not None:
+            stuck &= may_stall
+        if np.count_nonzero(stuck):  # and the step taken is below one count: no progress
+            stuck &= (np.abs(q_next - q_a) < res).all(axis=-1)
+        idle = (idle + 1) * stuck
+        stalled = idle >= stall_patience
+        q_a, d_a, e_a = q_next, d_new, e_new
+        stop = done | stalled
+        if np.count_nonzero(stop):
+            fin = rows[stop]
+            q[fin], delta[fin], iterations[fin] = q_a[stop], d_a[stop], done_iterations
+            status[rows[stalled]] = STATUS_UNREACHABLE
+            status[rows[done]] = STATUS_CONVERGED
+            keep = ~stop
+            rows, q_a, d_a, e_a, idle = rows[keep], q_a[keep], d_a[keep], e_a[keep], idle[keep]
         if record_history:
             hist_q.append(q.copy())
             hist_d.append(delta.copy())
+            hist_q[-1][rows], hist_d[-1][rows] = q_a, d_a
+    q[rows], delta[rows], iterations[rows] = q_a, d_a, done_iterations
 
-    status = np.full(m, STATUS_MAX_ITER, np.int64)
-    status[converged] = STATUS_CONVERGED
-    status[unreachable] = STATUS_UNREACHABLE
     left = np.flatnonzero(status == STATUS_MAX_ITER)
     if left.size:
         _, mask = _task_mask(task_axes)
@@ -438,18 +474,20 @@ def _iterate(
         rank = min(len(task_axes), chain.n_joints)  # the masked rows add zero singular values
         s_min = _scaled_svd(J, length)[1][:, rank - 1]
         status[left[s_min < SINGULAR_SIGMA]] = STATUS_SINGULAR
-    pos, rot = _errors(delta)  # |dp| and the rotation angle of the final pose error
+    errors = _errors(delta)  # |dp| and the rotation angle of the final pose error
     history = None
     if record_history:
         hq, hd = np.stack(hist_q), np.stack(hist_d)
-        hp, hr = _errors(hd)
-        history = IKHistory(q=hq, delta=hd, position_error_cm=hp, orientation_error_rad=hr)
+        he = _errors(hd)
+        history = IKHistory(
+            q=hq, delta=hd, position_error_cm=he[..., 0], orientation_error_rad=he[..., 1]
+        )
     return IKResult(
         q=q,
         converged=status == STATUS_CONVERGED,
         iterations=iterations,
-        position_error_cm=pos,
-        orientation_error_rad=rot,
+        position_error_cm=errors[:, 0],
+        orientation_error_rad=errors[:, 1],
         status=status,
         history=history,
         task_axes=task_axes,
@@ -529,8 +567,9 @@ def newton_raphson(
     Each iteration evaluates ``δ = differential_motion(T(q), T*)`` in base
     coordinates (as (5.4) defines it; Appendix C.1 steps 3-5 express it in tool
     coordinates instead, with the Jacobian to match) and the geometric Jacobian
-    ``J(q)`` (same base frame, rows ``v`` then ``ω``), solves ``J dq = δ`` by SVD
-    and sets ``q ← q + dq``. Where that Newton step does not reduce the error
+    ``J(q)`` (same base frame, rows ``v`` then ``ω``), solves ``J dq = δ`` by LU
+    (the SVD pseudo-inverse where J is singular or not square) and sets
+    ``q ← q + dq``. Where that Newton step does not reduce the error
     (far from the solution, or next to a singularity) a safeguard replaces it
     by a shorter or damped step (see ``damping``); steps never contain NaN.
     Targets stop independently (module docstring: stopping rule and status).
@@ -586,28 +625,34 @@ def newton_raphson(
     T, q, res = _prepare(chain, T_target, q0, resolution)
     axes, mask = _task_mask(task_axes)
     m = T.shape[0]
-    length = _length_scale(chain)
-    T_q, J_cache = pose_and_jacobian(chain, q)  # Appendix C.1 steps 1-2 at q⁰
+    length = chain.length_scale
+    T_q, J_q = pose_and_jacobian(chain, q)  # Appendix C.1 steps 1-2 at q⁰
     delta0 = _masked(differential_motion(T_q, T), mask)
+    limit = _step_limit(chain, max_step, length)
+    # The rows of the last step, J(q^k) from the pass that evaluated q^k and
+    # their targets (the active rows only shrink, so they are found among them).
+    evaluated: list[tuple[IntArray, Array, Array]] = [(np.arange(m), J_q, T)]
 
     def step(
-        rows: IntArray, q_rows: Array, delta_rows: Array
-    ) -> tuple[Array, BoolArray, Array, Array, BoolArray]:
-        J = _masked_rows(J_cache[rows], mask)  # J(q^k), from the pass that evaluated q^k
-        e_old = _scaled_error(delta_rows, length)
+        rows: IntArray, q_rows: Array, delta_rows: Array, e_rows: Array
+    ) -> tuple[Array, BoolArray | None, Array, Array, Array, BoolArray | None]:
+        last_rows, J, T_rows = evaluated[0]
+        if rows.size != last_rows.size:
+            keep = np.searchsorted(last_rows, rows)
+            J, T_rows = J[keep], T_rows[keep]
+        J = _masked_rows(J, mask)
         newton = _newton_step(J, delta_rows, length)  # Eq. (5.4): J⁻¹ δ
-        q_try = q_rows + _cap_step(newton, chain.prismatic, max_step, length)  # C.1 step 7
-        T_try, J_try = pose_and_jacobian(_take(chain, rows, m), q_try)
-        d_out = _masked(differential_motion(T_try, T[rows]), mask)
-        better = _scaled_error(d_out, length) < e_old
-        q_out = np.where(better[:, None], q_try, q_rows)
-        J_cache[rows[better]] = J_try[better]
-        bad = np.flatnonzero(~better)
-        if bad.size:
+        q_out = q_rows + _cap_step(newton, limit)  # C.1 step 7
+        T_out, J_out = pose_and_jacobian(_take(chain, rows, m), q_out)
+        d_out = _masked(differential_motion(T_out, T_rows), mask)
+        err_out = _errors(d_out)
+        better = _scaled_error(err_out, length) < e_rows
+        if np.count_nonzero(better) < better.size:  # the Newton step did not descend
+            bad = np.flatnonzero(~better)
             sub = _take(chain, rows[bad], m)
             q_out[bad] = _safeguard(
                 sub,
-                T[rows[bad]],
+                T_rows[bad],
                 q_rows[bad],
                 delta_rows[bad],
                 J[bad],
@@ -616,10 +661,11 @@ def newton_raphson(
                 max_step,
                 mask,
             )
-            T_bad, J_cache[rows[bad]] = pose_and_jacobian(sub, q_out[bad])
-            d_out[bad] = _masked(differential_motion(T_bad, T[rows[bad]]), mask)
-        everything = np.ones(rows.size, bool)
-        return q_out, everything, newton, d_out, everything
+            T_bad, J_out[bad] = pose_and_jacobian(sub, q_out[bad])
+            d_out[bad] = _masked(differential_motion(T_bad, T_rows[bad]), mask)
+            err_out[bad] = _errors(d_out[bad])
+        evaluated[0] = rows, J_out, T_rows
+        return q_out, None, newton, d_out, err_out, None
 
     return _iterate(
         chain,
@@ -632,6 +678,7 @@ def newton_raphson(
         position_tol_cm,
         orientation_tol_rad,
         record_history,
+        length,
         task_axes=axes,
     )
 
@@ -647,14 +694,13 @@ def _newton_step(J: Array, delta: Array, length: float) -> Array:
     k, _, n = J.shape
     if n == 6 and k:
         try:
-            dq = np.asarray(np.linalg.solve(J, delta[..., None])[..., 0], float)
-            if np.isfinite(dq).all():
-                return dq
+            dq = np.linalg.solve(J, delta[..., None])[..., 0]
+            if np.count_nonzero(np.isfinite(dq)) == dq.size:
+                return np.asarray(dq, float)
         except np.linalg.LinAlgError:
             pass
     U, sv, Vt = _scaled_svd(J, length)
-    w = np.array([1.0 / length] * 3 + [1.0] * 3)
-    return _damped_step(U, sv, Vt, delta * w, np.zeros(k))
+    return _damped_step(U, sv, Vt, delta * _unit_weights(length), np.zeros(k))
 
 
 def _safeguard(
@@ -690,27 +736,76 @@ def _safeguard(
     -------
     q_next : ndarray, shape (k, n)
     """
-    length = _length_scale(chain)
-    U, sv, Vt = _scaled_svd(J, length)
-    d_scaled = delta * np.array([1.0 / length] * 3 + [1.0] * 3)
-    e_old = _scaled_error(delta, length)
+    length = chain.length_scale
+    limit = _step_limit(chain, max_step, length)
+    d_scaled = delta * _unit_weights(length)
+    e_old = _scaled_error(_errors(delta), length)
+    trials = _trials(damping)[1:]  # [0] is the plain Newton step
     q_out = q.copy()
     todo = np.arange(q.shape[0])
-    for kind, value in _trials(damping)[1:]:  # [0] is the plain Newton step
-        if kind == "newton":  # shortened Newton step
-            dq = value * newton[todo]
-        else:  # "lm": Levenberg-Marquardt step, λ = value
-            lam = np.full(todo.size, value)
-            dq = _damped_step(U[todo], sv[todo], Vt[todo], d_scaled[todo], lam)
-        q_try = q[todo] + _cap_step(dq, chain.prismatic, max_step, length)
-        T_try = forward_kinematics(_take(chain, todo, q.shape[0]), q_try)
-        d_try = _masked(differential_motion(T_try, T[todo]), mask)
-        better = _scaled_error(d_try, length) < e_old[todo]
-        q_out[todo[better]] = q_try[better]
-        todo = todo[~better]
-        if todo.size == 0:
-            break
+    # JᵀJ and Jᵀδ (unit-scaled) of the rows reaching a damped step, made once.
+    normal: tuple[IntArray, Array, Array] | None = None
+    start = 0
+    while todo.size and start < len(trials):
+        # Several candidates per row in one forward-kinematics call while the
+        # rows are few (per-call overhead), one at a time for many rows.
+        chunk = trials[start : start + max(1, SAFEGUARD_POSES // todo.size)]
+        start += len(chunk)
+        steps = []
+        for kind, value in chunk:
+            if kind == "newton":  # shortened Newton step
+                dq = value * newton[todo]
+            else:  # "lm": Levenberg-Marquardt step, λ = value
+                if normal is None:
+                    Js = J[todo] * _unit_weights(length)[:, None]
+                    Jst = Js.swapaxes(-1, -2)
+                    normal = (todo, Jst @ Js, (Jst @ d_scaled[todo, :, None])[..., 0])
+                at = np.searchsorted(normal[0], todo)
+                dq = _lm_step(normal[1][at], normal[2][at], value)
+            steps.append(q[todo] + _cap_step(dq, limit))
+        rows = np.tile(todo, len(chunk))  # candidate-major
+        q_try = np.concatenate(steps)
+        T_try = forward_kinematics(_take(chain, rows, q.shape[0]), q_try)
+        d_try = _masked(differential_motion(T_try, T[rows]), mask)
+        descends = _scaled_error(_errors(d_try), length) < e_old[rows]
+        descends = descends.reshape(len(chunk), todo.size)
+        found = descends.any(axis=0)
+        first = descends.argmax(axis=0) * todo.size + np.arange(todo.size)  # first that descends
+        q_out[todo[found]] = q_try[first[found]]
+        todo = todo[~found]
     return q_out
+
+
+def _lm_step(gram: Array, rhs: Array, lam: float) -> Array:
+    """Levenberg-Marquardt step ``(JᵀJ + λ² I)⁻¹ Jᵀ δ`` of the unit-scaled system.
+
+    Parameters
+    ----------
+    gram, rhs : ndarray, shapes (k, n, n), (k, n)
+        ``JᵀJ`` and ``Jᵀδ`` with J's and δ's position rows divided by the length
+        scale (see :func:`_scaled_svd`).
+    lam : float
+        Damping λ > 0. The safeguard's smallest, 1e-3, bounds the condition
+        number of ``JᵀJ + λ² I`` by ~1e7 (σ_max² ≲ 10 for the unit-scaled Puma
+        Jacobian), so the normal equations lose at most ~1e-9 of the step's
+        relative accuracy: immaterial for a trial step that is kept only if it
+        reduces the error.
+
+    Returns
+    -------
+    dq : ndarray, shape (k, n)
+        Equal to ``V diag(σ / (σ² + λ²)) Uᵀ δ`` of :func:`_damped_step`.
+    """
+    n = gram.shape[-1]
+    dq = np.linalg.solve(gram + lam**2 * np.eye(n), rhs[..., None])[..., 0]
+    return np.asarray(dq, float)
+
+
+#: Candidate poses the safeguard evaluates per forward-kinematics call: all
+#: remaining candidates of up to ~290 rows at once (the rows left to a
+#: safeguard are typically 50-150 of 100,000), one candidate at a time for
+#: more than 2048 rows.
+SAFEGUARD_POSES = 2048
 
 
 def jacobi_iterative(
@@ -795,13 +890,16 @@ def jacobi_iterative(
     count = np.zeros(m, np.int64)
     slow = np.zeros(m, bool)  # plain (5.8) stopped contracting: accelerate
 
+    length = signature_chain.length_scale
+
     def step(
-        rows: IntArray, q_rows: Array, delta_rows: Array
-    ) -> tuple[Array, BoolArray, Array, Array, BoolArray]:
+        rows: IntArray, q_rows: Array, delta_rows: Array, e_rows: Array
+    ) -> tuple[Array, BoolArray, Array, Array, Array, BoolArray]:
         sig = _take(signature_chain, rows, m)
         F_s = forward_kinematics(sig, q_rows)  # C.2 step 2
         F_d = forward_kinematics(_take(design_chain, rows, m), q_rows)  # C.2 step 3
-        Delta = invert_transform(F_s) @ T[rows]  # Eq. (5.9), C.2 step 4
+        T_rows = T if rows.size == m else T[rows]
+        Delta = invert_transform(F_s) @ T_rows  # Eq. (5.9), C.2 step 4
         T_k = F_d @ Delta  # Eq. (5.10), C.2 step 5
         q_next = np.asarray(design_inverse(T_k, q_rows), float)  # Eq. (5.8), C.2 step 6
         if q_next.shape != q_rows.shape:
@@ -812,12 +910,11 @@ def jacobi_iterative(
             )
         ok = np.isfinite(q_next).all(axis=-1)
         q_next = np.where(ok[:, None], q_next, q_rows)
-        d_next = differential_motion(forward_kinematics(sig, q_next), T[rows])
-        was_slow = slow[rows].copy()
+        d_next = differential_motion(forward_kinematics(sig, q_next), T_rows)
+        err_next = _errors(d_next)
+        was_slow = slow[rows]
         if depth:
-            length = _length_scale(signature_chain)
-            e_old = _scaled_error(delta_rows, length)
-            e_next = _scaled_error(d_next, length)
+            e_next = _scaled_error(err_next, length)
             Q_hist[rows] = np.roll(Q_hist[rows], -1, axis=1)
             G_hist[rows] = np.roll(G_hist[rows], -1, axis=1)
             Q_hist[rows, -1], G_hist[rows, -1] = q_rows, q_next
@@ -829,11 +926,13 @@ def jacobi_iterative(
                 d_acc = differential_motion(
                     forward_kinematics(_take(sig, acc, rows.size), q_acc), T[r]
                 )
-                take = _scaled_error(d_acc, length) < e_next[acc]  # never worse than (5.8)
+                err_acc = _errors(d_acc)
+                take = _scaled_error(err_acc, length) < e_next[acc]  # never worse than (5.8)
                 q_next[acc[take]] = q_acc[take]
                 d_next[acc[take]] = d_acc[take]
-            slow[rows] |= e_next > JACOBI_SLOW_RATIO * e_old
-        return q_next, ok, q_next - q_rows, d_next, was_slow | (depth == 0)
+                err_next[acc[take]] = err_acc[take]
+            slow[rows] |= e_next > JACOBI_SLOW_RATIO * e_rows
+        return q_next, ok, q_next - q_rows, d_next, err_next, was_slow | (depth == 0)
 
     return _iterate(
         signature_chain,
@@ -846,6 +945,7 @@ def jacobi_iterative(
         position_tol_cm,
         orientation_tol_rad,
         record_history,
+        length,
         stall_patience=JACOBI_STALL_PATIENCE,
     )
 
@@ -890,7 +990,7 @@ def controllable_axes(chain: SerialChain, q: ArrayLike) -> tuple[int, ...]:
         two-joint arm that moves x, y and z): choose ``task_axes`` by hand.
     """
     J = geometric_jacobian(chain, np.atleast_2d(np.asarray(q, float)))
-    w = np.array([1.0 / _length_scale(chain)] * 3 + [1.0] * 3)
+    w = _unit_weights(chain.length_scale)
     size = np.abs(J * w[:, None]).max(axis=(0, 2))  # (6,): largest entry of each row
     live = tuple(int(i) for i in np.flatnonzero(size > DEAD_ROW_FRACTION * size.max()))
     n = chain.n_joints

@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.kinematics.chain import SerialChain, frames_soa, link_frames
+from pipeline.kinematics.chain import (
+    SerialChain,
+    frames_soa,
+    is_single_robot,
+    link_frames,
+    soa_blocks,
+)
 from pipeline.kinematics.transforms import Array, ArrayLike, cross3
 
 
@@ -46,26 +52,48 @@ def pose_and_jacobian(chain: SerialChain, q: ArrayLike) -> tuple[Array, Array]:
     """
     qq = np.asarray(q, float)
     n = chain.n_joints
-    pris = chain.prismatic[:, None]
-    if chain.links.ndim == 3 and chain.base.ndim == 2 and chain.tool.ndim == 2:
-        F, tool = frames_soa(chain, qq.reshape(-1, n), columns=(2, 3))
-        z, p = F[:n, 0], F[:n, 1]  # (n, 3, m): joint axes and origins
-        lin_rev = cross3(z, tool[3][None] - p, axis=-2)
-        J_soa = np.concatenate(
-            [np.where(pris[..., None], z, lin_rev), np.where(pris[..., None], 0.0, z)], 1
-        )
-        m = tool.shape[-1]
-        T = np.zeros((m, 4, 4))
-        T[:, :3, :] = np.moveaxis(tool, (-1, 0), (0, -1))
-        T[:, 3, 3] = 1.0
-        J = np.ascontiguousarray(np.moveaxis(J_soa, (-1, 0), (0, -1)))
-        return T.reshape(*qq.shape[:-1], 4, 4), J.reshape(*qq.shape[:-1], 6, n)
+    if is_single_robot(chain):
+        return _pose_and_jacobian_soa(chain, qq)
     Fr = link_frames(chain, qq)
     z = Fr[..., :n, :3, 2]
-    p = Fr[..., :n, :3, 3]
-    p_tool = Fr[..., n + 1, :3, 3]
-    lin_rev = cross3(z, p_tool[..., None, :] - p)
-    lin = np.where(pris, z, lin_rev)
-    ang = np.where(pris, 0.0, z)
-    J = np.concatenate([np.swapaxes(lin, -1, -2), np.swapaxes(ang, -1, -2)], axis=-2)
-    return Fr[..., n + 1, :, :], J
+    lin = cross3(z, Fr[..., n + 1, None, :3, 3] - Fr[..., :n, :3, 3])
+    if chain.motion_basis[2]:  # prismatic columns are [z_i; 0]
+        pris = chain.prismatic[:, None]
+        lin, z = np.where(pris, z, lin), np.where(pris, 0.0, z)
+    J = np.concatenate([lin, z], axis=-1)  # (..., n, 6)
+    return Fr[..., n + 1, :, :], J.swapaxes(-1, -2)
+
+
+def _pose_and_jacobian_soa(chain: SerialChain, q: Array) -> tuple[Array, Array]:
+    """:func:`pose_and_jacobian` from the column-major frames of :func:`frames_soa`."""
+    n = chain.n_joints
+    q2 = q.reshape(-1, n)
+    m = q2.shape[0]
+    blocks = soa_blocks(m)
+    if len(blocks) == 1:
+        T, J = _pose_and_jacobian_block(chain, q2)
+    else:
+        T, J = np.empty((m, 4, 4)), np.empty((m, 6, n))
+        for block in blocks:
+            T[block], J[block] = _pose_and_jacobian_block(chain, q2[block])
+    batch = q.shape[:-1]
+    return T.reshape(*batch, 4, 4), J.reshape(*batch, 6, n)
+
+
+def _pose_and_jacobian_block(chain: SerialChain, q: Array) -> tuple[Array, Array]:
+    """Poses (k, 4, 4) and Jacobians (k, 6, n) of one block of poses ``q`` (k, n)."""
+    n = chain.n_joints
+    F, tool = frames_soa(chain, q, columns=(2, 3))
+    z, p = F[:n, 0].swapaxes(0, 1), F[:n, 1].swapaxes(0, 1)  # (3, n, k): axes, origins
+    J = np.empty((6, n, q.shape[0]))
+    J[:3] = cross3(z, tool[3][:, None] - p, axis=-3)
+    J[3:] = z
+    if chain.motion_basis[2]:  # prismatic columns are [z_i; 0]
+        J[:3, chain.prismatic] = z[:, chain.prismatic]
+        J[3:, chain.prismatic] = 0.0
+    T = np.empty((q.shape[0], 4, 4))
+    T[:, :3, :] = tool.transpose(2, 1, 0)
+    T[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
+    # One transposing copy to the batch-first layout (a strided view would slow
+    # down every later gather and solve about as much as this copy costs).
+    return T, J.reshape(6 * n, -1).T.reshape(-1, 6, n)

@@ -143,18 +143,34 @@ def pose_error(T_desired: ArrayLike, T_actual: ArrayLike) -> tuple[Array, Array]
     return dp, np.arctan2(sin_t, cos_t)
 
 
+#: Components (y, z, x, y) of a 3-vector: slices [0:3] and [1:4] of them are the two
+#: cyclic shifts a cross product multiplies.
+_CYCLE = np.array([1, 2, 0, 1])
+
+#: Up to this many elements per operand, :func:`cross3` multiplies the two cyclic
+#: shifts (3 operations after 2 gathers); above it, component by component
+#: (9 operations on contiguous slices, ~3x faster for 10⁶ elements).
+_CROSS_SHIFT_MAX = 3000
+
+
 def cross3(a: Array, b: Array, axis: int = -1) -> Array:
     """Cross product of 3-vectors stored along ``axis`` (a negative axis).
 
-    Same as ``np.cross(a, b, axis=axis)`` for equal shapes, without its
-    per-call axis bookkeeping (which dominates for small stacks).
+    Same as ``np.cross(a, b, axis=axis)`` (the same products and differences),
+    without its per-call axis bookkeeping (which dominates for small stacks).
     """
     tail: tuple[slice, ...] = (slice(None),) * (-axis - 1)
+    if a.size <= _CROSS_SHIFT_MAX and b.size <= _CROSS_SHIFT_MAX:
+        lo: tuple[Any, ...] = (Ellipsis, slice(0, 3), *tail)
+        hi: tuple[Any, ...] = (Ellipsis, slice(1, 4), *tail)
+        aa, bb = a.take(_CYCLE, axis=axis), b.take(_CYCLE, axis=axis)
+        out: Array = aa[lo] * bb[hi] - aa[hi] * bb[lo]  # (a_y b_z − a_z b_y, ...)
+        return out
 
     def c(i: int, arr: Array) -> Array:
         index: tuple[Any, ...] = (Ellipsis, i, *tail)
-        out: Array = arr[index]
-        return out
+        comp: Array = arr[index]
+        return comp
 
     return np.stack(
         [
@@ -164,6 +180,11 @@ def cross3(a: Array, b: Array, axis: int = -1) -> Array:
         ],
         axis=axis,
     )
+
+
+#: Flat indices into a 3x3 matrix: R21, R02, R10, R12, R20, R01, R00, R11, R22.
+_SKEW_TRACE = np.array([7, 2, 3, 5, 6, 1, 0, 4, 8])
+_ONES3 = np.ones(3)
 
 
 def differential_motion(T_from: ArrayLike, T_to: ArrayLike) -> Array:
@@ -184,19 +205,20 @@ def differential_motion(T_from: ArrayLike, T_to: ArrayLike) -> Array:
     """
     Tf = np.asarray(T_from, float)
     Tt = np.asarray(T_to, float)
-    # R = R_to R_fromᵀ = Σ_k t_k f_kᵀ over the columns f_k, t_k of the two
-    # rotations, so its skew part is Σ_k f_k × t_k and its trace Σ_k f_k · t_k
-    # (no 3x3 product needed, which is slow for large stacks).
-    Rf, Rt = Tf[..., :3, :3], Tt[..., :3, :3]
-    skew = cross3(Rf, Rt, axis=-2).sum(axis=-1)
-    sin_t = np.linalg.norm(skew, axis=-1) / 2.0
-    cos_t = ((Rf * Rt).sum(axis=(-2, -1)) - 1.0) / 2.0
-    angle = np.arctan2(sin_t, cos_t)
-    # angle/sin(angle) -> 1 as angle -> 0; guard the division there.
-    with np.errstate(invalid="ignore", divide="ignore"):
-        scale = np.where(sin_t > 1e-12, angle / (2.0 * np.maximum(sin_t, 1e-300)), 0.5)
-    rot = skew * scale[..., None]
-    return np.concatenate([Tt[..., :3, 3] - Tf[..., :3, 3], rot], axis=-1)
+    R = Tt[..., :3, :3] @ Tf[..., :3, :3].swapaxes(-1, -2)  # R_to R_fromᵀ
+    # One gather: R21, R02, R10 | R12, R20, R01 (the skew part) | R00, R11, R22.
+    g = R.reshape(*R.shape[:-2], 9).take(_SKEW_TRACE, axis=-1)
+    skew = g[..., :3] - g[..., 3:6]  # 2 sin(θ) · axis
+    # Sums over 3 components as products with ones: numpy reduces short axes slowly.
+    two_sin = np.sqrt((skew * skew) @ _ONES3)
+    angle = np.arctan2(two_sin, g[..., 6:] @ _ONES3 - 1.0)  # tr R − 1 = 2 cos(θ)
+    # θ / (2 sin θ) = 1/2 + θ²/12 + …: for sin θ below 1e-12 (round-off of R) the
+    # limit 1/2 is exact to double precision, and the division is guarded.
+    scale = np.divide(angle, two_sin, out=np.full_like(angle, 0.5), where=two_sin > 2e-12)
+    out = np.empty((*R.shape[:-2], 6))
+    np.subtract(Tt[..., :3, 3], Tf[..., :3, 3], out=out[..., :3])
+    np.multiply(skew, scale[..., None], out=out[..., 3:])
+    return out
 
 
 def transform_from_xyz_rpy(xyz: ArrayLike, rpy: ArrayLike) -> Array:

@@ -16,9 +16,11 @@ Inverse
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from pipeline.kinematics.chain import SerialChain
 from pipeline.kinematics.transforms import (
@@ -288,7 +290,7 @@ def inverse_kinematics(
     base: ArrayLike | None = None,
     q4_singular: float = 0.0,
     branches: tuple[Branch, ...] | None = None,
-) -> tuple[Array, Array]:
+) -> tuple[Array, npt.NDArray[np.bool_]]:
     """All eight closed-form inverse solutions of the Puma 560 design model.
 
     Parameters
@@ -316,65 +318,63 @@ def inverse_kinematics(
         Joint limits are not applied here.
     """
     Tw, wc = flange_and_wrist_centre(T, tool, base)
-    d1, d3, d4 = _D[0], _D[1], _D[3]  # d3 here is the shoulder offset (d2 = d2+d3)
-    a2, a3 = _A[1], _A[2]
+    d1, d3, _, d4, _, _ = DESIGN_D_CM  # d3 here is the shoulder offset (d2 = d2+d3)
+    a2, a3 = DESIGN_A_CM[1], DESIGN_A_CM[2]
     px, py, pz = wc[..., 0], wc[..., 1], wc[..., 2] - d1
-    batch = Tw.shape[:-2]
     wanted = BRANCHES if branches is None else branches
-    q = np.full((*batch, len(wanted), 6), np.nan)
-    ok = np.zeros((*batch, len(wanted)), bool)
-    rho2 = d4**2 + a3**2
-    phi = np.arctan2(a3, d4)
+    # The branch flags only choose signs: r = ±√rr and the elbow's ±√disc.
+    rr = px**2 + py**2 - d3**2
+    root_rr = np.sqrt(np.maximum(rr, 0.0))
+    Kc = (root_rr**2 + pz**2 - (d4**2 + a3**2 + a2**2)) / (2.0 * a2)  # r2 / (2 a2), (B.22)
+    disc = (d4**2 + a3**2) - Kc**2
+    valid = (rr >= 0.0) & (disc >= 0.0)
+    root_disc = np.sqrt(np.maximum(disc, 0.0))
+    phi = math.atan2(a3, d4)
+    t1_base = np.arctan2(py, px)
+    q = np.empty((*Tw.shape[:-2], len(wanted), 6))
     for k, br in enumerate(wanted):
-        rr = px**2 + py**2 - d3**2
-        reach_ok = rr >= 0.0
-        r = br.shoulder * np.sqrt(np.maximum(rr, 0.0))
-        t1 = np.arctan2(py, px) - np.arctan2(d3, r)  # (px, py) = Rot(θ1)·(r, d3), cf. (B.14)
-        Kc = (r**2 + pz**2 - d4**2 - a3**2 - a2**2) / (2.0 * a2)  # r2 / (2 a2), (B.22)
-        disc = rho2 - Kc**2
-        elbow_ok = disc >= 0.0
-        t3 = np.arctan2(Kc, br.elbow * np.sqrt(np.maximum(disc, 0.0))) - phi  # (B.16), ERRATA r2²
+        r = br.shoulder * root_rr
+        t1 = t1_base - np.arctan2(d3, r)  # (px, py) = Rot(θ1)·(r, d3), cf. (B.14)
+        t3 = np.arctan2(Kc, br.elbow * root_disc) - phi  # (B.16), ERRATA r2²
         S3, C3 = np.sin(t3), np.cos(t3)
         u = a2 + d4 * S3 + a3 * C3
         v = d4 * C3 - a3 * S3
         t2 = np.arctan2(v * r - u * pz, u * r + v * pz)  # r = u C2 + v S2, pz = v C2 - u S2
-        # Wrist: R36 = R03ᵀ R06 = Rot(z,θ4) Rot(y,θ5) Rot(z,θ6) for α4 = -90°, α5 = 90°.
-        t123 = np.stack([t1, t2, t3], axis=-1)
-        R03 = _arm_rotation(t123)
-        R36 = np.swapaxes(R03, -1, -2) @ Tw[..., :3, :3]
+        # Wrist: R36 = R03ᵀ R06 = Rot(z,θ4) Rot(y,θ5) Rot(z,θ6) for α4 = -90°, α5 = 90°;
+        # the wrist flag is the sign of sin θ5, which multiplies the atan2 arguments.
+        R36 = _wrist_rotation(t1, t2 + t3, Tw[..., :3, :3])
+        Rw = R36 if br.wrist > 0 else -R36
         s5 = np.hypot(R36[..., 0, 2], R36[..., 1, 2])
-        w = br.wrist
-        t5 = np.arctan2(w * s5, R36[..., 2, 2])
+        q[..., k, 0], q[..., k, 1], q[..., k, 2] = t1, t2, t3
+        q[..., k, 4] = np.arctan2(s5 if br.wrist > 0 else -s5, R36[..., 2, 2])
+        q[..., k, 3] = np.arctan2(Rw[..., 1, 2], Rw[..., 0, 2])
+        q[..., k, 5] = np.arctan2(Rw[..., 2, 1], -Rw[..., 2, 0])
         singular = s5 < WRIST_SINGULAR_TOL
-        t4 = np.where(singular, q4_singular, np.arctan2(w * R36[..., 1, 2], w * R36[..., 0, 2]))
-        t6_regular = np.arctan2(w * R36[..., 2, 1], -w * R36[..., 2, 0])
-        # Singular: cos θ5 = +1 gives Rot(z, θ4 + θ6); cos θ5 = -1 gives θ6 - θ4 = atan2(r21, -r11).
-        t6_sing = np.where(
-            R36[..., 2, 2] > 0,
-            np.arctan2(R36[..., 1, 0], R36[..., 0, 0]) - q4_singular,
-            np.arctan2(R36[..., 1, 0], -R36[..., 0, 0]) + q4_singular,
-        )
-        t6 = np.where(singular, t6_sing, t6_regular)
-        sol = np.stack([t1, t2, t3, t4, t5, t6], axis=-1)
-        valid = reach_ok & elbow_ok
-        q[..., k, :] = np.where(valid[..., None], wrap_angle(sol), np.nan)
-        ok[..., k] = valid
+        if np.count_nonzero(singular):
+            # cos θ5 = +1 gives Rot(z, θ4 + θ6); cos θ5 = -1 gives θ6 - θ4 = atan2(r21, -r11).
+            t6_sing = np.where(
+                R36[..., 2, 2] > 0,
+                np.arctan2(R36[..., 1, 0], R36[..., 0, 0]) - q4_singular,
+                np.arctan2(R36[..., 1, 0], -R36[..., 0, 0]) + q4_singular,
+            )
+            q[..., k, 3] = np.where(singular, q4_singular, q[..., k, 3])
+            q[..., k, 5] = np.where(singular, t6_sing, q[..., k, 5])
+    q = wrap_angle(q)
+    if np.count_nonzero(valid) < valid.size:
+        q[~valid] = np.nan
+    ok = np.empty((*valid.shape, len(wanted)), bool)
+    ok[...] = valid[..., None]
     return q, ok
 
 
-def _arm_rotation(t123: Array) -> Array:
-    """Rotation of D-H frame 3 in frame 0 for joints 1-3, shape (..., 3, 3)."""
-    c1, s1 = np.cos(t123[..., 0]), np.sin(t123[..., 0])
-    c23, s23 = np.cos(t123[..., 1] + t123[..., 2]), np.sin(t123[..., 1] + t123[..., 2])
-    # Rot(z,θ1) Rot(x,-90°) Rot(z,θ2+θ3) Rot(x,90°), written out.
-    R = np.empty((*t123.shape[:-1], 3, 3))
-    R[..., 0, 0] = c1 * c23
-    R[..., 0, 1] = -s1
-    R[..., 0, 2] = c1 * s23
-    R[..., 1, 0] = s1 * c23
-    R[..., 1, 1] = c1
-    R[..., 1, 2] = s1 * s23
-    R[..., 2, 0] = -s23
-    R[..., 2, 1] = 0.0
-    R[..., 2, 2] = c23
-    return R
+def _wrist_rotation(t1: Array, t23: Array, R06: Array) -> Array:
+    """``R03ᵀ R06`` for joints 1-3 at θ1 and θ2 + θ3, shape (..., 3, 3).
+
+    ``R03 = Rot(z,θ1) Rot(x,-90°) Rot(z,θ2+θ3) Rot(x,90°)`` has the columns
+    ``(c1 c23, s1 c23, −s23)``, ``(−s1, c1, 0)`` and ``(c1 s23, s1 s23, c23)``;
+    row i of the product is column i of R03 combined with the rows of R06.
+    """
+    c1, s1, c23, s23 = (v[..., None] for v in (np.cos(t1), np.sin(t1), np.cos(t23), np.sin(t23)))
+    r0, r1, r2 = R06[..., 0, :], R06[..., 1, :], R06[..., 2, :]
+    a = c1 * r0 + s1 * r1
+    return np.stack([c23 * a - s23 * r2, c1 * r1 - s1 * r0, s23 * a + c23 * r2], axis=-2)

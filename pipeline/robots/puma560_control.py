@@ -9,8 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.errors import KinematicsError
+from pipeline.kinematics.chain import soa_blocks
 from pipeline.kinematics.ik import DesignInverse
-from pipeline.kinematics.transforms import Array, ArrayLike
+from pipeline.kinematics.transforms import Array, ArrayLike, invert_transform
 from pipeline.robots import puma560
 from pipeline.robots.puma560 import Branch
 
@@ -35,20 +36,19 @@ JACOBI_ELBOW_MARGIN_RAD = float(np.deg2rad(0.01))
 JACOBI_SHOULDER_MARGIN_CM = 0.01
 
 
-def _puma_clamp(
-    T: Array, tool: Array | None, base: Array | None, elbow_margin: float, shoulder_margin: float
-) -> Array:
-    """Move the wrist centre of poses (k, 4, 4) into the Puma design workspace.
+def _puma_clamp(Tw: Array, elbow_margin: float, shoulder_margin: float) -> Array:
+    """Move the wrist centre of flange poses (k, 4, 4) into the Puma design workspace.
 
-    Uses the design geometry of :func:`pipeline.robots.puma560.inverse_kinematics`
-    (wrist centre ``p − d6·a``; shoulder radius ``r² = px² + py² − d3²``; elbow
+    ``Tw`` are flange poses in D-H frame 0. Uses the design geometry of
+    :func:`pipeline.robots.puma560.inverse_kinematics` (wrist centre ``p − d6·a``;
+    shoulder radius ``r² = px² + py² − d3²``; elbow
     ``K = (r² + pz² − d4² − a3² − a2²)/(2 a2)`` with ``|K| ≤ ρ = √(d4² + a3²)``).
     ``(r, pz)`` is scaled about the shoulder until ``|K| = ρ cos(margin)``; the
     orientation is unchanged.
     """
     d1, d3, _, d4, _, _ = puma560.DESIGN_D_CM
     a2, a3 = puma560.DESIGN_A_CM[1], puma560.DESIGN_A_CM[2]
-    Tw, wc = puma560.flange_and_wrist_centre(T, tool, base)
+    _, wc = puma560.flange_and_wrist_centre(Tw)
     px, py, pz = wc[:, 0], wc[:, 1], wc[:, 2] - d1
     rho2 = d4**2 + a3**2
     r = np.sqrt(np.maximum(px**2 + py**2 - d3**2, shoulder_margin**2))
@@ -66,8 +66,7 @@ def _puma_clamp(
     wc_new = np.stack([ux * R_new, uy * R_new, pz_new + d1], axis=-1)
     out = Tw.copy()
     out[:, :3, 3] += wc_new - wc
-    out = out if base is None else base @ out
-    return out if tool is None else out @ tool
+    return out
 
 
 def puma_design_inverse(
@@ -116,42 +115,50 @@ def puma_design_inverse(
     if branch is not None and not isinstance(branch, puma560.Branch):
         raise KinematicsError("bad branch", expected="puma560.Branch or None", got=repr(branch))
     table = np.array([[b.shoulder, b.elbow, b.wrist] for b in puma560.BRANCHES])
-    fixed = branch is not None
     wanted = None if branch is None else (branch,)
-    tool_m = None if tool is None else np.asarray(tool, float)
-    base_m = None if base is None else np.asarray(base, float)
+    # Targets are mapped to flange poses in D-H frame 0 once: base⁻¹ · T · tool⁻¹.
+    base_inv = None if base is None else invert_transform(base)
+    tool_inv = None if tool is None else invert_transform(tool)
 
     def inverse(T: Array, q_near: Array) -> Array:
-        T = np.asarray(T, float)
+        Tw = np.asarray(T, float)
         q_near = np.asarray(q_near, float)
-        k = T.shape[0]
-        rows = np.arange(k)
-        sols, ok = puma560.inverse_kinematics(T, tool=tool_m, base=base_m, branches=wanted)
-        if clamp and not ok.all():
+        blocks = soa_blocks(len(Tw))
+        if len(blocks) > 1:  # in cache-sized blocks (as the forward kinematics)
+            return np.concatenate([inverse(Tw[b], q_near[b]) for b in blocks])
+        if base_inv is not None:
+            Tw = base_inv @ Tw
+        if tool_inv is not None:
+            Tw = Tw @ tool_inv
+        sols, ok = puma560.inverse_kinematics(Tw, branches=wanted)
+        if clamp and np.count_nonzero(ok) < ok.size:
             # Reachability does not depend on the branch for the Puma (the wrist
             # centre's distances decide it), so clamp whole rows.
             out = np.flatnonzero(~ok.all(axis=-1))
             sols[out], ok[out] = puma560.inverse_kinematics(
-                _puma_clamp(T[out], tool_m, base_m, elbow_margin_rad, shoulder_margin_cm),
-                tool=tool_m,
-                base=base_m,
-                branches=wanted,
+                _puma_clamp(Tw[out], elbow_margin_rad, shoulder_margin_cm), branches=wanted
             )
-        if fixed:
-            col = np.zeros(k, int)  # the one branch computed
-        else:
+        if wanted is None:
             flags = puma560.branch_of(q_near)
             col = np.argmax(np.all(flags[:, None, :] == table[None], axis=-1), axis=-1)
-        q, reach = sols[rows, col], ok[rows, col]
-        q = np.where(reach[:, None], q, q_near)  # keep NaN out of the arithmetic below
+            rows = np.arange(len(col))
+            q, reach = sols[rows, col], ok[rows, col]
+        else:
+            q, reach = sols[:, 0], ok[:, 0]  # the one branch computed
+        unreached = np.count_nonzero(reach) < reach.size
+        if unreached:
+            q = np.where(reach[:, None], q, q_near)  # keep NaN out of the arithmetic below
         # Wrist singular: inverse_kinematics set θ4 = 0; θ4 + θ6 (cos θ5 > 0) or
         # θ6 − θ4 (cos θ5 < 0) is what the pose fixes. Keep θ4 from q_near.
         sing = reach & (np.abs(np.sin(q[:, 4])) < puma560.WRIST_SINGULAR_TOL)
-        t4 = q_near[:, 3]
-        t6 = np.where(np.cos(q[:, 4]) > 0, q[:, 5] + q[:, 3] - t4, q[:, 5] - q[:, 3] + t4)
-        q[:, 3] = np.where(sing, t4, q[:, 3])
-        q[:, 5] = np.where(sing, t6, q[:, 5])
+        if np.count_nonzero(sing):
+            t4 = q_near[:, 3]
+            t6 = np.where(np.cos(q[:, 4]) > 0, q[:, 5] + q[:, 3] - t4, q[:, 5] - q[:, 3] + t4)
+            q[:, 3] = np.where(sing, t4, q[:, 3])
+            q[:, 5] = np.where(sing, t6, q[:, 5])
         q = q_near + puma560.wrap_angle(q - q_near)  # nearest 2π class
-        return np.where(reach[:, None], q, np.nan)
+        if unreached:
+            q[~reach] = np.nan
+        return q
 
     return inverse
