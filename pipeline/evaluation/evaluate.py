@@ -16,15 +16,13 @@ from typing import Any
 import numpy as np
 
 from pipeline.control import task_axes_for
+from pipeline.evaluation.grid12 import CORNER_VERTICES
 from pipeline.evaluation.recording import read_evaluation
 from pipeline.evaluation.score import AXIS_LETTERS, dropped_indices
 from pipeline.evaluation.tasks import TASK_NAMES, reading_resolution
 from pipeline.stages.runner import EVALUATE_STAGE_MODULES, StageRun, run, stage_path
 from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_provenance, read_table
-
-#: Section 7.2.1 acceptance: signature radial errors at these vertices, below this (cm).
-RADIAL_VERTICES = (1, 4, 5, 8)
 
 
 @dataclass(frozen=True)
@@ -166,7 +164,7 @@ def summarize(session_dir: str | Path) -> dict[str, Any]:
     if "grid12" in tasks:
         rad = {i["name"]: i["signature"] for i in tasks["grid12"]["indices"]}
         out["grid12_signature_radial_cm"] = {
-            str(v): rad[f"vertex{v}_radial_error_cm"] for v in RADIAL_VERTICES
+            str(v): rad[f"vertex{v}_radial_error_cm"] for v in CORNER_VERTICES
         }
     return out
 

@@ -14,13 +14,11 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.evaluation.grid12 import CORNER_VERTICES
 from pipeline.montecarlo.engine import StudyResult
 from pipeline.montecarlo.stats import indices_table, summary_table
 from pipeline.report.figures import save_png
 from pipeline.stages.tables import write_table
-
-#: Thesis numbering of the corner vertices in Figures 7-4 … 7-8.
-CORNERS = (1, 4, 5, 8)
 
 
 def _provenance(res: StudyResult) -> dict[str, Any]:
@@ -79,7 +77,7 @@ def _radial_figure(res: StudyResult, path: Path) -> Path:
     fig = Figure(figsize=(6.0, 4.2))
     fig.subplots_adjust(left=0.13, right=0.97, bottom=0.13, top=0.9)
     ax = fig.subplots()
-    for v, marker in zip(CORNERS, "osD^", strict=True):
+    for v, marker in zip(CORNER_VERTICES, "osD^", strict=True):
         k = st.index_names.index(f"vertex{v}_radial_error_cm")
         ax.errorbar(x, sm.std[:, k], yerr=sm.se_std[:, k], marker=marker, ms=4, capsize=2,
                     label=f"vertex {v}")  # fmt: skip

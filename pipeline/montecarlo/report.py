@@ -13,10 +13,10 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.atomic import write_text_atomic
+from pipeline.evaluation.grid12 import CORNER_VERTICES
 from pipeline.kinematics.transforms import Array
 from pipeline.stages.tables import read_provenance, read_table
 
-CORNERS = (1, 4, 5, 8)
 #: Section 7.4.1: radial error std (cm) at vertices 1, 4, 5, 8 for σ_e = 0.3°.
 THESIS_ENCODER_RADIAL = (0.225, 0.299, 0.202, 0.282)
 
@@ -123,10 +123,10 @@ def nonzero_means(s: SummaryArrays, z: float = 3.0) -> tuple[int, int]:
 
 
 def _radial_table(s: SummaryArrays) -> list[str]:
-    cols = [s.names.index(f"vertex{v}_radial_error_cm") for v in CORNERS]
+    cols = [s.names.index(f"vertex{v}_radial_error_cm") for v in CORNER_VERTICES]
     lines = [
-        f"| {s.parameter} | " + " | ".join(f"vertex {v} std (cm)" for v in CORNERS) + " |",
-        "|---|" + "---|" * len(CORNERS),
+        f"| {s.parameter} | " + " | ".join(f"vertex {v} std (cm)" for v in CORNER_VERTICES) + " |",
+        "|---|" + "---|" * len(CORNER_VERTICES),
     ]
     for i, x in enumerate(s.x):
         cells = [f"{s.std[i, c]:.4f} ± {s.se_std[i, c]:.4f}" for c in cols]
@@ -141,7 +141,7 @@ def _exponents(s: SummaryArrays) -> tuple[Array, Array]:
 
 def _exponent_lines(s: SummaryArrays, what: str, thesis: str) -> list[str]:
     p, se = _exponents(s)
-    radial = [s.names.index(f"vertex{v}_radial_error_cm") for v in CORNERS]
+    radial = [s.names.index(f"vertex{v}_radial_error_cm") for v in CORNER_VERTICES]
     rad = ", ".join(f"{p[k]:.2f} ± {se[k]:.2f}" for k in radial)
     ori = [k for k, n in enumerate(s.names) if "orientation" in n]
     lin = [k for k, n in enumerate(s.names) if "length_error" in n]
@@ -204,7 +204,7 @@ def _section(s: SummaryArrays) -> list[str]:
         k = s.names.index("vertex1_radial_error_cm")
         i = int(np.argmin(np.abs(s.x - 0.3)))
         ours = ", ".join(
-            f"{s.std[i, s.names.index(f'vertex{v}_radial_error_cm')]:.3f}" for v in CORNERS
+            f"{s.std[i, s.names.index(f'vertex{v}_radial_error_cm')]:.3f}" for v in CORNER_VERTICES
         )
         r2 = np.array([linearity(s.x, s.std[:, j])[2] for j in range(len(s.names))])
         fits = [linearity(s.x, s.std[:, j]) for j in range(len(s.names))]
