@@ -151,7 +151,12 @@ def target_positions(
 
     ``local`` (..., 3) is the target in the frame ``F_{joint-1} · M_joint(q)``.
     """
-    T = target_frames(chain, sensor_from_base, q, joint)
+    return points_in_frames(target_frames(chain, sensor_from_base, q, joint), local)
+
+
+def points_in_frames(T: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """Points ``local`` (..., 3) given in frames ``T`` (..., 4, 4), in ``T``'s parent
+    frame (..., 3); the two shapes broadcast."""
     return (T[..., :3, :3] @ np.asarray(local, float)[..., None])[..., 0] + T[..., :3, 3]
 
 
@@ -261,8 +266,7 @@ def plan_measurements(
 
     def targets(i: int, k: slice) -> np.ndarray:
         """Sensor-frame positions (candidates, K, grid, 3) of joint i's targets k."""
-        T = frames[i]
-        return np.einsum("cgij,kj->ckgi", T[..., :3, :3], options[i, k]) + T[:, None, :, :3, 3]
+        return points_in_frames(frames[i][:, None], options[i, k][None, :, None, :])
 
     def visible_sweeps(k: slice) -> np.ndarray:
         """Longest visible sweep (candidates, n, K) of targets k, deg / cm."""
