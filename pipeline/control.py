@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import ArmsigError
-from pipeline.kinematics.chain import SerialChain
+from pipeline.kinematics.chain import SerialChain, in_frame
 from pipeline.kinematics.ik import (
     ALL_AXES,
     DesignInverse,
@@ -33,7 +33,6 @@ from pipeline.kinematics.ik import (
     jacobi_iterative,
     newton_raphson,
 )
-from pipeline.kinematics.transforms import invert_transform
 from pipeline.robots.description import RobotDescription
 from pipeline.signature_file import Signature, load_signature
 from pipeline.units import joints_to_internal
@@ -102,15 +101,13 @@ class Controller:
             self._design_inverses[branch, jacobi] = inv
         return inv
 
-    def _design_in_sensor(self) -> SerialChain:
+    def _design_model(self, world_from_base: np.ndarray | None = None) -> SerialChain:
+        """The design model with the signature's tool (``Y``), in the design base frame or,
+        given ``world_from_base`` (4, 4), in that world (the sensor frame: ``X``)."""
         d = self.robot.design_chain()
-        return SerialChain(
-            links=d.links,
-            prismatic=d.prismatic,
-            base=self.sensor_from_base @ d.base,
-            tool=d.tool @ self.flange_to_tool,
-            joint_offsets=d.joint_offsets,
-        )
+        base = d.base if world_from_base is None else world_from_base @ d.base
+        tool = d.tool @ self.flange_to_tool
+        return SerialChain(d.links, d.prismatic, base, tool, d.joint_offsets)
 
     def default_branch(self):  # -> Branch
         """The Puma branch of the signature configuration."""
@@ -125,7 +122,7 @@ class Controller:
         qs = np.broadcast_to(q_sig, (m, self.robot.n_joints))
         if self.robot.name == "puma560":
             return self._design_inverse(branch or self.default_branch())(T_sensor, qs)
-        design = self._design_in_sensor()
+        design = self._design_model(self.sensor_from_base)
         res = newton_raphson(design, T_sensor, qs, self.resolution, max_iter=100, damping=1e-2)
         return res.q
 
@@ -167,7 +164,7 @@ class Controller:
         inv = self._design_inverse(branch, jacobi=True)
         res = jacobi_iterative(
             self.signature.chain,
-            self._design_in_sensor(),
+            self._design_model(self.sensor_from_base),
             inv,
             T_sensor,
             q0,
@@ -186,22 +183,14 @@ class Controller:
         """Newton-Raphson on the ``axes`` components of δ, in the design base frame
         (the chain re-based there, so the axes are the base's)."""
         sig = self.signature.chain
-        base_from_sensor = invert_transform(self.sensor_from_base)
-        chain = SerialChain(
-            sig.links, sig.prismatic, base_from_sensor @ sig.base, sig.tool, sig.joint_offsets
-        )
+        chain = in_frame(sig, self.sensor_from_base)  # the signature in the design base frame
         if self.robot.name == "puma560":
             q0 = self.initial_estimate(self.sensor_from_base @ T_base, branch)
         else:
-            d = self.robot.design_chain()
-            design = SerialChain(
-                d.links, d.prismatic, d.base, d.tool @ self.flange_to_tool, d.joint_offsets
-            )
             m = T_base.shape[0]
             q_sig = np.broadcast_to(np.asarray(sig.joint_offsets, float), (m, self.robot.n_joints))
-            q0 = newton_raphson(
-                design, T_base, q_sig, self.resolution, max_iter=100, damping=1e-2, task_axes=axes
-            ).q
+            q0 = newton_raphson(self._design_model(), T_base, q_sig, self.resolution,
+                                max_iter=100, damping=1e-2, task_axes=axes).q  # fmt: skip
         res = newton_raphson(
             chain, T_base, q0, self.resolution, record_history=record_history, task_axes=axes
         )

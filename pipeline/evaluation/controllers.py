@@ -34,7 +34,7 @@ import pyarrow.compute as pc
 
 from pipeline.control import Controller, into_limits, task_axes_for
 from pipeline.evaluation.tasks import Task
-from pipeline.kinematics.chain import SerialChain, forward_kinematics
+from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
 from pipeline.kinematics.ik import ALL_AXES, newton_raphson
 from pipeline.kinematics.transforms import Array, invert_transform, rot_z
 from pipeline.robots.description import RobotDescription
@@ -206,12 +206,6 @@ def nr_multistart(
         good = r.converged & within_limits(robot, qq)
         q[todo[good]], ok[todo[good]] = qq[good], True
     return q, ok
-
-
-def in_frame(chain: SerialChain, frame: Array) -> SerialChain:
-    """``chain`` with its world frame moved to ``frame`` (4, 4), given in the old world."""
-    base = invert_transform(frame) @ chain.base
-    return SerialChain(chain.links, chain.prismatic, base, chain.tool, chain.joint_offsets)
 
 
 def solve_with_wrist_flip(

@@ -15,7 +15,7 @@ from functools import cached_property
 import numpy as np
 
 from pipeline.kinematics.dh import dh_link
-from pipeline.kinematics.transforms import Array, ArrayLike, rot_z, trans_z
+from pipeline.kinematics.transforms import Array, ArrayLike, invert_transform, rot_z, trans_z
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,6 +135,12 @@ def chain_from_dh(
         base=np.eye(4) if base is None else np.asarray(base, float),
         tool=np.eye(4) if tool is None else np.asarray(tool, float),
     )
+
+
+def in_frame(chain: SerialChain, frame: Array) -> SerialChain:
+    """``chain`` with its world frame moved to ``frame`` (4, 4), given in the old world."""
+    base = invert_transform(frame) @ chain.base
+    return SerialChain(chain.links, chain.prismatic, base, chain.tool, chain.joint_offsets)
 
 
 def joint_motion(chain: SerialChain, q: ArrayLike) -> Array:

@@ -22,7 +22,6 @@ from pipeline.control import task_axes_for
 from pipeline.errors import ArmsigError
 from pipeline.evaluation.controllers import (
     DesignModel,
-    in_frame,
     task_branches,
     task_poses,
     within_limits,
@@ -36,7 +35,7 @@ from pipeline.evaluation.tasks import (
     Task,
     tasks_for,
 )
-from pipeline.kinematics.chain import SerialChain, forward_kinematics
+from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
 from pipeline.kinematics.ik import ALL_AXES, newton_raphson
 from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans
 from pipeline.rig.plan import PROBE_LENGTH_CM
