@@ -60,7 +60,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.errors import KinematicsError
-from pipeline.kinematics.chain import SerialChain, forward_kinematics
+from pipeline.kinematics.chain import SerialChain, forward_kinematics, is_single_robot
 from pipeline.kinematics.jacobian import geometric_jacobian, pose_and_jacobian
 from pipeline.kinematics.transforms import (
     Array,
@@ -561,6 +561,7 @@ def newton_raphson(
     max_step: float = 0.5,
     record_history: bool = False,
     task_axes: Sequence[int] | None = None,
+    compiled: bool = True,
 ) -> IKResult:
     """Invert a (signature) model by the Newton-Raphson iteration (5.4), Appendix C.1.
 
@@ -617,6 +618,13 @@ def newton_raphson(
         world frame, e.g. ``(0, 1, 2, 5)`` (position and rotation about Z) for
         a SCARA-like arm whose joint axes are parallel to the world Z (module
         docstring, "Task axes"; :func:`controllable_axes`). None: all six.
+    compiled : bool
+        For an unbatched six-joint chain on all six axes without history, run
+        the plain Newton iterations compiled
+        (:mod:`pipeline.kinematics.ik_compiled`, ~100x faster per target); a
+        target that needs more than plain Newton steps (safeguard, singular
+        Jacobian, stall, iteration cap) is solved by the numpy iteration from
+        its start. The two agree to round-off; False: numpy only.
 
     Returns
     -------
@@ -624,6 +632,10 @@ def newton_raphson(
     """
     T, q, res = _prepare(chain, T_target, q0, resolution)
     axes, mask = _task_mask(task_axes)
+    if compiled and mask is None and not record_history and _compilable(chain):
+        return _newton_compiled(
+            chain, T, q, res, max_iter, damping, position_tol_cm, orientation_tol_rad, max_step
+        )
     m = T.shape[0]
     length = chain.length_scale
     T_q, J_q = pose_and_jacobian(chain, q)  # Appendix C.1 steps 1-2 at q⁰
@@ -680,6 +692,57 @@ def newton_raphson(
         record_history,
         length,
         task_axes=axes,
+    )
+
+
+def _compilable(chain: SerialChain) -> bool:
+    """Whether :mod:`pipeline.kinematics.ik_compiled` can solve for ``chain``: one
+    robot (no batch axis) and a square Jacobian (six joints)."""
+    return is_single_robot(chain) and chain.n_joints == 6
+
+
+def _newton_compiled(
+    chain: SerialChain,
+    T: Array,
+    q0: Array,
+    res: Array,
+    max_iter: int,
+    damping: float,
+    position_tol_cm: float | None,
+    orientation_tol_rad: float | None,
+    max_step: float,
+) -> IKResult:
+    """:func:`newton_raphson` by the compiled plain iteration, the numpy iteration for
+    the targets it defers (same arguments, after :func:`_prepare`)."""
+    from pipeline.kinematics.ik_compiled import FAST_CONVERGED, plain_newton
+
+    n, length = chain.n_joints, chain.length_scale
+    limit = np.broadcast_to(_step_limit(chain, max_step, length), (n,))
+    tol_p = np.inf if position_tol_cm is None else position_tol_cm
+    tol_o = np.inf if orientation_tol_rad is None else orientation_tol_rad
+    q, outcome, iterations, delta = plain_newton(
+        chain.base, chain.links, chain.tool, np.asarray(chain.joint_offsets), chain.prismatic,
+        T, q0, res, limit, max_iter, length, tol_p, tol_o,
+    )  # fmt: skip
+    errors = _errors(delta)
+    status = np.full(len(q), STATUS_CONVERGED, np.int64)
+    deferred = np.flatnonzero(outcome != FAST_CONVERGED)
+    if deferred.size:
+        rest = newton_raphson(
+            chain, T[deferred], q0[deferred], res, max_iter, damping,
+            position_tol_cm=position_tol_cm, orientation_tol_rad=orientation_tol_rad,
+            max_step=max_step, compiled=False,
+        )  # fmt: skip
+        q[deferred], iterations[deferred], status[deferred] = rest.q, rest.iterations, rest.status
+        errors[deferred, 0] = rest.position_error_cm
+        errors[deferred, 1] = rest.orientation_error_rad
+    return IKResult(
+        q=q,
+        converged=status == STATUS_CONVERGED,
+        iterations=iterations,
+        position_error_cm=errors[:, 0],
+        orientation_error_rad=errors[:, 1],
+        status=status,
     )
 
 

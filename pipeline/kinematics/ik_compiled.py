@@ -1,0 +1,321 @@
+"""Compiled plain Newton-Raphson iteration (5.4) for one robot: the fast path of
+:func:`pipeline.kinematics.ik.newton_raphson`.
+
+Why compiled: a numpy solve of one target costs ~500 small numpy calls of
+0.5-1 µs each (four pose-and-Jacobian evaluations, three 6×6 solves and the
+per-iteration bookkeeping), ~430 µs measured; the same arithmetic as scalar
+loops takes a few µs. The kernel is compiled once by numba and cached beside
+this module (``__pycache__``).
+
+What it does: for each target independently, the iteration of
+:func:`~pipeline.kinematics.ik.newton_raphson` as long as it is *plain*: the
+Newton step ``J⁻¹ δ`` (LU with partial pivoting), capped per joint, reduces the
+scaled error ``|dp|/L + |rotation|``, and the target stops by the module's
+stopping rule (encoder rule and pose-error tolerances). Whenever the numpy
+iteration would do anything else (a safeguard step, the SVD of a singular
+Jacobian, a stall, the iteration cap), the kernel *defers* the target instead,
+and the numpy iteration solves it from its start. A target's result never
+depends on the other targets in the call (each is solved alone, serially or on
+one of a few threads), so a batch equals a loop of single solves bit for bit.
+
+The pose and Jacobian are those of
+:func:`pipeline.kinematics.jacobian.pose_and_jacobian` and δ that of
+:func:`pipeline.kinematics.transforms.differential_motion`, evaluated in
+another order: they agree to round-off (tested against both).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, TypeVar, cast
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+from pipeline.kinematics.transforms import Array
+
+#: Kernel outcome of a target: converged by the stopping rule.
+FAST_CONVERGED = 0
+#: Kernel outcome of a target: left to the numpy iteration.
+FAST_DEFERRED = 1
+
+#: Targets per call above which the kernel runs in one Python thread per core
+#: (it releases the GIL). Below it starting the threads (~100 µs) outweighs the
+#: work (~3.5 µs per target). Plain threads, not numba's ``parallel=True``: its
+#: default OpenMP layer does not survive the ``fork`` of the Monte-Carlo worker
+#: pool, and its fork-safe layer must not be entered from two threads at once.
+THREADED_MIN_TARGETS = 2000
+
+#: Stall test of the numpy loop (:data:`pipeline.kinematics.ik.STALL_RATIO`),
+#: repeated here because the kernel is compiled before that module can be imported.
+_STALL_RATIO = 0.9
+
+Kernel = TypeVar("Kernel", bound=Callable[..., Any])
+IntArray = npt.NDArray[np.int64]
+#: Argument type of the compiled kernels: float, bool or int buffers.
+Buf = npt.NDArray[Any]
+
+
+def _jit(func: Kernel) -> Kernel:
+    """Compile ``func`` with numba (no Python objects, GIL released, cached on disk)."""
+    return cast(Kernel, numba.njit(cache=True, nogil=True)(func))
+
+
+@_jit
+def _pose_jacobian(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    q: Buf, T: Buf, J: Buf, F: Buf, G: Buf, axes: Buf,
+) -> None:  # fmt: skip
+    """Tool pose ``T`` (4, 4) and geometric Jacobian ``J`` (6, n) at ``q`` (n,).
+
+    Eq. (5.1): ``T = base · Π Rot(z, q_i − q0_i) · K̄_i · tool`` (Eq. (5.2); a
+    prismatic joint ``Trans(0, 0, q_i − q0_i)``, Eq. (5.3)). Column ``i`` of J
+    is ``[z_i × (p_tool − p_i); z_i]`` (revolute) or ``[z_i; 0]`` (prismatic).
+    ``F``, ``G`` (3, 4) and ``axes`` (n, 6) are scratch.
+    """
+    n = q.shape[0]
+    for r in range(3):
+        for c in range(4):
+            F[r, c] = base[r, c]
+    for i in range(n):
+        for r in range(3):
+            axes[i, r] = F[r, 2]  # z_i
+            axes[i, 3 + r] = F[r, 3]  # p_i
+        d = q[i] - offsets[i]
+        if prismatic[i]:  # Eq. (5.3)
+            for r in range(3):
+                F[r, 3] += d * F[r, 2]
+        else:  # Eq. (5.2)
+            co, si = np.cos(d), np.sin(d)
+            for r in range(3):
+                x, y = F[r, 0], F[r, 1]
+                F[r, 0] = co * x + si * y
+                F[r, 1] = co * y - si * x
+        L = links[i]
+        for r in range(3):  # Eq. (5.1): F ← F · K̄_i
+            a0, a1, a2, a3 = F[r, 0], F[r, 1], F[r, 2], F[r, 3]
+            for c in range(4):
+                G[r, c] = a0 * L[0, c] + a1 * L[1, c] + a2 * L[2, c] + a3 * L[3, c]
+        for r in range(3):
+            for c in range(4):
+                F[r, c] = G[r, c]
+    for r in range(3):
+        a0, a1, a2, a3 = F[r, 0], F[r, 1], F[r, 2], F[r, 3]
+        for c in range(4):
+            T[r, c] = a0 * tool[0, c] + a1 * tool[1, c] + a2 * tool[2, c] + a3 * tool[3, c]
+    T[3, 0], T[3, 1], T[3, 2], T[3, 3] = 0.0, 0.0, 0.0, 1.0
+    for i in range(n):
+        zx, zy, zz = axes[i, 0], axes[i, 1], axes[i, 2]
+        if prismatic[i]:
+            J[0, i], J[1, i], J[2, i] = zx, zy, zz
+            J[3, i], J[4, i], J[5, i] = 0.0, 0.0, 0.0
+        else:
+            rx, ry, rz = T[0, 3] - axes[i, 3], T[1, 3] - axes[i, 4], T[2, 3] - axes[i, 5]
+            J[0, i] = zy * rz - zz * ry
+            J[1, i] = zz * rx - zx * rz
+            J[2, i] = zx * ry - zy * rx
+            J[3, i], J[4, i], J[5, i] = zx, zy, zz
+
+
+@_jit
+def _delta(T_from: Buf, T_to: Buf, out: Buf) -> None:
+    """``differential_motion(T_from, T_to)`` into ``out`` (6,): origin difference and
+    the axis-angle vector of ``R_to R_fromᵀ``."""
+    R = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            R[i, j] = (
+                T_to[i, 0] * T_from[j, 0] + T_to[i, 1] * T_from[j, 1] + T_to[i, 2] * T_from[j, 2]
+            )  # R_to R_fromᵀ
+    sx, sy, sz = R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]  # 2 sin(θ) · axis
+    two_sin = np.sqrt(sx * sx + sy * sy + sz * sz)
+    angle = np.arctan2(two_sin, R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
+    # θ / (2 sin θ) → 1/2 below sin θ ~ 1e-12, the round-off of R (as differential_motion).
+    scale = angle / two_sin if two_sin > 2e-12 else 0.5
+    for r in range(3):
+        out[r] = T_to[r, 3] - T_from[r, 3]
+    out[3], out[4], out[5] = sx * scale, sy * scale, sz * scale
+
+
+@_jit
+def _lu_solve(A: Buf, b: Buf, x: Buf, M: Buf) -> bool:
+    """``x = A⁻¹ b`` for a square ``A`` (n, n) by LU with partial pivoting (``M``: scratch
+    (n, n + 1)). False when a pivot is zero or the solution is not finite."""
+    n = A.shape[0]
+    for i in range(n):
+        for j in range(n):
+            M[i, j] = A[i, j]
+        M[i, n] = b[i]
+    for k in range(n):
+        p = k
+        for i in range(k + 1, n):
+            if abs(M[i, k]) > abs(M[p, k]):
+                p = i
+        if M[p, k] == 0.0:
+            return False
+        if p != k:
+            for j in range(k, n + 1):
+                M[k, j], M[p, j] = M[p, j], M[k, j]
+        for i in range(k + 1, n):
+            f = M[i, k] / M[k, k]
+            for j in range(k + 1, n + 1):
+                M[i, j] -= f * M[k, j]
+    for i in range(n - 1, -1, -1):
+        s = M[i, n]
+        for j in range(i + 1, n):
+            s -= M[i, j] * x[j]
+        x[i] = s / M[i, i]
+        if not np.isfinite(x[i]):
+            return False
+    return True
+
+
+@_jit
+def _errors(d: Buf) -> tuple[float, float]:
+    """Radial position error (cm) and rotation angle (rad) of δ (6,)."""
+    return (
+        np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]),
+        np.sqrt(d[3] * d[3] + d[4] * d[4] + d[5] * d[5]),
+    )
+
+
+@_jit
+def _solve_one(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    target: Buf, q: Buf, res: Buf, limit: Buf, settings: Buf, delta: Buf,
+) -> tuple[int, int]:  # fmt: skip
+    """Plain Newton-Raphson on one target; ``q`` (n,) in: the start, out: the solution.
+
+    ``settings`` = (max_iter, length scale L, position tol. cm, orientation tol. rad).
+    Returns (outcome, iterations); ``delta`` (6,) receives the final δ.
+    """
+    n = q.shape[0]
+    max_iter, length = int(settings[0]), settings[1]
+    tol_p, tol_o = settings[2], settings[3]
+    T = np.empty((4, 4))
+    J = np.empty((6, n))
+    F, G = np.empty((3, 4)), np.empty((3, 4))
+    axes, M = np.empty((n, 6)), np.empty((n, n + 1))
+    dq, q_new, d_new = np.empty(n), np.empty(n), np.empty(6)
+    _pose_jacobian(base, links, tool, offsets, prismatic, q, T, J, F, G, axes)
+    _delta(T, target, delta)  # Appendix C.1 steps 1-2 at q⁰
+    ep, eo = _errors(delta)
+    e = ep * (1.0 / length) + eo
+    for it in range(1, max_iter + 1):
+        if not _lu_solve(J, delta, dq, M):  # Eq. (5.4): dq = J⁻¹ δ
+            return FAST_DEFERRED, it
+        worst = 1.0  # C.1 step 7, the step capped per joint (ik._cap_step)
+        for j in range(n):
+            worst = max(worst, abs(dq[j]) / limit[j])
+        small = True  # Appendix C.1 step 8: every increment below one count
+        for j in range(n):
+            q_new[j] = q[j] + (dq[j] / worst if worst > 1.0 else dq[j])
+            small = small and abs(dq[j]) < res[j]
+        _pose_jacobian(base, links, tool, offsets, prismatic, q_new, T, J, F, G, axes)
+        _delta(T, target, d_new)
+        ep, eo = _errors(d_new)
+        e_new = ep * (1.0 / length) + eo
+        if not e_new < e:  # the numpy iteration's safeguard takes over
+            return FAST_DEFERRED, it
+        accurate = ep <= tol_p and eo <= tol_o
+        moved = False
+        for j in range(n):
+            moved = moved or abs(q_new[j] - q[j]) >= res[j]
+            q[j] = q_new[j]
+        for r in range(6):
+            delta[r] = d_new[r]
+        if small and accurate:
+            return FAST_CONVERGED, it
+        if not accurate and not e_new < _STALL_RATIO * e and not moved:
+            return FAST_DEFERRED, it  # a stall: the numpy loop decides
+        e = e_new
+    return FAST_DEFERRED, max_iter
+
+
+@_jit
+def _solve_serial(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    targets: Buf, q: Buf, res: Buf, limit: Buf, settings: Buf,
+    outcome: Buf, iterations: Buf, delta: Buf,
+) -> None:  # fmt: skip
+    for k in range(targets.shape[0]):
+        outcome[k], iterations[k] = _solve_one(
+            base, links, tool, offsets, prismatic, targets[k], q[k], res, limit, settings, delta[k]
+        )
+
+
+def plain_newton(
+    base: Array,
+    links: Array,
+    tool: Array,
+    offsets: Array,
+    prismatic: Array,
+    targets: Array,
+    q0: Array,
+    res: Array,
+    limit: Array,
+    max_iter: int,
+    length: float,
+    position_tol_cm: float,
+    orientation_tol_rad: float,
+) -> tuple[Array, IntArray, IntArray, Array]:
+    """Run the kernel on ``m`` targets of one robot (see the module docstring).
+
+    Parameters
+    ----------
+    base, tool : ndarray, shape (4, 4)
+    links : ndarray, shape (n, 4, 4)
+        The chain's constant link transforms ``K̄_i``.
+    offsets : ndarray, shape (n,)
+        Joint offsets ``q0_i`` (rad / cm).
+    prismatic : ndarray of bool, shape (n,)
+    targets : ndarray, shape (m, 4, 4)
+        Desired tool poses in the chain's world frame, cm.
+    q0 : ndarray, shape (m, n)
+        Starts (rad / cm); not modified.
+    res, limit : ndarray, shape (n,)
+        Encoder resolution and step cap per joint (rad / cm).
+    max_iter : int
+    length : float
+        The chain's length scale L (cm).
+    position_tol_cm, orientation_tol_rad : float
+        Pose-error tolerances (``inf``: none).
+
+    Returns
+    -------
+    q : ndarray, shape (m, n)
+        Solutions (rows of deferred targets: meaningless).
+    outcome : ndarray of int, shape (m,)
+        :data:`FAST_CONVERGED` or :data:`FAST_DEFERRED`.
+    iterations : ndarray of int, shape (m,)
+    delta : ndarray, shape (m, 6)
+        Final δ (cm, rad).
+    """
+    m = targets.shape[0]
+    q = np.array(q0, float, order="C", copy=True)
+    outcome, iterations = np.empty(m, np.int64), np.empty(m, np.int64)
+    delta = np.empty((m, 6))
+    settings = np.array([max_iter, length, position_tol_cm, orientation_tol_rad], float)
+    model = (
+        np.ascontiguousarray(base, float), np.ascontiguousarray(links, float),
+        np.ascontiguousarray(tool, float), np.ascontiguousarray(offsets, float),
+        np.ascontiguousarray(prismatic, np.bool_),
+    )  # fmt: skip
+    T = np.ascontiguousarray(targets, float)
+    res_c, limit_c = np.ascontiguousarray(res, float), np.ascontiguousarray(limit, float)
+
+    def run(rows: slice) -> None:
+        _solve_serial(*model, T[rows], q[rows], res_c, limit_c, settings,
+                      outcome[rows], iterations[rows], delta[rows])  # fmt: skip
+
+    workers = len(os.sched_getaffinity(0))
+    if m < THREADED_MIN_TARGETS or workers < 2:
+        run(slice(0, m))
+    else:  # one contiguous share per core; each target is still solved alone
+        bounds = np.linspace(0, m, workers + 1).astype(int)
+        with ThreadPoolExecutor(workers) as pool:
+            list(pool.map(run, [slice(a, b) for a, b in zip(bounds, bounds[1:], strict=False)]))
+    return q, outcome, iterations, delta
