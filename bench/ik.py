@@ -1,7 +1,8 @@
 """Signature-based control on robot3 (issue 5): batch throughput and single-target latency.
 
 Issue 5 targets: batched Newton-Raphson >= 200,000 targets/s for a batch of
-100,000; single-target latency <= 200 µs. Targets are random configurations of
+100,000; single-target latency <= 200 µs (median; the 99th percentile is
+printed too). Targets are random configurations of
 one branch (right-up-noflip) inside the joint limits, posed by the signature
 itself, so every one is reachable.
 """
@@ -50,11 +51,14 @@ def main() -> None:
         sec = best_of(lambda m=method: c.solve(T, branch=branch, method=m), repeats=3)
         rows.append((f"Controller.solve {method}, batch", n, sec))
     single = []
-    for k in range(300):
+    for k in range(1000):
         t0 = time.perf_counter()
         c.solve(T[k], branch=branch, method="nr")
         single.append(time.perf_counter() - t0)
     print(f"{'benchmark':45s} {'items':>8s} {'best s':>9s} {'targets/s':>10s}")
     for name, items, sec in rows:
         print(f"{name:45s} {items:8d} {sec:9.3f} {items / sec:10.0f}")
-    print(f"{'Controller.solve nr, one target (median)':45s} {np.median(single) * 1e6:9.0f} µs")
+    p50, p99 = np.percentile(single, [50, 99]) * 1e6
+    print(f"{'Controller.solve nr, one target (median)':45s} {p50:9.0f} µs")
+    # The tail: targets the compiled kernel defers to the numpy iteration (safeguard).
+    print(f"{'Controller.solve nr, one target (99th pct.)':45s} {p99:9.0f} µs")
