@@ -482,6 +482,18 @@ def _iterate(
         history = IKHistory(
             q=hq, delta=hd, position_error_cm=he[..., 0], orientation_error_rad=he[..., 1]
         )
+    return _result(q, status, iterations, errors, history, task_axes)
+
+
+def _result(
+    q: Array,
+    status: IntArray,
+    iterations: IntArray,
+    errors: Array,
+    history: IKHistory | None = None,
+    task_axes: tuple[int, ...] = ALL_AXES,
+) -> IKResult:
+    """An :class:`IKResult` from final iterates, statuses, counts and :func:`_errors` (m, 2)."""
     return IKResult(
         q=q,
         converged=status == STATUS_CONVERGED,
@@ -736,14 +748,7 @@ def _newton_compiled(
         q[deferred], iterations[deferred], status[deferred] = rest.q, rest.iterations, rest.status
         errors[deferred, 0] = rest.position_error_cm
         errors[deferred, 1] = rest.orientation_error_rad
-    return IKResult(
-        q=q,
-        converged=status == STATUS_CONVERGED,
-        iterations=iterations,
-        position_error_cm=errors[:, 0],
-        orientation_error_rad=errors[:, 1],
-        status=status,
-    )
+    return _result(q, status, iterations, errors)
 
 
 def _newton_step(J: Array, delta: Array, length: float) -> Array:

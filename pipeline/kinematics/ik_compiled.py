@@ -35,6 +35,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from pipeline.kinematics.ik import STALL_RATIO
 from pipeline.kinematics.transforms import Array
 
 #: Kernel outcome of a target: converged by the stopping rule.
@@ -49,9 +50,6 @@ FAST_DEFERRED = 1
 #: pool, and its fork-safe layer must not be entered from two threads at once.
 THREADED_MIN_TARGETS = 2000
 
-#: Stall test of the numpy loop (:data:`pipeline.kinematics.ik.STALL_RATIO`),
-#: repeated here because the kernel is compiled before that module can be imported.
-_STALL_RATIO = 0.9
 
 Kernel = TypeVar("Kernel", bound=Callable[..., Any])
 IntArray = npt.NDArray[np.int64]
@@ -229,7 +227,7 @@ def _solve_one(
             delta[r] = d_new[r]
         if small and accurate:
             return FAST_CONVERGED, it
-        if not accurate and not e_new < _STALL_RATIO * e and not moved:
+        if not accurate and not e_new < STALL_RATIO * e and not moved:
             return FAST_DEFERRED, it  # a stall: the numpy loop decides
         e = e_new
     return FAST_DEFERRED, max_iter
