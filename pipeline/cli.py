@@ -277,16 +277,28 @@ def ik(
         str | None, typer.Option(help="Arrow file: x_cm y_cm z_cm rx_deg ry_deg rz_deg [branch].")
     ] = None,
     out: Annotated[str | None, typer.Option(help="Arrow file for the joints of --targets.")] = None,
+    tool: Annotated[
+        tuple[float, float, float, float, float, float] | None,
+        typer.Option(
+            help="User tool x y z (cm) rx ry rz (deg, fixed axes) in the design flange frame; "
+            "poses are then for that tool (default: the signature's tool)."
+        ),
+    ] = None,
 ) -> None:
     """Joint readings that put the identified tool at a pose (signature-based control)."""
     from pipeline.control import Controller, solve_arrow, solve_poses
     from pipeline.kinematics.ik import STATUS_NAMES
+    from pipeline.kinematics.transforms import transform_from_xyz_rpy
 
     ctl = Controller.from_session(session)
+    tool_label = "signature"
+    if tool is not None:
+        ctl = ctl.with_tool(transform_from_xyz_rpy(tool[:3], np.deg2rad(tool[3:])))
+        tool_label = "flange " + " ".join(f"{v:g}" for v in tool)
     if targets is not None:
         if out is None:
             raise ArmsigError("--targets needs --out", fix="--out joints.arrow")
-        summary = solve_arrow(ctl, targets, out, method)
+        summary = solve_arrow(ctl, targets, out, method, tool_label)
         typer.echo(summary)
         return
     if pose is None:

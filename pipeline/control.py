@@ -16,7 +16,7 @@ signature's sensor frame with the base alignment stored in the signature file
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -33,6 +33,7 @@ from pipeline.kinematics.ik import (
     jacobi_iterative,
     newton_raphson,
 )
+from pipeline.kinematics.transforms import invert_transform
 from pipeline.robots.description import RobotDescription
 from pipeline.signature_file import Signature, load_signature
 from pipeline.units import joints_to_internal
@@ -66,6 +67,29 @@ class Controller:
         """Load ``signature.json`` of an identified session."""
         sig = load_signature(Path(session_dir) / "signature.json")
         return cls(sig, sig.robot, sig.sensor_from_design_base, sig.design_flange_to_tool)
+
+    def with_tool(self, flange_to_user_tool: np.ndarray) -> Controller:
+        """The controller of a user tool given in the design flange frame (4, 4), cm.
+
+        The flange is the end frame of the robot description's design chain; the
+        offset is what the tool's drawing gives. The signature's tool (the probe
+        the session measured) is ``Y`` from the flange, so the user tool is
+        ``F_s(q) · Y⁻¹ · flange_to_user_tool``: the signature chain's tool moves
+        by ``Y⁻¹ · flange_to_user_tool``, the design model's by the offset itself.
+        Poses, residuals and the initial estimate then all refer to the user tool.
+        """
+        F_u = np.asarray(flange_to_user_tool, float)
+        R = F_u[:3, :3]
+        # A rigid transform: orthonormal to round-off of a matrix built from angles.
+        if F_u.shape != (4, 4) or not np.allclose(R.T @ R, np.eye(3), atol=1e-9):
+            raise ArmsigError(
+                "bad user tool", expected="a (4, 4) rigid transform", got=repr(F_u.tolist())
+            )
+        c = self.signature.chain
+        tool = c.tool @ invert_transform(self.flange_to_tool) @ F_u
+        chain = SerialChain(c.links, c.prismatic, c.base, tool, c.joint_offsets)
+        sig = replace(self.signature, chain=chain, design_flange_to_tool=F_u)
+        return Controller(sig, self.robot, self.sensor_from_base, F_u)
 
     @cached_property
     def resolution(self) -> np.ndarray:
@@ -289,8 +313,17 @@ def solve_poses(
     return joints_to_boundary(out.q, controller.robot.prismatic), out
 
 
-def solve_arrow(controller: Controller, targets: str | Path, out: str | Path, method: str) -> str:
-    """Solve an Arrow file of poses and write the joints beside them (atomically)."""
+def solve_arrow(
+    controller: Controller,
+    targets: str | Path,
+    out: str | Path,
+    method: str,
+    tool: str = "signature",
+) -> str:
+    """Solve an Arrow file of poses and write the joints beside them (atomically).
+
+    ``tool`` names the tool the poses are for, for the output's metadata (the
+    controller's own tool: see :meth:`Controller.with_tool`)."""
     import pyarrow as pa
     import pyarrow.ipc as ipc
 
@@ -324,5 +357,6 @@ def solve_arrow(controller: Controller, targets: str | Path, out: str | Path, me
     )
     for name, values in extra.items():
         table = table.append_column(name, pa.array(values))
-    write_table(Path(out), table, {"method": method, "signature": controller.robot.name})
+    meta = {"method": method, "signature": controller.robot.name, "tool": tool}
+    write_table(Path(out), table, meta)
     return f"{int(res.converged.sum())} of {len(q)} targets converged; wrote {out}"

@@ -120,3 +120,58 @@ def test_cli_ik_pose_batch_and_convergence(robot3: Controller, tmp_path: Path) -
     nr, jac = poor
     assert nr.rows[-1, 4] < 1e-6 and jac.rows[-1, 4] < 1e-6
     assert len(nr.rows) < len(jac.rows)  # quadratic versus linear convergence
+
+
+def test_user_tool_round_trip(robot3: Controller) -> None:
+    # A gripper 12 cm out along the flange z, tilted 30° about its x, offset 2 cm in y.
+    from pipeline.kinematics.transforms import transform_from_xyz_rpy
+
+    F_u = transform_from_xyz_rpy([0.0, 2.0, 12.0], np.deg2rad([30.0, 0.0, 0.0]))
+    user = robot3.with_tool(F_u)
+    q, T_sig = _targets(robot3, 300, 9)
+    # Independently: user tool = signature tool · Y⁻¹ · F_u (Y: flange -> signature tool).
+    T_user = T_sig @ invert_transform(robot3.flange_to_tool) @ F_u
+    b = parse_branch("right-up-noflip")
+    on = np.all(puma560.branch_of(q) == [b.shoulder, b.elbow, b.wrist], axis=1)
+    assert on.sum() > 20
+    for method in ("nr", "jacobi"):
+        r = user.solve(T_user[on], branch=b, method=method)
+        assert r.converged.all() and r.position_error_cm.max() <= 1e-7
+        # The solve stops within 1e-7 cm / 1e-10 rad of the pose; the joints then
+        # lie within ~2e-9 rad of q (measured), 1e-7 rad leaves room near singularities.
+        np.testing.assert_allclose(puma560.wrap_angle(r.q - q[on]), 0.0, atol=1e-7)
+    # Without the user tool the probe, not the gripper, goes to those poses: other joints.
+    r = robot3.solve(T_user[on], branch=b)
+    assert np.abs(puma560.wrap_angle(r.q - q[on])).max(axis=1).min() > 1e-2
+    # The signature's own tool as the "user" tool gives the signature's answer.
+    same = robot3.with_tool(robot3.flange_to_tool).solve(T_sig[on], branch=b)
+    np.testing.assert_allclose(same.q, robot3.solve(T_sig[on], branch=b).q, atol=1e-9)
+    with pytest.raises(ArmsigError, match="bad user tool"):
+        robot3.with_tool(np.diag([2.0, 1.0, 1.0, 1.0]))
+
+
+def test_cli_ik_user_tool(robot3: Controller, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+    from pipeline.kinematics.transforms import transform_from_xyz_rpy, xyz_rpy_from_transform
+
+    d = tmp_path / "s"
+    d.mkdir()
+    shutil.copy(ROOT / "sessions/robot3/recording.mcap", d)
+    identify(d, report=False)
+    q = np.deg2rad([10.0, -30.0, 160.0, 20.0, 40.0, -15.0])
+    tool = (1.0, -2.0, 15.0, 0.0, 45.0, 0.0)
+    F_u = transform_from_xyz_rpy(tool[:3], np.deg2rad(tool[3:]))
+    T_sig = invert_transform(robot3.sensor_from_base) @ forward_kinematics(
+        robot3.signature.chain, q
+    )
+    xyz, rpy = xyz_rpy_from_transform(T_sig @ invert_transform(robot3.flange_to_tool) @ F_u)
+    pose = [*map(str, xyz), *map(str, np.rad2deg(rpy))]
+    branch = next(b.label for b in puma560.BRANCHES
+                  if list(puma560.branch_of(q)) == [b.shoulder, b.elbow, b.wrist])  # fmt: skip
+    args = ["ik", str(d), "--pose", *pose, "--branch", branch]
+    r = CliRunner().invoke(app, [*args, "--tool", *map(str, tool)])
+    assert r.exit_code == 0, r.output
+    q_out = [float(v) for v in r.output.split("\n")[0].split()[2::2]]
+    np.testing.assert_allclose(q_out, np.rad2deg(q), atol=1e-4)  # printed to 1e-4°
