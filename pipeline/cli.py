@@ -53,6 +53,16 @@ def robots() -> None:
         typer.echo(f"{name}: {rob.n_joints} joints: {joints}")
 
 
+def _joint_values(text: str, option: str) -> list[float]:
+    """Joint values from a comma- or space-separated option (deg / cm)."""
+    try:
+        return [float(v) for v in text.replace(",", " ").split()]
+    except ValueError as exc:
+        raise ArmsigError(
+            f"{option} must hold numbers", got=repr(text), fix=f'{option} "0 -90 90 0 0 0"'
+        ) from exc
+
+
 @app.command()
 @_errors_to_exit
 def fk(
@@ -67,11 +77,7 @@ def fk(
     from pipeline.robots import get_robot
     from pipeline.robots.fk import design_pose
 
-    try:
-        values = [float(v) for v in q.replace(",", " ").split()]
-    except ValueError as exc:
-        raise ArmsigError("--q must hold numbers", got=repr(q), fix='--q "0 -90 90 0 0 0"') from exc
-    pose = design_pose(get_robot(robot), values)
+    pose = design_pose(get_robot(robot), _joint_values(q, "--q"))
     with np.printoptions(precision=6, suppress=True):
         typer.echo(f"xyz_cm  = {pose.xyz_cm}")
         typer.echo(f"rpy_deg = {pose.rpy_deg}")
@@ -284,6 +290,14 @@ def ik(
             "poses are then for that tool (default: the signature's tool)."
         ),
     ] = None,
+    near: Annotated[
+        str | None,
+        typer.Option(
+            help="Start near these joint readings (deg / cm, comma or space separated): "
+            "the Puma takes their branch unless --branch is given; other arms return "
+            "the solution the search from there reaches (default: the signature's q^s)."
+        ),
+    ] = None,
 ) -> None:
     """Joint readings that put the identified tool at a pose (signature-based control)."""
     from pipeline.control import Controller, solve_arrow, solve_poses
@@ -291,6 +305,7 @@ def ik(
     from pipeline.kinematics.transforms import transform_from_xyz_rpy
 
     ctl = Controller.from_session(session)
+    q_near = None if near is None else np.array(_joint_values(near, "--near"))
     tool_label = "signature"
     if tool is not None:
         ctl = ctl.with_tool(transform_from_xyz_rpy(tool[:3], np.deg2rad(tool[3:])))
@@ -298,12 +313,12 @@ def ik(
     if targets is not None:
         if out is None:
             raise ArmsigError("--targets needs --out", fix="--out joints.arrow")
-        summary = solve_arrow(ctl, targets, out, method, tool_label)
+        summary = solve_arrow(ctl, targets, out, method, tool_label, q_near)
         typer.echo(summary)
         return
     if pose is None:
         raise ArmsigError("give --pose x y z rx ry rz, or --targets FILE --out FILE")
-    q, res = solve_poses(ctl, np.array(pose[:3]), np.array(pose[3:]), [branch], method)
+    q, res = solve_poses(ctl, np.array(pose[:3]), np.array(pose[3:]), [branch], method, q_near)
     units = [j.unit for j in ctl.robot.joints]
     typer.echo("q = " + "  ".join(f"{v:.4f} {u}" for v, u in zip(q[0], units, strict=True)))
     typer.echo(

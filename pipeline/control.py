@@ -139,13 +139,30 @@ class Controller:
 
         return Branch(*(int(v) for v in branch_of(self.signature.chain.joint_offsets)))
 
-    def initial_estimate(self, T_sensor: np.ndarray, branch=None) -> np.ndarray:
-        """q⁰: closed-form design inverse on ``branch`` (Puma) or damped least squares."""
-        m = T_sensor.shape[0]
-        q_sig = np.asarray(self.signature.chain.joint_offsets, float)
-        qs = np.broadcast_to(q_sig, (m, self.robot.n_joints))
+    def _starts(self, m: int, q_near: np.ndarray | None) -> np.ndarray:
+        """Reference configurations (m, n), rad / cm: ``q_near`` broadcast, or the
+        signature configuration q^s."""
+        n = self.robot.n_joints
+        q = np.asarray(self.signature.chain.joint_offsets if q_near is None else q_near, float)
+        if q.shape not in ((n,), (m, n)) or not np.isfinite(q).all():
+            raise ArmsigError(
+                "bad start configuration (--near)",
+                expected=f"{n} finite joint values (or one row per target)",
+                got=f"shape {q.shape}",
+            )
+        return np.broadcast_to(q, (m, n))
+
+    def initial_estimate(
+        self, T_sensor: np.ndarray, branch=None, q_near: np.ndarray | None = None
+    ) -> np.ndarray:
+        """q⁰: closed-form design inverse on ``branch`` (Puma; None: the branch of each
+        ``q_near`` row, else of q^s), or damped least squares from ``q_near`` (else q^s).
+        ``q_near`` (n,) or (m, n), rad / cm; the Puma's q⁰ takes its 2π class from it."""
+        qs = self._starts(T_sensor.shape[0], q_near)
         if self.robot.name == "puma560":
-            return self._design_inverse(branch or self.default_branch())(T_sensor, qs)
+            if branch is None and q_near is None:
+                branch = self.default_branch()
+            return self._design_inverse(branch)(T_sensor, qs)
         design = self._design_model(self.sensor_from_base)
         res = newton_raphson(design, T_sensor, qs, self.resolution, max_iter=100, damping=1e-2)
         return res.q
@@ -157,12 +174,16 @@ class Controller:
         method: str = "nr",
         record_history: bool = False,
         task_axes: tuple[int, ...] | None = None,
+        q_near: np.ndarray | None = None,
     ) -> IKResult:
         """Encoder readings (rad / cm) that put the signature tool at ``T_base`` (m, 4, 4).
 
         ``task_axes``: controlled components of δ = [dx, dy, dz, rx, ry, rz] in
         the design base frame (e.g. :func:`task_axes_for`); Newton-Raphson only.
         None: the full pose.
+        ``q_near`` (n,) or (m, n), rad / cm: where to start (:meth:`initial_estimate`):
+        the Puma takes its branch from it when ``branch`` is None, other arms start
+        their search there and so return the solution it leads to. None: q^s.
         """
         if method not in METHODS:
             raise ArmsigError(f"unknown method {method!r}", expected=" or ".join(METHODS))
@@ -170,11 +191,11 @@ class Controller:
         if task_axes is not None:
             if method != "nr":
                 raise ArmsigError("task axes need Newton-Raphson", fix="use --method nr")
-            return self._solve_task_axes(T, branch, tuple(task_axes), record_history)
+            return self._solve_task_axes(T, branch, tuple(task_axes), record_history, q_near)
         T_sensor = self.sensor_from_base @ T
-        if self.robot.name == "puma560" and branch is None:
+        if self.robot.name == "puma560" and branch is None and q_near is None:
             branch = self.default_branch()
-        q0 = self.initial_estimate(T_sensor, branch)
+        q0 = self.initial_estimate(T_sensor, branch, q_near)
         if method == "nr":
             res = newton_raphson(
                 self.signature.chain, T_sensor, q0, self.resolution, record_history=record_history
@@ -202,18 +223,22 @@ class Controller:
         return res
 
     def _solve_task_axes(
-        self, T_base: np.ndarray, branch, axes: tuple[int, ...], record_history: bool
+        self,
+        T_base: np.ndarray,
+        branch,
+        axes: tuple[int, ...],
+        record_history: bool,
+        q_near: np.ndarray | None,
     ) -> IKResult:
         """Newton-Raphson on the ``axes`` components of δ, in the design base frame
         (the chain re-based there, so the axes are the base's)."""
         sig = self.signature.chain
         chain = in_frame(sig, self.sensor_from_base)  # the signature in the design base frame
         if self.robot.name == "puma560":
-            q0 = self.initial_estimate(self.sensor_from_base @ T_base, branch)
+            q0 = self.initial_estimate(self.sensor_from_base @ T_base, branch, q_near)
         else:
-            m = T_base.shape[0]
-            q_sig = np.broadcast_to(np.asarray(sig.joint_offsets, float), (m, self.robot.n_joints))
-            q0 = newton_raphson(self._design_model(), T_base, q_sig, self.resolution,
+            qs = self._starts(T_base.shape[0], q_near)
+            q0 = newton_raphson(self._design_model(), T_base, qs, self.resolution,
                                 max_iter=100, damping=1e-2, task_axes=axes).q  # fmt: skip
         res = newton_raphson(
             chain, T_base, q0, self.resolution, record_history=record_history, task_axes=axes
@@ -269,9 +294,12 @@ def solve_poses(
     rpy_deg: np.ndarray,
     branches: list[str | None] | None = None,
     method: str = "nr",
+    near: np.ndarray | None = None,
 ) -> tuple[np.ndarray, IKResult]:
     """Solve poses given as position (m, 3) cm and fixed-axis rx, ry, rz (m, 3) deg.
 
+    ``near``: start configuration (n,) in boundary units (deg / cm), see
+    :meth:`Controller.solve`'s ``q_near``.
     Returns the joint readings in boundary units (m, n) and the raw result.
     Targets are grouped by branch so every group is one batched solve. An arm with
     fewer than six joints solves the components it controls (:func:`task_axes_for`).
@@ -284,10 +312,15 @@ def solve_poses(
     labels = branches if branches is not None else [None] * m
     axes = task_axes_for(controller.robot)  # arms with < 6 joints: the components they control
     task_axes = None if axes == ALL_AXES else axes
+    q_near = None if near is None else np.asarray(near, float)
+    if q_near is not None and q_near.shape[-1:] == (controller.robot.n_joints,):
+        q_near = joints_to_internal(q_near, controller.robot.prismatic)  # else: _starts says why
     results: dict[str | None, tuple[np.ndarray, IKResult]] = {}
     for label in dict.fromkeys(labels):
         sel = np.array([b == label for b in labels])
-        res = controller.solve(T[sel], parse_branch(label), method, task_axes=task_axes)
+        res = controller.solve(
+            T[sel], parse_branch(label), method, task_axes=task_axes, q_near=q_near
+        )
         results[label] = (sel, res)
     n = controller.robot.n_joints
     fields = {
@@ -319,6 +352,7 @@ def solve_arrow(
     out: str | Path,
     method: str,
     tool: str = "signature",
+    near: np.ndarray | None = None,
 ) -> str:
     """Solve an Arrow file of poses and write the joints beside them (atomically).
 
@@ -344,7 +378,7 @@ def solve_arrow(
     xyz = np.column_stack([table.column(c).to_numpy() for c in cols[:3]]).astype(float)
     rpy = np.column_stack([table.column(c).to_numpy() for c in cols[3:]]).astype(float)
     branches = table.column("branch").to_pylist() if "branch" in table.column_names else None
-    q, res = solve_poses(controller, xyz, rpy, branches, method)
+    q, res = solve_poses(controller, xyz, rpy, branches, method, near)
     extra: dict[str, Any] = {}
     for i, j in enumerate(controller.robot.joints):
         extra[f"q{i + 1}_{j.unit}"] = q[:, i]

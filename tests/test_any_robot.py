@@ -272,6 +272,24 @@ def test_user_description_file_end_to_end_on_the_command_line(tmp_path: Path) ->
     assert res.signature.max_position_cm <= 1e-6 and res.signature.max_orientation_deg <= 1e-7
     dh = read_table(stage_path(d, "dh")).to_pydict()
     assert dh["type"][2] == "prismatic" and dh["a_cm"][2] == 0.0
+    # `pipeline ik --near` for an arm without a closed-form inverse: the flange pose at
+    # q (the design flange as user tool, --tool 0 0 0 0 0 0) comes back as q itself.
+    from pipeline.control import Controller
+    from pipeline.kinematics.chain import forward_kinematics
+    from pipeline.kinematics.transforms import invert_transform, xyz_rpy_from_transform
+
+    ctl = Controller.from_session(d).with_tool(np.eye(4))
+    q = np.array([30.0, 45.0, 10.0, 20.0])  # deg, deg, cm, deg
+    T = invert_transform(ctl.sensor_from_base) @ forward_kinematics(
+        ctl.signature.chain, joints_to_internal(q, ctl.robot.prismatic)
+    )
+    xyz, rpy = xyz_rpy_from_transform(T)
+    pose = [f"{v:.9f}" for v in (*xyz, *np.rad2deg(rpy))]
+    args = ["ik", str(d), "--pose", *pose, "--tool", *["0"] * 6, "--near", "25 50 5 0"]
+    r = cli.invoke(app, args)
+    assert r.exit_code == 0, r.output
+    q_out = [float(v) for v in r.output.split("\n")[0].split()[2::2]]
+    np.testing.assert_allclose(q_out, q, atol=2e-4)  # printed to 1e-4
 
 
 def test_gantry_consecutive_prismatic_joints(tmp_path: Path) -> None:

@@ -175,3 +175,26 @@ def test_cli_ik_user_tool(robot3: Controller, tmp_path: Path) -> None:
     assert r.exit_code == 0, r.output
     q_out = [float(v) for v in r.output.split("\n")[0].split()[2::2]]
     np.testing.assert_allclose(q_out, np.rad2deg(q), atol=1e-4)  # printed to 1e-4°
+
+
+def test_q_near_picks_the_branch_of_each_target(robot3: Controller) -> None:
+    q, T = _targets(robot3, 200, 12)
+    flags = puma560.branch_of(q)
+    assert len({tuple(f) for f in flags}) >= 4  # several branches in one batch
+    near = q + 0.05  # 3° off; a few cross a branch boundary and ask for another branch
+    wanted = puma560.branch_of(near)
+    same = np.all(wanted == flags, axis=1)
+    assert 0.8 < same.mean() < 1.0
+    for method in ("nr", "jacobi"):
+        r = robot3.solve(T, method=method, q_near=near)
+        ok = r.converged & np.all(puma560.branch_of(r.q) == wanted, axis=1)
+        # Misses: targets within 3° of a singularity, asked for the branch across it.
+        assert ok.mean() >= 0.97 and ok[same].all()
+        # Same branch and 2π class as q (joint limits wider than ±180°): q itself.
+        np.testing.assert_allclose(r.q[same], q[same], atol=1e-7)
+    # Without q_near every target gets the signature configuration's branch.
+    r = robot3.solve(T)
+    home = puma560.branch_of(robot3.signature.chain.joint_offsets)
+    assert np.all(puma560.branch_of(r.q) == home, axis=1).mean() >= 0.95
+    with pytest.raises(ArmsigError, match="bad start configuration"):
+        robot3.solve(T[:3], q_near=np.zeros(5))
