@@ -298,8 +298,8 @@ def solve_poses(
 ) -> tuple[np.ndarray, IKResult]:
     """Solve poses given as position (m, 3) cm and fixed-axis rx, ry, rz (m, 3) deg.
 
-    ``near``: start configuration (n,) in boundary units (deg / cm), see
-    :meth:`Controller.solve`'s ``q_near``.
+    ``near``: start configuration (n,) or one per pose (m, n), in boundary units
+    (deg / cm), see :meth:`Controller.solve`'s ``q_near``.
     Returns the joint readings in boundary units (m, n) and the raw result.
     Targets are grouped by branch so every group is one batched solve. An arm with
     fewer than six joints solves the components it controls (:func:`task_axes_for`).
@@ -318,8 +318,9 @@ def solve_poses(
     results: dict[str | None, tuple[np.ndarray, IKResult]] = {}
     for label in dict.fromkeys(labels):
         sel = np.array([b == label for b in labels])
+        near_sel = q_near[sel] if q_near is not None and q_near.ndim == 2 else q_near
         res = controller.solve(
-            T[sel], parse_branch(label), method, task_axes=task_axes, q_near=q_near
+            T[sel], parse_branch(label), method, task_axes=task_axes, q_near=near_sel
         )
         results[label] = (sel, res)
     n = controller.robot.n_joints
