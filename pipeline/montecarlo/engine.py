@@ -78,7 +78,8 @@ class StudyResult:
 
 
 class Progress:
-    """A one-line progress bar on stderr: ``study  [#####.....]  12/40 batches  35 s``."""
+    """A one-line progress bar on stderr: ``study  [#####.....]  12/40 batches  35 s``
+    (redrawn on a terminal; elsewhere only the final line)."""
 
     def __init__(self, label: str, total: int, stream: TextIO | None = sys.stderr) -> None:
         self.label, self.total, self.stream = label, total, stream
@@ -89,9 +90,12 @@ class Progress:
         self.done += 1
         if self.stream is None:
             return
+        last = self.done >= self.total
+        if not last and not self.stream.isatty():  # a log file gets the final line only
+            return
         width = 30
         fill = int(width * self.done / max(self.total, 1))
-        end = "\n" if self.done >= self.total else ""
+        end = "\n" if last else ""
         self.stream.write(
             f"\r{self.label:14s} [{'#' * fill}{'.' * (width - fill)}] "
             f"{self.done}/{self.total} batches {time.perf_counter() - self.t0:6.1f} s{end}"
