@@ -633,7 +633,9 @@ def newton_raphson(
     compiled : bool
         For an unbatched six-joint chain on all six axes without history, run
         the plain Newton iterations compiled
-        (:mod:`pipeline.kinematics.ik_compiled`, ~100x faster per target); a
+        (:mod:`pipeline.kinematics.ik_compiled`; measured on robot3: one target
+        25 µs instead of 430 µs, a batch of 20,000 3.3 µs per target instead
+        of 10 µs); a
         target that needs more than plain Newton steps (safeguard, singular
         Jacobian, stall, iteration cap) is solved by the numpy iteration from
         its start. The two agree to round-off; False: numpy only.
