@@ -634,8 +634,8 @@ def newton_raphson(
         For an unbatched six-joint chain on all six axes without history, run
         the plain Newton iterations compiled
         (:mod:`pipeline.kinematics.ik_compiled`; measured on robot3: one target
-        25 µs instead of 430 µs, a batch of 20,000 3.3 µs per target instead
-        of 10 µs); a
+        25 µs instead of 430 µs, a batch of 20,000 3.0-3.6 µs per target
+        instead of 8-10 µs); a
         target that needs more than plain Newton steps (safeguard, singular
         Jacobian, stall, iteration cap) is solved by the numpy iteration from
         its start. The two agree to round-off; False: numpy only.
