@@ -309,8 +309,9 @@ def plain_newton(
         _solve_serial(*model, T[rows], q[rows], res_c, limit_c, settings,
                       outcome[rows], iterations[rows], delta[rows])  # fmt: skip
 
-    workers = len(os.sched_getaffinity(0))
-    if m < THREADED_MIN_TARGETS or workers < 2:
+    # The cores are counted only for a batch that may use them (not per single target).
+    workers = len(os.sched_getaffinity(0)) if m >= THREADED_MIN_TARGETS else 1
+    if workers < 2:
         run(slice(0, m))
     else:  # one contiguous share per core; each target is still solved alone
         bounds = np.linspace(0, m, workers + 1).astype(int)
