@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SESSION ?= robot3
 
-.PHONY: install test lint bench identify sessions clean
+.PHONY: install test lint bench fuzz identify sessions clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,6 +24,10 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m bench
+
+# Issue 13's acceptance: 500 byte-level and 200 JSON-level seeded mutations of robot3's recording.
+fuzz: $(STAMP)
+	$(BIN)/python tests/fuzz_recording.py sessions/robot3/recording.mcap --byte 500 --json 200
 
 # The seven committed sessions: seeds 1-7, every other option at its default.
 sessions: $(STAMP)
