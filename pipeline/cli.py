@@ -200,13 +200,19 @@ def simulate(
     ] = 10,
     faults: Annotated[str, typer.Option(help="Comma-separated: bias, dropouts, outliers.")] = "",
     wac_error_cm: Annotated[
-        float, typer.Option(help="Error of the recorded W_AC calibration (cm), Section 7.3.")
+        float,
+        typer.Option(
+            min=-100.0, max=100.0, help="Error of the recorded W_AC calibration (cm), Section 7.3."
+        ),
     ] = 0.0,
     noiseless: Annotated[
         bool, typer.Option(help="No range noise or quantization, uniform 70 °F, perfect servo.")
     ] = False,
     max_sweep_deg: Annotated[
-        float, typer.Option(help="Cap of every revolute sweep (deg); under 180 violates B-3.")
+        float,
+        typer.Option(
+            min=1.0, max=720.0, help="Cap of every revolute sweep (deg); under 180 violates B-3."
+        ),
     ] = 300.0,
     force: Annotated[
         bool, typer.Option(help="Replace the recording of an existing session (else refused).")

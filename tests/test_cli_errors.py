@@ -92,9 +92,15 @@ def test_usage_errors_are_one_line_with_exit_2_from_the_installed_command() -> N
     assert r.returncode == 0 and "simulate" in r.stdout
 
 
-def test_usage_error_in_process_is_one_line() -> None:
+def test_usage_error_in_process_is_one_line(tmp_path: Path) -> None:
     assert_one_error(invoke("ik"), EXIT_USAGE, "Missing argument 'session'", "pipeline ik --help")
     assert_one_error(invoke("fk", "puma560"), EXIT_USAGE, "'--q'")
+    # Option ranges: NaN and out-of-range values are usage errors, not a recording of NaN.
+    bad = {"--max-sweep-deg": "nan", "--wac-error-cm": "1e9", "--sigma-p": "-1", "--points": "0"}
+    for option, value in bad.items():
+        r = invoke("simulate", str(tmp_path / "s"), option, value)
+        assert_one_error(r, EXIT_USAGE, f"'{option}'")
+    assert not (tmp_path / "s").exists()
 
 
 def test_numpy_warnings_do_not_precede_an_error() -> None:
