@@ -31,7 +31,7 @@ fuzz: $(STAMP)
 
 # The seven committed sessions: seeds 1-7, every other option at its default.
 sessions: $(STAMP)
-	for i in 1 2 3 4 5 6 7; do $(BIN)/pipeline simulate robot$$i --seed $$i || exit 1; done
+	for i in 1 2 3 4 5 6 7; do $(BIN)/pipeline simulate robot$$i --seed $$i --force || exit 1; done
 
 identify: $(STAMP)
 	$(BIN)/pipeline identify sessions/$(SESSION)

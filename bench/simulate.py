@@ -14,7 +14,8 @@ from pipeline.rig.simulate import SimulationOptions, simulate_session
 
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
-        inproc = best_of(lambda: simulate_session(Path(tmp) / "a", SimulationOptions(seed=3)), 3)
+        opts = SimulationOptions(seed=3)
+        inproc = best_of(lambda: simulate_session(Path(tmp) / "a", opts, force=True), 3)
         exe = Path(sys.executable).with_name("pipeline")
         t0 = time.perf_counter()
         subprocess.run(

@@ -54,3 +54,40 @@ def write_unless_same_inputs(
     out = write()
     write_text_atomic(stamp, current)
     return out
+
+
+def check_writable(path: str | Path, what: str, *, folder: bool = False) -> Path:
+    """Refuse, before any work is done, an output ``path`` that cannot be written.
+
+    A file (``folder=False``) needs an existing, writable parent folder and must not
+    be a folder itself; a folder (``folder=True``) must be a folder or not exist yet,
+    and its nearest existing ancestor must be a writable folder (the missing ones are
+    made when the output is written). ``what`` names the output in the message, e.g.
+    ``"--out"``. Returns ``path`` as a :class:`Path`.
+    """
+    from pipeline.errors import ArmsigError
+
+    p = Path(path)
+    if folder:
+        if p.exists() and not p.is_dir():
+            raise ArmsigError(f"{what} {p} is a file", expected="a folder (or a new path)")
+        parent = next(a for a in (p, *p.absolute().parents) if a.exists())
+    else:
+        if p.is_dir():
+            raise ArmsigError(f"{what} {p} is a folder", expected="a file path")
+        parent = p.absolute().parent
+        if not parent.exists():
+            raise ArmsigError(
+                f"{what} {p}: folder {parent} does not exist", fix="create it, or give another path"
+            )
+    if not parent.is_dir():
+        raise ArmsigError(f"{what} {p}: {parent} is not a folder", fix="give another path")
+    try:
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+    except OSError as exc:
+        raise ArmsigError(
+            f"{what} {p}: cannot write in {parent}", got=exc.strerror or str(exc),
+            fix="give a path in a writable folder",
+        ) from exc  # fmt: skip
+    return p

@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -20,11 +21,16 @@ from pipeline.errors import ArmsigError
 from pipeline.kinematics.alignment import fit_alignment
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.transforms import pose_error
+from pipeline.robots.description import JOINT_TYPES
 from pipeline.stages.frames import chain_from_frames
 from pipeline.stages.runner import stage_path
 from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_table
 from pipeline.units import joints_to_internal
+
+#: Most random configurations: 1e5 keep the (m, n, 4, 4) stacks of the audit near 100 MB.
+MAX_CONFIGURATIONS = 100_000
+_RESIMULATE = "simulate the session again (`pipeline simulate NAME --force`)"
 
 
 @dataclass(frozen=True)
@@ -53,11 +59,58 @@ class AuditResult:
         return {**asdict(self), "improvement_rms_position": self.improvement}
 
 
-def true_chain(truth: dict) -> SerialChain:
+def read_truth(path: Path) -> dict[str, Any]:
+    """The parsed ``rig-truth.json`` of a simulated session (one-line error if unreadable)."""
+    try:
+        truth = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, RecursionError, json.JSONDecodeError) as exc:
+        raise ArmsigError(
+            f"{path}: not a readable JSON file", got=str(exc), fix=_RESIMULATE
+        ) from exc
+    if not isinstance(truth, dict):
+        raise ArmsigError(f"{path}: not a JSON object", got=type(truth).__name__, fix=_RESIMULATE)
+    return truth
+
+
+def _array(value: Any, shape: tuple[int, ...], field: str) -> np.ndarray:
+    """``value`` as a finite float array of ``shape``, else a one-line error naming ``field``."""
+    try:
+        out = np.array(value, float)
+    except (TypeError, ValueError):
+        out = np.full(0, np.nan)
+    if out.shape != shape or not np.isfinite(out).all():
+        raise ArmsigError(
+            f"rig-truth.json: field {field!r} is malformed",
+            expected=f"finite numbers of shape {shape}",
+            got=f"shape {out.shape}" if out.shape != shape else "a value that is not finite",
+            fix=_RESIMULATE,
+        )
+    return out
+
+
+def true_chain(truth: dict[str, Any]) -> SerialChain:
     """The true robot of ``rig-truth.json`` (sensor frame, encoder readings in rad / cm)."""
-    tk = truth["true_kinematics"]
-    pris = np.array([t == "prismatic" for t in tk["joint_types"]])
-    return SerialChain(links=np.array(tk["links"]), prismatic=pris, base=np.array(tk["base"]))
+    tk = truth.get("true_kinematics")
+    if not isinstance(tk, dict):
+        raise ArmsigError(
+            "rig-truth.json: no field 'true_kinematics'",
+            expected="the ground truth `pipeline simulate` writes",
+            fix=_RESIMULATE,
+        )
+    types = tk.get("joint_types")
+    if not (isinstance(types, list) and types and all(t in JOINT_TYPES for t in types)):
+        raise ArmsigError(
+            "rig-truth.json: field 'true_kinematics.joint_types' is malformed",
+            expected=f"a list of {' or '.join(JOINT_TYPES)}",
+            got=repr(types)[:80],
+            fix=_RESIMULATE,
+        )
+    n = len(types)
+    return SerialChain(
+        links=_array(tk.get("links"), (n, 4, 4), "true_kinematics.links"),
+        prismatic=np.array([t == "prismatic" for t in types]),
+        base=_array(tk.get("base"), (4, 4), "true_kinematics.base"),
+    )
 
 
 def _aligned_errors(T_true: np.ndarray, T_model: np.ndarray) -> ModelError:
@@ -73,7 +126,15 @@ def _aligned_errors(T_true: np.ndarray, T_model: np.ndarray) -> ModelError:
 
 
 def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) -> AuditResult:
-    """Compare the identified signature and the design model with the truth."""
+    """Compare the identified signature and the design model with the truth over
+    ``configurations`` (1 to :data:`MAX_CONFIGURATIONS`) random configurations."""
+    if not 1 <= configurations <= MAX_CONFIGURATIONS:
+        raise ArmsigError(
+            "--configurations out of range",
+            expected=f"1 to {MAX_CONFIGURATIONS}",
+            got=str(configurations),
+            fix="--configurations 1000",
+        )
     sdir = Path(session_dir)
     truth_path = sdir / "rig-truth.json"
     if not truth_path.is_file():
@@ -87,8 +148,14 @@ def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) ->
         raise ArmsigError(
             f"{sdir}: not identified yet", fix=f"run `pipeline identify {sdir}` first"
         )
-    truth = json.loads(truth_path.read_text())
+    truth = true_chain(read_truth(truth_path))
     robot = session_robot(read_table(stage_path(sdir, "session")))
+    if truth.n_joints != robot.n_joints:
+        raise ArmsigError(
+            f"{truth_path}: the true robot has {truth.n_joints} joints",
+            expected=f"the {robot.n_joints} joints of the session's robot {robot.name}",
+            fix=_RESIMULATE,
+        )
     pris = robot.prismatic
     sig = chain_from_frames(read_table(frames_path), pris)
     rng = np.random.default_rng(seed)
@@ -96,7 +163,7 @@ def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) ->
     q = joints_to_internal(
         rng.uniform(lim[:, 0], lim[:, 1], (configurations, robot.n_joints)), pris
     )
-    T_true = forward_kinematics(true_chain(truth), q)
+    T_true = forward_kinematics(truth, q)
     return AuditResult(
         session=str(sdir),
         configurations=configurations,

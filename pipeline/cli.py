@@ -1,46 +1,120 @@
 """The ``pipeline`` command line. Commands are thin; the work is in importable functions.
 
-Only this module turns :class:`~pipeline.errors.ArmsigError` into exit codes.
+Only this module turns exceptions into exit codes, in one place (:class:`_Pipeline`):
+
+==  =====================================================================
+0   done
+1   refused input or data (an :class:`~pipeline.errors.ArmsigError`)
+2   usage error (unknown command or option, missing or malformed argument)
+3   ``ik``: a target was not reached (the joints are still printed / written)
+70  internal error: a bug in armsig (the traceback with ``ARMSIG_DEBUG=1``)
+==  =====================================================================
+
+Every error is one line on stderr starting ``error:``.
 """
 
 from __future__ import annotations
 
-import functools
+import contextlib
+import os
+import shlex
 import sys
-from collections.abc import Callable
-from typing import Annotated, Any, TypeVar
+import traceback
+import warnings
+from collections.abc import Iterator, Sequence
+from typing import Annotated, Any
 
 import numpy as np
 import typer
+from typer.core import TyperGroup
 
 from pipeline.errors import ArmsigError
+
+EXIT_REFUSED = 1
+EXIT_USAGE = 2
+EXIT_NOT_REACHED = 3
+EXIT_INTERNAL = 70  # EX_SOFTWARE of sysexits.h
+DEBUG_ENV = "ARMSIG_DEBUG"
+
+
+def _one_line(text: str) -> str:
+    """``text`` with every run of whitespace (newlines too) as one space."""
+    return " ".join(text.split())
+
+
+def _fail(message: str, code: int) -> int:
+    typer.echo(f"error: {_one_line(message)}", err=True)
+    return code
+
+
+@contextlib.contextmanager
+def _quiet_numpy(debug: bool) -> Iterator[None]:
+    """No numpy floating-point or RuntimeWarning lines on stderr (unless ``debug``).
+
+    armsig checks its numbers itself (finite inputs, dropouts as NaN, feature
+    checks) and reports what matters as warnings of its own or as an error, so
+    numpy's ``invalid value`` / ``divide by zero`` / ``Mean of empty slice`` lines
+    would only precede those. Other warning categories still print.
+    """
+    if debug:
+        yield
+        return
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        yield
+
+
+class _Pipeline(TyperGroup):
+    """The command group: maps every outcome of a command to one exit code."""
+
+    def main(  # type: ignore[override]
+        self,
+        args: Sequence[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        **extra: Any,
+    ) -> Any:
+        argv = list(sys.argv[1:] if args is None else args)
+        prog = prog_name or "pipeline"
+        debug = os.environ.get(DEBUG_ENV) == "1"
+        try:
+            with _quiet_numpy(debug):
+                rv = super().main(argv, prog, complete_var, standalone_mode=False, **extra)
+            code = rv if isinstance(rv, int) else 0  # an int: typer.Exit's code (--help: 0)
+        except typer.TyperException as exc:  # the parser's: unknown option, bad value, ...
+            where = getattr(getattr(exc, "ctx", None), "command_path", None) or prog
+            code = _fail(f"{exc.format_message().rstrip('.')}; try: {where} --help", EXIT_USAGE)
+        except typer.Abort:
+            code = _fail("aborted", EXIT_REFUSED)
+        except ArmsigError as exc:
+            code = _fail(str(exc), EXIT_REFUSED)
+        except (SystemExit, KeyboardInterrupt):
+            raise
+        except BaseException as exc:  # noqa: B036  (also a Rust panic of polars / pyarrow)
+            if debug:
+                traceback.print_exc()
+            command = shlex.join([prog, *argv])
+            code = _fail(
+                f"internal error (a bug in armsig): {type(exc).__name__}: {exc}; "
+                f"try: report it with the output of {DEBUG_ENV}=1 {command}",
+                EXIT_INTERNAL,
+            )
+        if not standalone_mode:
+            return code
+        sys.exit(code)
+
 
 app = typer.Typer(
     name="pipeline",
     help="armsig: identify a robot arm's kinematic signature and control it with it.",
-    no_args_is_help=True,
+    cls=_Pipeline,
     add_completion=False,
+    pretty_exceptions_enable=False,
 )
-
-F = TypeVar("F", bound=Callable[..., Any])
-
-
-def _errors_to_exit(func: F) -> F:
-    """Turn an ArmsigError into a one-line message on stderr and exit code 1."""
-
-    @functools.wraps(func)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return func(*args, **kwargs)
-        except ArmsigError as exc:
-            typer.echo(f"error: {exc}", err=True)
-            sys.exit(1)
-
-    return wrapper  # type: ignore[return-value]
 
 
 @app.command()
-@_errors_to_exit
 def robots() -> None:
     """List the built-in robots with their joints."""
     from pipeline.robots import builtin_names, get_robot
@@ -56,15 +130,24 @@ def robots() -> None:
 def _joint_values(text: str, option: str) -> list[float]:
     """Joint values from a comma- or space-separated option (deg / cm)."""
     try:
-        return [float(v) for v in text.replace(",", " ").split()]
+        values = [float(v) for v in text.replace(",", " ").split()]
     except ValueError as exc:
         raise ArmsigError(
             f"{option} must hold numbers", got=repr(text), fix=f'{option} "0 -90 90 0 0 0"'
         ) from exc
+    return _finite(values, option)
+
+
+def _finite(values: Sequence[float], option: str) -> list[float]:
+    """``values`` when every one is finite, else the one-line error of ``option``."""
+    if not np.isfinite(values).all():
+        raise ArmsigError(
+            f"{option} must hold finite numbers", got=" ".join(f"{v:g}" for v in values)
+        )
+    return list(values)
 
 
 @app.command()
-@_errors_to_exit
 def fk(
     robot: Annotated[
         str, typer.Argument(help="Built-in robot name or path to a .toml description.")
@@ -88,7 +171,6 @@ def fk(
 
 
 @app.command()
-@_errors_to_exit
 def simulate(
     name: Annotated[str, typer.Argument(help="Session name (sessions/NAME) or a folder path.")],
     robot: Annotated[
@@ -98,25 +180,43 @@ def simulate(
             "(schemas/robot_description.md)."
         ),
     ] = "puma560",
-    seed: Annotated[int, typer.Option(help="Seed of every random draw.")] = 1,
-    sigma_p: Annotated[float, typer.Option(help="Positional manufacturing error σ_p (cm).")] = 0.03,
-    sigma_o: Annotated[float, typer.Option(help="Orientational error σ_o (deg).")] = 0.03,
-    sigma_e: Annotated[float, typer.Option(help="Encoder calibration error σ_e (deg).")] = 0.3,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of every random draw.")] = 1,
+    sigma_p: Annotated[
+        float, typer.Option(min=0.0, help="Positional manufacturing error σ_p (cm).")
+    ] = 0.03,
+    sigma_o: Annotated[float, typer.Option(min=0.0, help="Orientational error σ_o (deg).")] = 0.03,
+    sigma_e: Annotated[
+        float, typer.Option(min=0.0, help="Encoder calibration error σ_e (deg).")
+    ] = 0.3,
     noise_factor: Annotated[
-        float, typer.Option(help="Multiplier of slant-range noise (7.9).")
+        float, typer.Option(min=0.0, help="Multiplier of slant-range noise (7.9).")
     ] = 1.0,
-    points: Annotated[int, typer.Option(help="Positions per joint sweep, N_i.")] = 100,
-    repeats: Annotated[int, typer.Option(help="Digitize cycles per position, N_avg.")] = 10,
+    # The thesis used 5 to 100 positions and 10 cycles; the caps bound memory and file size.
+    points: Annotated[
+        int, typer.Option(min=3, max=1000, help="Positions per joint sweep, N_i.")
+    ] = 100,
+    repeats: Annotated[
+        int, typer.Option(min=1, max=100, help="Digitize cycles per position, N_avg.")
+    ] = 10,
     faults: Annotated[str, typer.Option(help="Comma-separated: bias, dropouts, outliers.")] = "",
     wac_error_cm: Annotated[
-        float, typer.Option(help="Error of the recorded W_AC calibration (cm), Section 7.3.")
+        float,
+        typer.Option(
+            min=-100.0, max=100.0, help="Error of the recorded W_AC calibration (cm), Section 7.3."
+        ),
     ] = 0.0,
     noiseless: Annotated[
         bool, typer.Option(help="No range noise or quantization, uniform 70 °F, perfect servo.")
     ] = False,
     max_sweep_deg: Annotated[
-        float, typer.Option(help="Cap of every revolute sweep (deg); under 180 violates B-3.")
+        float,
+        typer.Option(
+            min=1.0, max=720.0, help="Cap of every revolute sweep (deg); under 180 violates B-3."
+        ),
     ] = 300.0,
+    force: Annotated[
+        bool, typer.Option(help="Replace the recording of an existing session (else refused).")
+    ] = False,
 ) -> None:
     """Record a simulated session: recording.mcap plus rig-truth.json."""
     from pathlib import Path
@@ -137,7 +237,7 @@ def simulate(
         noiseless=noiseless,
         max_sweep_deg=max_sweep_deg,
     )
-    path = simulate_session(folder, opts)
+    path = simulate_session(folder, opts, force=force)
     typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")
 
 
@@ -159,7 +259,6 @@ SessionArg = Annotated[str, typer.Argument(help="Session folder, e.g. sessions/r
 
 
 @app.command()
-@_errors_to_exit
 def identify(
     session: SessionArg,
     force: Annotated[bool, typer.Option(help="Rerun every stage.")] = False,
@@ -196,7 +295,6 @@ def identify(
 
 
 @app.command()
-@_errors_to_exit
 def status(session: SessionArg) -> None:
     """Show every stage of a session as fresh, stale or missing, and why
     (identification, then the `pipeline evaluate` stages)."""
@@ -208,7 +306,6 @@ def status(session: SessionArg) -> None:
 
 
 @app.command()
-@_errors_to_exit
 def show(
     session: SessionArg,
     stage: Annotated[str, typer.Argument(help="Stage name, e.g. features.")],
@@ -224,13 +321,13 @@ def show(
     import polars as pl
 
     from pipeline.stages.runner import stage_path
-    from pipeline.stages.tables import read_provenance
+    from pipeline.stages.tables import read_provenance, read_table
 
     path = stage_path(Path(session), stage)
     if not path.is_file():
         raise ArmsigError(f"{path}: no such stage output", fix=f"`pipeline status {session}`")
     typer.echo(json.dumps(read_provenance(path), indent=1, sort_keys=True))
-    df = pl.read_ipc(path)
+    df = pl.DataFrame(read_table(path))  # a damaged file: one line, not a polars panic
     if columns:
         wanted = [c.strip() for c in columns.split(",") if c.strip()]
         unknown = [c for c in wanted if c not in df.columns]
@@ -242,7 +339,6 @@ def show(
 
 
 @app.command()
-@_errors_to_exit
 def audit(
     session: SessionArg,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON for machines.")] = False,
@@ -268,7 +364,6 @@ def audit(
 
 
 @app.command()
-@_errors_to_exit
 def ik(
     session: SessionArg,
     pose: Annotated[
@@ -308,16 +403,20 @@ def ik(
     q_near = None if near is None else np.array(_joint_values(near, "--near"))
     tool_label = "signature"
     if tool is not None:
+        _finite(tool, "--tool")
         ctl = ctl.with_tool(transform_from_xyz_rpy(tool[:3], np.deg2rad(tool[3:])))
         tool_label = "flange " + " ".join(f"{v:g}" for v in tool)
     if targets is not None:
         if out is None:
             raise ArmsigError("--targets needs --out", fix="--out joints.arrow")
-        summary = solve_arrow(ctl, targets, out, method, tool_label, q_near)
+        summary, failed = solve_arrow(ctl, targets, out, method, tool_label, q_near)
         typer.echo(summary)
+        if failed:
+            raise typer.Exit(EXIT_NOT_REACHED)
         return
     if pose is None:
         raise ArmsigError("give --pose x y z rx ry rz, or --targets FILE --out FILE")
+    _finite(pose, "--pose")
     q, res = solve_poses(ctl, np.array(pose[:3]), np.array(pose[3:]), [branch], method, q_near)
     units = [j.unit for j in ctl.robot.joints]
     typer.echo("q = " + "  ".join(f"{v:.4f} {u}" for v, u in zip(q[0], units, strict=True)))
@@ -335,14 +434,15 @@ def ik(
     if outside:
         typer.echo(f"warning: outside joint limits: {', '.join(outside)}", err=True)
     if not res.converged[0]:
-        raise typer.Exit(1)
+        raise typer.Exit(EXIT_NOT_REACHED)
 
 
 @app.command("ik-convergence")
-@_errors_to_exit
 def ik_convergence(
     session: SessionArg,
-    seed: Annotated[int, typer.Option(help="Seed of the target and the poor signature.")] = 3,
+    seed: Annotated[
+        int, typer.Option(min=0, help="Seed of the target and the poor signature.")
+    ] = 3,
 ) -> None:
     """Per-iteration errors of Newton-Raphson and Jacobi (Tables 5-1, 5-2, Section 5.4)."""
     from pipeline.convergence import convergence_tables, format_tables
@@ -351,7 +451,6 @@ def ik_convergence(
 
 
 @app.command()
-@_errors_to_exit
 def evaluate(
     session: SessionArg,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
@@ -392,7 +491,6 @@ def evaluate(
 
 
 @app.command()
-@_errors_to_exit
 def montecarlo(
     study: Annotated[
         str,
@@ -400,10 +498,12 @@ def montecarlo(
             help="encoder, machining, noise, points, radius, misalignment, features or all."
         ),
     ],
-    robots: Annotated[int, typer.Option(help="Simulated robots per setting.")] = 500,
-    seed: Annotated[int, typer.Option(help="Study seed (same seed, same numbers).")] = 0,
+    robots: Annotated[
+        int, typer.Option(min=2, max=100_000, help="Simulated robots per setting.")
+    ] = 500,
+    seed: Annotated[int, typer.Option(min=0, help="Study seed (same seed, same numbers).")] = 0,
     out: Annotated[str, typer.Option(help="Output folder.")] = "montecarlo",
-    workers: Annotated[int, typer.Option(help="Worker processes.")] = 1,
+    workers: Annotated[int, typer.Option(min=1, max=256, help="Worker processes.")] = 1,
 ) -> None:
     """Monte-Carlo study of design-model and signature control (Chapter 7, Appendix G)."""
     from pipeline.montecarlo.studies import run_montecarlo

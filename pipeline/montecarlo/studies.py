@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
+from pipeline.atomic import check_writable
 from pipeline.errors import ArmsigError
 from pipeline.evaluation.grid12 import INDEX_NAMES, INDEX_SIGNED, INDEX_UNITS
 from pipeline.montecarlo import design
@@ -136,7 +137,7 @@ def run_montecarlo(
     if robots < 2:
         raise ArmsigError("too few robots", expected="--robots >= 2", got=str(robots))
     names = [*SWEPT, "features"] if study == "all" else [study]
-    out_dir = Path(out)
+    out_dir = check_writable(out, "--out", folder=True)  # before hours of computing
     lines = []
     for name in names:
         if name == "features":

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.atomic import write_text_atomic
+from pipeline.atomic import check_writable, write_text_atomic
 from pipeline.errors import ArmsigError
 from pipeline.rig.atmosphere import Atmosphere, random_atmosphere
 from pipeline.rig.digitizer import DigitizerModel, digitize
@@ -72,10 +72,27 @@ def _check(opts: SimulationOptions) -> None:
         )
 
 
-def simulate_session(session_dir: str | Path, opts: SimulationOptions) -> Path:
-    """Simulate a rig session and write it to ``session_dir``; returns the recording path."""
+def _refuse_existing(out: Path, force: bool) -> None:
+    """A session folder that already holds a recording is never overwritten unless
+    ``force``: it may be the only copy of a real one."""
+    check_writable(out, "session folder", folder=True)
+    recording = out / "recording.mcap"
+    if recording.exists() and not force:
+        raise ArmsigError(
+            f"{out} already holds a recording ({recording})",
+            expected="a new session folder",
+            fix=f"choose another name, or `--force` to replace {recording} by a simulated one",
+        )
+
+
+def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bool = False) -> Path:
+    """Simulate a rig session and write it to ``session_dir``; returns the recording path.
+
+    A folder that already holds ``recording.mcap`` is refused unless ``force``.
+    """
     _check(opts)
     out = Path(session_dir)
+    _refuse_existing(out, force)
     robot = get_robot(opts.robot)
     rng = np.random.default_rng(opts.seed)
     rng_robot, rng_world, rng_servo, rng_sensor = rng.spawn(4)

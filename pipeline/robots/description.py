@@ -127,24 +127,53 @@ class RobotDescription:
         )
 
 
-def _field(table: dict[str, Any], key: str, where: str, kind: type | tuple[type, ...]) -> Any:
+#: Bounds of a description. Two turns either way covers any revolute joint (and any
+#: angle of the D-H rows and poses); 10 m covers any arm and prismatic travel. They
+#: keep the planner's joint grids (2°/1 cm, then 0.5°/0.1 cm steps over the travel)
+#: and every later array to a size that fits in memory.
+MAX_JOINTS = 12
+MAX_ANGLE_DEG = 720.0
+MAX_LENGTH_CM = 1000.0
+
+
+def _is_number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
+def _bounded(value: Any, key: str, where: str, bound: float, unit: str) -> float:
+    """``value`` as a float when it is a finite number within ±``bound`` ``unit``."""
+    if not _is_number(value):
+        raise RobotDescriptionError(
+            f"{where}: field '{key}' has the wrong type", expected="a number", got=repr(value)
+        )
+    if not np.isfinite(value):
+        raise RobotDescriptionError(
+            f"{where}: field '{key}' is not a finite number", expected="a number", got=repr(value)
+        )
+    if abs(value) > bound:
+        raise RobotDescriptionError(
+            f"{where}: field '{key}' is out of bounds",
+            expected=f"within ±{bound:g} {unit}",
+            got=repr(value),
+        )
+    return float(value)
+
+
+_KINDS: dict[type, str] = {str: "a string", list: "a list", dict: "a table"}
+
+
+def _field(table: dict[str, Any], key: str, where: str, kind: type) -> Any:
     if key not in table:
         raise RobotDescriptionError(
             f"{where}: missing field '{key}'",
             fix="see schemas/robot_description.md for the required fields",
         )
     value = table[key]
-    if kind is float:
-        kind = (int, float)
-    if not isinstance(value, kind) or isinstance(value, bool):
+    if not isinstance(value, kind):
         raise RobotDescriptionError(
             f"{where}: field '{key}' has the wrong type",
-            expected=getattr(kind, "__name__", "a number"),
+            expected=_KINDS.get(kind, kind.__name__),
             got=repr(value),
-        )
-    if isinstance(value, int | float) and not np.isfinite(value):
-        raise RobotDescriptionError(
-            f"{where}: field '{key}' is not a finite number", expected="a number", got=repr(value)
         )
     return value
 
@@ -160,28 +189,70 @@ def _known(table: dict[str, Any], allowed: tuple[str, ...], where: str) -> None:
             )
 
 
-def _pose(table: dict[str, Any] | None, where: str) -> Pose:
+def _pose(table: Any, where: str) -> Pose:
     if table is None:
         return Pose()
     if not isinstance(table, dict):
         raise RobotDescriptionError(f"{where} is not a table", got=repr(table))
     _known(table, ("xyz_cm", "rpy_deg"), where)
     out = []
-    for key in ("xyz_cm", "rpy_deg"):
+    for key, bound, unit in (("xyz_cm", MAX_LENGTH_CM, "cm"), ("rpy_deg", MAX_ANGLE_DEG, "deg")):
         v = table.get(key, [0.0, 0.0, 0.0])
-        if not (
-            isinstance(v, list)
-            and len(v) == 3
-            and all(isinstance(x, int | float) and np.isfinite(x) for x in v)
-        ):
+        if not (isinstance(v, list) and len(v) == 3):
             raise RobotDescriptionError(
                 f"{where}: field '{key}' must be a list of three numbers", got=repr(v)
             )
-        out.append(tuple(float(x) for x in v))
+        out.append(tuple(_bounded(x, key, where, bound, unit) for x in v))
     return Pose(xyz_cm=out[0], rpy_deg=out[1])  # type: ignore[arg-type]
 
 
-def description_from_dict(data: dict[str, Any], source: str = "<dict>") -> RobotDescription:
+def _joint(jt: Any, where: str) -> JointSpec:
+    """One ``[[joints]]`` table; travel and lengths within the bounds of a description."""
+    if not isinstance(jt, dict):
+        raise RobotDescriptionError(f"{where} is not a table", got=repr(jt))
+    _known(jt, ("name", "type", "limits", "encoder_resolution", "dh"), where)
+    jname = _field(jt, "name", where, str)
+    jtype = _field(jt, "type", where, str)
+    if jtype not in JOINT_TYPES:
+        raise RobotDescriptionError(
+            f"{where}: field 'type' is unknown", expected=" or ".join(JOINT_TYPES), got=repr(jtype)
+        )
+    bound, unit = (MAX_LENGTH_CM, "cm") if jtype == "prismatic" else (MAX_ANGLE_DEG, "deg")
+    limits = _field(jt, "limits", where, list)
+    if len(limits) != 2:
+        raise RobotDescriptionError(
+            f"{where}: field 'limits' must be [lower, upper]", got=repr(limits)
+        )
+    lower, upper = (_bounded(x, "limits", where, bound, f"{unit} ({jtype})") for x in limits)
+    if not upper > lower:
+        raise RobotDescriptionError(
+            f"{where}: field 'limits' has a negative or empty range",
+            expected="lower < upper",
+            got=repr(limits),
+        )
+    res = _bounded(_field(jt, "encoder_resolution", where, object), "encoder_resolution",
+                   where, upper - lower, f"{unit} (the travel)")  # fmt: skip
+    if res <= 0:
+        raise RobotDescriptionError(
+            f"{where}: field 'encoder_resolution' must be positive", got=repr(res)
+        )
+    dh = _field(jt, "dh", where, dict)
+    _known(dh, ("theta_deg", "d_cm", "a_cm", "alpha_deg"), f"{where}.dh")
+    row = DHRow(
+        *(
+            _bounded(_field(dh, key, f"{where}.dh", object), key, f"{where}.dh", *b)
+            for key, b in (
+                ("theta_deg", (MAX_ANGLE_DEG, "deg")),
+                ("d_cm", (MAX_LENGTH_CM, "cm")),
+                ("a_cm", (MAX_LENGTH_CM, "cm")),
+                ("alpha_deg", (MAX_ANGLE_DEG, "deg")),
+            )
+        )
+    )
+    return JointSpec(jname, jtype, lower, upper, res, row)
+
+
+def description_from_dict(data: Any, source: str = "<dict>") -> RobotDescription:
     """Validate a parsed description (the TOML document as a dict).
 
     Raises
@@ -189,63 +260,36 @@ def description_from_dict(data: dict[str, Any], source: str = "<dict>") -> Robot
     RobotDescriptionError
         Naming the source and the offending field.
     """
+    if not isinstance(data, dict):
+        raise RobotDescriptionError(f"{source} is not a table", got=repr(data)[:80])
     _known(data, ("name", "notes", "base", "tool", "joints"), source)
     name = _field(data, "name", source, str)
+    notes = data.get("notes", "")
+    if not isinstance(notes, str):
+        raise RobotDescriptionError(
+            f"{source}: field 'notes' has the wrong type", expected="a string", got=repr(notes)
+        )
     joints_raw = _field(data, "joints", source, list)
-    if not joints_raw:
-        raise RobotDescriptionError(f"{source}: 'joints' is empty", expected="at least one joint")
+    if not 1 <= len(joints_raw) <= MAX_JOINTS:
+        raise RobotDescriptionError(
+            f"{source}: field 'joints' holds {len(joints_raw)} joints",
+            expected=f"1 to {MAX_JOINTS} joints",
+        )
     joints: list[JointSpec] = []
     for k, jt in enumerate(joints_raw):
-        where = f"{source}: joints[{k}]"
-        if not isinstance(jt, dict):
-            raise RobotDescriptionError(f"{where} is not a table", got=repr(jt))
-        _known(jt, ("name", "type", "limits", "encoder_resolution", "dh"), where)
-        jname = _field(jt, "name", where, str)
-        if jname in (j.name for j in joints):
+        joint = _joint(jt, f"{source}: joints[{k}]")
+        if joint.name in (j.name for j in joints):
             raise RobotDescriptionError(
-                f"{where}: field 'name' repeats joint name {jname!r}", expected="unique joint names"
+                f"{source}: joints[{k}]: field 'name' repeats joint name {joint.name!r}",
+                expected="unique joint names",
             )
-        jtype = _field(jt, "type", where, str)
-        if jtype not in JOINT_TYPES:
-            raise RobotDescriptionError(
-                f"{where}: field 'type' is unknown",
-                expected=" or ".join(JOINT_TYPES),
-                got=repr(jtype),
-            )
-        limits = _field(jt, "limits", where, list)
-        if len(limits) != 2 or not all(
-            isinstance(x, int | float) and not isinstance(x, bool) and np.isfinite(x)
-            for x in limits
-        ):
-            raise RobotDescriptionError(
-                f"{where}: field 'limits' must be [lower, upper]", got=repr(limits)
-            )
-        if not limits[1] > limits[0]:
-            raise RobotDescriptionError(
-                f"{where}: field 'limits' has a negative or empty range",
-                expected="lower < upper",
-                got=repr(limits),
-            )
-        res = float(_field(jt, "encoder_resolution", where, float))
-        if res <= 0:
-            raise RobotDescriptionError(
-                f"{where}: field 'encoder_resolution' must be positive", got=repr(res)
-            )
-        dh = _field(jt, "dh", where, dict)
-        _known(dh, ("theta_deg", "d_cm", "a_cm", "alpha_deg"), f"{where}.dh")
-        row = DHRow(
-            *(
-                float(_field(dh, key, f"{where}.dh", float))
-                for key in ("theta_deg", "d_cm", "a_cm", "alpha_deg")
-            )
-        )
-        joints.append(JointSpec(jname, jtype, float(limits[0]), float(limits[1]), res, row))
+        joints.append(joint)
     return RobotDescription(
         name=name,
         joints=tuple(joints),
         base=_pose(data.get("base"), f"{source}: base"),
         tool=_pose(data.get("tool"), f"{source}: tool"),
-        notes=str(data.get("notes", "")),
+        notes=notes,
     )
 
 

@@ -13,7 +13,31 @@ from typing import Any
 
 import pyarrow as pa
 
+from pipeline.errors import ArmsigError
+
 RECORDING = "recording"
+
+
+def check_param(params: Any, stage: str, name: str, ok: bool, rule: str) -> None:
+    """Raise the one-line error of a stage parameter that breaks its ``rule`` (unless ``ok``).
+
+    Called from the ``__post_init__`` of a stage's ``Params``, so a bad ``--param``
+    is refused where it enters, naming the parameter and its default.
+    """
+    if ok:
+        return
+    default = next(f.default for f in dataclasses.fields(params) if f.name == name)
+    raise ArmsigError(
+        f"parameter {stage}.{name} must be {rule}",
+        got=_text(getattr(params, name)),
+        fix=f"--param {stage}.{name}={default:g} (the default)"
+        if isinstance(default, float)
+        else f"--param {stage}.{name}={default} (the default)",
+    )
+
+
+def _text(value: Any) -> str:
+    return f"{value:g}" if isinstance(value, float) else repr(value)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ import pyarrow as pa
 from pipeline.errors import StageError
 from pipeline.sensor.compensation import compensate
 from pipeline.sensor.geometry import DigitizerGeometry
-from pipeline.stages.base import Stage
+from pipeline.stages.base import Stage, check_param
 
 
 @dataclass(frozen=True)
@@ -23,6 +23,15 @@ class Params:
 
     tol_cm: float = 1e-9
     max_iter: int = 50
+
+    def __post_init__(self) -> None:
+        # Above 0.01 cm (the digitizer's resolution) the fixed point would stop at
+        # positions off by more than what the rig can measure.
+        tol = self.tol_cm
+        check_param(self, "compensate", "tol_cm", 0 < tol <= 0.01, "> 0 and <= 0.01 (cm)")
+        # 4-5 iterations converge; 10,000 only bounds the run time of a bad setting.
+        it = self.max_iter
+        check_param(self, "compensate", "max_iter", 1 <= it <= 10_000, ">= 1 and <= 10000")
 
 
 def cycles_from_ranges(ranges: pa.Table) -> tuple[np.ndarray, np.ndarray]:

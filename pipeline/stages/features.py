@@ -16,7 +16,7 @@ from pipeline.features.circle import fit_circle
 from pipeline.features.line import fit_line
 from pipeline.features.plane import fit_plane_eigen, fit_plane_lsq, frame_about, orient_normal
 from pipeline.schemas import arrow_schema
-from pipeline.stages.base import Stage
+from pipeline.stages.base import Stage, check_param
 from pipeline.stages.frames import joint_readings
 from pipeline.stages.session import session_robot
 from pipeline.stages.triangulate import positions
@@ -29,6 +29,10 @@ class Params:
     """``plane_method``: which plane fit defines the joint axis (both are reported)."""
 
     plane_method: str = "lsq"
+
+    def __post_init__(self) -> None:
+        rule = " or ".join(PLANE_METHODS)
+        check_param(self, "features", "plane_method", self.plane_method in PLANE_METHODS, rule)
 
 
 def sweep_points(

@@ -18,12 +18,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from math import inf
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
 
-from pipeline.stages.base import Stage
+from pipeline.stages.base import Stage, check_param
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,13 @@ class Params:
     reject_k: float = 5.0
     floor_cm: float = 0.005
     pair_max_cm: float = 1.0
+
+    def __post_init__(self) -> None:
+        # k >= 1 keeps every cycle within 1.4826 median(d) of the median: at least half.
+        k, floor, pair = self.reject_k, self.floor_cm, self.pair_max_cm
+        check_param(self, "triangulate", "reject_k", 1 <= k < inf, ">= 1 and finite")
+        check_param(self, "triangulate", "floor_cm", 0 <= floor < inf, ">= 0 and finite (cm)")
+        check_param(self, "triangulate", "pair_max_cm", 0 < pair < inf, "> 0 and finite (cm)")
 
 
 def positions(table: pa.Table) -> np.ndarray:
