@@ -409,6 +409,10 @@ def ik(
     if targets is not None:
         if out is None:
             raise ArmsigError("--targets needs --out", fix="--out joints.arrow")
+        if pose is not None:
+            raise ArmsigError(
+                "--pose and --targets both given", expected="one of them", fix="drop one"
+            )
         summary, failed = solve_arrow(ctl, targets, out, method, tool_label, q_near)
         typer.echo(summary)
         if failed:

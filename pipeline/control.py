@@ -433,6 +433,12 @@ def solve_arrow(
 
     table, poses, branches = read_targets(targets)
     check_writable(out, "--out")
+    if Path(out).resolve() == Path(targets).resolve():
+        raise ArmsigError(
+            f"--out {out} is the --targets file",
+            expected="an output file other than the input",
+            fix="--out joints.arrow",
+        )
     q, res = solve_poses(controller, poses[:, :3], poses[:, 3:], branches, method, near)
     extra: dict[str, pa.Array] = {}
     for i, j in enumerate(controller.robot.joints):

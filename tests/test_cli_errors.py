@@ -285,6 +285,23 @@ def test_ik_read_only_out_folder_is_refused(session: Path, tmp_path: Path) -> No
         ro.chmod(0o755)
 
 
+def test_ik_pose_and_targets_together_are_refused(session: Path, tmp_path: Path) -> None:
+    t = str(targets(tmp_path))
+    pose = [str(v) for v in POSE.values()]
+    r = invoke(
+        "ik", str(session), "--targets", t, "--out", str(tmp_path / "q.arrow"), "--pose", *pose
+    )
+    assert_one_error(r, EXIT_REFUSED, "--pose and --targets both given")
+
+
+def test_ik_out_over_its_own_targets_file_is_refused(session: Path, tmp_path: Path) -> None:
+    t = targets(tmp_path)
+    before = t.read_bytes()
+    r = invoke("ik", str(session), "--targets", str(t), "--out", str(t))
+    assert_one_error(r, EXIT_REFUSED, "is the --targets file")
+    assert t.read_bytes() == before
+
+
 def test_ik_output_columns_in_the_input_are_replaced_not_repeated(
     session: Path, tmp_path: Path
 ) -> None:
