@@ -1,25 +1,21 @@
 """Read ``evaluation.mcap`` (channels ``/eval/*``, schemas in ``schemas/mcap/eval_*.json``).
 
 The pipeline's only door to the evaluation recording; it knows nothing of the rig.
+Integrity (CRCs, the ``armsig.content`` digest) and every message's schema are
+checked by :func:`pipeline.contract.mcap_read.read_mcap`.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pipeline.contract.channels import EVAL_CHANNELS
+from pipeline.contract.mcap_read import read_mcap
 from pipeline.errors import RecordingError
-from pipeline.stages.recording import check_required_fields
 
-TOPICS = ("/eval/description", "/eval/teach", "/eval/program", "/eval/measurement")
-_REQUIRED = {
-    "/eval/description": ("mode", "servo", "instruments", "robot"),
-    "/eval/teach": ("task", "point", "q_encoder", "units"),
-    "/eval/program": ("task", "controller", "point", "q_commanded", "units"),
-    "/eval/measurement": ("task", "controller", "point", "instrument"),
-}
+TOPICS = tuple(EVAL_CHANNELS)
 
 
 @dataclass(frozen=True)
@@ -38,25 +34,14 @@ class EvaluationRecording:
 
 def read_evaluation(path: str | Path) -> EvaluationRecording:
     """Parse an evaluation recording, with clear errors for foreign or broken files."""
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
-
     p = Path(path)
-    msgs: dict[str, list[tuple[int, dict[str, Any]]]] = {t: [] for t in TOPICS}
-    try:
-        with p.open("rb") as fh:
-            for _schema, channel, message in make_reader(fh).iter_messages(log_time_order=False):
-                if channel.topic in msgs:
-                    msgs[channel.topic].append((message.log_time, json.loads(message.data)))
-    except (McapError, EOFError, ValueError, OSError, json.JSONDecodeError) as exc:
-        raise RecordingError(
-            f"{p}: evaluation recording is unreadable",
-            got=f"{type(exc).__name__}: {exc}",
-            fix="delete it and run `pipeline evaluate` again (a simulated session re-records it)",
-        ) from exc
-    for topic in _REQUIRED:
-        msgs[topic].sort(key=lambda tm: tm[0])
-    check_required_fields(p, msgs, _REQUIRED)
+    msgs = read_mcap(
+        p,
+        EVAL_CHANNELS,
+        fix="delete it and run `pipeline evaluate` again (a simulated session re-records it)",
+    ).messages
+    for topic in TOPICS:
+        msgs[topic].sort(key=lambda tm: tm[0])  # stable: equal times keep file order
     if len(msgs["/eval/description"]) != 1 or not msgs["/eval/teach"]:
         raise RecordingError(
             f"{p}: no /eval/description or /eval/teach",

@@ -142,7 +142,9 @@ def collect(mask: Mask, message: Callable[[tuple[int, ...]], str]) -> list[str]:
     return [label(i) + message(i) for i in (tuple(int(v) for v in r) for r in np.argwhere(mask))]
 
 
-def spacing_warnings(steps: Array, extent: Array, noise: Array, scale_name: str) -> list[str]:
+def spacing_warnings(
+    steps: Array, extent: Array, noise: Array, scale_name: str, angular: bool
+) -> list[str]:
     """Warnings for (B-1) and (B-2) shared by circle and line fits.
 
     Parameters
@@ -155,6 +157,8 @@ def spacing_warnings(steps: Array, extent: Array, noise: Array, scale_name: str)
         Largest residual standard deviation, cm.
     scale_name : str
         What ``extent`` is, for the message.
+    angular : bool
+        ``steps`` are angles in rad (shown in degrees), else lengths in cm.
     """
     n = steps.shape[-1] + 1
     out = collect(
@@ -171,11 +175,13 @@ def spacing_warnings(steps: Array, extent: Array, noise: Array, scale_name: str)
         )
     mean = steps.mean(axis=-1)
     uneven = np.max(np.abs(steps - mean[..., None]), axis=-1) > STEP_DEVIATION_B2 * np.abs(mean)
+    scale, unit = (np.degrees(1.0), "°") if angular else (1.0, " cm")
     out += collect(
         uneven,
         lambda i: (
             "B-2: joint positions are not uniformly spaced or not in increasing order "
-            f"(steps from {steps[i].min():.3g} to {steps[i].max():.3g}, mean {mean[i]:.3g})"
+            f"(steps from {scale * steps[i].min():.3g}{unit} to {scale * steps[i].max():.3g}"
+            f"{unit}, mean {scale * mean[i]:.3g}{unit})"
         ),
     )
     return out

@@ -145,7 +145,7 @@ def fit_circle(
     warnings += collect(
         ~done, lambda i: f"circle fit did not converge in {max_iter} passes; check the points"
     )
-    warnings += spacing_warnings(steps, radius, noise, "radius")
+    warnings += spacing_warnings(steps, radius, noise, "radius", angular=True)
     # The measured sweep errs by ~σ/R at each end: allow 3 of that before warning,
     # so a joint with exactly 180° of travel is not flagged at random.
     warnings += collect(

@@ -69,7 +69,7 @@ def fit_line(points: ArrayLike) -> LineFit:
     extent = travel.max(-1) - travel.min(-1)
     # Per-coordinate noise: each squared distance sums two perpendicular components.
     noise = np.sqrt(np.mean(residuals**2, axis=-1) / 2.0)
-    warnings = spacing_warnings(np.diff(travel, axis=-1), extent, noise, "travel")
+    warnings = spacing_warnings(np.diff(travel, axis=-1), extent, noise, "travel", angular=False)
     return LineFit(
         direction=v, point=u0, residuals=residuals, travel=travel, warnings=tuple(warnings)
     )

@@ -5,7 +5,8 @@ ranges (sparker × microphone A-D). A reported range is the internal nominal
 speed of sound times the true time of flight (integrated through the
 :class:`~pipeline.rig.atmosphere.Atmosphere`), plus noise (7.9)
 ``σ = 9.6432e-5·X + 0.003`` cm times a noise factor, quantized to the 0.01 cm
-resolution. There is no echo (NaN) outside 30-250 cm or from behind the wall.
+resolution. There is no echo (NaN) outside 30-250 cm or from behind the wall, and
+no reported range outside that window (the digitizer gates its reports).
 
 Fault switches, all off by default: a per-microphone range bias (acoustic-zero
 offset), echo drop-outs, spurious outliers. A microphone position calibration
@@ -120,6 +121,10 @@ def digitize(
         (true_dist >= g.range_min_cm)
         & (true_dist <= g.range_max_cm)
         & (sparks[:, :, None, 2] > 0.0)  # a sparker behind the wall is never heard
+        # The digitizer gates what it reports: never a range outside its window
+        # (noise, a bias or a spurious echo can carry a heard one across).
+        & (raw >= g.range_min_cm)
+        & (raw <= g.range_max_cm)
     )
     if model.dropout_prob > 0:
         heard &= rng.random(raw.shape) >= model.dropout_prob

@@ -1,7 +1,9 @@
 """Write a session recording: MCAP, zstd chunks, JSON messages with embedded JSON Schemas.
 
 Channel names and schemas are the contract between a rig (real or simulated)
-and the pipeline; see ``schemas/mcap/``.
+and the pipeline; see ``schemas/mcap/`` and :mod:`pipeline.contract`. Every file
+carries chunk CRCs, a data-section CRC, message indexes and the ``armsig.content``
+digest of its messages (schemas/README.md).
 """
 
 from __future__ import annotations
@@ -11,25 +13,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType, IndexType, Writer
 
 from pipeline.atomic import atomic_write
+from pipeline.contract.channels import CHANNELS, EVAL_CHANNELS
+from pipeline.contract.digest import DIGEST_NAME, content_digest
 from pipeline.schemas import mcap_json_schema
 
-#: topic -> schema file in schemas/mcap/
-CHANNELS = {
-    "/rig/description": "rig_description",
-    "/robot/description": "robot_description",
-    "/robot/joint_state": "joint_state",
-    "/sonic/ranges": "sonic_ranges",
-}
-#: topic -> schema file of the evaluation recording ``evaluation.mcap`` (docs/evaluation.md)
-EVAL_CHANNELS = {
-    "/eval/description": "eval_description",
-    "/eval/teach": "eval_teach",
-    "/eval/program": "eval_program",
-    "/eval/measurement": "eval_measurement",
-}
+__all__ = ["CHANNELS", "EVAL_CHANNELS", "Message", "write_recording"]
+
 PROFILE = "armsig"
 LIBRARY = "armsig-rig"  # fixed so that the same seed gives the same bytes
 
@@ -47,8 +39,19 @@ def write_recording(
     path: str | Path, messages: list[Message], channels: dict[str, str] = CHANNELS
 ) -> None:
     """Write ``messages`` (in time order) to ``path`` atomically; ``channels``: topic -> schema."""
+    encoded = [
+        (m, json.dumps(m.payload, separators=(",", ":"), allow_nan=False).encode())
+        for m in messages
+    ]
     with atomic_write(path, "wb") as fh:
-        writer = Writer(fh, compression=CompressionType.ZSTD, chunk_size=1 << 20)  # type: ignore[arg-type]
+        writer = Writer(
+            fh,  # type: ignore[arg-type]
+            compression=CompressionType.ZSTD,
+            chunk_size=1 << 20,
+            index_types=IndexType.ALL,  # chunk and message indexes, metadata index
+            enable_crcs=True,  # chunk CRCs and the summary CRC
+            enable_data_crcs=True,  # the data section's CRC in DataEnd
+        )
         writer.start(profile=PROFILE, library=LIBRARY)
         channel_ids: dict[str, int] = {}
         for topic, schema_name in channels.items():
@@ -62,13 +65,14 @@ def write_recording(
                 topic=topic, message_encoding="json", schema_id=sid
             )
         sequence: dict[str, int] = dict.fromkeys(channels, 0)
-        for msg in messages:
+        for msg, data in encoded:
             writer.add_message(
                 channel_id=channel_ids[msg.topic],
                 log_time=msg.time_ns,
                 publish_time=msg.time_ns,
                 sequence=sequence[msg.topic],
-                data=json.dumps(msg.payload, separators=(",", ":"), allow_nan=False).encode(),
+                data=data,
             )
             sequence[msg.topic] += 1
+        writer.add_metadata(DIGEST_NAME, content_digest((m.topic, d) for m, d in encoded))
         writer.finish()

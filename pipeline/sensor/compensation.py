@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 from pipeline.errors import ArmsigError
 from pipeline.sensor.geometry import DigitizerGeometry
-from pipeline.sensor.triangulation import triangulate
+from pipeline.sensor.triangulation import Trilateration
 
 Array = npt.NDArray[np.float64]
 
@@ -161,8 +161,9 @@ def compensate(
         Raw ranges (cm) of sparkers 1-5 (rows) to microphones A-D (columns), NaN = no
         echo. Uses sparkers 1, 2 → B, 3, 4 → D and 5 → A, B, C.
     geometry : DigitizerGeometry
-        The digitizer as calibrated; its ``w_ab``, ``w_bc``, ``w_ac`` and heights are
-        used as given, so a calibration error propagates into the positions.
+        The digitizer as calibrated; its microphone positions (any layout with Z out
+        of the wall, :class:`~pipeline.sensor.triangulation.Trilateration`) and heights
+        are used as given, so a calibration error propagates into the positions.
     tol_cm : float
         Stop a cycle when an update moves its position by less than this. The default
         1e-9 cm is about 1e4 ulps of a 250 cm coordinate: above rounding noise, and
@@ -176,7 +177,7 @@ def compensate(
     """
     r = np.asarray(raw, float)
     _need_last(r, (5, 4), "raw", "pass (..., 5, 4) slant ranges, sparkers 1-5 × mics A-D")
-    w = (geometry.w_ab, geometry.w_bc, geometry.w_ac)
+    locate = Trilateration.from_microphones(geometry.microphones[:3])  # as recorded
     h_mic = geometry.height(geometry.microphones)  # A, B, C, D
     h_b, h_d = float(h_mic[1]), float(h_mic[3])  # rods are level with B and D (E.1)
     f_b, f_d = rod_ratios(r[..., 0:2, 1], r[..., 2:4, 3], geometry.rod_length_cm)
@@ -184,7 +185,7 @@ def compensate(
     s_raw = r[..., 4, :3]
     f_avg = (f_b + f_d) / 2.0  # Eq. (E.5), ERRATA form
     s = f_avg[..., None] * s_raw
-    p = triangulate(s, *w)  # Eqs. (6.1)-(6.6): first estimate
+    p = locate(s)  # Eqs. (6.1)-(6.6): first estimate
     valid = np.array(np.isfinite(p).all(axis=-1) & np.isfinite(s).all(axis=-1))
     iterations = np.zeros(valid.shape, np.int64)
     converged = np.zeros(valid.shape, bool)
@@ -201,7 +202,7 @@ def compensate(
         sel = slice(None) if active.all() else active
         f_t = speed_ratio_at_height(geometry.height(pf[sel]), f_b_f[sel], f_d_f[sel], h_b, h_d)
         s_new = line_of_sight_length(s_raw_f[sel], f_abc_f[sel], f_t[:, None])  # Eq. (E.3)
-        p_new = triangulate(s_new, *w)  # Eqs. (6.1)-(6.6)
+        p_new = locate(s_new)  # Eqs. (6.1)-(6.6)
         step = np.linalg.norm(p_new - pf[sel], axis=-1)
         sf[sel], pf[sel] = s_new, p_new
         iterations_f[sel] += 1

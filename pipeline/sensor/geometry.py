@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.errors import ArmsigError
+from pipeline.sensor.triangulation import Trilateration
 
 W_AB_CM = 143.0  # Section 6.3.1
 W_BC_CM = 143.0
@@ -37,6 +38,15 @@ D_DROP_CM = 40.0
 ROD_NEAR_CM = 40.0
 ROD_ANGLE_DEG = 45.0
 MICROPHONES = ("A", "B", "C", "D")
+#: B and D must differ in height by this much: compensation draws the speed of sound
+#: through their two heights (B-3), and over the ~150 cm of the workspace a 1 cm base
+#: already magnifies one count (0.01 cm) of rod-range rounding 150-fold.
+MIN_ROD_HEIGHT_GAP_CM = 1.0
+#: A rod sparker may sit this far off its microphone's level line, or its spacing off
+#: ``rod_length_cm``: 0.1 cm of height changes the speed ratio by ~1e-6 (gradients of
+#: ~1e-5 per cm, Appendix E); a wrong layout (swapped sparkers, a rod at the other
+#: microphone) is off by tens of cm.
+ROD_TOL_CM = 0.1
 
 
 def speed_of_sound_cm_s(temperature_f: np.ndarray | float) -> np.ndarray:
@@ -133,6 +143,58 @@ class DigitizerGeometry:
                 got=f"{type(exc).__name__}: {exc}",
                 fix="re-record the session or repair its /rig/description message",
             ) from exc
+
+
+def check_geometry(g: DigitizerGeometry, source: str = "/rig/description") -> None:
+    """Raise :class:`ArmsigError` when ``g`` is not a layout the pipeline can use as recorded.
+
+    Checks: a range window; A, B, C a triangle facing the sensor Z axis
+    (:class:`~pipeline.sensor.triangulation.Trilateration`); B and D at heights
+    :data:`MIN_ROD_HEIGHT_GAP_CM` apart; sparkers 1, 2 (3, 4) on the level line
+    through B (D), within :data:`ROD_TOL_CM`, ``rod_length_cm`` apart, 1 (3) the near one.
+    """
+    fix = "repair the rig's /rig/description (schemas/mcap/rig_description.json)"
+    if not g.range_min_cm < g.range_max_cm:
+        raise ArmsigError(
+            f"{source}: empty range window",
+            expected="range_min_cm < range_max_cm",
+            got=f"{g.range_min_cm:g} and {g.range_max_cm:g} cm",
+            fix=fix,
+        )
+    try:
+        Trilateration.from_microphones(g.microphones[:3])
+    except ArmsigError as exc:
+        raise ArmsigError(
+            f"{source}: {exc.what}", expected=exc.expected, got=exc.got, fix=fix
+        ) from exc
+    h = g.height(g.microphones)
+    if not abs(h[3] - h[1]) >= MIN_ROD_HEIGHT_GAP_CM:
+        raise ArmsigError(
+            f"{source}: microphones B and D are at the same height",
+            expected=f"heights at least {MIN_ROD_HEIGHT_GAP_CM:g} cm apart (Appendix E)",
+            got=f"B at {h[1]:.4g} cm, D at {h[3]:.4g} cm above C",
+            fix=fix,
+        )
+    for near, far, mic in ((0, 1, 1), (2, 3, 3)):
+        m, p1, p2 = g.microphones[mic], g.rod_sparkers[near], g.rod_sparkers[far]
+        d1, d2 = p1 - m, p2 - m
+        along = d2 / np.linalg.norm(d2)
+        off_line = float(np.linalg.norm(d1 - (d1 @ along) * along))
+        off_level = float(np.max(np.abs(g.height(np.array([p1, p2])) - h[mic])))
+        spacing = float(np.linalg.norm(p2 - p1))
+        if not (
+            max(off_line, off_level, abs(spacing - g.rod_length_cm)) <= ROD_TOL_CM
+            and 0.0 < d1 @ along < np.linalg.norm(d2)
+        ):
+            raise ArmsigError(
+                f"{source}: sparkers {near + 1} and {far + 1} are not on a level rod through "
+                f"microphone {MICROPHONES[mic]} (E.1)",
+                expected=f"sparker {near + 1} nearer, sparker {far + 1} rod_length_cm "
+                f"({g.rod_length_cm:g}) farther on the level line, within {ROD_TOL_CM:g} cm",
+                got=f"{off_line:.3g} cm off the line, {off_level:.3g} cm off level, "
+                f"{spacing:.6g} cm apart",
+                fix=fix,
+            )
 
 
 def up_direction(microphones: np.ndarray) -> np.ndarray:

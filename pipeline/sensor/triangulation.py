@@ -1,11 +1,18 @@
 """Target position from three slant ranges (Section 6.3.1, (6.1)-(6.6), ERRATA.md).
 
-The sensor frame is that of :func:`pipeline.sensor.geometry.microphones_from_distances`:
-``C = 0``, ``B = (0, w_BC, 0)``, ``A = w_AC (sin θ, cos θ, 0)``, Z out of the wall. The
-target is on the room side of the wall, so ``z = +sqrt(s3² − x² − y²)``.
+:func:`triangulate` works in the frame of (6.1)-(6.6), that of
+:func:`pipeline.sensor.geometry.microphones_from_distances`: ``C = 0``,
+``B = (0, w_BC, 0)``, ``A = w_AC (sin θ, cos θ, 0)``, Z out of the wall. The target is
+on the room side of the wall, so ``z = +sqrt(s3² − x² − y²)``.
+
+:class:`Trilateration` applies it to microphones recorded anywhere in a sensor frame
+whose Z points out of the wall (e.g. A at −X, a mirror of the thesis layout): it
+solves in the (6.1) frame of the recorded A, B, C and maps the result back.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -78,3 +85,62 @@ def triangulate(s_abc: npt.ArrayLike, w_ab: float, w_bc: float, w_ac: float) -> 
     p = np.stack([x, y, z], axis=-1)
     p[~ok] = np.nan
     return p
+
+
+#: The wall (the A-B-C plane) must face the sensor Z axis within 45°: Z then tells
+#: the room side unambiguously; "Z out of the wall" is the contract's frame.
+_WALL_COS_MIN = np.cos(np.deg2rad(45.0))
+
+
+@dataclass(frozen=True)
+class Trilateration:
+    """(6.1)-(6.6) for microphones A, B, C as recorded, positions in the recording's frame.
+
+    Attributes
+    ----------
+    w_ab, w_bc, w_ac : float
+        Microphone distances (cm).
+    origin : ndarray, shape (3,)
+        Microphone C.
+    axes : ndarray, shape (3, 3), or None
+        Columns: the (6.1) frame's X (toward A's side of C-B), Y (toward B) and Z
+        (toward the room, the recording's +Z side) in the recording's frame; a
+        reflection when A lies at −X. None when the two frames coincide.
+    """
+
+    w_ab: float
+    w_bc: float
+    w_ac: float
+    origin: Array
+    axes: Array | None
+
+    @classmethod
+    def from_microphones(cls, abc: npt.ArrayLike) -> Trilateration:
+        """From A, B, C (3, 3) in the sensor frame (cm); raises :class:`ArmsigError`
+        when they are no triangle or their plane does not face the Z axis."""
+        a, b, c = np.asarray(abc, float)
+        w_ab, w_bc, w_ac = (float(np.linalg.norm(u - v)) for u, v in ((a, b), (b, c), (a, c)))
+        _cos_sin_theta(w_ab, w_bc, w_ac)  # a triangle, or the error
+        ey = (b - c) / w_bc
+        v = (a - c) - ((a - c) @ ey) * ey
+        ex = v / np.linalg.norm(v)
+        normal = np.cross(ex, ey)
+        if not abs(normal[2]) >= _WALL_COS_MIN:
+            raise ArmsigError(
+                "the microphones' wall does not face the sensor Z axis",
+                expected="A, B, C in a plane within 45° of the sensor X-Y plane "
+                "(Z out of the wall)",
+                got=f"plane normal {np.round(normal, 4).tolist()}",
+                fix="record the microphones in the sensor frame of "
+                "schemas/mcap/rig_description.json",
+            )
+        axes = np.column_stack([ex, ey, normal * np.sign(normal[2])])
+        same = np.array_equal(axes, np.eye(3)) and not c.any()
+        return cls(w_ab, w_bc, w_ac, c, None if same else axes)
+
+    def __call__(self, s_abc: npt.ArrayLike) -> Array:
+        """Positions (..., 3) from ranges ``s_abc`` (..., 3) to A, B, C, as :func:`triangulate`."""
+        p = triangulate(s_abc, self.w_ab, self.w_bc, self.w_ac)
+        if self.axes is None:
+            return p
+        return np.asarray(self.origin + p @ self.axes.T, float)

@@ -17,7 +17,7 @@ from pipeline.features.line import fit_line
 from pipeline.features.plane import fit_plane_eigen, fit_plane_lsq, frame_about, orient_normal
 from pipeline.schemas import arrow_schema
 from pipeline.stages.base import Stage, check_param
-from pipeline.stages.frames import joint_readings
+from pipeline.stages.frames import readings_at
 from pipeline.stages.session import session_robot
 from pipeline.stages.triangulate import positions
 
@@ -39,16 +39,17 @@ def sweep_points(
     tri: pa.Table, joints: pa.Table, joint: int, n: int, prismatic: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Usable target positions (N, 3) of sweep ``joint`` by increasing reading, the
-    readings (N,) and the configuration steps (N,)."""
+    readings (N,) and the configuration steps (N,).
+
+    Each position is paired with the joint state of its own (sweep, step) key.
+    """
     sel = tri.filter(pc.equal(tri.column("sweep"), joint))
-    q = joint_readings(joints, joint, n, prismatic)[:, joint - 1]
     p = positions(sel)
-    steps = sel.column("step").to_numpy()
-    if len(q) != len(p):
-        raise StageError(
-            f"sweep {joint}: {len(p)} positions but {len(q)} joint states",
-            fix="re-record the sweep; the recording is inconsistent",
-        )
+    steps = sel.column("step").to_numpy().astype(np.int64)
+    try:
+        q = readings_at(joints, joint, steps, n, prismatic)[:, joint - 1]
+    except StageError as exc:
+        raise StageError(f"sweep {joint}: {exc}") from exc
     ok = ~np.isnan(p).any(axis=1)
     order = np.argsort(q[ok], kind="stable")
     return p[ok][order], q[ok][order], steps[ok][order]
@@ -179,7 +180,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "features",
-    2,
+    3,
     ("triangulate", "joints", "session"),
     Params(),
     compute,

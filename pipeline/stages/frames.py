@@ -8,7 +8,9 @@ line of translation (prismatic, Figure 4-6). ``S̄_n = S̄_{n-1}``.
 Signature readings: ``S̄_i`` (i < n) is measured while joint i holds still
 during sweep i+1, so q̄_i^s is joint i's reading there (median over the sweep);
 q̄_n^s is joint n's reading at the tool measurement, which also fixes the tool:
-``tool = T_sig(q_tool)^{-1} · p_tool`` with the orientation of ``S_n``.
+``tool = T_sig(q_tool)^{-1} · p_tool`` with the orientation of ``S_n``. A tool
+measurement repeated as several steps of the ``tool`` sweep gives the mean of the
+tools of its usable steps, each paired with its own joint state by (sweep, step).
 """
 
 from __future__ import annotations
@@ -50,14 +52,44 @@ def matrices_from_columns(table: pa.Table) -> np.ndarray:
 
 
 def joint_readings(joints: pa.Table, sweep: int, n: int, prismatic: np.ndarray) -> np.ndarray:
-    """Encoder readings (K, n) of the configurations of one sweep, boundary units."""
+    """Encoder readings (K, n) of the configurations of one sweep, boundary units, by step."""
+    return sweep_readings(joints, sweep, n, prismatic)[1]
+
+
+def sweep_readings(
+    joints: pa.Table, sweep: int, n: int, prismatic: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Steps (K,) and encoder readings (K, n) of one sweep's configurations, by step."""
     sel = joints.filter(pc.equal(joints.column("sweep"), sweep))
     if sel.num_rows == 0:
-        return np.zeros((0, n))
+        return np.zeros(0, np.int64), np.zeros((0, n))
     deg = sel.column("q_deg").to_numpy(zero_copy_only=False)
     cm = sel.column("q_cm").to_numpy(zero_copy_only=False)
-    q = np.where(np.tile(prismatic, sel.num_rows // n), cm, deg)
-    return q.astype(float).reshape(-1, n)
+    q = np.where(np.tile(prismatic, sel.num_rows // n), cm, deg).astype(float).reshape(-1, n)
+    steps = sel.column("step").to_numpy()[::n].astype(np.int64)
+    order = np.argsort(steps, kind="stable")
+    return steps[order], q[order]
+
+
+def readings_at(
+    joints: pa.Table, sweep: int, steps: np.ndarray, n: int, prismatic: np.ndarray
+) -> np.ndarray:
+    """Encoder readings (len(steps), n) of sweep ``sweep`` at ``steps``, joined by key.
+
+    Raises :class:`StageError` naming a (sweep, step) that has no joint state.
+    """
+    have, q = sweep_readings(joints, sweep, n, prismatic)
+    at = np.searchsorted(have, steps)
+    found = at < len(have)
+    found[found] = have[at[found]] == steps[found]
+    if not found.all():
+        name = "tool" if sweep == TOOL_SWEEP else sweep
+        raise StageError(
+            f"no joint state for (sweep {name}, step {steps[~found][0]})",
+            expected="a joint state for every measured configuration",
+            fix="re-record the session; the recording is inconsistent",
+        )
+    return q[at]
 
 
 def signature_readings(joints: pa.Table, prismatic: np.ndarray, source: str) -> np.ndarray:
@@ -122,16 +154,26 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     qs = signature_readings(inputs["joints"], pris, "joints")
     tri = inputs["triangulate"]
     tool_rows = tri.filter(pc.equal(tri.column("sweep"), TOOL_SWEEP))
-    if tool_rows.num_rows == 0 or tool_rows.column("x_cm").null_count:
+    p_tool = positions(tool_rows)
+    usable = ~np.isnan(p_tool).any(axis=1)
+    if not usable.any():
         raise StageError(
             "no usable tool-probe measurement",
             expected="sweep 'tool' with at least one usable cycle",
             fix="re-record the tool measurement at the signature configuration",
         )
-    p_tool = positions(tool_rows)[0]
-    q_tool = joint_readings(inputs["joints"], TOOL_SWEEP, n, pris)[0]
+    steps = tool_rows.column("step").to_numpy().astype(np.int64)[usable]
+    q_tool = readings_at(inputs["joints"], TOOL_SWEEP, steps, n, pris)
     chain = signature_chain(F, joints_to_internal(qs, pris), pris)
-    tool = tool_from_probe(chain, joints_to_internal(q_tool, pris), p_tool)
+    # Every usable probe measurement (repeated steps of the tool sweep): the mean of
+    # their tools, each from its own reading; one measurement gives exactly its tool.
+    tools = np.stack(
+        [
+            tool_from_probe(chain, joints_to_internal(q, pris), p)
+            for q, p in zip(q_tool, p_tool[usable], strict=True)
+        ]
+    )
+    tool = tools.mean(axis=0) if len(tools) > 1 else tools[0]
     T = np.concatenate([F, tool[None]], axis=0)
     q_deg = np.full(n + 2, np.nan)
     q_cm = np.full(n + 2, np.nan)
@@ -161,7 +203,7 @@ def chain_from_frames(frames: pa.Table, prismatic: np.ndarray):  # -> SerialChai
 
 STAGE = Stage(
     "frames",
-    1,
+    2,
     ("features", "joints", "triangulate", "session"),
     NoParams(),
     compute,

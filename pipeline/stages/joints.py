@@ -32,4 +32,4 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     )
 
 
-STAGE = Stage("joints", 1, (RECORDING,), NoParams(), compute, "joint positions per configuration")
+STAGE = Stage("joints", 2, (RECORDING,), NoParams(), compute, "joint positions per configuration")

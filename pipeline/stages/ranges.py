@@ -30,4 +30,4 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     )
 
 
-STAGE = Stage("ranges", 1, (RECORDING,), NoParams(), compute, "raw slant ranges, one row per echo")
+STAGE = Stage("ranges", 2, (RECORDING,), NoParams(), compute, "raw slant ranges, one row per echo")

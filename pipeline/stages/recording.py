@@ -1,13 +1,18 @@
 """Read a session recording (MCAP) into plain arrays, with clear errors.
 
 This is the pipeline's only door to the recording; it knows the channel
-contract of ``schemas/mcap/`` and nothing of the simulator.
+contract of ``schemas/mcap/`` and nothing of the simulator. On top of the file's
+integrity and each message's schema (:mod:`pipeline.contract.mcap_read`) it checks
+what one message cannot: the recorded rig layout, the robot description, that every
+key names a planned sweep, values within the recorded limits, and that joint states
+and digitize cycles pair up by their keys. Tables come out sorted by their keys,
+so the order and the log times of the messages never change a result.
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -15,29 +20,28 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.errors import RecordingError
+from pipeline.contract.channels import CHANNELS
+from pipeline.contract.mcap_read import read_mcap
+from pipeline.errors import ArmsigError, RecordingError
 
-TOPICS = ("/rig/description", "/robot/description", "/robot/joint_state", "/sonic/ranges")
-_REQUIRED = {
-    "/robot/joint_state": ("sweep", "step", "q_commanded", "q_encoder", "units"),
-    "/sonic/ranges": ("sweep", "step", "repeat", "ranges_cm"),
-    "/robot/description": ("robot", "signature_q", "plan", "mode"),
-    "/rig/description": (
-        "microphones_cm",
-        "rod_sparkers_cm",
-        "rod_length_cm",
-        "nominal_speed_cm_s",
-    ),
-}
+TOPICS = tuple(CHANNELS)
 TOOL_SWEEP = 0  # the tool-probe measurement's sweep id in tables ("tool" in the recording)
+#: Recorded joint values may pass the robot's limits by this much (deg or cm): far
+#: above a servo's settling error (a few encoder counts) and an encoder offset
+#: (tenths of a degree), far below what garbage or a wrong unit gives.
+LIMIT_MARGIN = 5.0
+_FIX = "re-copy the file from the rig, or re-record the session"
+_KEY_FIX = "repair the rig's writer: keys are documented in schemas/mcap/ (docs/rig.md)"
 
 
 @dataclass(frozen=True)
 class Recording:
     """Everything a session recording holds.
 
-    ``joint_*`` arrays have one row per commanded configuration, ``cycle_*`` one row
-    per digitize cycle; ``sweep`` is the target number, or 0 for the tool probe.
+    ``joint_*`` arrays have one row per commanded configuration, sorted by
+    ``(sweep, step)``; ``cycle_*`` one row per digitize cycle, sorted by
+    ``(sweep, step, repeat)``; ``sweep`` is the target number, or 0 for the tool probe.
+    Times are seconds after the earliest joint state.
     """
 
     path: Path
@@ -56,24 +60,6 @@ class Recording:
     ranges_cm: np.ndarray  # (M, 5, 4), NaN = no echo
 
 
-def check_required_fields(
-    path: Path,
-    msgs: dict[str, list[tuple[int, dict[str, Any]]]],
-    required: dict[str, tuple[str, ...]],
-) -> None:
-    """Raise :class:`RecordingError` naming the first message of ``msgs`` (topic ->
-    (log time, decoded JSON)) that lacks a field its channel's schema requires."""
-    for topic, keys in required.items():
-        for k, (_, m) in enumerate(msgs[topic]):
-            absent = [key for key in keys if key not in m]
-            if absent:
-                raise RecordingError(
-                    f"{path}: {topic} message {k} does not match its schema",
-                    expected="fields " + ", ".join(keys),
-                    got="missing " + ", ".join(absent),
-                )
-
-
 def file_sha256(path: Path) -> str:
     """Content hash of a file (hex)."""
     h = hashlib.sha256()
@@ -83,12 +69,9 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _sweep_id(value: Any, where: str) -> int:
-    if value == "tool":
-        return TOOL_SWEEP
-    if isinstance(value, int) and not isinstance(value, bool) and value >= 1:
-        return value
-    raise RecordingError(where, expected="sweep = a target number >= 1 or 'tool'", got=repr(value))
+def sweep_name(sweep: int) -> str:
+    """A sweep id as the recording spells it: the target number, or 'tool'."""
+    return "tool" if sweep == TOOL_SWEEP else str(int(sweep))
 
 
 def read_recording(path: str | Path, sha256: str | None = None) -> Recording:
@@ -108,44 +91,7 @@ def read_recording(path: str | Path, sha256: str | None = None) -> Recording:
 
 @lru_cache(maxsize=4)
 def _read_cached(p: Path, sha: str) -> Recording:
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
-
-    msgs: dict[str, list[tuple[int, dict[str, Any]]]] = {t: [] for t in TOPICS}
-    with p.open("rb") as fh:
-        head = fh.read(8)
-        if head[:5] != b"\x89MCAP":
-            raise RecordingError(
-                f"{p}: not an MCAP file",
-                expected="the MCAP magic bytes 89 4D 43 41 50",
-                got=repr(head),
-                fix="point the pipeline at the session's recording.mcap",
-            )
-        fh.seek(0)
-        try:
-            reader = make_reader(fh)
-            # File order, then one sort per topic below: the reader's own time-ordered
-            # merge costs a heap comparison per message (0.2 s for a session).
-            for _schema, channel, message in reader.iter_messages(log_time_order=False):
-                if channel.topic not in msgs:
-                    continue
-                if channel.message_encoding != "json":
-                    raise RecordingError(
-                        f"{p}: channel {channel.topic} has the wrong encoding",
-                        expected="json",
-                        got=channel.message_encoding,
-                    )
-                msgs[channel.topic].append((message.log_time, json.loads(message.data)))
-        except RecordingError:
-            raise
-        except (McapError, EOFError, ValueError, OSError, json.JSONDecodeError) as exc:
-            raise RecordingError(
-                f"{p}: recording is truncated or corrupt",
-                got=f"{type(exc).__name__}: {exc}",
-                fix="re-copy the file from the rig, or re-record the session",
-            ) from exc
-    for topic in TOPICS:
-        msgs[topic].sort(key=lambda tm: tm[0])  # stable: equal times keep file order
+    msgs = read_mcap(p, CHANNELS, _FIX).messages
     missing = [t for t in TOPICS if not msgs[t]]
     if missing:
         raise RecordingError(
@@ -153,41 +99,270 @@ def _read_cached(p: Path, sha: str) -> Recording:
             expected="channels " + ", ".join(TOPICS),
             fix="record every channel of schemas/mcap/ (see schemas/README.md)",
         )
-    check_required_fields(p, msgs, _REQUIRED)
+    rig = _single(p, msgs, "/rig/description")
+    robot = _single(p, msgs, "/robot/description")
+    limits, units = _check_rig_and_robot(p, rig, robot)
+    n_points, n_avg = _planned(p, robot, len(units))
+
     js = msgs["/robot/joint_state"]
+    j_sweep, j_step = _keys(p, "/robot/joint_state", [m for _, m in js], n_points)
+    order = np.lexsort((j_step, j_sweep))
+    js = [js[k] for k in order]
+    j_sweep, j_step = j_sweep[order], j_step[order]
+    _refuse_duplicates(p, "/robot/joint_state", j_sweep, j_step)
+    _refuse_step_gaps(p, j_sweep, j_step)
+    q_cmd, q_enc = _joint_values(p, js, j_sweep, j_step, units, limits)
+
     rg = msgs["/sonic/ranges"]
-    try:
-        ranges = np.array(
-            [
-                [[np.nan if v is None else float(v) for v in row] for row in m["ranges_cm"]]
-                for _, m in rg
-            ],
-            float,
-        )
-        q_cmd = np.array([m["q_commanded"] for _, m in js], float)
-        q_enc = np.array([m["q_encoder"] for _, m in js], float)
-    except (TypeError, ValueError) as exc:
-        raise RecordingError(f"{p}: malformed ranges or joint values", got=str(exc)) from exc
-    if ranges.ndim != 3 or ranges.shape[1:] != (5, 4):
+    c_sweep, c_step = _keys(p, "/sonic/ranges", [m for _, m in rg], n_points)
+    c_rep = np.array([m["repeat"] for _, m in rg], np.int64)
+    order = np.lexsort((c_rep, c_step, c_sweep))
+    rg = [rg[k] for k in order]
+    c_sweep, c_step, c_rep = c_sweep[order], c_step[order], c_rep[order]
+    _refuse_duplicates(p, "/sonic/ranges", c_sweep, c_step, c_rep)
+    over = np.flatnonzero(c_rep >= n_avg)
+    if len(over):
+        k = over[0]
         raise RecordingError(
-            f"{p}: /sonic/ranges does not match its schema",
-            expected="ranges_cm of 5 sparkers x 4 microphones",
-            got=f"shape {ranges.shape[1:]}",
+            f"{p}: /sonic/ranges cycle {_key(c_sweep[k], c_step[k], c_rep[k])} is beyond the plan",
+            expected=f"repeat 0 to {n_avg - 1} (plan.n_avg = {n_avg})",
+            got=f"repeat {c_rep[k]}",
+            fix=_KEY_FIX,
         )
-    t0 = js[0][0]
+    ranges = _ranges(p, rg, c_sweep, c_step, c_rep, rig)
+    _pair(p, j_sweep, j_step, c_sweep, c_step, c_rep)
+
+    t0 = min(t for t, _ in js)
     return Recording(
         path=p,
         sha256=sha,
-        rig=msgs["/rig/description"][0][1],
-        robot=msgs["/robot/description"][0][1],
-        joint_sweep=np.array([_sweep_id(m["sweep"], f"{p}: /robot/joint_state") for _, m in js]),
-        joint_step=np.array([m["step"] for _, m in js], int),
+        rig=rig,
+        robot=robot,
+        joint_sweep=j_sweep,
+        joint_step=j_step,
         joint_t_s=np.array([(t - t0) * 1e-9 for t, _ in js]),
         q_commanded=q_cmd,
         q_encoder=q_enc,
-        cycle_sweep=np.array([_sweep_id(m["sweep"], f"{p}: /sonic/ranges") for _, m in rg]),
-        cycle_step=np.array([m["step"] for _, m in rg], int),
-        cycle_repeat=np.array([m["repeat"] for _, m in rg], int),
+        cycle_sweep=c_sweep,
+        cycle_step=c_step,
+        cycle_repeat=c_rep,
         cycle_t_s=np.array([(t - t0) * 1e-9 for t, _ in rg]),
         ranges_cm=ranges,
     )
+
+
+def _key(sweep: Any, step: Any, repeat: Any = None) -> str:
+    out = f"(sweep {sweep_name(sweep)}, step {int(step)}"
+    return out + (")" if repeat is None else f", repeat {int(repeat)})")
+
+
+def _single(p: Path, msgs: dict[str, list[tuple[int, dict[str, Any]]]], topic: str) -> Any:
+    if len(msgs[topic]) != 1:
+        raise RecordingError(
+            f"{p}: {len(msgs[topic])} {topic} messages",
+            expected="exactly one (the rig and robot are described once per session)",
+            fix="record the description once",
+        )
+    return msgs[topic][0][1]
+
+
+def _check_rig_and_robot(
+    p: Path, rig: dict[str, Any], robot: dict[str, Any]
+) -> tuple[np.ndarray, list[str]]:
+    """Refuse an unusable rig layout or robot description; joint limits (n, 2) and units."""
+    from pipeline.robots.description import description_from_dict
+    from pipeline.sensor.geometry import DigitizerGeometry, check_geometry
+
+    try:
+        check_geometry(DigitizerGeometry.from_dict(rig))
+        desc = description_from_dict(robot["robot"], source="/robot/description")
+    except ArmsigError as exc:
+        raise RecordingError(f"{p}: {exc}") from exc
+    except (KeyError, TypeError, ValueError) as exc:  # a description the checks missed
+        raise RecordingError(
+            f"{p}: /robot/description robot is malformed",
+            got=f"{type(exc).__name__}: {exc}",
+            fix="see schemas/robot_description.md",
+        ) from exc
+    units = ["cm" if j.type == "prismatic" else "deg" for j in desc.joints]
+    if len(robot["signature_q"]) != len(units):
+        raise RecordingError(
+            f"{p}: /robot/description signature_q has the wrong length",
+            expected=f"{len(units)} joint values",
+            got=str(len(robot["signature_q"])),
+        )
+    return desc.limits, units
+
+
+def _planned(p: Path, robot: dict[str, Any], n: int) -> tuple[dict[int, int | None], int]:
+    """Sweep id -> planned positions (None: the tool, any number), and plan.n_avg."""
+    plan = robot["plan"]
+    points: dict[int, int | None] = {}
+    for s in plan["sweeps"]:
+        if s["joint"] > n or s["joint"] in points:
+            raise RecordingError(
+                f"{p}: /robot/description plan has a bad sweep of joint {s['joint']}",
+                expected=f"at most one sweep per joint 1 to {n}",
+                fix="repair the recorded plan",
+            )
+        points[s["joint"]] = s["n_points"]
+    points[TOOL_SWEEP] = None
+    order = [TOOL_SWEEP if o == "tool" else o for o in plan["order"]]
+    if sorted(order) != sorted(points):
+        raise RecordingError(
+            f"{p}: /robot/description plan.order does not list each sweep once",
+            expected=", ".join(sweep_name(s) for s in sorted(points)),
+            got=str(plan["order"]),
+            fix="repair the recorded plan",
+        )
+    return points, int(plan["n_avg"])
+
+
+def _keys(
+    p: Path, topic: str, payloads: list[dict[str, Any]], n_points: dict[int, int | None]
+) -> tuple[np.ndarray, np.ndarray]:
+    """(sweep, step) of each message, each naming a planned position."""
+    sweep = np.array([TOOL_SWEEP if m["sweep"] == "tool" else m["sweep"] for m in payloads])
+    step = np.array([m["step"] for m in payloads], np.int64)
+    unplanned, unlimited = -1, np.iinfo(np.int64).max
+    limit = np.array([n_points.get(int(s), unplanned) for s in sweep], dtype=object)
+    limit = np.where(limit == None, unlimited, limit).astype(np.int64)  # noqa: E711 (tool)
+    bad = np.flatnonzero((limit == unplanned) | (step >= limit))
+    if len(bad):
+        k = bad[0]
+        planned = sorted(sweep_name(s) for s in n_points)
+        raise RecordingError(
+            f"{p}: {topic} {_key(sweep[k], step[k])} names no planned position",
+            expected=f"a sweep of plan.order ({', '.join(planned)}) and a step below its "
+            "plan.sweeps n_points",
+            got=f"sweep {payloads[k]['sweep']!r}, step {step[k]}",
+            fix=_KEY_FIX,
+        )
+    return sweep.astype(np.int64), step
+
+
+def _refuse_duplicates(p: Path, topic: str, *keys: np.ndarray) -> None:
+    """``keys`` sorted; refuse two messages with the same key."""
+    same = np.ones(len(keys[0]) - 1, bool)
+    for k in keys:
+        same &= k[1:] == k[:-1]
+    dup = np.flatnonzero(same)
+    if len(dup):
+        k = dup[0]
+        raise RecordingError(
+            f"{p}: {topic} key {_key(*(a[k] for a in keys))} is recorded twice",
+            expected="one message per key",
+            fix=_KEY_FIX,
+        )
+
+
+def _refuse_step_gaps(p: Path, sweep: np.ndarray, step: np.ndarray) -> None:
+    """Steps of each sweep (sorted) must be 0, 1, ..., K-1."""
+    first = np.r_[True, sweep[1:] != sweep[:-1]]
+    start = np.maximum.accumulate(np.where(first, np.arange(len(sweep)), 0))
+    gap = np.flatnonzero(step != np.arange(len(sweep)) - start)
+    if len(gap):
+        k = gap[0]
+        want = k - start[k]
+        raise RecordingError(
+            f"{p}: /robot/joint_state sweep {sweep_name(sweep[k])} has no step {want}",
+            expected="steps 0, 1, ... of every sweep without a gap",
+            got=f"step {step[k]} after step {want - 1}" if want else f"first step {step[k]}",
+            fix=_KEY_FIX,
+        )
+
+
+def _joint_values(
+    p: Path,
+    js: list[tuple[int, dict[str, Any]]],
+    sweep: np.ndarray,
+    step: np.ndarray,
+    units: list[str],
+    limits: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Commanded and encoder readings (K, n), checked against units and limits."""
+    n = len(units)
+    for k, (_, m) in enumerate(js):
+        if m["units"] != units or len(m["q_commanded"]) != n or len(m["q_encoder"]) != n:
+            raise RecordingError(
+                f"{p}: /robot/joint_state {_key(sweep[k], step[k])} does not fit the robot",
+                expected=f"{n} joint values in units {units}",
+                got=f"units {m['units']}, {len(m['q_commanded'])} commanded, "
+                f"{len(m['q_encoder'])} encoder values",
+                fix="record one value per joint of /robot/description, deg or cm by joint type",
+            )
+    q_cmd = np.array([m["q_commanded"] for _, m in js], float).reshape(-1, n)
+    q_enc = np.array([m["q_encoder"] for _, m in js], float).reshape(-1, n)
+    lo, hi = limits[:, 0] - LIMIT_MARGIN, limits[:, 1] + LIMIT_MARGIN
+    for name, q in (("q_encoder", q_enc), ("q_commanded", q_cmd)):
+        bad = np.argwhere(~((q >= lo) & (q <= hi)))
+        if len(bad):
+            k, j = bad[0]
+            raise RecordingError(
+                f"{p}: /robot/joint_state {_key(sweep[k], step[k])} {name} of joint {j + 1} "
+                "is outside its limits",
+                expected=f"{limits[j, 0]:g} to {limits[j, 1]:g} {units[j]} "
+                f"(± {LIMIT_MARGIN:g} {units[j]})",
+                got=f"{q[k, j]:g} {units[j]}",
+                fix="check the encoder units and the limits of /robot/description",
+            )
+    return q_cmd, q_enc
+
+
+def _ranges(
+    p: Path,
+    rg: list[tuple[int, dict[str, Any]]],
+    sweep: np.ndarray,
+    step: np.ndarray,
+    repeat: np.ndarray,
+    rig: dict[str, Any],
+) -> np.ndarray:
+    """Raw ranges (M, 5, 4), NaN = no echo; every range within the digitizer's window."""
+    nan = math.nan
+    flat = [
+        nan if v is None else v for _, m in rg for row in m["ranges_cm"] for v in row
+    ]  # the schema holds 5 x 4 numbers or nulls per message
+    ranges = np.array(flat, float).reshape(-1, 5, 4)
+    lo, hi = float(rig["range_min_cm"]), float(rig["range_max_cm"])
+    bad = np.argwhere(~np.isnan(ranges) & ~((ranges >= lo) & (ranges <= hi)))
+    if len(bad):
+        k, s, m = bad[0]
+        raise RecordingError(
+            f"{p}: /sonic/ranges cycle {_key(sweep[k], step[k], repeat[k])} reports a range "
+            f"of sparker {s + 1} to microphone {'ABCD'[m]} outside the digitizer's window",
+            expected=f"{lo:g} to {hi:g} cm (range_min_cm, range_max_cm), or null for no echo",
+            got=f"{ranges[k, s, m]:g} cm",
+            fix="record ranges the digitizer reported; a missing echo is null",
+        )
+    return ranges
+
+
+def _pair(
+    p: Path,
+    j_sweep: np.ndarray,
+    j_step: np.ndarray,
+    c_sweep: np.ndarray,
+    c_step: np.ndarray,
+    c_rep: np.ndarray,
+) -> None:
+    """Every cycle has its joint state and every joint state at least one cycle."""
+    stride = np.int64(1) << 21  # steps are at most 1e6 (schema) < 2**21
+    j_key = j_sweep * stride + j_step  # sorted, unique
+    c_key = c_sweep * stride + c_step
+    orphan = np.flatnonzero(~np.isin(c_key, j_key))
+    if len(orphan):
+        k = orphan[0]
+        raise RecordingError(
+            f"{p}: /sonic/ranges cycle {_key(c_sweep[k], c_step[k], c_rep[k])} has no "
+            "/robot/joint_state",
+            expected="the joint state of every measured configuration, same (sweep, step)",
+            fix=_KEY_FIX,
+        )
+    lonely = np.flatnonzero(~np.isin(j_key, c_key))
+    if len(lonely):
+        k = lonely[0]
+        raise RecordingError(
+            f"{p}: /robot/joint_state {_key(j_sweep[k], j_step[k])} has no /sonic/ranges cycle",
+            expected="at least one digitize cycle per configuration, same (sweep, step)",
+            fix=_KEY_FIX,
+        )

@@ -27,7 +27,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 
 STAGE = Stage(
-    "session", 1, (RECORDING,), NoParams(), compute, "description messages of the recording"
+    "session", 2, (RECORDING,), NoParams(), compute, "description messages of the recording"
 )
 
 

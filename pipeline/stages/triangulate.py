@@ -87,7 +87,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             "scatter_cm",
         )
     }
-    order = np.argsort(first)  # keep recording order
+    order = np.argsort(first)  # the order of the compensate table: by (sweep, step)
     for g in order:
         members = np.flatnonzero(inverse == g)
         good = members[ok[members]]

@@ -1,0 +1,42 @@
+"""The channels of the two recordings and their compiled JSON Schemas (``schemas/mcap/``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from functools import cache
+from typing import Any
+
+#: topic -> schema file in schemas/mcap/ of a session recording ``recording.mcap``
+CHANNELS = {
+    "/rig/description": "rig_description",
+    "/robot/description": "robot_description",
+    "/robot/joint_state": "joint_state",
+    "/sonic/ranges": "sonic_ranges",
+}
+#: topic -> schema file of the evaluation recording ``evaluation.mcap`` (docs/evaluation.md)
+EVAL_CHANNELS = {
+    "/eval/description": "eval_description",
+    "/eval/teach": "eval_teach",
+    "/eval/program": "eval_program",
+    "/eval/measurement": "eval_measurement",
+}
+#: Words of older recordings, read as today's: (topic, field) -> {old: new}.
+LEGACY_VALUES = {("/robot/description", "mode"): {"real": "hardware"}}
+
+
+@cache
+def validator(schema_name: str) -> Callable[[Any], Any]:
+    """The compiled validator of ``schemas/mcap/<schema_name>.json`` (raises
+    ``fastjsonschema.JsonSchemaValueException`` naming the field)."""
+    import fastjsonschema
+
+    from pipeline.schemas import mcap_json_schema
+
+    return fastjsonschema.compile(mcap_json_schema(schema_name))  # type: ignore[no-any-return]
+
+
+def upgrade_legacy(topic: str, payload: dict[str, Any]) -> None:
+    """Replace the old words of :data:`LEGACY_VALUES` in ``payload`` in place."""
+    for (t, field), words in LEGACY_VALUES.items():
+        if t == topic and isinstance(payload.get(field), str) and payload[field] in words:
+            payload[field] = words[payload[field]]

@@ -1,0 +1,174 @@
+"""Channels are paired by their keys, never by log time (issue 13)."""
+
+from __future__ import annotations
+
+import json
+import random
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from recording_data import Raw, read_raw, small_session, write_raw
+
+from pipeline.errors import RecordingError, StageError
+from pipeline.identify import identify
+from pipeline.stages.features import sweep_points
+
+RANGES = "/sonic/ranges"
+JOINTS = "/robot/joint_state"
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory) -> Path:
+    return small_session(tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def signature(session: Path, tmp_path_factory) -> dict:
+    d = tmp_path_factory.mktemp("original")
+    shutil.copy(session / "recording.mcap", d)
+    return _signature(d)
+
+
+def _signature(d: Path) -> dict:
+    identify(d, report=False)
+    doc = json.loads((d / "signature.json").read_text())
+    del doc["provenance"], doc["session"]
+    return doc
+
+
+def _retimed(raw: list[Raw], topic: str, how: str) -> list[Raw]:
+    times = [m.log_time for m in raw if m.topic == topic]
+    if how == "reversed":
+        times.reverse()
+    else:
+        random.Random(7).shuffle(times)
+    it = iter(times)
+    return [Raw(m.topic, next(it), m.data) if m.topic == topic else m for m in raw]
+
+
+@pytest.mark.parametrize(
+    "variant",
+    [
+        "joint_state_reversed",
+        "joint_state_permuted",
+        "ranges_reversed",
+        "ranges_permuted",
+        "file_order_shuffled",
+    ],
+)
+def test_log_times_never_change_the_signature(
+    session: Path, signature: dict, tmp_path: Path, variant: str
+) -> None:
+    """Before: reversed joint-state log times gave 79 cm, permuted range log times 73 cm."""
+    raw, _ = read_raw(session / "recording.mcap")
+    if variant == "file_order_shuffled":
+        random.Random(3).shuffle(raw)
+    else:
+        topic = JOINTS if variant.startswith("joint_state") else RANGES
+        raw = _retimed(raw, topic, variant.rsplit("_", 1)[1])
+    write_raw(tmp_path / "recording.mcap", raw)
+    assert _signature(tmp_path) == signature  # bit for bit
+
+
+def _first(raw: list[Raw], topic: str, **key) -> int:
+    return next(
+        i
+        for i, m in enumerate(raw)
+        if m.topic == topic and all(m.payload[k] == v for k, v in key.items())
+    )
+
+
+CASES = {
+    "duplicated_joint_state": ("recorded twice", "(sweep 3, step 4)"),
+    "duplicated_cycle": ("recorded twice", "(sweep 3, step 4, repeat 1)"),
+    "cycle_without_joint_state": ("has no /robot/joint_state", "(sweep 3, step 11, repeat 0)"),
+    "joint_state_without_cycle": ("has no /sonic/ranges cycle", "(sweep 3, step 4)"),
+    "step_gap": ("has no step 4", "sweep 3"),
+    "tool_step_gap": ("has no step 0", "sweep tool"),
+    "two_rig_descriptions": ("2 /rig/description messages", ""),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_broken_keys_are_refused_naming_the_key(session: Path, tmp_path: Path, case: str) -> None:
+    raw, _ = read_raw(session / "recording.mcap")
+    js = _first(raw, JOINTS, sweep=3, step=4)
+    cyc = [
+        i
+        for i, m in enumerate(raw)
+        if m.topic == RANGES and (m.payload["sweep"], m.payload["step"]) == (3, 4)
+    ]
+    if case == "duplicated_joint_state":
+        raw.append(raw[js])
+    elif case == "duplicated_cycle":
+        raw.append(raw[cyc[1]])
+    elif case == "cycle_without_joint_state":
+        del raw[_first(raw, JOINTS, sweep=3, step=11)]
+    elif case == "joint_state_without_cycle":
+        raw = [m for i, m in enumerate(raw) if i not in cyc]
+    elif case == "step_gap":
+        raw = [m for i, m in enumerate(raw) if i not in cyc and i != js]
+    elif case == "tool_step_gap":
+        raw = [
+            m.with_payload({**m.payload, "step": 1}) if m.payload.get("sweep") == "tool" else m
+            for m in raw
+        ]
+    else:
+        raw.append(raw[_first(raw, "/rig/description")])
+    write_raw(tmp_path / "recording.mcap", raw)
+    what, key = CASES[case]
+    with pytest.raises(RecordingError, match=what) as exc:
+        identify(tmp_path, report=False)
+    assert key in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_sweep_points_pair_positions_and_readings_by_key() -> None:
+    """Before: the k-th position of a sweep took the k-th joint state of the table."""
+    n, pris = 2, np.array([False, False])
+    steps = np.array([0, 1, 2, 3])
+    q1 = np.array([10.0, 20.0, 30.0, 40.0])
+    tri = pa.table(
+        {
+            "sweep": [1] * 4,
+            "step": steps[::-1],
+            "x_cm": [3.0, 2.0, 1.0, 0.0],
+            "y_cm": [0.0] * 4,
+            "z_cm": [0.0] * 4,
+        }
+    )  # positions listed from the last step to the first; x = step
+    joints = pa.table(
+        {
+            "sweep": [1] * 8,
+            "step": np.repeat(steps, 2),
+            "joint": [1, 2] * 4,
+            "q_deg": np.ravel(np.column_stack([q1, np.zeros(4)])),
+            "q_cm": [None] * 8,
+        }
+    )
+    p, q, st = sweep_points(tri, joints, 1, n, pris)
+    assert np.array_equal(st, steps) and np.array_equal(q, q1)
+    assert np.array_equal(p[:, 0], steps)
+    with pytest.raises(StageError, match=r"\(sweep 1, step 3\)"):
+        sweep_points(tri, joints.slice(0, 6), 1, n, pris)
+
+
+def test_repeated_tool_measurements_are_all_used(
+    session: Path, signature: dict, tmp_path: Path
+) -> None:
+    """A tool probe measured as two steps: the mean of both, not the first (before)."""
+    raw, _ = read_raw(session / "recording.mcap")
+    split: list[Raw] = []
+    for m in raw:
+        p = m.payload
+        if p.get("sweep") != "tool":
+            split.append(m)
+        elif m.topic == JOINTS:
+            split += [m, m.with_payload({**p, "step": 1})]
+        else:  # cycle 0 as step 0, cycle 1 as step 1
+            split.append(m.with_payload({**p, "step": p["repeat"], "repeat": 0}))
+    write_raw(tmp_path / "recording.mcap", split)
+    tool = _signature(tmp_path)["smodel"]["tool"]
+    assert np.allclose(tool, signature["smodel"]["tool"], rtol=0, atol=1e-9)
