@@ -11,22 +11,22 @@ run leaves the files of the last good run untouched.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import datetime as dt
 import importlib
 import os
 import shutil
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from pipeline import __version__
-from pipeline.errors import ArmsigError, SessionLockedError, StageError
+from pipeline.errors import ArmsigError, StageError
 from pipeline.schemas import validate_table
 from pipeline.stages.base import RECORDING, Stage
+from pipeline.stages.lock import session_lock
 from pipeline.stages.recording import file_sha256, read_recording
 from pipeline.stages.tables import content_hash, read_provenance, read_table, write_table
 
@@ -57,7 +57,6 @@ FILE_INPUTS = {
     "signature": ("signature.json", "pipeline.signature_file:load_signature"),
     "evaluation": ("evaluation.mcap", "pipeline.evaluation.recording:read_evaluation"),
 }
-LOCK_NAME = ".pipeline.lock"
 
 
 def stages(modules: tuple[str, ...] = STAGE_MODULES) -> list[Stage]:
@@ -206,48 +205,6 @@ def status(
             stale.add(stage.name)
         out.append(st)
     return out
-
-
-@contextlib.contextmanager
-def session_lock(session_dir: Path) -> Iterator[None]:
-    """Exclusive lock on a session folder; a second run gets a clear error."""
-    lock = session_dir / LOCK_NAME
-    for _ in range(2):
-        try:
-            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-            break
-        except FileExistsError:
-            try:
-                pid = int(lock.read_text().strip() or 0)
-            except (OSError, ValueError):
-                pid = 0
-            alive = pid > 0 and _pid_alive(pid)
-            if alive:
-                raise SessionLockedError(
-                    f"{session_dir}: another pipeline run (pid {pid}) is working on this session",
-                    fix=f"wait for it to finish; if it died, delete {lock}",
-                ) from None
-            with contextlib.suppress(FileNotFoundError):
-                lock.unlink()  # a dead run's lock
-    else:  # pragma: no cover - lost a race twice
-        raise SessionLockedError(f"{session_dir}: could not take the session lock")
-    try:
-        os.write(fd, str(os.getpid()).encode())
-        os.close(fd)
-        yield
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            lock.unlink()
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def run(
