@@ -14,13 +14,16 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO
 
+#: Temp files are ``.<name>.<random>.tmp`` beside their target.
+TEMP_SUFFIX = ".tmp"
+
 
 @contextlib.contextmanager
 def atomic_write(path: str | Path, mode: str = "wb") -> Iterator[IO[bytes] | IO[str]]:
     """Open a temp file beside ``path``; on success rename it over ``path``."""
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=TEMP_SUFFIX, dir=target.parent)
     umask = os.umask(0)
     os.umask(umask)
     try:
@@ -34,6 +37,20 @@ def atomic_write(path: str | Path, mode: str = "wb") -> Iterator[IO[bytes] | IO[
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+def remove_debris(folder: Path) -> list[Path]:
+    """Delete the temp files that killed writers left in ``folder`` (not its subfolders).
+
+    Only safe while no writer of ``folder`` is running: call it under the session lock.
+    """
+    gone = []
+    for tmp in folder.glob(f".*{TEMP_SUFFIX}") if folder.is_dir() else ():
+        if tmp.is_file() and not tmp.is_symlink():
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+                gone.append(tmp)
+    return gone
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:

@@ -289,7 +289,7 @@ def identify(
             typer.echo(f"  {r.name:12s} {r.action}")
     for w in result.warnings:
         typer.echo(f"warning: {w}", err=True)
-    typer.echo(f"signature: {result.signature}")
+    typer.echo(f"signature: {result.signature or 'not written'}")
     if result.report:
         typer.echo(f"report:    {result.report}")
 
@@ -297,7 +297,7 @@ def identify(
 @app.command()
 def status(session: SessionArg) -> None:
     """Show every stage of a session as fresh, stale or missing, and why
-    (identification, then the `pipeline evaluate` stages)."""
+    (identification, signature.json, then the `pipeline evaluate` stages)."""
     from pipeline.stages.runner import EVALUATE_STAGE_MODULES, STAGE_MODULES
     from pipeline.stages.runner import status as stage_status
 

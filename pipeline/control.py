@@ -35,7 +35,7 @@ from pipeline.kinematics.ik import (
 )
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.robots.description import RobotDescription
-from pipeline.signature_file import Signature, load_signature
+from pipeline.signature_file import Signature, load_session_signature
 from pipeline.units import joints_to_internal
 
 METHODS = ("nr", "jacobi")
@@ -64,8 +64,9 @@ class Controller:
 
     @classmethod
     def from_session(cls, session_dir: str | Path) -> Controller:
-        """Load ``signature.json`` of an identified session."""
-        sig = load_signature(Path(session_dir) / "signature.json")
+        """Load ``signature.json`` of an identified session; refused unless it matches the
+        session's committed stages (:func:`pipeline.signature_file.load_session_signature`)."""
+        sig = load_session_signature(Path(session_dir) / "signature.json")
         return cls(sig, sig.robot, sig.sensor_from_design_base, sig.design_flange_to_tool)
 
     def with_tool(self, flange_to_user_tool: np.ndarray) -> Controller:

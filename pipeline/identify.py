@@ -1,4 +1,4 @@
-"""``identify``: recording -> cached stages -> signature.json -> report."""
+"""``identify``: recording -> cached stages -> signature.json -> report, under the session lock."""
 
 from __future__ import annotations
 
@@ -7,14 +7,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pipeline.signature_file import write_signature
-from pipeline.stages.runner import StageRun, run
+from pipeline.signature_file import FILE_NAME, read_signature_document
+from pipeline.stages.lock import session_lock
+from pipeline.stages.runner import PRODUCT, StageRun, run, session_folder
 
 
 @dataclass(frozen=True)
 class IdentifyResult:
+    """``signature`` and ``report`` are None when not written (``warnings`` says why)."""
+
     runs: list[StageRun]
-    signature: Path
+    signature: Path | None
     report: Path | None
     warnings: list[str]
 
@@ -28,11 +31,19 @@ def identify(
     overrides: Mapping[str, Mapping[str, Any]] | None = None,
     report: bool = True,
 ) -> IdentifyResult:
-    """Bring the session's stages up to date, then write its signature and report."""
-    sdir = Path(session_dir)
-    runs = run(sdir, force=force, from_stage=from_stage, only=only, overrides=overrides)
-    sig, doc = write_signature(sdir)
-    rep = _report_if_stale(sdir, doc["provenance"]["stages"]) if report else None
+    """Bring the session's stages and signature up to date, then write its report."""
+    sdir = session_folder(session_dir)
+    with session_lock(sdir):  # one lock for stages, signature and report
+        runs = run(sdir, force=force, from_stage=from_stage, only=only, overrides=overrides)
+        if next(r for r in runs if r.name == PRODUCT[0]).action == "not written":
+            why = (
+                f"{FILE_NAME} not written: stages after --only {only} are stale; "
+                f"`pipeline identify {sdir}` brings them and the signature up to date"
+            )
+            return IdentifyResult(runs, None, None, [why])
+        sig = sdir / FILE_NAME
+        doc = read_signature_document(sig)
+        rep = _report_if_stale(sdir, doc["provenance"]["stages"]) if report else None
     return IdentifyResult(runs, sig, rep, doc["warnings"])
 
 

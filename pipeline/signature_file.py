@@ -1,6 +1,8 @@
 """The arm signature file ``sessions/NAME/signature.json`` (format in schemas/signature.md).
 
-Written from the stage tables at the end of ``identify``; read by controllers.
+A product of the stage runner: written from the committed stage tables, under the
+session lock, in the run that commits them. Read by controllers; a session's file is
+used only while it matches the session's committed stages.
 """
 
 from __future__ import annotations
@@ -25,17 +27,23 @@ from pipeline.robots.description import (
     description_from_dict,
     description_to_dict,
 )
+from pipeline.signature_checks import (
+    DIGEST_KEY,
+    FORMAT,
+    FORMAT_VERSION,
+    check_document,
+    document_digest,
+    parse_json,
+)
 from pipeline.stages.frames import chain_from_frames
-from pipeline.stages.runner import stage_path, stages
+from pipeline.stages.runner import committed_hashes, stage_path
 from pipeline.stages.session import session_robot
-from pipeline.stages.tables import read_provenance, read_table
+from pipeline.stages.tables import read_table
 from pipeline.units import joints_to_boundary, joints_to_internal
 
-FORMAT = "armsig.signature"
-#: 3: the design alignment stays put along symmetries of the design model
-#: (:mod:`pipeline.kinematics.alignment`); files of format 2 are rewritten on identify.
-FORMAT_VERSION = 3
 ALIGNMENT_SAMPLES = 500
+FILE_NAME = "signature.json"
+STALE = "signature.json does not match the session's stages"
 
 
 def design_alignment(
@@ -62,13 +70,9 @@ def _m(T: np.ndarray) -> list[list[float]]:
     return [[float(v) for v in row] for row in T]
 
 
-def signature_document(
-    session_dir: Path, hashes: dict[str, str | None] | None = None
-) -> dict[str, Any]:
-    """The signature as a JSON-ready dict, built from the session's stage tables.
-
-    ``hashes`` are the stage content hashes when the caller already has them.
-    """
+def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict[str, Any]:
+    """The signature as a JSON-ready dict (without its digest), built from the session's
+    stage tables, whose content hashes are ``hashes``."""
     session = read_table(stage_path(session_dir, "session"))
     robot = session_robot(session)
     pris = robot.prismatic
@@ -160,39 +164,82 @@ def signature_document(
         "warnings": [f"joint {f['joint']}: {w}" for f in features for w in f["warnings"]],
         "provenance": {
             "recording_sha256": session.column("recording_sha256")[0].as_py(),
-            "stages": hashes if hashes is not None else stage_hashes(session_dir),
+            "stages": hashes,
             "package_version": __version__,
             "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         },
     }
 
 
-def stage_hashes(session_dir: Path) -> dict[str, str | None]:
-    """Content hash of every committed stage output."""
-    return {
-        s.name: read_provenance(stage_path(session_dir, s.name)).get("content_hash")
-        for s in stages()
-    }
+def signature_text(doc: dict[str, Any]) -> str:
+    """The file's text: ``doc`` with its ``sha256`` self-digest."""
+    sealed = {**doc, DIGEST_KEY: document_digest(doc)}
+    return json.dumps(sealed, indent=1, allow_nan=False) + "\n"
 
 
-def write_signature(session_dir: str | Path) -> tuple[Path, dict[str, Any]]:
-    """Write ``signature.json`` beside the recording (atomically); return it and its document.
+def read_signature_document(path: str | Path) -> dict[str, Any]:
+    """Read and check a signature file (:func:`pipeline.signature_checks.check_document`)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ArmsigError(
+            f"cannot read signature {p}",
+            got=str(exc),
+            fix="run `pipeline identify SESSION` to write it",
+        ) from exc
+    doc = parse_json(text, str(p))
+    check_document(doc, str(p))
+    return doc
 
-    An existing file built from the same stage outputs is kept as it is, so a
-    warm run changes nothing on disk.
+
+def signature_status(session_dir: Path, hashes: dict[str, str | None]) -> tuple[str, str]:
+    """``(state, reason)`` of a session's signature.json against the content ``hashes`` of
+    its committed identification stages: missing, stale (unreadable, or built from other
+    stage outputs) or fresh."""
+    state, reason, _ = _status(Path(session_dir) / FILE_NAME, hashes)
+    return state, reason
+
+
+def _status(path: Path, hashes: dict[str, str | None]) -> tuple[str, str, dict[str, Any] | None]:
+    if not path.is_file():
+        return "missing", "never written", None
+    try:
+        doc = read_signature_document(path)
+    except ArmsigError as exc:
+        why = exc.what.removeprefix(f"{path}: ") + (f" ({exc.got})" if exc.got else "")
+        return "stale", why, None
+    if doc["provenance"]["stages"] != hashes:
+        why = "built from other stage outputs than the committed ones (interrupted run?)"
+        return "stale", why, doc
+    return "fresh", "matches the committed stages", doc
+
+
+def write_signature(
+    session_dir: str | Path, hashes: dict[str, str | None] | None = None, force: bool = False
+) -> tuple[Path, dict[str, Any], bool]:
+    """Write ``signature.json`` beside the recording (atomically) unless the file there is
+    intact and built from the stage outputs with content ``hashes`` (default: the verified
+    committed ones); return its path, its document and whether it was written.
+
+    The stage runner calls this under the session lock after it commits the stages.
     """
     sdir = Path(session_dir)
-    path = sdir / "signature.json"
-    current = stage_hashes(sdir)
-    try:
-        old = json.loads(path.read_text())
-        if old.get("format_version") == FORMAT_VERSION and old["provenance"]["stages"] == current:
-            return path, old
-    except (OSError, ValueError, KeyError, TypeError):
-        pass
+    path = sdir / FILE_NAME
+    current = committed_hashes(sdir) if hashes is None else hashes
+    missing = [name for name, h in current.items() if h is None]
+    if missing:
+        raise ArmsigError(
+            f"{sdir}: cannot write {FILE_NAME}: stage {missing[0]} is missing or damaged",
+            fix=f"run `pipeline identify {sdir}`",
+        )
+    state, _, old = _status(path, current)
+    if not force and state == "fresh" and old is not None:
+        return path, old, False
     doc = signature_document(sdir, current)
-    write_text_atomic(path, json.dumps(doc, indent=1) + "\n")
-    return path, doc
+    text = signature_text(doc)
+    write_text_atomic(path, text)
+    return path, json.loads(text), True
 
 
 @dataclass(frozen=True)
@@ -215,42 +262,40 @@ class Signature:
 
 
 def load_signature(path: str | Path) -> Signature:
-    """Read a signature file; a clear error for a missing, foreign or broken file."""
+    """Read a signature file; a one-line error for a missing, foreign, corrupt or
+    inconsistent file (schemas/signature.schema.json and
+    :func:`pipeline.signature_checks.check_document`)."""
     p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ArmsigError(
-            f"cannot read signature {p}",
-            got=str(exc),
-            fix="run `pipeline identify SESSION` to write it",
-        ) from exc
-    if doc.get("format") != FORMAT:
-        raise ArmsigError(
-            f"{p}: not an armsig signature", expected=FORMAT, got=repr(doc.get("format"))
-        )
-    try:
-        robot = description_from_dict(doc["robot_description"], source=str(p))
-        sm = doc["smodel"]
-        al = doc["design_alignment"]
-        chain = SerialChain(
-            links=np.array(sm["links"], float),
-            prismatic=robot.prismatic,
-            base=np.array(sm["base"], float),
-            tool=np.array(sm["tool"], float),
-            joint_offsets=joints_to_internal(
-                np.array(doc["signature_configuration"], float), robot.prismatic
-            ),
-        )
-        return Signature(
-            robot,
-            chain,
-            np.array(al["sensor_from_design_base"], float),
-            np.array(al["design_flange_to_signature_tool"], float),
-        )
-    except (KeyError, ValueError, TypeError) as exc:
-        raise ArmsigError(
-            f"{p}: signature is incomplete",
-            got=f"{type(exc).__name__}: {exc}",
-            fix="re-run `pipeline identify` on its session",
-        ) from exc
+    return signature_from_document(read_signature_document(p), str(p))
+
+
+def load_session_signature(path: str | Path) -> Signature:
+    """Read ``SESSION/signature.json``, refused unless it was built from the stage outputs
+    committed in ``SESSION/stages`` (e.g. after a run killed between the two)."""
+    p = Path(path)
+    doc = read_signature_document(p)
+    if doc["provenance"]["stages"] != committed_hashes(p.parent):
+        raise ArmsigError(f"{p}: {STALE}", fix=f"run `pipeline identify {p.parent}`")
+    return signature_from_document(doc, str(p))
+
+
+def signature_from_document(doc: dict[str, Any], source: str) -> Signature:
+    """The :class:`Signature` of a checked document."""
+    robot = description_from_dict(doc["robot_description"], source=source)
+    sm = doc["smodel"]
+    al = doc["design_alignment"]
+    chain = SerialChain(
+        links=np.array(sm["links"], float),
+        prismatic=robot.prismatic,
+        base=np.array(sm["base"], float),
+        tool=np.array(sm["tool"], float),
+        joint_offsets=joints_to_internal(
+            np.array(doc["signature_configuration"], float), robot.prismatic
+        ),
+    )
+    return Signature(
+        robot,
+        chain,
+        np.array(al["sensor_from_design_base"], float),
+        np.array(al["design_flange_to_signature_tool"], float),
+    )

@@ -16,3 +16,16 @@ def random_rigid(rng: np.random.Generator, n: int, scale: float = 50.0) -> np.nd
     T[:, :3, :3] = Q
     T[:, :3, 3] = rng.normal(scale=scale, size=(n, 3))
     return T
+
+
+@pytest.fixture(scope="session")
+def identified_session(tmp_path_factory: pytest.TempPathFactory):
+    """A small simulated session, identified without a report. Tests that change files
+    work on a copy: ``shutil.copytree(identified_session, tmp_path / "s")``."""
+    from pipeline.identify import identify
+    from pipeline.rig.simulate import SimulationOptions, simulate_session
+
+    d = tmp_path_factory.mktemp("identified") / "s"
+    simulate_session(d, SimulationOptions(seed=2, points=12, repeats=2))
+    identify(d, report=False)
+    return d

@@ -86,7 +86,7 @@ def test_new_signature_reruns_the_program(tmp_path) -> None:
     first = evaluate(sdir, report=False)
     doc = json.loads((sdir / "signature.json").read_text())
     doc["smodel"]["links"][1][0][3] += 0.05  # a different signature, same stage provenance
-    (sdir / "signature.json").write_text(json.dumps(doc))
+    (sdir / "signature.json").write_text(_resealed(doc))  # an edit with a valid digest
     r = evaluate(sdir, report=False)
     actions = {x.name: x.action for x in r.runs}
     assert actions["evaluate_program"] == "ran" and actions["evaluate_indices"] == "ran"
@@ -96,9 +96,17 @@ def test_new_signature_reruns_the_program(tmp_path) -> None:
     # A hardware session cannot re-run the robot: the stale recording is refused.
     (sdir / "rig-truth.json").unlink()
     doc["smodel"]["links"][1][0][3] += 0.05
-    (sdir / "signature.json").write_text(json.dumps(doc))
+    (sdir / "signature.json").write_text(_resealed(doc))
     with pytest.raises(StageError, match="another joint program"):
         evaluate(sdir, report=False)
+
+
+def _resealed(doc: dict) -> str:
+    """A deliberately edited signature with its self-digest recomputed (a hand edit
+    without it is corrupt, and ``identify`` rewrites it)."""
+    from pipeline.signature_file import signature_text
+
+    return signature_text({k: v for k, v in doc.items() if k != "sha256"})
 
 
 def test_hardware_session_needs_its_recording(tmp_path) -> None:
@@ -172,7 +180,7 @@ def test_fresh_process_with_cached_stages(session, tmp_path) -> None:
     shutil.copytree(sdir, other)
     doc = json.loads((other / "signature.json").read_text())
     doc["smodel"]["links"][1][0][3] += 0.05  # a different signature, same stage provenance
-    (other / "signature.json").write_text(json.dumps(doc))
+    (other / "signature.json").write_text(_resealed(doc))
     res = subprocess.run(
         [sys.executable, "-m", "pipeline.cli", "evaluate", str(other), "--json", "--no-report"],
         capture_output=True,

@@ -12,7 +12,7 @@ import polars as pl
 import pytest
 
 from pipeline.audit import audit
-from pipeline.errors import RecordingError, SessionLockedError, StageError
+from pipeline.errors import RecordingError, StageError
 from pipeline.identify import identify
 from pipeline.kinematics.chain import forward_kinematics
 from pipeline.kinematics.signature import chain_from_pseudo_dh, pseudo_dh_from_chain
@@ -123,18 +123,6 @@ def test_cache_reruns_exactly_what_changed(
     # --from and --only.
     assert _ran(run(d, overrides=over, from_stage="frames")) == {"frames", "smodel", "dh"}
     assert _ran(run(d, overrides=over, only="triangulate")) == {"triangulate"}
-
-
-def test_lock_blocks_a_second_run(small_session: Path, tmp_path: Path) -> None:
-    import os
-
-    d = _copy(small_session, tmp_path / "s")
-    (d / runner.LOCK_NAME).write_text(str(os.getppid()))  # a live process holds it
-    with pytest.raises(SessionLockedError, match="another pipeline run"):
-        run(d)
-    (d / runner.LOCK_NAME).write_text("999999999")  # a dead run's lock is taken over
-    run(d)
-    assert not (d / runner.LOCK_NAME).exists()
 
 
 def _stage_bytes(d: Path) -> dict[str, bytes]:

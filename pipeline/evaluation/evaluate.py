@@ -20,7 +20,14 @@ from pipeline.evaluation.grid12 import CORNER_VERTICES
 from pipeline.evaluation.recording import read_evaluation
 from pipeline.evaluation.score import AXIS_LETTERS, dropped_indices
 from pipeline.evaluation.tasks import TASK_NAMES, reading_resolution
-from pipeline.stages.runner import EVALUATE_STAGE_MODULES, StageRun, run, stage_path
+from pipeline.stages.lock import session_lock
+from pipeline.stages.runner import (
+    EVALUATE_STAGE_MODULES,
+    StageRun,
+    run,
+    session_folder,
+    stage_path,
+)
 from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_provenance, read_table
 
@@ -59,9 +66,14 @@ def evaluate(
         for a first recording).
     report : write ``report/evaluation.md`` (when its inputs changed).
     """
+    sdir = session_folder(session_dir)
+    with session_lock(sdir):  # one lock for the identification, the rig and the stages
+        return _evaluate(sdir, rig, report)
+
+
+def _evaluate(sdir: Path, rig: Any | None, report: bool) -> EvaluateResult:
     from pipeline.identify import identify
 
-    sdir = Path(session_dir)
     ident = identify(sdir, report=report)
     path = sdir / "evaluation.mcap"
     simulated = (sdir / "rig-truth.json").is_file()

@@ -1,34 +1,40 @@
 """Run the stages of a session, caching each in ``stages/<name>.arrow``.
 
 A stage reruns only when its version, its parameters or the content hash of
-one of its inputs changed (or when forced); otherwise it is reported cached.
-Every output is validated against its schema and written with its provenance.
+one of its inputs changed, when its file fails its check (unreadable, columns
+of another schema, data no longer hashing to the recorded content hash), or
+when forced; otherwise it is reported cached. Every output is validated
+against its schema and written with its provenance.
 
 A run is all or nothing: outputs go to ``stages/.pending/`` and are renamed
 into ``stages/`` only when every stage of the run succeeded, so a failing
-run leaves the files of the last good run untouched.
+run leaves the files of the last good run untouched; its own outputs move to
+``stages/failed/`` for inspection (removed by the next good run). Then, still
+under the session lock, the run writes its product ``signature.json`` from the
+committed identification stages unless the file there already matches them.
 """
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import datetime as dt
 import importlib
 import os
 import shutil
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from pipeline import __version__
-from pipeline.errors import ArmsigError, SessionLockedError, StageError
+from pipeline.atomic import remove_debris
+from pipeline.errors import ArmsigError, StageError
 from pipeline.schemas import validate_table
 from pipeline.stages.base import RECORDING, Stage
+from pipeline.stages.lock import session_lock
 from pipeline.stages.recording import file_sha256, read_recording
-from pipeline.stages.tables import content_hash, read_provenance, read_table, write_table
+from pipeline.stages.tables import CheckedTable, check_table, content_hash, write_table
 
 #: Stage modules in pipeline order (each defines ``STAGE``).
 STAGE_MODULES = (
@@ -54,15 +60,30 @@ EVALUATE_STAGE_MODULES = (
 #: name -> (file name, ``module:function`` that loads it from its path).
 #: They are hashed by content, like the recording.
 FILE_INPUTS = {
-    "signature": ("signature.json", "pipeline.signature_file:load_signature"),
+    "signature": ("signature.json", "pipeline.signature_file:load_session_signature"),
     "evaluation": ("evaluation.mcap", "pipeline.evaluation.recording:read_evaluation"),
 }
-LOCK_NAME = ".pipeline.lock"
+#: The product of the identification stages, written by the run that commits them:
+#: its name (a :data:`FILE_INPUTS` key) and ``module:function`` of its writer
+#: ``(session_dir, hashes, force) -> (path, doc, written)`` and of its check
+#: ``(session_dir, hashes) -> (state, reason)``; ``hashes``: the stages' content hashes.
+PRODUCT = (
+    "signature",
+    "pipeline.signature_file:write_signature",
+    "pipeline.signature_file:signature_status",
+)
+FAILED = "failed"
 
 
 def stages(modules: tuple[str, ...] = STAGE_MODULES) -> list[Stage]:
     """All stages of a stage list (default: the identification), in order."""
     return [importlib.import_module(f"pipeline.stages.{m}").STAGE for m in modules]
+
+
+def _function(ref: str) -> Callable[..., Any]:
+    """The function named by ``module:function``."""
+    module, func = ref.split(":")
+    return getattr(importlib.import_module(module), func)  # type: ignore[no-any-return]
 
 
 def _load_file_input(sdir: Path, name: str) -> Any:
@@ -73,8 +94,19 @@ def _load_file_input(sdir: Path, name: str) -> Any:
         raise StageError(
             f"{sdir}: no {fname}", fix="run `pipeline identify` / `pipeline evaluate` first"
         )
-    module, func = loader.split(":")
-    return getattr(importlib.import_module(module), func)(path)
+    return _function(loader)(path)
+
+
+def session_folder(session_dir: str | Path) -> Path:
+    """``session_dir`` as a Path, refused with one line unless it holds a recording."""
+    sdir = Path(session_dir)
+    if not (sdir / "recording.mcap").is_file():
+        raise StageError(
+            f"{sdir}: no recording.mcap" + ("" if sdir.is_dir() else " (no such folder)"),
+            expected="a session folder holding recording.mcap",
+            fix="`pipeline simulate NAME` records a simulated session",
+        )
+    return sdir
 
 
 def stage_path(session_dir: Path, name: str) -> Path:
@@ -84,6 +116,11 @@ def stage_path(session_dir: Path, name: str) -> Path:
 
 def _pending_dir(session_dir: Path) -> Path:
     return session_dir / "stages" / ".pending"
+
+
+def failed_dir(session_dir: Path) -> Path:
+    """Where the outputs of the last failed run wait for inspection."""
+    return session_dir / "stages" / FAILED
 
 
 @dataclass(frozen=True)
@@ -136,11 +173,14 @@ def _params(stage: Stage, overrides: Mapping[str, Mapping[str, Any]]) -> Any:
 
 
 class _Hashes:
-    """Content hashes of the recording and of stage files, computed once per run."""
+    """Content hashes of the recording, the file inputs and stage files (each stage file
+    checked once per run: see :func:`pipeline.stages.tables.check_table`)."""
 
     def __init__(self, session_dir: Path) -> None:
         self.session_dir = session_dir
-        self._cache: dict[str, str | None] = {}
+        self._files: dict[str, str | None] = {}
+        self._tables: dict[str, CheckedTable | None] = {}
+        self._product: tuple[str, str] | None = None
         self.pending: set[str] = set()  # stages written in this run, not committed yet
 
     def path(self, name: str) -> Path:
@@ -148,33 +188,55 @@ class _Hashes:
             return _pending_dir(self.session_dir) / f"{name}.arrow"
         return stage_path(self.session_dir, name)
 
-    def get(self, name: str) -> str | None:
-        if name not in self._cache:
-            if name == RECORDING:
-                rec = self.session_dir / "recording.mcap"
-                self._cache[name] = file_sha256(rec) if rec.is_file() else None
-            elif name in FILE_INPUTS:
-                f = self.session_dir / FILE_INPUTS[name][0]
-                self._cache[name] = file_sha256(f) if f.is_file() else None
-            else:
-                path = self.path(name)
-                self._cache[name] = (
-                    read_provenance(path).get("content_hash") if path.is_file() else None
-                )
-        return self._cache[name]
+    def check(self, name: str) -> CheckedTable | None:
+        """The checked stage file, or None when there is none."""
+        if name not in self._tables:
+            path = self.path(name)
+            self._tables[name] = check_table(path, name) if path.is_file() else None
+        return self._tables[name]
 
-    def set(self, name: str, value: str) -> None:
-        self._cache[name] = value
+    def get(self, name: str) -> str | None:
+        """Content hash of an input; None when it is missing or fails its check (a stage
+        file, or the product when it does not match the committed stages)."""
+        if name == RECORDING or name in FILE_INPUTS:
+            if name not in self._files:
+                fname = "recording.mcap" if name == RECORDING else FILE_INPUTS[name][0]
+                f = self.session_dir / fname
+                self._files[name] = file_sha256(f) if f.is_file() else None
+                if name == PRODUCT[0] and self.product_status()[0] != "fresh":
+                    self._files[name] = None
+            return self._files[name]
+        checked = self.check(name)
+        if checked is None or checked.problem:
+            return None
+        return checked.provenance.get("content_hash")
+
+    def product_status(self) -> tuple[str, str]:
+        """``(state, reason)`` of the product file against the committed stages."""
+        if self._product is None:
+            check = _function(PRODUCT[2])
+            self._product = check(self.session_dir, {n: self.get(n) for n in STAGE_MODULES})
+        return self._product
+
+    def put(self, name: str, table: Any, provenance: dict[str, Any]) -> None:
+        """Record a stage output written in this run."""
+        self._tables[name] = CheckedTable(table, provenance)
+
+
+def committed_hashes(session_dir: str | Path) -> dict[str, str | None]:
+    """Content hash of every committed identification stage output whose file passes its
+    check (None: missing or failing it)."""
+    hashes = _Hashes(Path(session_dir))
+    return {s.name: hashes.get(s.name) for s in stages()}
 
 
 def _check(stage: Stage, params: Any, hashes: _Hashes, stale: set[str]) -> StageStatus:
-    path = hashes.path(stage.name)
-    if not path.is_file():
+    checked = hashes.check(stage.name)
+    if checked is None:
         return StageStatus(stage.name, "missing", "never run")
-    try:
-        prov = read_provenance(path)
-    except StageError:
-        return StageStatus(stage.name, "stale", "file unreadable")
+    if checked.problem:
+        return StageStatus(stage.name, "stale", checked.problem)
+    prov = checked.provenance
     if prov.get("stage_version") != stage.version:
         return StageStatus(
             stage.name, "stale", f"version {prov.get('stage_version')} -> {stage.version}"
@@ -182,9 +244,10 @@ def _check(stage: Stage, params: Any, hashes: _Hashes, stale: set[str]) -> Stage
     if prov.get("params") != stage.params_dict(params):
         return StageStatus(stage.name, "stale", "parameters changed")
     for inp in stage.inputs:
-        if inp in stale:
+        current = hashes.get(inp)
+        if inp in stale or current is None:
             return StageStatus(stage.name, "stale", f"input {inp} is stale or missing")
-        if prov.get("inputs", {}).get(inp) != hashes.get(inp):
+        if prov.get("inputs", {}).get(inp) != current:
             return StageStatus(stage.name, "stale", f"input {inp} changed")
     return StageStatus(stage.name, "fresh", "inputs, parameters and version unchanged")
 
@@ -195,59 +258,42 @@ def status(
     modules: tuple[str, ...] = STAGE_MODULES,
 ) -> list[StageStatus]:
     """Freshness of every stage of a session, and why (``modules``: the stage list,
-    e.g. ``STAGE_MODULES + EVALUATE_STAGE_MODULES``; staleness propagates along it)."""
-    sdir = Path(session_dir)
-    hashes = _Hashes(sdir)
+    e.g. ``STAGE_MODULES + EVALUATE_STAGE_MODULES``; staleness propagates along it).
+    A list holding the identification stages also gives the status of their product
+    (``signature``) right after them."""
+    sdir = session_folder(session_dir)
+    return _statuses(sdir, stages(modules), overrides or {}, _Hashes(sdir))
+
+
+def _statuses(
+    sdir: Path,
+    all_stages: list[Stage],
+    overrides: Mapping[str, Mapping[str, Any]],
+    hashes: _Hashes,
+    product: bool = True,
+) -> list[StageStatus]:
     out: list[StageStatus] = []
     stale: set[str] = set()
-    for stage in stages(modules):
-        st = _check(stage, _params(stage, overrides or {}), hashes, stale)
+    has_product = product and set(STAGE_MODULES) <= {s.name for s in all_stages}
+    for stage in all_stages:
+        st = _check(stage, _params(stage, overrides), hashes, stale)
         if st.state != "fresh":
             stale.add(stage.name)
         out.append(st)
+        if has_product and stage.name == STAGE_MODULES[-1]:
+            st = _product_status(hashes, stale)
+            if st.state != "fresh":
+                stale.add(st.name)
+            out.append(st)
     return out
 
 
-@contextlib.contextmanager
-def session_lock(session_dir: Path) -> Iterator[None]:
-    """Exclusive lock on a session folder; a second run gets a clear error."""
-    lock = session_dir / LOCK_NAME
-    for _ in range(2):
-        try:
-            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-            break
-        except FileExistsError:
-            try:
-                pid = int(lock.read_text().strip() or 0)
-            except (OSError, ValueError):
-                pid = 0
-            alive = pid > 0 and _pid_alive(pid)
-            if alive:
-                raise SessionLockedError(
-                    f"{session_dir}: another pipeline run (pid {pid}) is working on this session",
-                    fix=f"wait for it to finish; if it died, delete {lock}",
-                ) from None
-            with contextlib.suppress(FileNotFoundError):
-                lock.unlink()  # a dead run's lock
-    else:  # pragma: no cover - lost a race twice
-        raise SessionLockedError(f"{session_dir}: could not take the session lock")
-    try:
-        os.write(fd, str(os.getpid()).encode())
-        os.close(fd)
-        yield
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            lock.unlink()
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+def _product_status(hashes: _Hashes, stale: set[str]) -> StageStatus:
+    state, reason = hashes.product_status()
+    behind = [n for n in STAGE_MODULES if n in stale]
+    if state == "fresh" and behind:
+        state, reason = "stale", f"built from stage {behind[0]}, which is stale or missing"
+    return StageStatus(PRODUCT[0], state, reason)
 
 
 def run(
@@ -259,23 +305,23 @@ def run(
     overrides: Mapping[str, Mapping[str, Any]] | None = None,
     modules: tuple[str, ...] = STAGE_MODULES,
 ) -> list[StageRun]:
-    """Bring every stage of a session up to date.
+    """Bring every stage of a session up to date, then (identification) its signature.
 
     Parameters
     ----------
     modules : the stage list (:data:`STAGE_MODULES` or :data:`EVALUATE_STAGE_MODULES`).
-    force : rerun every stage.
+    force : rerun every stage and rewrite the signature.
     from_stage : rerun this stage and every later one.
-    only : rerun just this stage (its inputs must exist).
+    only : rerun just this stage (its inputs must exist and pass their checks).
     overrides : ``{stage: {param: value}}``.
+
+    Returns
+    -------
+    One :class:`StageRun` per stage; with the identification stages, a last one for
+    the signature: ``written``, ``cached`` (the file matched), or ``not written``
+    (a stage is stale after ``only``).
     """
-    sdir = Path(session_dir)
-    if not (sdir / "recording.mcap").is_file():
-        raise StageError(
-            f"{sdir}: no recording.mcap",
-            expected="a session folder holding recording.mcap",
-            fix="`pipeline simulate NAME` records a simulated session",
-        )
+    sdir = session_folder(session_dir)
     all_stages = stages(modules)
     names = [s.name for s in all_stages]
     for opt, value in (("--from", from_stage), ("--only", only)):
@@ -289,15 +335,65 @@ def run(
     with session_lock(sdir):
         pending = _pending_dir(sdir)
         shutil.rmtree(pending, ignore_errors=True)  # debris of a killed run
+        for folder in (sdir, sdir / "stages", sdir / "report"):
+            remove_debris(folder)  # temp files of killed atomic writes
         hashes = _Hashes(sdir)
         try:
-            _run_all(sdir, all_stages, names, hashes, runs, force, from_stage, only, overrides)
+            try:
+                _run_all(sdir, all_stages, names, hashes, runs, force, from_stage, only, overrides)
+            except Exception as exc:
+                _keep_failed(sdir, names, hashes.pending)
+                raise _pointing_at_failed(exc, sdir, hashes.pending) from exc
             for name in names:  # commit: every stage of the run succeeded
                 if name in hashes.pending:
                     os.replace(pending / f"{name}.arrow", stage_path(sdir, name))
+            hashes.pending.clear()
+            shutil.rmtree(failed_dir(sdir), ignore_errors=True)
         finally:
             shutil.rmtree(pending, ignore_errors=True)
+        if set(STAGE_MODULES) <= set(names):
+            runs.append(_write_product(sdir, all_stages, overrides, hashes, force))
     return runs
+
+
+def _keep_failed(sdir: Path, names: list[str], written: set[str]) -> None:
+    """Replace ``stages/failed/`` by the outputs this failed run wrote (if any)."""
+    failed = failed_dir(sdir)
+    shutil.rmtree(failed, ignore_errors=True)
+    if written:
+        failed.mkdir()
+        for name in names:
+            if name in written:
+                os.replace(_pending_dir(sdir) / f"{name}.arrow", failed / f"{name}.arrow")
+
+
+def _pointing_at_failed(exc: Exception, sdir: Path, written: set[str]) -> Exception:
+    """``exc``, with advice that names ``stages/X.arrow`` of a stage this run rewrote
+    pointing at ``stages/failed/X.arrow`` (``stages/X.arrow`` is the last good run's)."""
+    msg = str(exc)
+    new = msg
+    for name in written:
+        new = new.replace(f"stages/{name}.arrow", f"stages/{FAILED}/{name}.arrow")
+    if new == msg or not isinstance(exc, ArmsigError):
+        return exc
+    return type(exc)(new)
+
+
+def _write_product(
+    sdir: Path,
+    all_stages: list[Stage],
+    overrides: Mapping[str, Mapping[str, Any]],
+    hashes: _Hashes,
+    force: bool,
+) -> StageRun:
+    """Write the signature from the committed stages unless a stage is stale (``--only``)
+    or the file already matches them (and not ``force``)."""
+    name, writer, _ = PRODUCT
+    t0 = time.perf_counter()
+    if any(st.state != "fresh" for st in _statuses(sdir, all_stages, overrides, hashes, False)):
+        return StageRun(name, "not written", 0.0, 0)
+    _, _, written = _function(writer)(sdir, {n: hashes.get(n) for n in STAGE_MODULES}, force)
+    return StageRun(name, "written" if written else "cached", time.perf_counter() - t0, -1)
 
 
 def _run_all(
@@ -343,13 +439,18 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
         elif inp in FILE_INPUTS:
             inputs[inp] = _load_file_input(sdir, inp)
         else:
-            path = hashes.path(inp)
-            if not path.is_file():
+            checked = hashes.check(inp)
+            if checked is None or checked.table is None:
+                why = (
+                    "which has not run"
+                    if checked is None
+                    else f"whose file fails: {checked.problem}"
+                )
                 raise StageError(
-                    f"{sdir}: stage '{stage.name}' needs '{inp}', which has not run",
+                    f"{sdir}: stage '{stage.name}' needs '{inp}', {why}",
                     fix=f"run `pipeline identify {sdir}` without --only",
                 )
-            inputs[inp] = read_table(path)
+            inputs[inp] = checked.table
     try:
         table = stage.compute(inputs, params)
     except ArmsigError as exc:  # name the session and the stage, keep the cause's advice
@@ -366,6 +467,5 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
         "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
     }
     hashes.pending.add(stage.name)
-    write_table(hashes.path(stage.name), table, provenance)
-    hashes.set(stage.name, digest)
+    hashes.put(stage.name, write_table(hashes.path(stage.name), table, provenance), provenance)
     return table

@@ -1,9 +1,11 @@
-"""Arrow IPC files of stage outputs: atomic writes, provenance metadata, content hashes."""
+"""Arrow IPC files of stage outputs: atomic writes, provenance metadata, content hashes,
+and the check that a file read back is the one that was written."""
 
 from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -12,8 +14,11 @@ import pyarrow.ipc as ipc
 
 from pipeline.atomic import atomic_write
 from pipeline.errors import StageError
+from pipeline.schemas import arrow_schema
 
 META_PREFIX = "armsig."
+#: Why a stage file whose data no longer hashes to its recorded content hash is stale.
+EDITED = "file differs from the hash recorded when it was written (edited or corrupt)"
 
 
 def content_hash(table: pa.Table) -> str:
@@ -40,6 +45,22 @@ def write_table(path: Path, table: pa.Table, provenance: dict[str, Any]) -> pa.T
     return out
 
 
+def _provenance(schema: pa.Schema, path: Path) -> dict[str, Any]:
+    out = {}
+    for k, v in (schema.metadata or {}).items():
+        key = k.decode("utf-8", "replace")
+        if key.startswith(META_PREFIX):
+            try:
+                out[key[len(META_PREFIX) :]] = json.loads(v)
+            except ValueError as exc:  # JSONDecodeError and UnicodeDecodeError
+                raise StageError(
+                    f"{path}: provenance '{key}' is not JSON",
+                    got=str(exc),
+                    fix="rerun with --force",
+                ) from exc
+    return out
+
+
 def read_provenance(path: Path) -> dict[str, Any]:
     """The ``armsig.*`` metadata of a stage file (reads the footer only)."""
     try:
@@ -49,13 +70,7 @@ def read_provenance(path: Path) -> dict[str, Any]:
         raise StageError(
             f"{path}: unreadable stage file", got=str(exc), fix="rerun with --force"
         ) from exc
-    meta = schema.metadata or {}
-    out = {}
-    for k, v in meta.items():
-        key = k.decode()
-        if key.startswith(META_PREFIX):
-            out[key[len(META_PREFIX) :]] = json.loads(v)
-    return out
+    return _provenance(schema, path)
 
 
 def read_table(path: Path) -> pa.Table:
@@ -67,3 +82,38 @@ def read_table(path: Path) -> pa.Table:
         raise StageError(
             f"{path}: unreadable stage file", got=str(exc), fix="rerun with --force"
         ) from exc
+
+
+@dataclass(frozen=True)
+class CheckedTable:
+    """A stage file read back and checked. ``problem`` is empty when the file is the one
+    that was written: readable, provenance JSON, columns of its schema, data hashing to
+    its recorded ``content_hash``; otherwise it says why not (and ``table`` is None)."""
+
+    table: pa.Table | None
+    provenance: dict[str, Any] = field(default_factory=dict)
+    problem: str = ""
+
+
+def _columns(schema: pa.Schema) -> list[tuple[str, pa.DataType, bool, bytes | None]]:
+    return [(f.name, f.type, f.nullable, (f.metadata or {}).get(b"unit")) for f in schema]
+
+
+def check_table(path: Path, name: str) -> CheckedTable:
+    """Read stage ``name``'s file and check it against its schema and its recorded hash."""
+    try:
+        table = read_table(path)
+        table.validate(full=True)  # before hashing: corrupt buffers must not be touched
+    except (StageError, pa.ArrowInvalid):
+        return CheckedTable(None, {}, "not a readable Arrow file (truncated, corrupt or foreign)")
+    try:
+        prov = _provenance(table.schema, path)
+    except StageError:
+        return CheckedTable(None, {}, "its provenance metadata is not JSON (corrupt)")
+    if _columns(table.schema) != _columns(arrow_schema(name)):
+        return CheckedTable(None, prov, f"columns differ from schemas/arrow/{name}.json")
+    if "content_hash" not in prov:
+        return CheckedTable(None, prov, "no content hash recorded (not written by armsig)")
+    if content_hash(table) != prov["content_hash"]:
+        return CheckedTable(None, prov, EDITED)
+    return CheckedTable(table, prov)
