@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import math
+from collections.abc import Callable
 from functools import cache
 from importlib import resources
 from pathlib import Path
@@ -49,6 +51,42 @@ def _read_json(path: Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise SchemaError(f"{path}: expected a JSON object", got=type(data).__name__)
     return data
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"number {text} overflows")
+    return value
+
+
+_STRICT = json.JSONDecoder(parse_constant=_no_constant)
+_STRICT_FINITE = json.JSONDecoder(parse_constant=_no_constant, parse_float=_finite_float)
+
+
+def strict_json(text: str, *, finite: bool = False) -> Any:
+    """Parse JSON as RFC 8259 defines it: ``NaN`` and ``Infinity``, which Python's parser
+    accepts, raise ``ValueError``. With ``finite``, so do numbers that overflow to infinity
+    (``1e999``); that costs a Python call per number, so the high-volume recording channels
+    leave it to their range checks instead."""
+    return (_STRICT_FINITE if finite else _STRICT).decode(text)
+
+
+@cache
+def compiled_validator(relative_path: str, detailed: bool = True) -> Callable[[Any], Any]:
+    """``schemas/<relative_path>`` (a JSON Schema) compiled with fastjsonschema, once per
+    process; the validator raises ``fastjsonschema.JsonSchemaValueException`` naming the
+    field. ``detailed=False`` compiles a third of the code (~10 ms instead of ~30 ms for the
+    signature schema) and still names the field, but fastjsonschema 2.22 cannot compile
+    ``const`` that way (use a one-value ``enum``)."""
+    import fastjsonschema
+
+    schema = _read_json(schema_dir() / relative_path)
+    return fastjsonschema.compile(schema, detailed_exceptions=detailed)  # type: ignore[no-any-return]
 
 
 @cache

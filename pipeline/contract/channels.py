@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from functools import cache
 from typing import Any
 
 #: topic -> schema file in schemas/mcap/ of a session recording ``recording.mcap``
@@ -24,15 +23,12 @@ EVAL_CHANNELS = {
 LEGACY_VALUES = {("/robot/description", "mode"): {"real": "hardware"}}
 
 
-@cache
 def validator(schema_name: str) -> Callable[[Any], Any]:
     """The compiled validator of ``schemas/mcap/<schema_name>.json`` (raises
     ``fastjsonschema.JsonSchemaValueException`` naming the field)."""
-    import fastjsonschema
+    from pipeline.schemas import compiled_validator
 
-    from pipeline.schemas import mcap_json_schema
-
-    return fastjsonschema.compile(mcap_json_schema(schema_name))  # type: ignore[no-any-return]
+    return compiled_validator(f"mcap/{schema_name}.json")
 
 
 def upgrade_legacy(topic: str, payload: dict[str, Any]) -> None:

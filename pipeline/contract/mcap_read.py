@@ -22,7 +22,6 @@ Every failure is one :class:`~pipeline.errors.RecordingError`.
 from __future__ import annotations
 
 import io
-import json
 import struct
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -33,7 +32,7 @@ from pipeline.contract.batch_schema import all_valid
 from pipeline.contract.channels import upgrade_legacy, validator
 from pipeline.contract.digest import COUNT_PREFIX, DIGEST_NAME, content_digest
 from pipeline.errors import RecordingError
-from pipeline.schemas import mcap_json_schema
+from pipeline.schemas import mcap_json_schema, strict_json
 
 #: Largest uncompressed chunk: 256 times the 1 MiB chunks armsig writes (a mutated
 #: size field must not make the reader allocate gigabytes).
@@ -42,7 +41,6 @@ _MAGIC_PREFIX = b"\x89MCAP"
 _SHOWN = 120  # characters of a bad value shown in an error
 #: Channels with this many messages are first validated as a whole (batch_schema).
 _BATCH = 50
-_JSON = json.JSONDecoder(parse_constant=lambda name: _no_constant(name))
 
 
 @dataclass(frozen=True)
@@ -214,13 +212,9 @@ def _check_digest(path: Path, recorded: dict[str, str], actual: dict[str, str]) 
         )
 
 
-def _no_constant(name: str) -> Any:
-    raise ValueError(f"{name} is not a JSON number")
-
-
 def _decode(path: Path, topic: str, k: int, data: bytes) -> dict[str, Any]:
     try:
-        payload = _JSON.decode(data.decode("utf-8"))  # JSON is UTF-8 (RFC 8259)
+        payload = strict_json(data.decode("utf-8"))  # JSON is UTF-8 (RFC 8259)
     except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
         raise RecordingError(
             f"{path}: {topic} message {k} is not valid JSON",
