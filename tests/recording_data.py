@@ -56,13 +56,15 @@ def write_raw(
     messages: list[Raw],
     metadata: dict[str, dict[str, str]] | None = None,
     data_crcs: bool = True,
+    channels: dict[str, str] = CHANNELS,
 ) -> None:
-    """Write messages as given (no digest unless in ``metadata``), as another tool would."""
+    """Write messages as given (no digest unless in ``metadata``), as another tool would;
+    ``channels``: topic -> schema name (default: a session recording's)."""
     with path.open("wb") as fh:
         w = Writer(fh, compression=CompressionType.ZSTD, enable_data_crcs=data_crcs)
         w.start(profile="armsig", library="test")
         ids = {}
-        for topic, name in CHANNELS.items():
+        for topic, name in channels.items():
             schema = mcap_json_schema(name)
             sid = w.register_schema(schema["title"], "jsonschema", json.dumps(schema).encode())
             ids[topic] = w.register_channel(topic, "json", sid)

@@ -14,21 +14,24 @@ import pyarrow as pa
 
 from pipeline.errors import StageError
 from pipeline.stages.base import NoParams, Stage
-from pipeline.stages.evaluate_teach import joints_from_columns
+from pipeline.stages.evaluate_teach import by_key, joints_from_columns
 
 #: Recorded commands may be logged to 6 decimals (deg / cm), as /robot/joint_state is.
 COMMAND_TOL = 1e-6
+KEY = ("task", "controller", "point")  # of /eval/program and /eval/measurement
 
 
 def program_matches(recorded: list[dict[str, Any]], program: pa.Table, tol: float = 0.0) -> bool:
     """Whether the recorded ``/eval/program`` is the executable part of ``program``
-    (same rows in order, joints within ``tol`` deg / cm).
+    (the same rows, matched by (task, controller, point) whatever their log times, joints
+    within ``tol`` deg / cm).
 
-    Executable: the tasks whose every row (both controllers) is ``ok``, in table order.
+    Executable: the tasks whose every row (both controllers) is ``ok``.
     """
-    want = recorded_program_rows(program)
+    want = sorted(recorded_program_rows(program), key=lambda row: row[:3])
     if len(want) != len(recorded):
         return False
+    recorded = sorted(recorded, key=lambda r: tuple(r[k] for k in KEY))
     for (t, c, p, q), r in zip(want, recorded, strict=True):
         if (t, c, p) != (r["task"], r["controller"], int(r["point"])):
             return False
@@ -60,14 +63,15 @@ def recorded_program_rows(program: pa.Table) -> list[tuple[str, str, int, tuple[
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     rec = inputs["evaluation"]
-    if not program_matches(rec.program, inputs["evaluate_program"], COMMAND_TOL):
+    program = by_key(rec.program, KEY, f"{rec.path}: /eval/program")
+    if not program_matches(program, inputs["evaluate_program"], COMMAND_TOL):
         raise StageError(
             f"{rec.path} was recorded for another joint program than evaluate_program's",
             expected="the /eval/program of the current signature",
             fix="run the new program on the robot and record it again "
             "(`pipeline evaluate` does so for a simulated session)",
         )
-    ms = rec.measurements
+    ms = by_key(rec.measurements, KEY, f"{rec.path}: /eval/measurement")
 
     def col(key: str, k: int | None = None) -> pa.Array:
         vals = [m.get(key) if k is None else (m[key][k] if key in m else None) for m in ms]
@@ -96,7 +100,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 STAGE = Stage(
     "evaluate_measurements",
-    1,
+    2,
     ("evaluation", "evaluate_program"),
     NoParams(),
     compute,

@@ -48,12 +48,14 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     )
     teach = inputs["evaluate_teach"]
     names = teach.column("task").to_pylist()
+    points = teach.column("point").to_pylist()
     q_all = joints_to_internal(joints_from_columns(teach), pris)
     cols: dict[str, list[Any]] = {
         k: [] for k in ("task", "controller", "point", "x_cm", "y_cm", "z_cm", "q", "ok")
     }
     for task in tasks_for(robot, tool):
-        rows = [k for k, n in enumerate(names) if n == task.name]
+        # Teach points 1, 2, 3 in that order (by their key, not as recorded).
+        rows = sorted((k for k, n in enumerate(names) if n == task.name), key=points.__getitem__)
         if len(rows) != 3:
             continue  # not taught: the rig could not reach it (reported by evaluate)
         q_teach = q_all[rows]

@@ -12,6 +12,21 @@ from pipeline.errors import StageError
 from pipeline.stages.base import NoParams, Stage
 
 
+def by_key(rows: list[dict[str, Any]], keys: tuple[str, ...], where: str) -> list[dict[str, Any]]:
+    """``rows`` (messages of one evaluation channel) sorted by their key fields, never by
+    log time; a key recorded twice is refused, naming it and ``where`` (file: topic)."""
+    ordered = sorted(rows, key=lambda r: tuple(r[k] for k in keys))
+    for a, b in zip(ordered, ordered[1:], strict=False):
+        if all(a[k] == b[k] for k in keys):
+            raise StageError(
+                f"{where} key " + ", ".join(f"{k}={a[k]!r}" for k in keys) + " is recorded twice",
+                expected="one message per key",
+                fix="record the evaluation again (`pipeline evaluate` does so for a simulated "
+                "session)",
+            )
+    return ordered
+
+
 def joint_columns(q: np.ndarray, units: list[str]) -> dict[str, list[list[float]]]:
     """``q_deg`` / ``q_cm`` list columns of joint vectors (m, n), NaN in the other unit's."""
     q = np.asarray(q, float)
@@ -31,7 +46,7 @@ def joints_from_columns(table: pa.Table) -> np.ndarray:
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     rec = inputs["evaluation"]
-    rows = rec.teach
+    rows = by_key(rec.teach, ("task", "point"), f"{rec.path}: /eval/teach")
     units = rows[0]["units"]
     if any(len(r["q_encoder"]) != len(units) for r in rows):
         raise StageError(
@@ -49,7 +64,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 STAGE = Stage(
     "evaluate_teach",
-    1,
+    2,
     ("evaluation",),
     NoParams(),
     compute,
