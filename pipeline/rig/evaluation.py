@@ -10,14 +10,13 @@ resolution (Sections 6.5.1-6.5.3).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pipeline.audit import true_chain
+from pipeline.audit import read_truth, true_chain
 from pipeline.control import task_axes_for
 from pipeline.errors import ArmsigError
 from pipeline.evaluation.controllers import (
@@ -96,12 +95,25 @@ class SimulatedRig:
                 fix="record /eval/teach, /eval/program and /eval/measurement on the robot "
                 "(docs/evaluation.md), or simulate the session with `pipeline simulate`",
             )
-        truth = json.loads(path.read_text())
-        self.opts = opts
-        self.robot = get_robot(truth["options"]["robot"])
-        self.nominal_tool = trans(0.0, 0.0, PROBE_LENGTH_CM)
+        truth = read_truth(path)
         c = true_chain(truth)
-        base = invert_transform(np.array(truth["sensor_from_base"])) @ c.base
+        try:
+            robot_name = str(truth["options"]["robot"])
+            sensor_from_base = np.array(truth["sensor_from_base"], float).reshape(4, 4)
+            tip = np.array(truth["true_tool_in_last_link_cm"], float).reshape(3)
+            seed = int(truth["seed"])
+        except (KeyError, TypeError, ValueError, OverflowError) as exc:
+            raise ArmsigError(
+                f"{path}: the ground truth is incomplete",
+                expected="options.robot, sensor_from_base (4x4), true_tool_in_last_link_cm "
+                "(3) and seed, as `pipeline simulate` writes them",
+                got=f"{type(exc).__name__}: {exc}",
+                fix="simulate the session again (`pipeline simulate NAME --force`)",
+            ) from exc
+        self.opts = opts
+        self.robot = get_robot(robot_name)
+        self.nominal_tool = trans(0.0, 0.0, PROBE_LENGTH_CM)
+        base = invert_transform(sensor_from_base) @ c.base
         # E: origin at the probe tip, axes of the frame the last joint's targets are
         # mounted in (F_{n-1}·M_n, pipeline.rig.plan.target_positions), whose X axis
         # points at the nominal mount (R, 0, z). The last link frame is that frame
@@ -109,10 +121,10 @@ class SimulatedRig:
         # (the Puma's is the identity), so the probe's rotation undoes it.
         probe = np.eye(4)
         probe[:3, :3] = c.links[-1][:3, :3].T
-        probe[:3, 3] = truth["true_tool_in_last_link_cm"]
+        probe[:3, 3] = tip
         self.chain = SerialChain(c.links, c.prismatic, base, c.tool @ probe)
         self.res = joints_to_internal(self.robot.encoder_resolution, self.robot.prismatic)
-        rng = np.random.default_rng([int(truth["seed"]), 6])  # issue 6's own stream
+        rng = np.random.default_rng([seed, 6])  # issue 6's own stream
         self.rng_fixture, self.rng_servo = rng.spawn(2)
         self.tasks = tasks_for(self.robot, self.nominal_tool)
         self.fixture = {}

@@ -1,4 +1,5 @@
-"""The evaluation recording's channels are joined by their keys, never by log time (issue 13).
+"""Evaluation inputs: channels joined by their keys, never by log time, and a broken ground
+truth reported in one line (issue 13).
 
 A copy of robot1 without ``rig-truth.json`` is a hardware session: its committed
 ``evaluation.mcap`` is used as recorded, never re-recorded by the simulated rig.
@@ -58,3 +59,26 @@ def test_a_key_recorded_twice_is_refused(hardware, tmp_path: Path, topic) -> Non
     write_raw(sdir / "evaluation.mcap", raw, channels=EVAL_CHANNELS)
     with pytest.raises(ArmsigError, match="is recorded twice"):
         evaluate(sdir, report=False)
+
+
+@pytest.mark.parametrize(
+    "truth",
+    ["{not json", "[]", '{"true_kinematics": 1}', "drop:seed", "drop:sensor_from_base"],
+)
+def test_a_broken_ground_truth_is_one_line_when_the_rig_records(tmp_path: Path, truth) -> None:
+    """Before: the simulated rig read rig-truth.json with a bare json.loads and indexing
+    (JSONDecodeError, TypeError or KeyError tracebacks)."""
+    import json
+
+    sdir = Path(
+        shutil.copytree(ROBOT1, tmp_path / "robot1", ignore=shutil.ignore_patterns("evaluat*"))
+    )
+    path = sdir / "rig-truth.json"
+    if truth.startswith("drop:"):
+        doc = json.loads(path.read_text())
+        del doc[truth[5:]]
+        truth = json.dumps(doc)
+    path.write_text(truth)
+    with pytest.raises(ArmsigError) as err:
+        evaluate(sdir, report=False)
+    assert "rig-truth.json" in str(err.value) and "\n" not in str(err.value)
