@@ -404,3 +404,49 @@ def test_montecarlo_out_file_is_refused_before_computing(
     r = invoke("montecarlo", "--study", "noise", "--robots", "2", "--out", str(f / "sub"))
     assert_one_error(r, EXIT_REFUSED, "is not a folder")
     assert f.read_text() == "mine"
+
+
+@pytest.mark.parametrize(
+    "opts",
+    [
+        SimulationOptions(noise_factor=math.nan),
+        SimulationOptions(max_sweep_deg=math.nan),
+        SimulationOptions(max_sweep_deg=0.0),
+        SimulationOptions(wac_error_cm=math.inf),
+    ],
+    ids=["noise_nan", "sweep_nan", "sweep_zero", "wac_inf"],
+)
+def test_simulate_session_refuses_bad_options_from_python(tmp_path: Path, opts) -> None:
+    """Before: the CLI refused these, but simulate_session wrote a recording with them."""
+    with pytest.raises(ArmsigError, match="simulation option"):
+        simulate_session(tmp_path / "s", opts)
+    assert not (tmp_path / "s" / "recording.mcap").exists()
+
+
+def test_simulate_refuses_a_locked_session(tmp_path: Path) -> None:
+    """simulate --force writes under the session lock: a run holding it makes it refuse."""
+    from pipeline.errors import SessionLockedError
+    from pipeline.stages.lock import session_lock
+
+    d = tmp_path / "s"
+    simulate_session(d, SimulationOptions(seed=2, noiseless=True, points=12, repeats=1))
+    before = (d / "recording.mcap").read_bytes()
+    import threading
+
+    held, release = threading.Event(), threading.Event()
+
+    def hold() -> None:
+        with session_lock(d):
+            held.set()
+            release.wait(30)
+
+    t = threading.Thread(target=hold)
+    t.start()
+    held.wait(30)
+    try:
+        with pytest.raises(SessionLockedError):
+            simulate_session(d, SimulationOptions(seed=3, points=12, repeats=1), force=True)
+    finally:
+        release.set()
+        t.join()
+    assert (d / "recording.mcap").read_bytes() == before

@@ -28,6 +28,7 @@ from pipeline.rig.true_robot import ErrorSigmas, draw_true_robot
 from pipeline.robots import get_robot
 from pipeline.robots.description import description_to_dict
 from pipeline.sensor.geometry import W_AB_CM, W_AC_CM, W_BC_CM, default_geometry
+from pipeline.stages.lock import session_lock
 from pipeline.units import joints_to_internal
 
 FAULTS = ("bias", "dropouts", "outliers")
@@ -63,6 +64,22 @@ def _check(opts: SimulationOptions) -> None:
     if bad:
         raise ArmsigError(
             f"unknown fault {bad[0]!r}", expected=", ".join(FAULTS), fix="--faults bias,dropouts"
+        )
+    numbers = {
+        **{f"sigmas.{k}": v for k, v in asdict(opts.sigmas).items()},
+        "noise_factor": opts.noise_factor,
+        "max_sweep_deg": opts.max_sweep_deg,
+    }
+    for name, value in numbers.items():
+        if not (np.isfinite(value) and value >= 0.0):
+            raise ArmsigError(
+                f"simulation option {name} must be a finite number >= 0", got=repr(value)
+            )
+    if not (0.0 < opts.max_sweep_deg <= 720.0 and np.isfinite(opts.wac_error_cm)):
+        raise ArmsigError(
+            "simulation options out of range",
+            expected="0 < max_sweep_deg <= 720 and a finite wac_error_cm",
+            got=f"max_sweep_deg={opts.max_sweep_deg}, wac_error_cm={opts.wac_error_cm}",
         )
     if opts.points < 3 or opts.repeats < 1:
         raise ArmsigError(
@@ -232,8 +249,6 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             )
     messages.sort(key=lambda m: m.time_ns)  # stable: descriptions stay first
     recording = out / "recording.mcap"
-    write_recording(recording, messages)
-
     truth = {
         "robot": robot.name,
         "seed": opts.seed,
@@ -264,5 +279,11 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             "p": p_target.tolist(),
         },
     }
-    write_text_atomic(out / "rig-truth.json", json.dumps(truth, indent=1) + "\n")
+    out.mkdir(parents=True, exist_ok=True)
+    # Under the session lock, like every pipeline run on the folder: no run reads a
+    # recording half replaced, and a recording that appeared meanwhile is still refused.
+    with session_lock(out):
+        _refuse_existing(out, force)
+        write_recording(recording, messages)
+        write_text_atomic(out / "rig-truth.json", json.dumps(truth, indent=1) + "\n")
     return recording
