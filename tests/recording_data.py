@@ -1,9 +1,13 @@
-"""Small recordings and their messages for the recording tests: read raw, mutate, write back."""
+"""Test helpers: small recordings and their messages (read raw, mutate, write back), and
+the session lock held by another run."""
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
+import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -94,3 +98,25 @@ def small_session(factory: Any, seed: int = 2, **options: Any) -> Path:
         simulate_session(d, SimulationOptions(seed=seed, **{**SMALL, **options}))
         _MADE[key] = d
     return _MADE[key]
+
+
+@contextlib.contextmanager
+def locked_elsewhere(session_dir: Path) -> Iterator[None]:
+    """The session lock held by another thread (another run) while the block runs."""
+    from pipeline.stages.lock import session_lock
+
+    held, done = threading.Event(), threading.Event()
+
+    def hold() -> None:
+        with session_lock(session_dir):
+            held.set()
+            done.wait(30)
+
+    t = threading.Thread(target=hold)
+    t.start()
+    try:
+        assert held.wait(30), "the other thread never took the lock"
+        yield
+    finally:
+        done.set()
+        t.join()

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from recording_data import locked_elsewhere
 from typer.testing import CliRunner
 
 from pipeline.cli import app
@@ -111,21 +112,6 @@ def test_no_such_folder_is_not_created(tmp_path: Path) -> None:
 
 def test_another_thread_is_refused(folder: Path) -> None:
     """Re-entrance is per thread: a second thread of the same process is another run."""
-    import threading
-
-    held, done = threading.Event(), threading.Event()
-
-    def hold() -> None:
-        with session_lock(folder):
-            held.set()
-            done.wait(10)
-
-    t = threading.Thread(target=hold)
-    t.start()
-    try:
-        assert held.wait(10)
+    with locked_elsewhere(folder):
         with pytest.raises(SessionLockedError, match="another pipeline run"):
             run(folder)
-    finally:
-        done.set()
-        t.join()

@@ -19,6 +19,7 @@ import polars as pl
 import pyarrow as pa
 import pyarrow.ipc as ipc
 import pytest
+from recording_data import locked_elsewhere
 from typer.testing import CliRunner, Result
 
 from pipeline.cli import EXIT_INTERNAL, EXIT_NOT_REACHED, EXIT_REFUSED, EXIT_USAGE, app
@@ -426,27 +427,10 @@ def test_simulate_session_refuses_bad_options_from_python(tmp_path: Path, opts) 
 def test_simulate_refuses_a_locked_session(tmp_path: Path) -> None:
     """simulate --force writes under the session lock: a run holding it makes it refuse."""
     from pipeline.errors import SessionLockedError
-    from pipeline.stages.lock import session_lock
 
     d = tmp_path / "s"
     simulate_session(d, SimulationOptions(seed=2, noiseless=True, points=12, repeats=1))
     before = (d / "recording.mcap").read_bytes()
-    import threading
-
-    held, release = threading.Event(), threading.Event()
-
-    def hold() -> None:
-        with session_lock(d):
-            held.set()
-            release.wait(30)
-
-    t = threading.Thread(target=hold)
-    t.start()
-    held.wait(30)
-    try:
-        with pytest.raises(SessionLockedError):
-            simulate_session(d, SimulationOptions(seed=3, points=12, repeats=1), force=True)
-    finally:
-        release.set()
-        t.join()
+    with locked_elsewhere(d), pytest.raises(SessionLockedError):
+        simulate_session(d, SimulationOptions(seed=3, points=12, repeats=1), force=True)
     assert (d / "recording.mcap").read_bytes() == before
