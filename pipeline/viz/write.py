@@ -129,7 +129,8 @@ def viz(
         sig = load_session_signature(sdir / FILE_NAME)
         pris = sig.prismatic
         names = [j.name for j in sig.robot.joints]
-        q_b = _configuration(q, joints_to_boundary(np.asarray(sig.chain.joint_offsets), pris), names)
+        q_s = joints_to_boundary(np.asarray(sig.chain.joint_offsets), pris)
+        q_b = _configuration(q, q_s, names)
         messages = [
             *frame_messages(sig, joints_to_internal(q_b, pris)),
             *feature_messages(sig, _checked(sdir, "features")),
