@@ -14,10 +14,12 @@ import jsonschema
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from recording_data import small_session
 from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from pipeline.cli import app
+from pipeline.identify import identify
 from pipeline.kinematics.chain import link_frames
 from pipeline.schemas import schema_dir
 from pipeline.signature_file import load_session_signature
@@ -213,3 +215,21 @@ def test_stale_signature_or_damaged_stage_is_refused(
     r = runner.invoke(app, ["viz", str(d)])
     assert r.exit_code == 1 and "signature.json" in r.output, r.output
     assert not (d / "viz.mcap").exists()
+
+
+def test_prismatic_joint_is_a_line_of_translation(tmp_path_factory: pytest.TempPathFactory) -> None:
+    src = small_session(tmp_path_factory, robot="scara")
+    d = tmp_path_factory.mktemp("scara") / "s"
+    shutil.copytree(src, d)
+    identify(d, report=False)
+    path = viz(d).path
+    (scene,) = [m for _, c, m in read_viz(path) if c.topic == "/features"]
+    feats = {f["joint"]: f for f in read_table(stage_path(d, "features")).to_pylist()}
+    (quill,) = [j for j, f in feats.items() if f["type"] == "prismatic"]
+    (e,) = [e for e in scene["entities"] if e["id"] == f"joint_{quill}"]
+    a, b = (np.array([p["x"], p["y"], p["z"]]) * 100.0 for p in e["lines"][0]["points"])
+    f = feats[quill]
+    np.testing.assert_allclose(np.linalg.norm(b - a), f["travel_cm"])
+    np.testing.assert_allclose((b - a) / f["travel_cm"], [f["axis_x"], f["axis_y"], f["axis_z"]])
+    for schema, _, msg in read_viz(path):
+        jsonschema.Draft202012Validator(strict(json.loads(schema.data))).validate(msg)
