@@ -178,7 +178,10 @@ def test_features_circles_lie_at_the_fitted_radius(viz_file: Path, session: Path
         if f["type"] == "revolute":
             np.testing.assert_allclose(np.linalg.norm(pts - centre, axis=1), f["radius_cm"])
             np.testing.assert_allclose((pts - centre) @ axis, 0.0, atol=1e-9)
-        assert e["arrows"] and f"joint {f['joint']}" in e["texts"][0]["text"]
+        o = e["arrows"][0]["pose"]["orientation"]  # identity: the arrow points along +x
+        x = Rotation.from_quat([o["x"], o["y"], o["z"], o["w"]]).apply([1.0, 0.0, 0.0])
+        np.testing.assert_allclose(x, axis / np.linalg.norm(axis), atol=1e-12)
+        assert f"joint {f['joint']}" in e["texts"][0]["text"]
 
 
 def test_cli_writes_the_session_file_and_replaces_only_its_own(session: Path) -> None:
