@@ -164,6 +164,9 @@ def test_frames_are_the_signature_and_design_at_q(
             got = frames[f"{prefix}/{name}"]
             np.testing.assert_allclose(got[:3, :3], T[:3, :3], atol=1e-12)
             np.testing.assert_allclose(got[:3, 3] * 100.0, T[:3, 3], atol=1e-9)  # cm
+    probe = frames["design/probe"]
+    T = F_d[-1] @ sig.design_flange_to_tool
+    np.testing.assert_allclose(probe[:3, 3] * 100.0, T[:3, 3], atol=1e-9)
 
 
 def test_features_circles_lie_at_the_fitted_radius(viz_file: Path, session: Path) -> None:

@@ -4,7 +4,8 @@ Everything is placed in the frame ``sensor`` (the frame of the measurements and 
 signature). Frame names: ``signature/base`` (S̄_0), ``signature/<joint>`` (the frame
 moved by that joint), ``signature/tool``; the same under ``design/`` below
 ``design/world``, the design model's world placed in the sensor frame by the
-signature's design alignment ``sensor_from_design_base``.
+signature's design alignment ``sensor_from_design_base``, and ``design/probe``: the
+design tool followed by the alignment's ``design_flange_to_signature_tool``.
 """
 
 from __future__ import annotations
@@ -64,6 +65,9 @@ def frame_messages(sig: Signature, q: np.ndarray) -> list[VizMessage]:
             child = f"{prefix}/{name}"
             out.append(fg.frame_transform(parent, child, invert_transform(T_parent) @ T))
             parent, T_parent = child, T
+    # Where the design model puts the probe: its distance to signature/tool is the design
+    # model's error at q (the alignment X, Y is a best fit over the workspace).
+    out.append(fg.frame_transform("design/tool", "design/probe", sig.design_flange_to_tool))
     return [VizMessage(TF_TOPIC, "foxglove.FrameTransform", m) for m in out]
 
 
