@@ -14,7 +14,7 @@ import jsonschema
 import numpy as np
 import pytest
 from mcap.reader import make_reader
-from recording_data import small_session
+from recording_data import locked_elsewhere, small_session
 from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
@@ -239,3 +239,10 @@ def test_prismatic_joint_is_a_line_of_translation(tmp_path_factory: pytest.TempP
     np.testing.assert_allclose((b - a) / f["travel_cm"], [f["axis_x"], f["axis_y"], f["axis_z"]])
     for schema, _, msg in read_viz(path):
         jsonschema.Draft202012Validator(strict(json.loads(schema.data))).validate(msg)
+
+
+def test_refused_while_another_run_holds_the_session(session: Path, tmp_path: Path) -> None:
+    with locked_elsewhere(session):
+        r = runner.invoke(app, ["viz", str(session), "--out", str(tmp_path / "v.mcap")])
+    assert r.exit_code == 1 and "another pipeline run" in r.output, r.output
+    assert not (tmp_path / "v.mcap").exists()
