@@ -495,6 +495,32 @@ def evaluate(
 
 
 @app.command()
+def viz(
+    session: SessionArg,
+    q: Annotated[
+        str | None,
+        typer.Option(
+            "--q",
+            help="Joint values of the link frames, comma or space separated (deg / cm); "
+            "default: the signature configuration q^s.",
+        ),
+    ] = None,
+    out: Annotated[
+        str | None, typer.Option(help="Output MCAP file (default: SESSION/viz.mcap).")
+    ] = None,
+) -> None:
+    """Write viz.mcap for Foxglove's 3-D panel: frames, fitted features, measured points (m)."""
+    from pipeline.viz.write import viz as run_viz
+
+    r = run_viz(session, None if q is None else _joint_values(q, "--q"), out)
+    shown = " ".join(f"{v:g}" for v in r.configuration)
+    typer.echo(f"wrote {r.path}: {sum(r.topics.values())} messages on {len(r.topics)} topics")
+    typer.echo(f"link frames at q = {shown} (deg / cm); lengths in metres")
+    if r.outside_limits:
+        typer.echo(f"warning: outside joint limits: {', '.join(r.outside_limits)}", err=True)
+
+
+@app.command()
 def montecarlo(
     study: Annotated[
         str,

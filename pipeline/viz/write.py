@@ -1,0 +1,160 @@
+"""``pipeline viz``: write a session's ``viz.mcap`` for Foxglove's 3-D panel.
+
+Reads the session's signature (refused when stale) and its committed, checked
+``triangulate`` and ``features`` tables under the session lock; validates every
+message against its published Foxglove schema; writes the file atomically. An
+existing file at the output path is replaced only when ``pipeline viz`` wrote it.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, IndexType, Writer
+
+from pipeline import __version__
+from pipeline.atomic import atomic_write, check_writable
+from pipeline.errors import ArmsigError, StageError
+from pipeline.signature_file import FILE_NAME, load_session_signature
+from pipeline.stages.lock import session_lock
+from pipeline.stages.runner import session_folder, stage_path
+from pipeline.stages.tables import check_table
+from pipeline.units import joints_to_boundary, joints_to_internal
+from pipeline.viz import foxglove as fg
+from pipeline.viz.scene import VizMessage, feature_messages, frame_messages, point_messages
+
+VIZ_NAME = "viz.mcap"
+LIBRARY = "armsig-viz"  # the header's library: marks a file this command may replace
+METADATA_NAME = "armsig.viz"
+
+
+@dataclass(frozen=True)
+class VizResult:
+    """The file written, its messages per topic and the configuration shown (deg / cm)."""
+
+    path: Path
+    topics: dict[str, int]
+    configuration: list[float]
+    outside_limits: list[str]
+
+
+def _checked(sdir: Path, name: str) -> pa.Table:
+    """A committed stage table, read back and checked (schema, content hash)."""
+    checked = check_table(stage_path(sdir, name), name)
+    if checked.table is None:
+        raise StageError(
+            f"{stage_path(sdir, name)}: {checked.problem}", fix=f"run `pipeline identify {sdir}`"
+        )
+    return checked.table
+
+
+def _written_by_viz(path: Path) -> bool:
+    """Whether ``path`` is an MCAP file whose header names this command as its writer."""
+    try:
+        with path.open("rb") as fh:
+            return make_reader(fh).get_header().library.startswith(LIBRARY)
+    except (McapError, OSError, ValueError, struct.error):
+        return False
+
+
+def _refuse_foreign(path: Path) -> None:
+    if path.exists() and not (path.is_file() and _written_by_viz(path)):
+        raise ArmsigError(
+            f"{path} exists and was not written by `pipeline viz`",
+            expected="a new path or a viz.mcap to replace",
+            fix="remove it, or give another --out",
+        )
+
+
+def _configuration(q: list[float] | None, default: np.ndarray, names: list[str]) -> np.ndarray:
+    """Joint values (deg / cm) to show: ``q``, or the signature configuration."""
+    if q is None:
+        return default
+    values = np.asarray(q, float)
+    if values.shape != default.shape:
+        raise ArmsigError(
+            "--q must hold one value per joint",
+            expected=f"{len(names)} values ({', '.join(names)})",
+            got=f"{values.size} values",
+        )
+    if not np.isfinite(values).all():
+        raise ArmsigError("--q must hold finite numbers", got=" ".join(f"{v:g}" for v in q))
+    return values
+
+
+def write_mcap(path: Path, messages: list[VizMessage], metadata: dict[str, str]) -> None:
+    """Write ``messages`` (JSON, schemas embedded as published) to ``path`` atomically."""
+    with atomic_write(path, "wb") as fh:
+        writer = Writer(
+            fh,  # type: ignore[arg-type]
+            compression=CompressionType.ZSTD,
+            index_types=IndexType.ALL,
+            enable_crcs=True,
+            enable_data_crcs=True,
+        )
+        writer.start(profile="", library=f"{LIBRARY} {__version__}")
+        schema_ids = {
+            name: writer.register_schema(name, "jsonschema", fg.schema_text(name))
+            for name in sorted({m.schema for m in messages})
+        }
+        channels: dict[str, int] = {}
+        sequence: dict[str, int] = {}
+        for m in messages:
+            if m.topic not in channels:
+                channels[m.topic] = writer.register_channel(m.topic, "json", schema_ids[m.schema])
+                sequence[m.topic] = 0
+            data = json.dumps(m.payload, separators=(",", ":"), allow_nan=False).encode()
+            writer.add_message(channels[m.topic], 0, data, 0, sequence[m.topic])
+            sequence[m.topic] += 1
+        writer.add_metadata(METADATA_NAME, metadata)
+        writer.finish()
+
+
+def viz(
+    session_dir: str | Path, q: list[float] | None = None, out: str | Path | None = None
+) -> VizResult:
+    """Write the session's frames (signature and design model at joint values ``q``,
+    deg / cm, default the signature configuration q^s), fitted features and measured
+    positions to ``out`` (default ``SESSION/viz.mcap``), in metres."""
+    sdir = session_folder(session_dir)
+    path = sdir / VIZ_NAME if out is None else check_writable(out, "--out")
+    with session_lock(sdir):
+        sig = load_session_signature(sdir / FILE_NAME)
+        pris = sig.prismatic
+        names = [j.name for j in sig.robot.joints]
+        q_s = joints_to_boundary(np.asarray(sig.chain.joint_offsets), pris)
+        q_b = _configuration(q, q_s, names)
+        messages = [
+            *frame_messages(sig, joints_to_internal(q_b, pris)),
+            *feature_messages(sig, _checked(sdir, "features")),
+            *point_messages(_checked(sdir, "triangulate")),
+        ]
+        for m in messages:
+            fg.validate(m.schema, m.payload)
+        _refuse_foreign(path)
+        units = [j.unit for j in sig.robot.joints]
+        write_mcap(
+            path,
+            messages,
+            {
+                "session": sdir.name,
+                "robot": sig.robot.name,
+                "configuration": json.dumps([float(v) for v in q_b]),
+                "configuration_units": json.dumps(units),
+                "length_unit": "m",
+                "package_version": __version__,
+            },
+        )
+    lim = sig.robot.limits
+    outside = [n for n, v, (lo, hi) in zip(names, q_b, lim, strict=True) if not lo <= v <= hi]
+    topics: dict[str, int] = {}
+    for m in messages:
+        topics[m.topic] = topics.get(m.topic, 0) + 1
+    return VizResult(path, topics, [float(v) for v in q_b], outside)
