@@ -88,25 +88,23 @@ def _check(chain: SerialChain, exported: SerialChain, q: np.ndarray) -> tuple[fl
     return pos, rot
 
 
+def _column(doc: dict[str, Any], key: str) -> np.ndarray:
+    """A column of a table document in math units (``_deg`` keys to radians)."""
+    v = np.array([row[key] for row in doc["rows"]], float)
+    return np.radians(v) if key.endswith("_deg") else v
+
+
 def _dh_from_document(doc: dict[str, Any], pris: np.ndarray) -> DHTable:
-    r = doc["rows"]
-    col = {k: np.array([row[k] for row in r], float) for k in r[0] if k.endswith(("_deg", "_cm"))}
-    rad = {k: np.radians(v) for k, v in col.items() if k.endswith("_deg")}
-    base, tool = np.array(doc["base"]), np.array(doc["tool"])
-    return DHTable(rad["theta_deg"], col["d_cm"], col["a_cm"], rad["alpha_deg"],
-                   rad["beta_deg"], pris, base, tool)  # fmt: skip
+    th, d, a, al, be = (
+        _column(doc, k) for k in ("theta_deg", "d_cm", "a_cm", "alpha_deg", "beta_deg")
+    )
+    return DHTable(th, d, a, al, be, pris, np.array(doc["base"]), np.array(doc["tool"]))
 
 
 def _mdh_from_document(doc: dict[str, Any], pris: np.ndarray) -> ModifiedDHTable:
-    r = doc["rows"]
-
-    def c(k: str) -> np.ndarray:
-        v = np.array([row[k] for row in r], float)
-        return np.radians(v) if k.endswith("_deg") else v
-
-    return ModifiedDHTable(c("alpha_prev_deg"), c("a_prev_cm"), c("beta_prev_deg"),
-                           c("theta_deg"), c("d_cm"), pris, np.array(doc["base"]),
-                           np.array(doc["tool"]))  # fmt: skip
+    keys = ("alpha_prev_deg", "a_prev_cm", "beta_prev_deg", "theta_deg", "d_cm")
+    al, a, be, th, d = (_column(doc, k) for k in keys)
+    return ModifiedDHTable(al, a, be, th, d, pris, np.array(doc["base"]), np.array(doc["tool"]))
 
 
 def _chain_from_document(doc: dict[str, Any], pris: np.ndarray) -> SerialChain:

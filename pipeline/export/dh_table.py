@@ -31,7 +31,7 @@ import numpy as np
 
 from pipeline.kinematics.chain import SerialChain, link_frames
 from pipeline.kinematics.dh import dh_link
-from pipeline.kinematics.smodel import smodel_from_matrix
+from pipeline.kinematics.smodel import PARALLEL_TOL, matrix_from_smodel, smodel_from_matrix
 from pipeline.kinematics.transforms import (
     Array,
     invert_transform,
@@ -42,11 +42,17 @@ from pipeline.kinematics.transforms import (
     trans_z,
     wrap_angle,
 )
+from pipeline.kinematics.true_dh import relocate_prismatic
 
 #: Axes within this angle of parallel get Hayati's β instead of a common normal. Beyond it,
 #: |d| ≤ (distance between the axes) / sin(10°) ≈ 5.8 × that distance; below it |β| ≤ 10°,
 #: far from Hayati's own singularity at perpendicular axes.
 HAYATI_DEG = 10.0
+
+#: Where the next axis crosses within this distance of the previous frame's origin (cm), the
+#: crossing counts as the origin itself (``a = 0``, θ chosen for ``β = 0``) instead of giving
+#: θ the direction of a round-off vector; 1e-9 cm = 1e-11 m, below the export's 1e-9 m.
+COINCIDENT_CM = 1e-9
 
 
 @dataclass(frozen=True)
@@ -72,19 +78,35 @@ class DHTable:
         return np.abs(np.sin(self.alpha)) < np.sin(np.radians(HAYATI_DEG))
 
 
-def _hayati_row(B: Array) -> tuple[float, float, float, float]:
-    """``(θ, a, α, β)`` of ``Rot(z,θ) Trans(a,0,0) Rot(x,α) Rot(y,β)`` whose origin is where
-    the z line of ``B`` (4, 4) crosses the plane z = 0, and whose z axis is ``B``'s."""
+def _hayati_row(B: Array, z0: float) -> tuple[float, float, float, float]:
+    """``(θ, a, α, β)`` of ``Rot(z,θ) Trans(0,0,z0) Trans(a,0,0) Rot(x,α) Rot(y,β)`` whose
+    origin is where the z line of ``B`` (4, 4) crosses the plane z = ``z0``, and whose z
+    axis is ``B``'s."""
     u, p = B[:3, 2], B[:3, 3]
-    o = p - (p[2] / u[2]) * u  # axis i+1 meets z = 0 (|u_z| ≥ cos 10°)
+    o = p - ((p[2] - z0) / u[2]) * u  # axis i+1 meets z = z0 (|u_z| ≥ cos 10°)
     theta = float(np.arctan2(o[1], o[0]))
     a = float(np.hypot(o[0], o[1]))
+    if a < COINCIDENT_CM:  # the axes meet there: θ is free; tilt about x alone (β = 0)
+        a = 0.0
+        tilted = np.hypot(u[0], u[1]) >= PARALLEL_TOL
+        theta = float(np.arctan2(-u[0], u[1])) if tilted else 0.0
     c, s = np.cos(theta), np.sin(theta)
     ux, uy = c * u[0] + s * u[1], -s * u[0] + c * u[1]  # u in Rot(z, θ)'s frame
     # Rot(x,α) Rot(y,β) e_z = (sin β, −sin α cos β, cos α cos β)
     alpha = float(np.arctan2(-uy, u[2]))
     beta = float(np.arctan2(ux, np.hypot(uy, u[2])))
     return theta, a, alpha, beta
+
+
+def relocated(chain: SerialChain) -> SerialChain:
+    """``chain`` with every prismatic joint's line moved onto the next joint's axis
+    (Section 4.3.5, :func:`pipeline.kinematics.true_dh.relocate_prismatic`): the S-Model
+    puts it through the targets, an arbitrary line parallel to the travel."""
+    if not chain.prismatic.any():
+        return chain
+    sm, base = relocate_prismatic(smodel_from_matrix(chain.links), chain.prismatic, chain.base)
+    links = matrix_from_smodel(sm.beta, sm.d_bar, sm.a_bar, sm.alpha_bar, sm.gamma, sm.b)
+    return SerialChain(links, chain.prismatic, base, chain.tool, chain.joint_offsets)
 
 
 def row_matrix(theta: float, d: float, a: float, alpha: float, beta: float) -> Array:
@@ -96,10 +118,14 @@ def row_matrix(theta: float, d: float, a: float, alpha: float, beta: float) -> A
 def dh_table_from_chain(chain: SerialChain) -> DHTable:
     """The D-H table of a single-robot chain, reproducing ``forward_kinematics(chain, q)``.
 
-    The frames are those of the chain at its signature reading ``q = joint_offsets``
-    (every joint motion the identity), walked from the base: each new frame from the
-    previous one and the next joint axis, each value taken relative to the reading.
+    The frames are those of the chain (prismatic lines :func:`relocated`) at its signature
+    reading ``q = joint_offsets`` (every joint motion the identity), walked from the base:
+    each new frame from the previous one and the next joint axis, each value taken
+    relative to the reading. A prismatic joint's Hayati frame keeps the next S-Model
+    frame's origin (its ``d`` is the joint's variable, so the plane ``d = 0`` of a
+    revolute joint has no meaning there).
     """
+    chain = relocated(chain)
     n = chain.n_joints
     q0 = np.asarray(chain.joint_offsets, float)
     F = link_frames(chain, q0)  # F[i]: z on axis i+1 (F[n]: the last link frame)
@@ -110,8 +136,8 @@ def dh_table_from_chain(chain: SerialChain) -> DHTable:
     for i in range(n):
         B = invert_transform(T) @ F[i + 1]  # axis i+1 (F's z) in T_{i−1}
         if abs(B[2, 2]) >= parallel:  # nearly (anti-)parallel: Hayati
-            theta, a, alpha, beta = _hayati_row(B)
-            d = 0.0
+            d = float(B[2, 3]) if pris[i] else 0.0
+            theta, a, alpha, beta = _hayati_row(B, d)
         else:  # common normal: (3.12)-(3.15) with γ, b of this link left to the next row
             sm = smodel_from_matrix(B)
             theta, d, a, alpha, beta = (
