@@ -35,7 +35,9 @@ HAYATI_NOTE = (
     f"beta is Hayati's parameter: rows whose joint axes are within {HAYATI_DEG:g} deg of "
     "parallel place their frame where the next axis crosses the plane through the previous "
     "frame's origin normal to this axis (d = 0 there, beta tilts the axis) instead of on the "
-    "far common normal; other rows are classic D-H (beta = 0)"
+    "far common normal (a prismatic joint's row keeps the next S-Model frame's origin, d "
+    "being its variable); other rows are classic D-H (beta = 0). Prismatic lines are moved "
+    "onto the next joint axis first (armsig Section 4.3.5)"
 )
 
 
