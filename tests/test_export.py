@@ -107,7 +107,7 @@ def test_urdf_in_pinocchio_equals_armsig_fk(sessions, robot, design, frame, tmp_
     assert_same_poses(T, armsig_fk_m(sig, q_b, design, frame))
 
 
-@pytest.mark.parametrize(("design", "frame"), [VARIANTS[0], VARIANTS[2]])
+@pytest.mark.parametrize(("design", "frame"), [VARIANTS[0]])  # pinocchio checks all three
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_urdf_in_yourdfpy_equals_armsig_fk(sessions, robot, design, frame, tmp_path) -> None:
     import yourdfpy

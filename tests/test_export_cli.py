@@ -104,3 +104,18 @@ def test_read_only_out_folder(session: Path, tmp_path: Path) -> None:
 def test_unwritable_out_folder_even_for_root(session: Path) -> None:
     r = invoke(str(session), "--format", "urdf", "--out", "/proc/armsig-export.urdf")
     assert_one_error(r, "--out", "cannot write in")
+
+
+def test_urdf_names_that_would_clash_are_refused() -> None:
+    from dataclasses import replace
+
+    from pipeline.errors import ArmsigError
+    from pipeline.export.urdf import link_names
+    from pipeline.robots import get_robot
+
+    robot = get_robot("scara")
+    assert link_names(robot)[0] == "base_link" and link_names(robot)[-1] == "tool"
+    for name, kind in (("base", "link"), ("tool_joint", "joint")):
+        bad = replace(robot, joints=(replace(robot.joints[0], name=name), *robot.joints[1:]))
+        with pytest.raises(ArmsigError, match=f"two {kind}s named"):
+            link_names(bad)

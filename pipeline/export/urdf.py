@@ -15,6 +15,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from pipeline.errors import ArmsigError
 from pipeline.kinematics.chain import SerialChain
 from pipeline.kinematics.transforms import (
     Array,
@@ -28,6 +29,7 @@ from pipeline.robots.description import RobotDescription
 M_PER_CM = 0.01
 BASE_LINK = "base_link"
 TOOL_LINK = "tool"
+TOOL_JOINT = "tool_joint"
 
 
 def joint_origins(chain: SerialChain) -> Array:
@@ -41,8 +43,18 @@ def joint_origins(chain: SerialChain) -> Array:
 
 
 def link_names(robot: RobotDescription) -> list[str]:
-    """``base_link``, one link per joint named after it, ``tool``."""
-    return [BASE_LINK, *(f"{j.name}_link" for j in robot.joints), TOOL_LINK]
+    """``base_link``, one link per joint named after it, ``tool``; refused if two coincide
+    (a joint named ``base``) or a joint is named like the tool's fixed joint."""
+    links = [BASE_LINK, *(f"{j.name}_link" for j in robot.joints), TOOL_LINK]
+    joints = [j.name for j in robot.joints]
+    for names, kind in ((links, "link"), ([*joints, TOOL_JOINT], "joint")):
+        dup = next((x for x in names if names.count(x) > 1), None)
+        if dup is not None:
+            raise ArmsigError(
+                f"robot {robot.name}: the URDF would have two {kind}s named {dup!r}",
+                fix="rename the joint in the robot description",
+            )
+    return links
 
 
 def _num(v: float) -> str:
@@ -85,7 +97,7 @@ def urdf_text(chain: SerialChain, robot: RobotDescription, name: str, comment: s
             "  </joint>",
         ]
     lines += [
-        f'  <joint name={quoteattr(TOOL_LINK + "_joint")} type="fixed">',
+        f'  <joint name={quoteattr(TOOL_JOINT)} type="fixed">',
         f"    <parent link={quoteattr(links[-2])}/>",
         f"    <child link={quoteattr(links[-1])}/>",
         f"    {_origin(origins[-1])}",
