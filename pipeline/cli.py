@@ -521,6 +521,39 @@ def viz(
 
 
 @app.command()
+def export(
+    session: SessionArg,
+    format_: Annotated[
+        str, typer.Option("--format", help="urdf, dh, mdh (Craig) or json (docs/export.md).")
+    ],
+    out: Annotated[
+        str | None,
+        typer.Option(help="Output file (default: SESSION/export/); an existing one needs --force."),
+    ] = None,
+    design: Annotated[bool, typer.Option(help="Export the design model instead.")] = False,
+    frame: Annotated[
+        str, typer.Option(help="World frame: sensor, or design-base (via the design alignment).")
+    ] = "sensor",
+    force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+) -> None:
+    """Export the session's signature (checked against its FK) as URDF, D-H or JSON."""
+    import json
+
+    from pipeline.export import export as run_export
+
+    r = run_export(session, format_, out=out, design=design, frame=frame, force=force)
+    if as_json:
+        typer.echo(json.dumps(r.to_dict(), indent=1))
+        return
+    typer.echo(
+        f"wrote {r.path} ({r.model}, {r.frame} frame); reproduces the chain at "
+        f"{r.configurations} configurations to {r.max_position_error_m:.1e} m, "
+        f"{r.max_orientation_error_rad:.1e} rad"
+    )
+
+
+@app.command()
 def montecarlo(
     study: Annotated[
         str,

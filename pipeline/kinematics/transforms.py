@@ -267,7 +267,15 @@ def xyz_rpy_from_transform(T: ArrayLike) -> tuple[Array, Array]:
     rz = np.where(
         locked, np.arctan2(-R[..., 0, 1], R[..., 1, 1]), np.arctan2(R[..., 1, 0], R[..., 0, 0])
     )
-    rx = np.where(locked, 0.0, np.arctan2(R[..., 2, 1], R[..., 2, 2]))
+    # rx from Rot(z, -rz) · R = Rot(y, ry) · Rot(x, rx), whose row 1 is [0, cos rx, -sin rx]:
+    # it absorbs the error of rz, so near gimbal lock the pose is still rebuilt to round-off
+    # (atan2(R21, R22) alone erred by up to 1e-5 at cos(ry) = 1e-11).
+    cz, sz = np.cos(rz), np.sin(rz)
+    rx = np.where(
+        locked,
+        0.0,
+        np.arctan2(sz * R[..., 0, 2] - cz * R[..., 1, 2], cz * R[..., 1, 1] - sz * R[..., 0, 1]),
+    )
     return M[..., :3, 3].copy(), np.stack([rx, ry, rz], axis=-1)
 
 
