@@ -233,3 +233,18 @@ def test_only_leaves_the_signature_unwritten_while_stages_are_stale(
     assert st["frames"].state == "stale" and st["signature"].state == "stale"
     with pytest.raises(ArmsigError, match="does not match the session's stages"):
         Controller.from_session(d)
+
+
+COMMITTED = sorted((Path(__file__).resolve().parent.parent / "sessions").glob("*/recording.mcap"))
+
+
+@pytest.mark.parametrize("recording", COMMITTED, ids=[p.parent.name for p in COMMITTED])
+def test_every_committed_session_signature_matches_the_schema(recording: Path, tmp_path) -> None:
+    """Issue 16: the signature of every committed session validates against
+    schemas/signature.schema.json, checked by jsonschema (armsig itself uses fastjsonschema)."""
+    d = tmp_path / recording.parent.name
+    d.mkdir()
+    shutil.copy(recording, d / "recording.mcap")
+    identify(d, report=False)
+    schema = json.loads((schema_dir() / "signature.schema.json").read_text())
+    jsonschema.Draft202012Validator(schema).validate(_doc(d))
