@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from pipeline.evaluation.recording import read_evaluation
 from pipeline.evaluation.summary import summarize
@@ -47,7 +47,11 @@ def _program_payloads(program: Any, units: list[str]) -> list[dict[str, Any]]:
 
 
 def evaluate(
-    session_dir: str | Path, *, rig: Any | None = None, report: bool = True
+    session_dir: str | Path,
+    *,
+    rig: Any | None = None,
+    report: bool = True,
+    progress: TextIO | None = None,
 ) -> EvaluateResult:
     """Evaluate a session's signature against its design model on the grid-touching tasks.
 
@@ -59,16 +63,20 @@ def evaluate(
         other switches is redone; None keeps whatever was recorded (defaults
         for a first recording).
     report : write ``report/evaluation.md`` (when its inputs changed).
+    progress : where the progress lines of the identification and evaluation stages go
+        (None: silent).
     """
     sdir = session_folder(session_dir)
     with session_lock(sdir):  # one lock for the identification, the rig and the stages
-        return _evaluate(sdir, rig, report)
+        return _evaluate(sdir, rig, report, progress)
 
 
-def _evaluate(sdir: Path, rig: Any | None, report: bool) -> EvaluateResult:
+def _evaluate(
+    sdir: Path, rig: Any | None, report: bool, progress: TextIO | None
+) -> EvaluateResult:
     from pipeline.identify import identify
 
-    ident = identify(sdir, report=report)
+    ident = identify(sdir, report=report, progress=progress)
     path = sdir / "evaluation.mcap"
     simulated = (sdir / "rig-truth.json").is_file()
     recorded: list[str] = []
@@ -93,7 +101,10 @@ def _evaluate(sdir: Path, rig: Any | None, report: bool) -> EvaluateResult:
             units = rec.teach[0]["units"]
             record_evaluation(sdir, _program_payloads(program, units), opts)
             recorded.append("program")
-    runs = [first.get(r.name, r) for r in run(sdir, modules=EVALUATE_STAGE_MODULES)]
+    runs = [
+        first.get(r.name, r)
+        for r in run(sdir, modules=EVALUATE_STAGE_MODULES, progress=progress)
+    ]
     summary = summarize(sdir)
     rep = _report_if_stale(sdir) if report else None
     return EvaluateResult(ident.runs, runs, recorded, rep, summary)
