@@ -109,7 +109,7 @@ app = typer.Typer(
     name="pipeline",
     help="armsig: identify a robot arm's kinematic signature and control it with it.",
     cls=_Pipeline,
-    add_completion=False,
+    add_completion=True,
     pretty_exceptions_enable=False,
 )
 

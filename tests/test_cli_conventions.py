@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -162,3 +163,12 @@ def test_fk_robot_still_works(robot: str) -> None:
     r = runner.invoke(app, ["fk", robot, "--q", " ".join(["0"] * get_robot(robot).n_joints)])
     assert r.exit_code == 0, r.output
     assert "xyz_cm" in r.stdout
+
+
+def test_shell_completion() -> None:
+    shown = runner.invoke(app, ["--show-completion", "bash"])  # never --install-completion
+    assert shown.exit_code == 0 and "_PIPELINE_COMPLETE" in shown.stdout
+    env = {"_PIPELINE_COMPLETE": "complete_bash", "COMP_WORDS": "pipeline iden", "COMP_CWORD": "1"}
+    cmd = [sys.executable, "-m", "pipeline"]
+    done = subprocess.run(cmd, env={**os.environ, **env}, capture_output=True, text=True)
+    assert done.returncode == 0 and done.stdout.split() == ["identify"]
