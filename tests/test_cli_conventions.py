@@ -172,3 +172,26 @@ def test_shell_completion() -> None:
     cmd = [sys.executable, "-m", "pipeline"]
     done = subprocess.run(cmd, env={**os.environ, **env}, capture_output=True, text=True)
     assert done.returncode == 0 and done.stdout.split() == ["identify"]
+
+
+def test_ik_json_when_not_reached(identified_session: Path, tmp_path: Path) -> None:
+    import pyarrow as pa
+    import pyarrow.ipc as ipc
+
+    d = str(identified_session)
+    far = ["500", "0", "0", "0", "0", "0"]  # cm: beyond the Puma's reach
+    r = runner.invoke(app, ["ik", d, "--pose", *far, "--json"])
+    assert r.exit_code == 3, r.output
+    doc = _parse(r.stdout)
+    assert doc["converged"] is False and doc["status"] != "converged" and len(doc["q"]) == 6
+    pose = _pose(runner.invoke(app, ["fk", d, "--q", Q]).stdout)
+    cols = ("x_cm", "y_cm", "z_cm", "rx_deg", "ry_deg", "rz_deg")
+    targets = pa.table({c: [v, float(f)] for c, v, f in zip(cols, pose, far, strict=True)})
+    with ipc.new_file(str(tmp_path / "t.arrow"), targets.schema) as w:
+        w.write_table(targets)
+    out = tmp_path / "q.arrow"
+    cmd = ["ik", d, "--targets", str(tmp_path / "t.arrow"), "--out", str(out), "--json"]
+    r = runner.invoke(app, [*cmd, "--near", Q])
+    assert r.exit_code == 3, r.output
+    doc = _parse(r.stdout)
+    assert (doc["targets"], doc["converged"], doc["failed"], doc["out"]) == (2, 1, 1, str(out))
