@@ -131,7 +131,7 @@ def _main(
         ),
     ] = False,
 ) -> None:
-    """armsig: identify a robot arm's kinematic signature and control it with it."""
+    pass  # the group's options; its help is the app's
 
 
 def _print_json(data: Any) -> None:
@@ -302,6 +302,8 @@ def _parse_params(values: list[str] | None) -> dict[str, dict[str, str]]:
 
 
 SessionArg = Annotated[str, typer.Argument(help="Session folder, e.g. sessions/robot3.")]
+#: ``--json``: machine output on stdout (warnings and errors stay on stderr).
+JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON on stdout for machines.")]
 
 
 @app.command()
@@ -316,7 +318,7 @@ def identify(
         list[str] | None, typer.Option(help="Stage parameter, STAGE.NAME=VALUE (repeatable).")
     ] = None,
     report: Annotated[bool, typer.Option(help="Write report/report.md.")] = True,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON for machines.")] = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Identify the arm signature of a recorded session (stages, signature.json, report)."""
     from pipeline.identify import identify as run_identify
@@ -330,8 +332,6 @@ def identify(
         report=report,
         progress=sys.stderr,
     )
-    for w in result.warnings:
-        typer.echo(f"warning: {w}", err=True)
     if as_json:
         _print_json(
             {
@@ -342,15 +342,18 @@ def identify(
                 "warnings": result.warnings,
             }
         )
-        return
-    for r in result.runs:
-        if r.action == "ran":
-            typer.echo(f"  {r.name:12s} ran     {r.seconds * 1e3:7.1f} ms  {r.rows} rows")
-        else:
-            typer.echo(f"  {r.name:12s} {r.action}")
-    typer.echo(f"signature: {result.signature or 'not written'}")
-    if result.report:
-        typer.echo(f"report:    {result.report}")
+    else:
+        for r in result.runs:
+            if r.action == "ran":
+                typer.echo(f"  {r.name:12s} ran     {r.seconds * 1e3:7.1f} ms  {r.rows} rows")
+            else:
+                typer.echo(f"  {r.name:12s} {r.action}")
+    for w in result.warnings:
+        typer.echo(f"warning: {w}", err=True)
+    if not as_json:
+        typer.echo(f"signature: {result.signature or 'not written'}")
+        if result.report:
+            typer.echo(f"report:    {result.report}")
 
 
 def _run_dict(r: Any) -> dict[str, Any]:
@@ -368,7 +371,7 @@ def _run_dict(r: Any) -> dict[str, Any]:
 @app.command()
 def status(
     session: SessionArg,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON for machines.")] = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Show every stage of a session as fresh, stale or missing, and why.
 
@@ -424,7 +427,7 @@ def show(
 @app.command()
 def audit(
     session: SessionArg,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON for machines.")] = False,
+    as_json: JsonOption = False,
     configurations: Annotated[int, typer.Option(help="Random configurations.")] = 1000,
 ) -> None:
     """Compare the signature and the design model with a simulated session's truth."""
@@ -474,7 +477,7 @@ def ik(
             "the solution the search from there reaches (default: the signature's q^s)."
         ),
     ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON for machines.")] = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Joint readings that put the identified tool at a pose (signature-based control)."""
     from pipeline.control import Controller, solve_arrow, solve_poses
@@ -567,7 +570,7 @@ def ik_convergence(
 @app.command()
 def evaluate(
     session: SessionArg,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    as_json: JsonOption = False,
     perfect_servo: Annotated[
         bool, typer.Option(help="Simulated rig: no servo error, no encoder rounding.")
     ] = False,
