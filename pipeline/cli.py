@@ -109,9 +109,36 @@ app = typer.Typer(
     name="pipeline",
     help="armsig: identify a robot arm's kinematic signature and control it with it.",
     cls=_Pipeline,
-    add_completion=False,
+    add_completion=True,
     pretty_exceptions_enable=False,
 )
+
+
+def _version(value: bool) -> None:
+    if value:
+        from pipeline import __version__
+
+        typer.echo(f"armsig {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_version, is_eager=True, help="Print the version and exit."
+        ),
+    ] = False,
+) -> None:
+    pass  # the group's options; its help is the app's
+
+
+def _print_json(data: Any) -> None:
+    """``data`` as JSON on stdout, for ``jq`` and scripts."""
+    import json
+
+    typer.echo(json.dumps(data, indent=1))
 
 
 @app.command()
@@ -150,17 +177,36 @@ def _finite(values: Sequence[float], option: str) -> list[float]:
 @app.command()
 def fk(
     robot: Annotated[
-        str, typer.Argument(help="Built-in robot name or path to a .toml description.")
+        str,
+        typer.Argument(
+            help="Identified session folder, built-in robot name or path to a .toml description."
+        ),
     ],
     q: Annotated[
         str, typer.Option("--q", help="Joint values, comma or space separated (deg / cm).")
     ],
+    design: Annotated[
+        bool, typer.Option(help="For a session: the design model's pose of the session's tool.")
+    ] = False,
 ) -> None:
-    """Print the design model's tool pose at joint values Q."""
-    from pipeline.robots import get_robot
-    from pipeline.robots.fk import design_pose
+    """Print the tool pose at joint values Q (a session's signature or a design model).
 
-    pose = design_pose(get_robot(robot), _joint_values(q, "--q"))
+    For a session: the pose of its signature's tool in the design base frame (what
+    `pipeline ik SESSION --pose` takes back); with --design, the design model's pose
+    of that tool. For a robot: the pose of its design flange.
+    """
+    from pathlib import Path
+
+    values = _joint_values(q, "--q")
+    if Path(robot).is_dir():
+        from pipeline.control import Controller
+
+        pose = Controller.from_session(robot).pose(values, design=design)
+    else:
+        from pipeline.robots import get_robot
+        from pipeline.robots.fk import design_pose
+
+        pose = design_pose(get_robot(robot), values)
     with np.printoptions(precision=6, suppress=True):
         typer.echo(f"xyz_cm  = {pose.xyz_cm}")
         typer.echo(f"rpy_deg = {pose.rpy_deg}")
@@ -256,6 +302,8 @@ def _parse_params(values: list[str] | None) -> dict[str, dict[str, str]]:
 
 
 SessionArg = Annotated[str, typer.Argument(help="Session folder, e.g. sessions/robot3.")]
+#: ``--json``: machine output on stdout (warnings and errors stay on stderr).
+JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON on stdout for machines.")]
 
 
 @app.command()
@@ -270,6 +318,7 @@ def identify(
         list[str] | None, typer.Option(help="Stage parameter, STAGE.NAME=VALUE (repeatable).")
     ] = None,
     report: Annotated[bool, typer.Option(help="Write report/report.md.")] = True,
+    as_json: JsonOption = False,
 ) -> None:
     """Identify the arm signature of a recorded session (stages, signature.json, report)."""
     from pipeline.identify import identify as run_identify
@@ -281,27 +330,64 @@ def identify(
         only=only,
         overrides=_parse_params(param),
         report=report,
+        progress=sys.stderr,
     )
-    for r in result.runs:
-        if r.action == "ran":
-            typer.echo(f"  {r.name:12s} ran     {r.seconds * 1e3:7.1f} ms  {r.rows} rows")
-        else:
-            typer.echo(f"  {r.name:12s} {r.action}")
+    if as_json:
+        _print_json(
+            {
+                "session": session,
+                "stages": [_run_dict(r) for r in result.runs],
+                "signature": None if result.signature is None else str(result.signature),
+                "report": None if result.report is None else str(result.report),
+                "warnings": result.warnings,
+            }
+        )
+    else:
+        for r in result.runs:
+            if r.action == "ran":
+                typer.echo(f"  {r.name:12s} ran     {r.seconds * 1e3:7.1f} ms  {r.rows} rows")
+            else:
+                typer.echo(f"  {r.name:12s} {r.action}")
     for w in result.warnings:
         typer.echo(f"warning: {w}", err=True)
-    typer.echo(f"signature: {result.signature or 'not written'}")
-    if result.report:
-        typer.echo(f"report:    {result.report}")
+    if not as_json:
+        typer.echo(f"signature: {result.signature or 'not written'}")
+        if result.report:
+            typer.echo(f"report:    {result.report}")
+
+
+def _run_dict(r: Any) -> dict[str, Any]:
+    """A :class:`~pipeline.stages.runner.StageRun` for ``--json`` (seconds and rows of a
+    stage that ran, else null)."""
+    ran = r.action == "ran"
+    return {
+        "name": r.name,
+        "action": r.action,
+        "seconds": round(r.seconds, 4) if ran else None,
+        "rows": r.rows if ran else None,
+    }
 
 
 @app.command()
-def status(session: SessionArg) -> None:
-    """Show every stage of a session as fresh, stale or missing, and why
-    (identification, signature.json, then the `pipeline evaluate` stages)."""
-    from pipeline.stages.runner import EVALUATE_STAGE_MODULES, STAGE_MODULES
+def status(
+    session: SessionArg,
+    as_json: JsonOption = False,
+) -> None:
+    """Show every stage of a session as fresh, stale or missing, and why.
+
+    The identification stages, signature.json, then, once the session has an
+    evaluation.mcap, the `pipeline evaluate` stages.
+    """
+    from pipeline.stages.runner import EVALUATE_STAGE_MODULES, STAGE_MODULES, session_folder
     from pipeline.stages.runner import status as stage_status
 
-    for st in stage_status(session, modules=STAGE_MODULES + EVALUATE_STAGE_MODULES):
+    evaluated = (session_folder(session) / "evaluation.mcap").is_file()
+    modules = STAGE_MODULES + (EVALUATE_STAGE_MODULES if evaluated else ())
+    states = stage_status(session, modules=modules)
+    if as_json:
+        _print_json([{"name": s.name, "state": s.state, "reason": s.reason} for s in states])
+        return
+    for st in states:
         typer.echo(f"  {st.name:21s} {st.state:8s} {st.reason}")
 
 
@@ -341,17 +427,15 @@ def show(
 @app.command()
 def audit(
     session: SessionArg,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON for machines.")] = False,
+    as_json: JsonOption = False,
     configurations: Annotated[int, typer.Option(help="Random configurations.")] = 1000,
 ) -> None:
     """Compare the signature and the design model with a simulated session's truth."""
-    import json
-
     from pipeline.audit import audit as run_audit
 
     r = run_audit(session, configurations=configurations)
     if as_json:
-        typer.echo(json.dumps(r.to_dict(), indent=1))
+        _print_json(r.to_dict())
         return
     typer.echo(f"{r.session}: {r.configurations} random configurations, best-fit base and tool")
     for name, e in (("signature", r.signature), ("design", r.design)):
@@ -393,6 +477,7 @@ def ik(
             "the solution the search from there reaches (default: the signature's q^s)."
         ),
     ] = None,
+    as_json: JsonOption = False,
 ) -> None:
     """Joint readings that put the identified tool at a pose (signature-based control)."""
     from pipeline.control import Controller, solve_arrow, solve_poses
@@ -414,7 +499,18 @@ def ik(
                 "--pose and --targets both given", expected="one of them", fix="drop one"
             )
         summary, failed = solve_arrow(ctl, targets, out, method, tool_label, q_near)
-        typer.echo(summary)
+        if as_json:
+            from pathlib import Path
+
+            from pipeline.stages.tables import read_table
+
+            n = read_table(Path(out)).num_rows
+            _print_json(
+                {"targets": n, "converged": n - failed, "failed": failed, "out": out,
+                 "method": method, "tool": tool_label}
+            )  # fmt: skip
+        else:
+            typer.echo(summary)
         if failed:
             raise typer.Exit(EXIT_NOT_REACHED)
         return
@@ -423,18 +519,35 @@ def ik(
     _finite(pose, "--pose")
     q, res = solve_poses(ctl, np.array(pose[:3]), np.array(pose[3:]), [branch], method, q_near)
     units = [j.unit for j in ctl.robot.joints]
-    typer.echo("q = " + "  ".join(f"{v:.4f} {u}" for v, u in zip(q[0], units, strict=True)))
-    typer.echo(
-        f"{STATUS_NAMES[int(res.status[0])]} after {int(res.iterations[0])} iterations; "
-        f"residual {res.position_error_cm[0]:.2e} cm, "
-        f"{np.degrees(res.orientation_error_rad[0]):.2e} deg"
-    )
+    status_name = STATUS_NAMES[int(res.status[0])]
     lim = ctl.robot.limits
     outside = [
         j.name
         for j, v, (lo, hi) in zip(ctl.robot.joints, q[0], lim, strict=True)
         if not lo <= v <= hi
     ]
+    if as_json:
+        _print_json(
+            {
+                "joints": [j.name for j in ctl.robot.joints],
+                "units": units,
+                "q": [float(v) for v in q[0]],
+                "status": status_name,
+                "converged": bool(res.converged[0]),
+                "iterations": int(res.iterations[0]),
+                "position_error_cm": float(res.position_error_cm[0]),
+                "orientation_error_deg": float(np.degrees(res.orientation_error_rad[0])),
+                "outside_limits": outside,
+                "tool": tool_label,
+            }
+        )
+    else:
+        typer.echo("q = " + "  ".join(f"{v:.4f} {u}" for v, u in zip(q[0], units, strict=True)))
+        typer.echo(
+            f"{status_name} after {int(res.iterations[0])} iterations; "
+            f"residual {res.position_error_cm[0]:.2e} cm, "
+            f"{np.degrees(res.orientation_error_rad[0]):.2e} deg"
+        )
     if outside:
         typer.echo(f"warning: outside joint limits: {', '.join(outside)}", err=True)
     if not res.converged[0]:
@@ -457,7 +570,7 @@ def ik_convergence(
 @app.command()
 def evaluate(
     session: SessionArg,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    as_json: JsonOption = False,
     perfect_servo: Annotated[
         bool, typer.Option(help="Simulated rig: no servo error, no encoder rounding.")
     ] = False,
@@ -467,8 +580,6 @@ def evaluate(
     report: Annotated[bool, typer.Option(help="Write report/evaluation.md.")] = True,
 ) -> None:
     """Grid-touching tasks under design-model and signature control, recorded and scored."""
-    import json
-
     from pipeline.evaluation.evaluate import evaluate as run_evaluate
 
     rig = None
@@ -476,9 +587,9 @@ def evaluate(
         from pipeline.rig.evaluation import EvaluationRigOptions
 
         rig = EvaluationRigOptions(perfect_servo, exact_instruments)
-    r = run_evaluate(session, rig=rig, report=report)
+    r = run_evaluate(session, rig=rig, report=report, progress=sys.stderr)
     if as_json:
-        typer.echo(json.dumps(r.summary, indent=1))
+        _print_json(r.summary)
         return
     for run in r.runs:
         typer.echo(f"  {run.name:22s} {run.action}")

@@ -35,6 +35,7 @@ from pipeline.kinematics.ik import (
 )
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.robots.description import RobotDescription
+from pipeline.robots.fk import ToolPose, chain_pose
 from pipeline.signature_file import Signature, load_session_signature
 from pipeline.units import joints_to_internal
 
@@ -133,6 +134,14 @@ class Controller:
         base = d.base if world_from_base is None else world_from_base @ d.base
         tool = d.tool @ self.flange_to_tool
         return SerialChain(d.links, d.prismatic, base, tool, d.joint_offsets)
+
+    def pose(self, q: np.ndarray | list[float], design: bool = False) -> ToolPose:
+        """The signature tool's pose in the design base frame at joint readings ``q`` (n,),
+        deg / cm: what :meth:`solve` takes back. ``design``: the design model's pose of
+        the same tool (its flange times ``Y``), for comparison."""
+        X = self.sensor_from_base
+        chain = self._design_model() if design else in_frame(self.signature.chain, X)
+        return chain_pose(self.robot, chain, q)
 
     def default_branch(self):  # -> Branch
         """The Puma branch of the signature configuration."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from pipeline.signature_file import FILE_NAME, read_signature_document
 from pipeline.stages.lock import session_lock
@@ -30,11 +30,20 @@ def identify(
     only: str | None = None,
     overrides: Mapping[str, Mapping[str, Any]] | None = None,
     report: bool = True,
+    progress: TextIO | None = None,
 ) -> IdentifyResult:
-    """Bring the session's stages and signature up to date, then write its report."""
+    """Bring the session's stages and signature up to date, then write its report
+    (``progress``: where the progress line of the stages goes; None: silent)."""
     sdir = session_folder(session_dir)
     with session_lock(sdir):  # one lock for stages, signature and report
-        runs = run(sdir, force=force, from_stage=from_stage, only=only, overrides=overrides)
+        runs = run(
+            sdir,
+            force=force,
+            from_stage=from_stage,
+            only=only,
+            overrides=overrides,
+            progress=progress,
+        )
         if next(r for r in runs if r.name == PRODUCT[0]).action == "not written":
             why = (
                 f"{FILE_NAME} not written: stages after --only {only} are stale; "

@@ -196,15 +196,16 @@ def test_cli_writes_tables_figures_and_report(tmp_path) -> None:
 def test_progress_redraws_on_a_terminal_and_logs_one_line_elsewhere() -> None:
     import io
 
-    from pipeline.montecarlo.engine import Progress
+    from pipeline.progress import Progress
 
     class Terminal(io.StringIO):
         def isatty(self) -> bool:
             return True
 
-    for stream, lines in ((io.StringIO(), 1), (Terminal(), 4)):
+    for stream, lines in ((io.StringIO(), 0), (Terminal(), 4)):  # a log: no \r
         bar = Progress("noise", 4, stream)
         for _ in range(4):
             bar.step()
         text = stream.getvalue()
         assert text.count("\r") == lines and text.endswith("\n") and "4/4 batches" in text
+        assert text.count("\n") == 1

@@ -61,6 +61,7 @@ import numpy.typing as npt
 
 from pipeline.errors import KinematicsError
 from pipeline.kinematics.chain import SerialChain, forward_kinematics, is_single_robot
+from pipeline.kinematics.ik_stall import STALL_RATIO
 from pipeline.kinematics.jacobian import geometric_jacobian, pose_and_jacobian
 from pipeline.kinematics.transforms import (
     Array,
@@ -93,13 +94,6 @@ STATUS_NAMES = {
 #: not converge is reported singular rather than merely out of iterations. For
 #: the Puma's wrist this is |θ5| below ~0.06°, about 12 encoder counts.
 SINGULAR_SIGMA = 1e-3
-
-#: A target whose step is below one encoder count and whose scaled residual fell
-#: by less than 10 % in that step has stalled. A reachable target shrinks its
-#: residual by orders of magnitude per step once the steps are that small (even
-#: Jacobi's linear rate is ~1e-2 per iteration for realistic signatures), so
-#: 0.9 only catches minima of the residual.
-STALL_RATIO = 0.9
 
 #: Design inverse for the Jacobi method: ``(T (k, 4, 4), q_near (k, n)) -> q (k, n)``.
 #: Rows the design model cannot reach on the branch are NaN.

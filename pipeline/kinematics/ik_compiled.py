@@ -35,7 +35,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.kinematics.ik import STALL_RATIO
+from pipeline.kinematics.ik_stall import STALL_RATIO
 from pipeline.kinematics.transforms import Array
 
 #: Kernel outcome of a target: converged by the stopping rule.

@@ -19,6 +19,7 @@ import numpy as np
 
 from pipeline.kinematics.transforms import Array
 from pipeline.montecarlo.stats import Summary, robot_seeds, summarize
+from pipeline.progress import Progress
 
 #: ``(parameter value, seeds of a batch of robots) -> values (batch, K)``.
 Evaluate = Callable[[float, list[np.random.SeedSequence]], Array]
@@ -75,32 +76,6 @@ class StudyResult:
     summary: Summary
     seed: int
     wall_s: float
-
-
-class Progress:
-    """A one-line progress bar on stderr: ``study  [#####.....]  12/40 batches  35 s``
-    (redrawn on a terminal; elsewhere only the final line)."""
-
-    def __init__(self, label: str, total: int, stream: TextIO | None = sys.stderr) -> None:
-        self.label, self.total, self.stream = label, total, stream
-        self.done = 0
-        self.t0 = time.perf_counter()
-
-    def step(self) -> None:
-        self.done += 1
-        if self.stream is None:
-            return
-        last = self.done >= self.total
-        if not last and not self.stream.isatty():  # a log file gets the final line only
-            return
-        width = 30
-        fill = int(width * self.done / max(self.total, 1))
-        end = "\n" if last else ""
-        self.stream.write(
-            f"\r{self.label:14s} [{'#' * fill}{'.' * (width - fill)}] "
-            f"{self.done}/{self.total} batches {time.perf_counter() - self.t0:6.1f} s{end}"
-        )
-        self.stream.flush()
 
 
 def _run_batch(study: Study, settings: list[int], seeds: list[np.random.SeedSequence]) -> Array:

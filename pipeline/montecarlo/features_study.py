@@ -31,7 +31,7 @@ from pipeline.features.accuracy import (
 from pipeline.features.circle import fit_circle
 from pipeline.features.plane import fit_plane_lsq
 from pipeline.kinematics.transforms import Array
-from pipeline.montecarlo.engine import Progress
+from pipeline.progress import Progress
 
 SWEEPS_DEG = (180.0, 240.0, 300.0, 360.0)
 POINTS = (20, 50, 100)

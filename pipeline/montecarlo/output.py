@@ -5,6 +5,10 @@
 ``OUT/<study>/radial_std.png`` Figures 7-4 … 7-8 (radial error std at vertices 1, 4, 5, 8)
 ``OUT/<study>/std_grid.png``, ``mean_grid.png``  Appendix G (all indices)
 ``OUT/misalignment/lines.png`` Figure 7-3 (mean and 3σ band of the three lines)
+``OUT/features/features.arrow``, ``features.png``  Section 6.6
+
+Each table carries ``schema_name`` and ``schema_version`` in its schema metadata and
+``armsig.package_version`` beside its other provenance, as the stage tables do.
 """
 
 from __future__ import annotations
@@ -14,11 +18,24 @@ from typing import Any
 
 import numpy as np
 
+from pipeline import __version__
 from pipeline.evaluation.grid12 import CORNER_VERTICES
 from pipeline.montecarlo.engine import StudyResult
 from pipeline.montecarlo.stats import indices_table, summary_table
 from pipeline.report.figures import save_png
 from pipeline.stages.tables import write_table
+
+#: Version of the Monte-Carlo table layouts (``schema_version``); the swept parameter's
+#: column is named per study (``sigma_e_deg``, ``points``, ...), the rest is fixed.
+SCHEMA_VERSION = "1"
+
+
+def _write(path: Path, table: Any, schema_name: str, provenance: dict[str, Any]) -> None:
+    """``table`` written as a stage table is: schema name and version, package version."""
+    meta = dict(table.schema.metadata or {})
+    meta.update({b"schema_name": schema_name.encode(), b"schema_version": SCHEMA_VERSION.encode()})
+    prov = {**provenance, "package_version": __version__}
+    write_table(path, table.replace_schema_metadata(meta), prov)
 
 
 def _provenance(res: StudyResult) -> dict[str, Any]:
@@ -41,12 +58,13 @@ def write_study(out_dir: Path, res: StudyResult) -> Path:
     names, units = list(st.index_names), list(st.index_units)
     values = np.asarray(st.values, float)
     prov = _provenance(res)
-    write_table(
+    _write(
         d / "indices.arrow",
         indices_table(st.name, st.parameter, st.parameter_unit, values, res.values, names, units),
+        "montecarlo_indices",
         prov,
     )
-    write_table(
+    _write(
         d / "summary.arrow",
         summary_table(
             st.name,
@@ -58,6 +76,7 @@ def write_study(out_dir: Path, res: StudyResult) -> Path:
             units,
             list(st.index_signed),
         ),
+        "montecarlo_summary",
         prov,
     )
     if st.name == "misalignment":
@@ -183,7 +202,7 @@ def write_features(out_dir: Path, res: Any) -> Path:
         "fit_6_13": list(res.fit_613),
         "wall_s": round(res.wall_s, 3),
     }
-    write_table(d / "features.arrow", features_table(res), prov)
+    _write(d / "features.arrow", features_table(res), "montecarlo_features", prov)
     fig = Figure(figsize=(10.0, 3.8))
     fig.subplots_adjust(left=0.07, right=0.98, bottom=0.14, top=0.86, wspace=0.25)
     ax1, ax2 = fig.subplots(1, 2)

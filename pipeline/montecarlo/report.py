@@ -180,8 +180,28 @@ def _means_line(s: SummaryArrays) -> str:
     return out + "; largest: " + "; ".join(items) + "."
 
 
-def _section(s: SummaryArrays) -> list[str]:
-    head = [f"### {s.name} ({s.robots} robots, {s.wall_s:.2f} s)", ""]
+#: The figures of each study folder, in the order the report shows them, with their captions.
+FIGURES = (
+    ("lines.png", "mean and 3σ band of the three line-length errors (cf. Figure 7-3)"),
+    ("radial_std.png", "radial error std at vertices 1, 4, 5, 8 (cf. Figures 7-4 … 7-8)"),
+    ("std_grid.png", "standard deviation of every index (Appendix G)"),
+    ("mean_grid.png", "mean of every index (Appendix G)"),
+    ("features.png", "empirical over formula (6.12) and (6.13)"),
+)
+
+
+def _figures(out: Path, study: str) -> list[str]:
+    """Markdown images of the figures found in ``out/<study>`` (links relative to ``out``)."""
+    lines = [
+        f"![{study}: {caption}]({study}/{name})"
+        for name, caption in FIGURES
+        if (out / study / name).is_file()
+    ]
+    return [*lines, ""] if lines else []
+
+
+def _section(s: SummaryArrays, out: Path) -> list[str]:
+    head = [f"### {s.name} ({s.robots} robots, {s.wall_s:.2f} s)", "", *_figures(out, s.name)]
     if s.name == "misalignment":
         lines = [
             f"| {s.parameter} | " + " | ".join(f"{n} mean ± 3σ" for n in s.names) + " |",
@@ -257,6 +277,7 @@ def _section(s: SummaryArrays) -> list[str]:
 
 def _features_section(path: Path) -> list[str]:
     prov = read_provenance(path)
+    figures = _figures(path.parent.parent, path.parent.name)
     a12, b12 = prov["fit_6_12"]
     a13, b13 = prov["fit_6_13"]
     t = read_table(path)
@@ -267,6 +288,7 @@ def _features_section(path: Path) -> list[str]:
     return [
         f"### features ({prov['trials']} trials per configuration, {prov['wall_s']:.1f} s)",
         "",
+        *figures,
         "| fit | a | b |",
         "|---|---|---|",
         f"| (6.12) plane tilt, Stone | 0.00244 | 0.344 |",  # noqa: F541
@@ -307,14 +329,17 @@ def write_report(out_dir: Path) -> Path:
     feat = out / "features" / "features.arrow"
     if feat.is_file():
         lines.append(f"| features | – | 36 | {read_provenance(feat)['wall_s']:.1f} |")
-    lines += ["", "## Design-model control (7.4.1, 7.4.2)", ""]
-    for s in found:
-        if s.name in ("encoder", "machining"):
-            lines += _section(s)
-    lines += ["## Signature control (7.3, 7.4.3-7.4.5)", ""]
-    for s in found:
-        if s.name not in ("encoder", "machining"):
-            lines += _section(s)
+    lines.append("")
+    design = [s for s in found if s.name in ("encoder", "machining")]
+    signature = [s for s in found if s.name not in ("encoder", "machining")]
+    for heading, studies in (
+        ("## Design-model control (7.4.1, 7.4.2)", design),
+        ("## Signature control (7.3, 7.4.3-7.4.5)", signature),
+    ):
+        if studies:  # no heading over nothing (a run of one kind of study)
+            lines += [heading, ""]
+            for s in studies:
+                lines += _section(s, out)
     if feat.is_file():
         lines += ["## Feature accuracy (6.6)", ""] + _features_section(feat)
     path = out / "montecarlo.md"

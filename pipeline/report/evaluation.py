@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 
 from pipeline.atomic import write_text_atomic
-from pipeline.evaluation.evaluate import summarize
 from pipeline.evaluation.indices import GRID3D_INDICES
+from pipeline.evaluation.summary import summarize
 from pipeline.evaluation.tasks import CATHETOMETER_CM, GRID2D_SHAPE
 from pipeline.report import evaluation_figures as figs
 from pipeline.report.identification import _table

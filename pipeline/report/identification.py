@@ -177,8 +177,10 @@ def _variance_section(res: list[figures.JointResiduals]) -> str:
 
 def _figures_section(paths: dict[str, Path]) -> str:
     captions = {
-        "residuals": "Normal (*) and radial (o) residuals against the joint reading "
-        "(cf. Figure 6-11).",
+        # No markdown characters in a caption: it is set in emphasis (a `*` inside one
+        # ends it early in pandoc, python-markdown and markdown-it).
+        "residuals": "Normal residuals (stars) and radial residuals (circles) against the "
+        "joint reading (cf. Figure 6-11).",
         "hist_normal": "Histograms of the normal residuals (cf. Figure 6-12).",
         "hist_radial": "Histograms of the radial residuals (cf. Figure 6-13).",
     }

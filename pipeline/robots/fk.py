@@ -1,4 +1,5 @@
-"""Design-model forward kinematics in boundary units (deg / cm in, cm / deg out)."""
+"""Forward kinematics of a robot chain (the design model, or a signature through
+:meth:`pipeline.control.Controller.pose`) in boundary units (deg / cm in, cm / deg out)."""
 
 from __future__ import annotations
 
@@ -7,15 +8,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.errors import KinematicsError
-from pipeline.kinematics.chain import forward_kinematics
+from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.transforms import xyz_rpy_from_transform
 from pipeline.robots.description import RobotDescription
 from pipeline.units import joints_to_internal
 
 
 @dataclass(frozen=True)
-class DesignPose:
-    """Tool pose of the design model at one joint configuration.
+class ToolPose:
+    """Tool pose of a chain at one joint configuration.
 
     ``matrix`` (4, 4) in cm; ``xyz_cm`` (3,); ``rpy_deg`` (3,) fixed-axis
     roll-pitch-yaw; ``outside_limits`` names joints beyond their limits.
@@ -27,14 +28,22 @@ class DesignPose:
     outside_limits: tuple[str, ...]
 
 
-def design_pose(robot: RobotDescription, q: list[float] | np.ndarray) -> DesignPose:
-    """Forward kinematics of ``robot``'s design model.
+def design_pose(robot: RobotDescription, q: list[float] | np.ndarray) -> ToolPose:
+    """Forward kinematics of ``robot``'s design model (flange in the design base frame).
 
     Parameters
     ----------
     q : sequence of float, length n
         Joint readings in deg (revolute) / cm (prismatic).
     """
+    return chain_pose(robot, robot.design_chain(), q)
+
+
+def chain_pose(
+    robot: RobotDescription, chain: SerialChain, q: list[float] | np.ndarray
+) -> ToolPose:
+    """Forward kinematics of ``chain``, a chain of ``robot`` (same joints), at joint
+    readings ``q`` (n,) in deg (revolute) / cm (prismatic)."""
     qq = np.asarray(q, float)
     if qq.shape != (robot.n_joints,):
         raise KinematicsError(
@@ -42,10 +51,10 @@ def design_pose(robot: RobotDescription, q: list[float] | np.ndarray) -> DesignP
             expected=f"{robot.n_joints} values ({', '.join(j.name for j in robot.joints)})",
             got=f"{qq.size}",
         )
-    T = forward_kinematics(robot.design_chain(), joints_to_internal(qq, robot.prismatic))
+    T = forward_kinematics(chain, joints_to_internal(qq, robot.prismatic))
     xyz, rpy = xyz_rpy_from_transform(T)
     lim = robot.limits
     outside = tuple(
         j.name for j, v, (lo, hi) in zip(robot.joints, qq, lim, strict=True) if not lo <= v <= hi
     )
-    return DesignPose(T, xyz, np.rad2deg(rpy), outside)
+    return ToolPose(T, xyz, np.rad2deg(rpy), outside)

@@ -25,11 +25,12 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from pipeline import __version__
 from pipeline.atomic import remove_debris
 from pipeline.errors import ArmsigError, StageError
+from pipeline.progress import Progress
 from pipeline.schemas import validate_table
 from pipeline.stages.base import RECORDING, Stage
 from pipeline.stages.lock import session_lock
@@ -304,6 +305,7 @@ def run(
     only: str | None = None,
     overrides: Mapping[str, Mapping[str, Any]] | None = None,
     modules: tuple[str, ...] = STAGE_MODULES,
+    progress: TextIO | None = None,
 ) -> list[StageRun]:
     """Bring every stage of a session up to date, then (identification) its signature.
 
@@ -314,6 +316,7 @@ def run(
     from_stage : rerun this stage and every later one.
     only : rerun just this stage (its inputs must exist and pass their checks).
     overrides : ``{stage: {param: value}}``.
+    progress : where the progress line goes (:class:`pipeline.progress.Progress`; None: silent).
 
     Returns
     -------
@@ -338,9 +341,13 @@ def run(
         for folder in (sdir, sdir / "stages", sdir / "report"):
             remove_debris(folder)  # temp files of killed atomic writes
         hashes = _Hashes(sdir)
+        label = "identify" if set(STAGE_MODULES) <= set(names) else "evaluate"
+        bar = Progress(label, len(all_stages), progress, unit="stages")
         try:
             try:
-                _run_all(sdir, all_stages, names, hashes, runs, force, from_stage, only, overrides)
+                _run_all(
+                    sdir, all_stages, names, hashes, runs, force, from_stage, only, overrides, bar
+                )
             except Exception as exc:
                 _keep_failed(sdir, names, hashes.pending)
                 raise _pointing_at_failed(exc, sdir, hashes.pending) from exc
@@ -350,6 +357,7 @@ def run(
             hashes.pending.clear()
             shutil.rmtree(failed_dir(sdir), ignore_errors=True)
         finally:
+            bar.close()
             shutil.rmtree(pending, ignore_errors=True)
         if set(STAGE_MODULES) <= set(names):
             runs.append(_write_product(sdir, all_stages, overrides, hashes, force))
@@ -406,12 +414,15 @@ def _run_all(
     from_stage: str | None,
     only: str | None,
     overrides: Mapping[str, Mapping[str, Any]],
+    bar: Progress,
 ) -> None:
     """Bring each stage up to date in order, writing outputs to the pending folder."""
     stale: set[str] = set()
     forced_from = names.index(from_stage) if from_stage else None
     for k, stage in enumerate(all_stages):
         params = _params(stage, overrides)
+        if k:
+            bar.step()  # the stage before this one is done
         if only is not None and stage.name != only:
             runs.append(StageRun(stage.name, "skipped", 0.0, 0))
             continue
@@ -429,6 +440,7 @@ def _run_all(
         # Dependants compare their recorded input hash with the new one in `hashes`.
         table = _run_one(sdir, stage, params, hashes)
         runs.append(StageRun(stage.name, "ran", time.perf_counter() - t0, table.num_rows))
+    bar.step()
 
 
 def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:

@@ -17,18 +17,24 @@ from pipeline.errors import StageError
 from pipeline.schemas import arrow_schema
 
 META_PREFIX = "armsig."
+#: Stage files are written zstd-compressed (~5x smaller, ~2 ms more per read); files written
+#: uncompressed before still read, and the content hash does not depend on it.
+WRITE_OPTIONS = ipc.IpcWriteOptions(compression="zstd")
 #: Why a stage file whose data no longer hashes to its recorded content hash is stale.
 EDITED = "file differs from the hash recorded when it was written (edited or corrupt)"
 
 
 def content_hash(table: pa.Table) -> str:
-    """SHA-256 of the table's data and column types (schema metadata excluded)."""
+    """SHA-256 of the table's data and column types (schema metadata excluded).
+
+    The table is re-serialized uncompressed here, so the hash is the same whether the file
+    it came from was compressed or not."""
     bare = table.replace_schema_metadata(None)
     bare = pa.Table.from_batches(
         bare.to_batches(), schema=pa.schema([f.remove_metadata() for f in bare.schema])
     )
     sink = pa.BufferOutputStream()
-    with ipc.new_stream(sink, bare.schema) as writer:
+    with ipc.new_stream(sink, bare.schema, options=ipc.IpcWriteOptions()) as writer:
         writer.write_table(bare)
     return hashlib.sha256(sink.getvalue().to_pybytes()).hexdigest()
 
@@ -40,7 +46,7 @@ def write_table(path: Path, table: pa.Table, provenance: dict[str, Any]) -> pa.T
         meta[(META_PREFIX + key).encode()] = json.dumps(value, sort_keys=True).encode()
     out = table.replace_schema_metadata(meta)
     with atomic_write(path, "wb") as fh:
-        with ipc.new_file(fh, out.schema) as writer:
+        with ipc.new_file(fh, out.schema, options=WRITE_OPTIONS) as writer:
             writer.write_table(out)
     return out
 
