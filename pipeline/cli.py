@@ -646,16 +646,14 @@ def export(
         str, typer.Option(help="World frame: sensor, or design-base (via the design alignment).")
     ] = "sensor",
     force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Export the session's signature (checked against its FK) as URDF, D-H or JSON."""
-    import json
-
     from pipeline.export import export as run_export
 
     r = run_export(session, format_, out=out, design=design, frame=frame, force=force)
     if as_json:
-        typer.echo(json.dumps(r.to_dict(), indent=1))
+        _print_json(r.to_dict())
         return
     typer.echo(
         f"wrote {r.path} ({r.model}, {r.frame} frame); reproduces the chain at "
