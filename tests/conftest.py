@@ -1,3 +1,7 @@
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -29,3 +33,15 @@ def identified_session(tmp_path_factory: pytest.TempPathFactory):
     simulate_session(d, SimulationOptions(seed=2, points=12, repeats=2))
     identify(d, report=False)
     return d
+
+
+@pytest.fixture
+def read_only_dir(tmp_path: Path) -> Iterator[Path]:
+    """An empty folder nobody may write in (skipped as root, who writes anyway)."""
+    if os.geteuid() == 0:
+        pytest.skip("root writes into read-only folders")
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    yield ro
+    ro.chmod(0o755)
