@@ -21,6 +21,7 @@ limits allow, and where the tool probe is visible. This is documented in
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +43,9 @@ PROBE_LENGTH_CM = 15.0  # evaluation tool: a pointed probe on the flange axis
 #: front of the wall, so that manufacturing errors (mm) never push a target out.
 RANGE_MARGIN_CM = 5.0
 WALL_MARGIN_CM = 10.0
+#: Memory for one block of the candidate search (its largest array; a few of them live
+#: at once): long joint travels are searched in blocks of candidates.
+_SEARCH_BYTES = 1 << 27  # 128 MiB
 MAX_SWEEP_DEG = 300.0
 MIN_SWEEP_DEG = 180.0  # (B-3) wants at least 180° of travel
 SWEEP_END_MARGIN_DEG = 3.0
@@ -192,19 +196,20 @@ def _longest_runs(ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return end - length + 1, length
 
 
-def _why_lost(p: np.ndarray, geometry: DigitizerGeometry) -> str:
-    """Which visibility condition the targets ``p`` (..., 3) break most often."""
-    dist = np.linalg.norm(p[..., None, :] - geometry.microphones[:3], axis=-1)
-    reasons = {
-        f"nearer than {geometry.range_min_cm + RANGE_MARGIN_CM:g} cm to a microphone": (
-            dist.min(-1) <= geometry.range_min_cm + RANGE_MARGIN_CM
-        ),
-        f"farther than {geometry.range_max_cm - RANGE_MARGIN_CM:g} cm from a microphone": (
-            dist.max(-1) >= geometry.range_max_cm - RANGE_MARGIN_CM
-        ),
-        f"less than {WALL_MARGIN_CM:g} cm in front of the wall": p[..., 2] <= WALL_MARGIN_CM,
+def _why_lost(chunks: Iterable[np.ndarray], geometry: DigitizerGeometry) -> str:
+    """Which visibility condition the targets (chunks of positions (..., 3)) break most often."""
+    lo, hi = geometry.range_min_cm + RANGE_MARGIN_CM, geometry.range_max_cm - RANGE_MARGIN_CM
+    counts = {
+        f"nearer than {lo:g} cm to a microphone": 0,
+        f"farther than {hi:g} cm from a microphone": 0,
+        f"less than {WALL_MARGIN_CM:g} cm in front of the wall": 0,
     }
-    return max(reasons, key=lambda k: int(reasons[k].sum()))
+    for p in chunks:
+        dist = np.linalg.norm(p[..., None, :] - geometry.microphones[:3], axis=-1)
+        broken = (dist.min(-1) <= lo, dist.max(-1) >= hi, p[..., 2] <= WALL_MARGIN_CM)
+        for key, mask in zip(counts, broken, strict=True):
+            counts[key] += int(mask.sum())
+    return max(counts, key=lambda k: counts[k])
 
 
 def plan_measurements(
@@ -257,21 +262,31 @@ def plan_measurements(
         0.5 * travel,
         np.minimum(min(MIN_SWEEP_DEG, max_sweep_deg) + 2 * SWEEP_END_MARGIN_DEG, travel - step),
     )
-    frames = []  # per joint, the frames carrying its target, (candidates, grid, 4, 4)
-    for i in range(n):
-        grid = np.arange(lim[i, 0], lim[i, 1] + 1e-9, step[i])
-        q = np.repeat(cand[:, None, :], len(grid), axis=1)
-        q[:, :, i] = grid
-        frames.append(target_frames(chain, sensor_from_base, joints_to_internal(q, pris), i + 1))
+    grids = [np.arange(lim[i, 0], lim[i, 1] + 1e-9, step[i]) for i in range(n)]
 
-    def targets(i: int, k: slice) -> np.ndarray:
-        """Sensor-frame positions (candidates, K, grid, 3) of joint i's targets k."""
-        return points_in_frames(frames[i][:, None], options[i, k][None, :, None, :])
+    def targets(i: int, k: slice) -> Iterator[np.ndarray]:
+        """Sensor-frame positions (rows, K, grid, 3) of joint i's targets k, for successive
+        blocks of candidates: every frame of the chain along a long joint travel for all
+        candidates at once took gigabytes (12 joints of +-1000 cm: 6.4 GB)."""
+        # The largest arrays per candidate row: the chain's n + 1 frames (16 doubles each),
+        # and the K targets' positions with their distances to 3 microphones (12 doubles).
+        per_row = len(grids[i]) * max((n + 1) * 16, options.shape[1] * 12) * 8
+        rows = max(1, _SEARCH_BYTES // per_row)
+        for a in range(0, candidates, rows):
+            q = np.repeat(cand[a : a + rows, None, :], len(grids[i]), axis=1)
+            q[:, :, i] = grids[i]
+            F = target_frames(chain, sensor_from_base, joints_to_internal(q, pris), i + 1)
+            yield points_in_frames(F[:, None], options[i, k][None, :, None, :])
 
     def visible_sweeps(k: slice) -> np.ndarray:
         """Longest visible sweep (candidates, n, K) of targets k, deg / cm."""
         return np.stack(
-            [_longest_runs(visible(targets(i, k), geometry))[1] * step[i] for i in range(n)],
+            [
+                np.concatenate(
+                    [_longest_runs(visible(p, geometry))[1] * step[i] for p in targets(i, k)]
+                )
+                for i in range(n)
+            ],
             axis=1,
         )
 
