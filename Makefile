@@ -38,4 +38,4 @@ identify: $(STAMP)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis build dist *.egg-info
-	rm -rf sessions/*/stages sessions/*/report
+	rm -rf sessions/*/stages sessions/*/report sessions/*/export sessions/*/viz.mcap
