@@ -66,7 +66,8 @@ def design_alignment(
     return X, Y, float(np.sqrt(np.mean(dp**2)))
 
 
-def _m(T: np.ndarray) -> list[list[float]]:
+def matrix_rows(T: np.ndarray) -> list[list[float]]:
+    """A matrix as JSON-ready rows of Python floats."""
     return [[float(v) for v in row] for row in T]
 
 
@@ -119,9 +120,9 @@ def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict
         "encoder_resolution": robot.encoder_resolution.tolist(),
         "signature_configuration": [float(v) for v in qs],
         "smodel": {
-            "base": _m(chain.base),
-            "links": [_m(B) for B in chain.links],
-            "tool": _m(chain.tool),
+            "base": matrix_rows(chain.base),
+            "links": [matrix_rows(B) for B in chain.links],
+            "tool": matrix_rows(chain.tool),
             "parameters": [
                 {
                     "beta_deg": float(np.degrees(sm.beta[i])),
@@ -136,13 +137,13 @@ def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict
         },
         "pseudo_dh": pseudo,
         "design_alignment": {
-            "sensor_from_design_base": _m(X),
-            "design_flange_to_signature_tool": _m(Y),
+            "sensor_from_design_base": matrix_rows(X),
+            "design_flange_to_signature_tool": matrix_rows(Y),
             "rms_misfit_cm": misfit,
         },
         "robot_description": description_to_dict(robot),
-        "pseudo_dh_base": _m(pdh.base),
-        "pseudo_dh_tool": _m(pdh.tool),
+        "pseudo_dh_base": matrix_rows(pdh.base),
+        "pseudo_dh_tool": matrix_rows(pdh.tool),
         "feature_accuracy": [
             {
                 k: f[k]

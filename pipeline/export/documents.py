@@ -13,6 +13,7 @@ import numpy as np
 from pipeline.export.dh_table import HAYATI_DEG, DHTable, ModifiedDHTable
 from pipeline.kinematics.chain import SerialChain
 from pipeline.robots.description import RobotDescription
+from pipeline.signature_file import matrix_rows
 from pipeline.units import joints_to_boundary
 
 DH_CONVENTION = (
@@ -39,10 +40,6 @@ HAYATI_NOTE = (
     "being its variable); other rows are classic D-H (beta = 0). Prismatic lines are moved "
     "onto the next joint axis first (armsig Section 4.3.5)"
 )
-
-
-def _m(T: np.ndarray) -> list[list[float]]:
-    return [[float(v) for v in row] for row in T]
 
 
 def _header(robot: RobotDescription, model: str, frame: str, convention: str) -> dict[str, Any]:
@@ -77,7 +74,13 @@ def dh_document(t: DHTable, robot: RobotDescription, model: str, frame: str) -> 
         for i in range(robot.n_joints)
     ]
     head = _header(robot, model, frame, DH_CONVENTION)
-    return {**head, "note": HAYATI_NOTE, "base": _m(t.base), "rows": rows, "tool": _m(t.tool)}
+    return {
+        **head,
+        "note": HAYATI_NOTE,
+        "base": matrix_rows(t.base),
+        "rows": rows,
+        "tool": matrix_rows(t.tool),
+    }
 
 
 def mdh_document(
@@ -97,7 +100,13 @@ def mdh_document(
         for i in range(robot.n_joints)
     ]
     head = _header(robot, model, frame, MDH_CONVENTION)
-    return {**head, "note": HAYATI_NOTE, "base": _m(m.base), "rows": rows, "tool": _m(m.tool)}
+    return {
+        **head,
+        "note": HAYATI_NOTE,
+        "base": matrix_rows(m.base),
+        "rows": rows,
+        "tool": matrix_rows(m.tool),
+    }
 
 
 def chain_document(
@@ -110,7 +119,7 @@ def chain_document(
         **head,
         "joints": [_joint(robot, i) for i in range(robot.n_joints)],
         "joint_offsets": [float(v) for v in q0],
-        "base": _m(chain.base),
-        "links": [_m(L) for L in chain.links],
-        "tool": _m(chain.tool),
+        "base": matrix_rows(chain.base),
+        "links": [matrix_rows(L) for L in chain.links],
+        "tool": matrix_rows(chain.tool),
     }
