@@ -13,11 +13,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mcap.writer import CompressionType, IndexType, Writer
-
 from pipeline.atomic import atomic_write
 from pipeline.contract.channels import CHANNELS, EVAL_CHANNELS
 from pipeline.contract.digest import DIGEST_NAME, content_digest
+from pipeline.contract.mcap_write import checked_writer, json_bytes
 from pipeline.schemas import mcap_json_schema
 
 __all__ = ["CHANNELS", "EVAL_CHANNELS", "Message", "write_recording"]
@@ -39,20 +38,9 @@ def write_recording(
     path: str | Path, messages: list[Message], channels: dict[str, str] = CHANNELS
 ) -> None:
     """Write ``messages`` (in time order) to ``path`` atomically; ``channels``: topic -> schema."""
-    encoded = [
-        (m, json.dumps(m.payload, separators=(",", ":"), allow_nan=False).encode())
-        for m in messages
-    ]
+    encoded = [(m, json_bytes(m.payload)) for m in messages]
     with atomic_write(path, "wb") as fh:
-        writer = Writer(
-            fh,  # type: ignore[arg-type]
-            compression=CompressionType.ZSTD,
-            chunk_size=1 << 20,
-            index_types=IndexType.ALL,  # chunk and message indexes, metadata index
-            enable_crcs=True,  # chunk CRCs and the summary CRC
-            enable_data_crcs=True,  # the data section's CRC in DataEnd
-        )
-        writer.start(profile=PROFILE, library=LIBRARY)
+        writer = checked_writer(fh, PROFILE, LIBRARY)  # type: ignore[arg-type]
         channel_ids: dict[str, int] = {}
         for topic, schema_name in channels.items():
             schema = mcap_json_schema(schema_name)

@@ -17,10 +17,10 @@ import numpy as np
 import pyarrow as pa
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.writer import CompressionType, IndexType, Writer
 
 from pipeline import __version__
 from pipeline.atomic import atomic_write, check_writable
+from pipeline.contract.mcap_write import checked_writer, json_bytes
 from pipeline.errors import ArmsigError, StageError
 from pipeline.signature_file import FILE_NAME, load_session_signature
 from pipeline.stages.lock import session_lock
@@ -92,14 +92,7 @@ def _configuration(q: list[float] | None, default: np.ndarray, names: list[str])
 def write_mcap(path: Path, messages: list[VizMessage], metadata: dict[str, str]) -> None:
     """Write ``messages`` (JSON, schemas embedded as published) to ``path`` atomically."""
     with atomic_write(path, "wb") as fh:
-        writer = Writer(
-            fh,  # type: ignore[arg-type]
-            compression=CompressionType.ZSTD,
-            index_types=IndexType.ALL,
-            enable_crcs=True,
-            enable_data_crcs=True,
-        )
-        writer.start(profile="", library=f"{LIBRARY} {__version__}")
+        writer = checked_writer(fh, "", f"{LIBRARY} {__version__}")  # type: ignore[arg-type]
         schema_ids = {
             name: writer.register_schema(name, "jsonschema", fg.schema_text(name))
             for name in sorted({m.schema for m in messages})
@@ -110,8 +103,7 @@ def write_mcap(path: Path, messages: list[VizMessage], metadata: dict[str, str])
             if m.topic not in channels:
                 channels[m.topic] = writer.register_channel(m.topic, "json", schema_ids[m.schema])
                 sequence[m.topic] = 0
-            data = json.dumps(m.payload, separators=(",", ":"), allow_nan=False).encode()
-            writer.add_message(channels[m.topic], 0, data, 0, sequence[m.topic])
+            writer.add_message(channels[m.topic], 0, json_bytes(m.payload), 0, sequence[m.topic])
             sequence[m.topic] += 1
         writer.add_metadata(METADATA_NAME, metadata)
         writer.finish()
