@@ -28,7 +28,7 @@ import numpy as np
 import typer
 from typer.core import TyperGroup
 
-from pipeline.errors import ArmsigError
+from pipeline.errors import ArmsigError, one_line
 
 EXIT_REFUSED = 1
 EXIT_USAGE = 2
@@ -37,13 +37,8 @@ EXIT_INTERNAL = 70  # EX_SOFTWARE of sysexits.h
 DEBUG_ENV = "ARMSIG_DEBUG"
 
 
-def _one_line(text: str) -> str:
-    """``text`` with every run of whitespace (newlines too) as one space."""
-    return " ".join(text.split())
-
-
 def _fail(message: str, code: int) -> int:
-    typer.echo(f"error: {_one_line(message)}", err=True)
+    typer.echo(f"error: {one_line(message)}", err=True)
     return code
 
 

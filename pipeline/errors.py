@@ -7,6 +7,13 @@ Every message says what was expected, what arrived, and what to try. Only
 from __future__ import annotations
 
 
+def one_line(text: str, limit: int | None = None) -> str:
+    """``text`` with every run of whitespace (newlines too) as one space, cut to ``limit``
+    characters (and "...") when given."""
+    text = " ".join(text.split())
+    return text if limit is None or len(text) <= limit else text[:limit] + "..."
+
+
 class ArmsigError(Exception):
     """Base class of every error armsig raises on purpose."""
 

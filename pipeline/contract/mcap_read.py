@@ -31,7 +31,7 @@ from typing import Any
 from pipeline.contract.batch_schema import all_valid
 from pipeline.contract.channels import upgrade_legacy, validator
 from pipeline.contract.digest import COUNT_PREFIX, DIGEST_NAME, content_digest
-from pipeline.errors import RecordingError
+from pipeline.errors import RecordingError, one_line
 from pipeline.schemas import mcap_json_schema, strict_json
 
 #: Largest uncompressed chunk: 256 times the 1 MiB chunks armsig writes (a mutated
@@ -231,5 +231,4 @@ def _decode(path: Path, topic: str, k: int, data: bytes) -> dict[str, Any]:
 
 
 def _one_line(text: str) -> str:
-    text = " ".join(text.split())
-    return text if len(text) <= _SHOWN else text[:_SHOWN] + "..."
+    return one_line(text, _SHOWN)
