@@ -270,12 +270,19 @@ def load_signature(path: str | Path) -> Signature:
     return signature_from_document(read_signature_document(p), str(p))
 
 
-def load_session_signature(path: str | Path) -> Signature:
+def load_session_signature(
+    path: str | Path, committed: dict[str, str | None] | None = None
+) -> Signature:
     """Read ``SESSION/signature.json``, refused unless it was built from the stage outputs
-    committed in ``SESSION/stages`` (e.g. after a run killed between the two)."""
+    committed in ``SESSION/stages`` (e.g. after a run killed between the two).
+
+    ``committed``: their content hashes when the caller has already checked the files
+    (the stage runner); otherwise every stage file is read back and checked here."""
     p = Path(path)
     doc = read_signature_document(p)
-    if doc["provenance"]["stages"] != committed_hashes(p.parent):
+    if doc["provenance"]["stages"] != (
+        committed_hashes(p.parent) if committed is None else committed
+    ):
         raise ArmsigError(f"{p}: {STALE}", fix=f"run `pipeline identify {p.parent}`")
     return signature_from_document(doc, str(p))
 

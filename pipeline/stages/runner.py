@@ -87,14 +87,17 @@ def _function(ref: str) -> Callable[..., Any]:
     return getattr(importlib.import_module(module), func)  # type: ignore[no-any-return]
 
 
-def _load_file_input(sdir: Path, name: str) -> Any:
-    """Load a :data:`FILE_INPUTS` file of a session with its loader."""
+def _load_file_input(sdir: Path, name: str, hashes: _Hashes) -> Any:
+    """Load a :data:`FILE_INPUTS` file of a session with its loader; the product's loader
+    also gets the content hashes of the committed stages, already checked in this run."""
     fname, loader = FILE_INPUTS[name]
     path = sdir / fname
     if not path.is_file():
         raise StageError(
             f"{sdir}: no {fname}", fix="run `pipeline identify` / `pipeline evaluate` first"
         )
+    if name == PRODUCT[0]:
+        return _function(loader)(path, {n: hashes.get(n) for n in STAGE_MODULES})
     return _function(loader)(path)
 
 
@@ -449,7 +452,7 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
         if inp == RECORDING:
             inputs[inp] = read_recording(sdir / "recording.mcap", hashes.get(RECORDING))
         elif inp in FILE_INPUTS:
-            inputs[inp] = _load_file_input(sdir, inp)
+            inputs[inp] = _load_file_input(sdir, inp, hashes)
         else:
             checked = hashes.check(inp)
             if checked is None or checked.table is None:
