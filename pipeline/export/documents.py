@@ -59,6 +59,19 @@ def _joint(robot: RobotDescription, i: int) -> dict[str, Any]:
     return {"joint": j.name, "type": j.type, f"limits_{j.unit}": [j.lower, j.upper]}
 
 
+def _table(
+    head: dict[str, Any], base: np.ndarray, rows: list[dict[str, Any]], tool: np.ndarray
+) -> dict[str, Any]:
+    """A D-H table document: header, Hayati's note, base (4, 4), rows, tool (4, 4)."""
+    return {
+        **head,
+        "note": HAYATI_NOTE,
+        "base": matrix_rows(base),
+        "rows": rows,
+        "tool": matrix_rows(tool),
+    }
+
+
 def dh_document(t: DHTable, robot: RobotDescription, model: str, frame: str) -> dict[str, Any]:
     """The standard D-H table with Hayati's β as a JSON-ready dict."""
     rows = [
@@ -73,14 +86,7 @@ def dh_document(t: DHTable, robot: RobotDescription, model: str, frame: str) -> 
         }
         for i in range(robot.n_joints)
     ]
-    head = _header(robot, model, frame, DH_CONVENTION)
-    return {
-        **head,
-        "note": HAYATI_NOTE,
-        "base": matrix_rows(t.base),
-        "rows": rows,
-        "tool": matrix_rows(t.tool),
-    }
+    return _table(_header(robot, model, frame, DH_CONVENTION), t.base, rows, t.tool)
 
 
 def mdh_document(
@@ -99,14 +105,7 @@ def mdh_document(
         }
         for i in range(robot.n_joints)
     ]
-    head = _header(robot, model, frame, MDH_CONVENTION)
-    return {
-        **head,
-        "note": HAYATI_NOTE,
-        "base": matrix_rows(m.base),
-        "rows": rows,
-        "tool": matrix_rows(m.tool),
-    }
+    return _table(_header(robot, model, frame, MDH_CONVENTION), m.base, rows, m.tool)
 
 
 def chain_document(
