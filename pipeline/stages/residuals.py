@@ -21,7 +21,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     }
     for row in inputs["features"].to_pylist():
         i = row["joint"]
-        p, q, steps = sweep_points(inputs["triangulate"], inputs["joints"], i, n, pris)
+        p, q, steps = sweep_points(inputs["positions"], inputs["joints"], i, n, pris)
         axis = np.array([row["axis_x"], row["axis_y"], row["axis_z"]])
         c = np.array([row["center_x_cm"], row["center_y_cm"], row["center_z_cm"]])
         d = p - c
@@ -49,8 +49,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 STAGE = Stage(
     "residuals",
-    1,
-    ("triangulate", "joints", "features", "session"),
+    2,
+    ("positions", "joints", "features", "session"),
     NoParams(),
     compute,
     "per-point normal and radial residuals",
