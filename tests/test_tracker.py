@@ -59,6 +59,10 @@ def test_a_nest_target_on_the_wrist_axis_is_not_used(tmp_path_factory) -> None:
     assert len(rows[6]["targets_not_used"]) == 1
     assert rows[6]["targets_not_used"][0].startswith("T3: too little motion (on or near the axis)")
     assert all(sorted(rows[j]["targets_used"]) == ["T1", "T2", "T3"] for j in range(1, 6))
+    res = read_table(stage_path(d, "residuals")).to_pylist()  # the best target's only
+    for j in range(1, 7):
+        radial = [r["radial_cm"] for r in res if r["joint"] == j]
+        assert len(radial) == rows[j]["n_points"] == 8 and max(map(abs, radial)) < 0.01
     report = (d / "report" / "report.md").read_text(encoding="utf-8")
     assert "| 6 | " in report and "T3: too little motion (on or near the axis)" in report
     assert audit(d, configurations=200).improvement >= 10.0

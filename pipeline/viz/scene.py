@@ -45,8 +45,9 @@ class VizMessage:
 
 
 def measured_topic(sweep: int) -> str:
-    """Topic of a sweep's measured positions: ``/measured/joint_<i>``; 0 is the tool probe."""
-    return "/measured/tool" if sweep == 0 else f"/measured/joint_{sweep}"
+    """Topic of a sweep's measured positions: ``/measured/joint_<i>``; 0 is the tool probe,
+    -1 the validation configurations (sweep 'check')."""
+    return {0: "/measured/tool", -1: "/measured/check"}.get(sweep, f"/measured/joint_{sweep}")
 
 
 def frame_messages(sig: Signature, q: np.ndarray) -> list[VizMessage]:
