@@ -6,6 +6,7 @@ Shared by the sonic reader (:mod:`pipeline.stages.recording`) and the point read
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -104,19 +105,19 @@ def pair_keys(
     j_step: np.ndarray,
     m_sweep: np.ndarray,
     m_step: np.ndarray,
-    m_key: list[str],
+    m_key: Callable[[int], str],
     topic: str,
     what: str,
 ) -> None:
-    """Every measurement (``what`` of ``topic``, its keys spelled ``m_key``) has its joint
-    state and every joint state at least one measurement."""
+    """Every measurement (``what`` of ``topic``; ``m_key(k)`` spells the key of the k-th)
+    has its joint state and every joint state at least one measurement."""
     stride = np.int64(1) << 21  # steps are at most 1e6 (schema) < 2**21
     j_key = j_sweep * stride + j_step  # sorted, unique
     c_key = m_sweep * stride + m_step
     orphan = np.flatnonzero(~np.isin(c_key, j_key))
     if len(orphan):
         raise RecordingError(
-            f"{p}: {topic} {what} {m_key[orphan[0]]} has no /robot/joint_state",
+            f"{p}: {topic} {what} {m_key(int(orphan[0]))} has no /robot/joint_state",
             expected="the joint state of every measured configuration, same (sweep, step)",
             fix=KEY_FIX,
         )
