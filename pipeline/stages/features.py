@@ -13,6 +13,7 @@ import pyarrow.compute as pc
 from pipeline.errors import StageError
 from pipeline.features.accuracy import revolute_accuracy
 from pipeline.features.circle import fit_circle
+from pipeline.features.expected import prismatic_expected, require_spread, revolute_expected
 from pipeline.features.line import fit_line
 from pipeline.features.plane import fit_plane_eigen, fit_plane_lsq, frame_about, orient_normal
 from pipeline.schemas import arrow_schema
@@ -22,6 +23,15 @@ from pipeline.stages.session import session_robot
 from pipeline.stages.triangulate import positions
 
 PLANE_METHODS = ("lsq", "eigen")
+#: Columns of :meth:`pipeline.features.expected.ExpectedAccuracy.columns` (two not float).
+EXPECTED_COLUMNS = (
+    "residual_dof",
+    "noise_gain",
+    "expected_axis_deg",
+    "expected_center_cm",
+    "expected_basis",
+)
+NOT_FLOAT = ("residual_dof", "expected_basis")
 
 
 @dataclass(frozen=True)
@@ -76,9 +86,11 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
                 fix=f"re-record sweep {i} with more positions, or check its echoes in "
                 "stages/compensate.arrow",
             )
+        require_spread(p, i, bool(pris[i - 1]))
         row: dict[str, Any] = {"joint": i, "type": robot.joints[i - 1].type, "n_points": len(p)}
         if pris[i - 1]:
             line = fit_line(p)
+            expected = prismatic_expected(p, line)
             x_dir = frame_about(line.direction)[:, 0]
             row.update(
                 plane_method="line",
@@ -109,6 +121,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             axis = n_lsq if params.plane_method == "lsq" else n_eig
             circle = fit_circle(p, plane)
             acc = revolute_accuracy(p, plane, circle)
+            thesis = (float(acc.sigma_delta_empirical), float(acc.sigma_c))
+            expected = revolute_expected(p, plane, circle, thesis)
             angle = np.degrees(np.arctan2(np.linalg.norm(np.cross(n_eig, n_lsq)), n_eig @ n_lsq))
             row.update(
                 plane_method=params.plane_method,
@@ -133,6 +147,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
                 sigma_c_cm=_nan(acc.sigma_c) if circle.sweep >= np.pi else None,
                 warnings=list(dict.fromkeys([*plane.warnings, *circle.warnings])),
             )
+        row.update(expected.columns(), warnings=[*row["warnings"], *expected.warnings])
         rows.append(row)
     out: dict[str, list[Any]] = {}
 
@@ -164,12 +179,14 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             "sigma_c_cm",
         ):
             put(name, r[name])
+        for name in EXPECTED_COLUMNS:
+            put(name, r[name])
         put("warnings", [str(w) for w in r["warnings"]])
     order = arrow_schema("features").names
     return pa.table(
         {
             k: pa.array(out[k], type=pa.float64())
-            if k not in ("joint", "type", "n_points", "plane_method", "warnings")
+            if k not in ("joint", "type", "n_points", "plane_method", "warnings", *NOT_FLOAT)
             else pa.array(out[k], type=pa.list_(pa.string()))
             if k == "warnings"
             else out[k]
@@ -180,7 +197,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "features",
-    3,
+    4,  # 4: expected accuracy per sweep, sparse / short sweep warnings
     ("triangulate", "joints", "session"),
     Params(),
     compute,
