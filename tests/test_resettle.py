@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -73,3 +74,21 @@ def test_frames_without_resettling_are_unchanged() -> None:
     qs = rng.normal(0, 1, 4)
     out = frames_at_signature(F, np.tile(qs, (4, 1)), qs, np.zeros(4, bool))
     assert np.array_equal(out, F)  # bit for bit: today's sessions keep their signatures
+
+
+def test_cli_resettle_option_and_truth(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+
+    args = ["simulate", "--noiseless", "--points", "3", "--repeats", "1"]
+    r = CliRunner().invoke(app, [*args, str(tmp_path / "a"), "--resettle-counts", "1"])
+    assert r.exit_code == 0, r.output
+    truth = json.loads((tmp_path / "a" / "rig-truth.json").read_text())
+    assert truth["options"]["resettle_counts"] == 1
+    r = CliRunner().invoke(app, [*args, str(tmp_path / "b")])
+    assert r.exit_code == 0, r.output
+    # Off by default, and then absent from rig-truth.json: today's files keep their bytes.
+    assert "resettle_counts" not in json.loads((tmp_path / "b" / "rig-truth.json").read_text())
+    r = CliRunner().invoke(app, [*args, str(tmp_path / "c"), "--resettle-counts", "-1"])
+    assert r.exit_code == 2

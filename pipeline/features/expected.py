@@ -31,9 +31,17 @@ accuracy to expect of its features and warns when it is poor:
   a full turn (6.11) gives ``sqrt(2/N)``, for a sweep of X° (6.12) gives
   ``1 / sqrt(N (.00244 X − .344))``. Above 1 the identified features are less
   accurate than one measured point, which no user expects from fitting many: we
-  warn. At 180° this asks for N ≥ 11, at 360° N ≥ 2. Evenly spaced, 5 points over 60°
-  have a gain of 8.0, 7 over 120° 1.98, 11 over 360° 0.45 (computed from the points,
-  as every session's are).
+  warn. (6.12) puts the limit at N ≥ 11 for 180° and N ≥ 2 for 360°. Each session's
+  gain is computed from its own points; for evenly spaced ones (whose end points weigh
+  more than in the continuous arc (6.12) models) the limit falls at N = 7 for 180°,
+  about 41 for 120° and 560 for 60° (the gain falls as 1/√N): 5 points over 60° have a
+  gain of 8.0, 13 over 60° 6.0, 7 over 120° 1.98, 11 over 360° 0.45.
+
+Checked by simulation (σ = 0.01 cm, R = 30 cm, 2000 trials, the stated value the RMS
+over 500 of them; ``tests/test_features_sparse.py``): the propagated axis σ is within
+1 % of the observed one for 5 points over 60° and 7 over 120°, the propagated centre σ
+10-18 % above it. (6.12)/(6.13) state 19 % / 15 % less than observed for 11 points over
+360° and within 2 % for 100 over 180°.
 """
 
 from __future__ import annotations
