@@ -11,14 +11,13 @@ from typer.testing import CliRunner
 
 from pipeline.audit import audit
 from pipeline.cli import app
-from pipeline.errors import ArmsigError, FeatureError
+from pipeline.contract.channels import POINT_CHANNELS
 from pipeline.features.accuracy import revolute_accuracy
 from pipeline.features.circle import fit_circle
 from pipeline.features.expected import (
     SIGMA_COLUMNS,
     noise_bound,
     prismatic_expected,
-    require_spread,
     revolute_expected,
 )
 from pipeline.features.line import fit_line
@@ -106,19 +105,24 @@ def test_prismatic_expected_accuracy() -> None:
     assert any("residual degrees of freedom" in w for w in exp.warnings)  # 6 < 8
 
 
-@pytest.mark.parametrize(
-    ("points", "prismatic", "fragment"),
-    [
-        (np.array([[0.0, 0, 0], [0, 0, 10], [0, 0, 20]]), False, "sweep 3 (revolute): target "
-         "positions are collinear"),
-        (np.zeros((4, 3)) + 5.0, False, "sweep 3 (revolute): all target positions coincide"),
-    ],
-)  # fmt: skip
-def test_unusable_sweeps_are_refused_in_one_line(points, prismatic: bool, fragment: str) -> None:
-    with pytest.raises(FeatureError) as exc:
-        require_spread(points, 3, prismatic)
-    assert isinstance(exc.value, ArmsigError)
-    assert fragment in str(exc.value) and "\n" not in str(exc.value)
+def test_collinear_revolute_sweep_is_refused_in_one_line(tmp_path: Path) -> None:
+    src = tmp_path / "src"
+    simulate_session(src, SimulationOptions(sensor="tracker", seed=2, noiseless=True, points=5))
+    raw, _ = read_raw(src / "recording.mcap")
+    out = []
+    for m in raw:  # sweep 2's target moves on a straight line
+        p = m.payload
+        if m.topic == "/points" and p["sweep"] == 2:
+            p.update(x_cm=10.0 + 5.0 * p["step"], y_cm=20.0, z_cm=30.0)
+            m = m.with_payload(p)
+        out.append(m)
+    (tmp_path / "s").mkdir()
+    write_raw(tmp_path / "s" / "recording.mcap", out, channels=POINT_CHANNELS)
+    r = CliRunner().invoke(app, ["identify", str(tmp_path / "s")])
+    assert r.exit_code == 1, r.output
+    lines = [ln for ln in r.output.splitlines() if ln.startswith("error")]
+    assert len(lines) == 1 and "sweep 2: no usable target" in lines[0], r.output
+    assert "collinear" in lines[0], r.output
 
 
 @pytest.fixture(scope="module")

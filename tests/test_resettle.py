@@ -67,6 +67,14 @@ def test_noiseless_session_with_resettling_is_exact(tmp_path: Path, robot: str) 
     assert r.signature.max_orientation_deg <= 1e-7, r.signature
 
 
+def test_tracker_session_with_resettling_and_checks_is_exact(tmp_path: Path) -> None:
+    opts = SimulationOptions(sensor="tracker", seed=4, noiseless=True, points=8,
+                             resettle_counts=2, check=5)  # fmt: skip
+    simulate_session(tmp_path, opts)
+    identify(tmp_path, report=False)
+    assert audit(tmp_path, configurations=200).signature.max_position_cm <= 1e-6
+
+
 def test_frames_without_resettling_are_unchanged() -> None:
     rng = np.random.default_rng(1)
     F = np.tile(np.eye(4), (4, 1, 1))

@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from pipeline.features.checks import MIN_SWEEP_B3, principal_axes
+from pipeline.features.checks import MIN_SWEEP_B3
 from pipeline.features.circle import CircleFit
 from pipeline.features.line import LineFit
 from pipeline.features.plane import PlaneFit, frame_about
@@ -105,13 +105,6 @@ class ExpectedAccuracy:
         if self.basis == "unknown":
             out.update(dict.fromkeys(SIGMA_COLUMNS))
         return out
-
-
-def require_spread(points: np.ndarray, joint: int, prismatic: bool) -> None:
-    """One-line error naming the sweep when its (at least 3) usable positions cannot
-    define its features: all coinciding, or (revolute) on a straight line."""
-    kind = "prismatic" if prismatic else "revolute"
-    principal_axes(points, f"sweep {joint} ({kind})", plane=not prismatic)
 
 
 def noise_bound(dof: int) -> float:

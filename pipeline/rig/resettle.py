@@ -30,8 +30,8 @@ def resettle(
     q : ndarray, shape (K, n)
         Joint positions of the configurations in recording order (deg / cm).
     sweeps : sequence of int or str, length K
-        Sweep of each configuration: the 1-based joint that moves, or ``"tool"``
-        (every joint held).
+        Sweep of each configuration: the 1-based joint that moves, ``"tool"`` (every
+        joint held) or ``"check"`` (a validation configuration, left as it is).
     resolution : ndarray, shape (n,)
         One encoder count of each joint (deg / cm).
     counts : int
@@ -49,6 +49,8 @@ def resettle(
     offset = np.zeros(n)  # counts away from the commanded position, per joint
     moving = -1
     for k, sweep in enumerate(sweeps):
+        if sweep == "check":
+            continue  # a validation configuration: every joint is commanded, none held
         if k > 0 and sweep != sweeps[k - 1]:
             if moving >= 0:
                 offset[moving] = 0.0  # it was commanded back to q^s

@@ -39,9 +39,9 @@ from pipeline.kinematics.signature import (
     signature_chain,
 )
 from pipeline.stages.base import NoParams, Stage
-from pipeline.stages.recording import TOOL_SWEEP
+from pipeline.stages.positions import positions, sweep_rows
+from pipeline.stages.recording import TOOL_SWEEP, sweep_name
 from pipeline.stages.session import session_robot
-from pipeline.stages.triangulate import positions
 from pipeline.units import joints_to_internal
 
 MATRIX_COLUMNS = ("nx", "ny", "nz", "ox", "oy", "oz", "ax", "ay", "az", "px_cm", "py_cm", "pz_cm")
@@ -96,9 +96,8 @@ def readings_at(
     found = at < len(have)
     found[found] = have[at[found]] == steps[found]
     if not found.all():
-        name = "tool" if sweep == TOOL_SWEEP else sweep
         raise StageError(
-            f"no joint state for (sweep {name}, step {steps[~found][0]})",
+            f"no joint state for (sweep {sweep_name(sweep)}, step {steps[~found][0]})",
             expected="a joint state for every measured configuration",
             fix="re-record the session; the recording is inconsistent",
         )
@@ -185,8 +184,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     held = joints_to_internal(held_readings(inputs["joints"], pris), pris)
     F[:n] = frames_at_signature(F[:n], held, joints_to_internal(qs, pris), pris)
     F[n] = F[n - 1]  # S̄_n = S̄_{n-1}
-    tri = inputs["triangulate"]
-    tool_rows = tri.filter(pc.equal(tri.column("sweep"), TOOL_SWEEP))
+    # The tool sweep measures one target (the recording reader refuses others).
+    tool_rows = sweep_rows(inputs["positions"], TOOL_SWEEP)
     p_tool = positions(tool_rows)
     usable = ~np.isnan(p_tool).any(axis=1)
     if not usable.any():
@@ -236,8 +235,8 @@ def chain_from_frames(frames: pa.Table, prismatic: np.ndarray):  # -> SerialChai
 
 STAGE = Stage(
     "frames",
-    3,  # 3: frames brought to q̄^s with each sweep's recorded readings
-    ("features", "joints", "triangulate", "session"),
+    4,  # 4: frames brought to q̄^s with each sweep's recorded readings
+    ("features", "joints", "positions", "session"),
     NoParams(),
     compute,
     "S-Model frames S̄_0..S̄_n and the tool",
