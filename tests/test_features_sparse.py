@@ -156,11 +156,13 @@ def test_seven_points_over_120_deg_identify_exactly(tmp_path: Path) -> None:
 
 def test_three_point_session_reports_no_zero_sigma(tmp_path: Path) -> None:
     simulate_session(tmp_path, SimulationOptions(seed=5, points=3, repeats=2))
-    result = identify(tmp_path, report=False)
+    result = identify(tmp_path)  # the report too: its summary sorts by a null σ_normal
     feats = pl.read_ipc(stage_path(tmp_path, "features"))
     assert (feats["expected_basis"] == "unknown").all()
     assert feats["sigma_normal_cm"].null_count() == len(feats)
     assert sum("unknown, not 0" in w for w in result.warnings) == len(feats)
+    report = (tmp_path / "report" / "report.md").read_text()
+    assert "| 1 | waist | 3 | 300.052° | 0 | 1.42 | — | — | unknown |" in report
 
 
 def test_prismatic_sweep_with_two_usable_points_is_one_line(tmp_path: Path) -> None:
