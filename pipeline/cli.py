@@ -255,6 +255,14 @@ def simulate(
             min=1.0, max=720.0, help="Cap of every revolute sweep (deg); under 180 violates B-3."
         ),
     ] = 300.0,
+    resettle_counts: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            max=1000,
+            help="Held joints re-settle by ±1..K encoder counts between sweeps (0: never).",
+        ),
+    ] = 0,
     sensor: Annotated[
         str,
         typer.Option(
@@ -293,6 +301,7 @@ def simulate(
         wac_error_cm=wac_error_cm,
         noiseless=noiseless,
         max_sweep_deg=max_sweep_deg,
+        resettle_counts=resettle_counts,
         sensor=sensor,
         targets=targets,
         nest_on_axis=nest_on_axis,

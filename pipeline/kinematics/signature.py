@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.kinematics.chain import SerialChain
+from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.smodel import SModelParams, dh_from_smodel, smodel_from_matrix
 from pipeline.kinematics.transforms import (
     Array,
@@ -56,6 +56,52 @@ def frame_from_features(axis: ArrayLike, origin: ArrayLike, toward: ArrayLike) -
     S[..., :3, 2] = a
     S[..., :3, 3] = p  # Eq. (4.49)
     return S
+
+
+def frames_at_signature(
+    frames: ArrayLike, readings: ArrayLike, q_signature: ArrayLike, prismatic: ArrayLike
+) -> Array:
+    """Frames measured each at its own sweep's readings, brought to ``q̄^s``.
+
+    ``S̄_{i−1}`` is fixed in link ``i−1``; sweep ``i`` measures it with joints
+    ``1 … i−1`` at that sweep's readings ``r`` (a held joint may re-settle between
+    sweeps), not at ``q̄^s``. With the link pose ``L(q) = S̄_0 Π_j M_j(q_j − q̄_j^s) B_j``
+    of the signature model (module docstring), the frame at ``q̄^s`` is
+    ``C · S̄_{i−1}`` with ``C = L_{i−1}(q̄^s) L_{i−1}(r)^{-1}``; ``B_{i−1}`` cancels in
+    ``C``, so ``C`` needs only ``S̄_0 … S̄_{i−2}``, already brought to ``q̄^s``:
+    the frames are corrected in order, sweep 2 to n (sweep 1 has no earlier joint).
+    ``C`` is a rigid motion, so moving the frame moves its features (axis, centre
+    or line point, first target) with it, and (4.49)-(4.50) give the same frame.
+    Exact for exact features and readings.
+
+    Parameters
+    ----------
+    frames : array_like, shape (n, 4, 4)
+        ``S̄_0 … S̄_{n−1}``, ``S̄_{i−1}`` from sweep ``i``'s features (cm).
+    readings : array_like, shape (n, n)
+        Row ``i−1``: the joint readings while sweep ``i`` was measured (rad / cm;
+        only joints ``1 … i−1`` are used).
+    q_signature : array_like, shape (n,)
+        ``q̄^s`` (rad / cm).
+    prismatic : array_like of bool, shape (n,)
+
+    Returns
+    -------
+    ndarray, shape (n, 4, 4)
+    """
+    F = np.array(frames, float)
+    r = np.asarray(readings, float)
+    qs = np.asarray(q_signature, float)
+    pris = np.asarray(prismatic, bool)
+    for i in range(2, len(F) + 1):
+        m = i - 1  # joints 1 … i−1 move link i−1
+        if np.array_equal(r[i - 1, :m], qs[:m]):
+            continue  # already at q̄^s: C = I exactly (no rounding from a product with its inverse)
+        # L_{i−1} with B_{i−1} = I (it cancels): frames S̄_0 … S̄_{i−2} and S̄_{i−2} again.
+        chain = signature_chain(np.concatenate([F[:m], F[m - 1 : m]]), qs[:m], pris[:m])
+        at_sweep = forward_kinematics(chain, r[i - 1, :m])
+        F[i - 1] = forward_kinematics(chain, qs[:m]) @ invert_transform(at_sweep) @ F[i - 1]
+    return F
 
 
 def links_from_frames(frames: ArrayLike) -> Array:

@@ -99,11 +99,38 @@ def _summary(name: str, t: dict[str, list[Row]], robot: Any, mode: str) -> str:
         )
     if not warned:
         return text + "No feature warnings."
-    worst = max(warned, key=lambda f: f["sigma_normal_cm"])
+    worst = max(warned, key=lambda f: f["sigma_normal_cm"] or 0.0)  # null: unknown
     return text + (
         f"{len(warned)} joint(s) carry feature warnings; the largest residuals "
         f"(σ_normal {cm(worst['sigma_normal_cm'])} cm) are on joint {worst['joint']}: "
         f"“{'; '.join(worst['warnings'])}”"
+    )
+
+
+def _expected_section(rows: list[Row], robot: Any) -> str:
+    """Expected feature accuracy of every sweep and why (pipeline/features/expected.py)."""
+    body = []
+    for r in rows:
+        pris = r["type"] == "prismatic"
+        extent = f"{cm(r['travel_cm'])} cm" if pris else f"{deg(r['sweep_deg'])}°"
+        body.append(
+            [r["joint"], robot.joints[r["joint"] - 1].name, r["n_points"], extent,
+             r["residual_dof"], f"{r['noise_gain']:.3g}", sig(r["expected_axis_deg"]),
+             sig(r["expected_center_cm"]), r["expected_basis"]]
+        )  # fmt: skip
+    head = ["Joint", "Name", "Points", "Sweep / travel", "Residual dof", "Noise gain"]
+    head += ["Axis σ (deg)", "Centre σ (cm)", "From"]
+    return (
+        "## Expected feature accuracy (6.12)/(6.13)\n\n"
+        + _table(head, body)
+        + "\n\n(6.12) (axis) and (6.13) (centre) hold for revolute sweeps of at least 180° "
+        "(B-3). Below 180°, and for prismatic sweeps, the table states the fitted noise "
+        "(N − 3, resp. 2N − 4, degrees of freedom) propagated through the fits instead "
+        "(*propagated*); with no residual degree of freedom (3 points on a revolute sweep) the "
+        "accuracy is *unknown*, not 0. The noise gain is the features' error at the target per "
+        "unit of point noise, from the geometry alone: above 1 a sweep is too short or too "
+        "sparse to beat one measured point, and a feature warning says so, as it does when "
+        "fewer than 8 degrees of freedom leave the noise itself uncertain by more than 2x."
     )
 
 
@@ -330,6 +357,7 @@ def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -
         _dh_section(t["dh"], robot),
         _smodel_section(t["smodel"], t["frames"], robot),
         _features_section(t["features"], robot),
+        _expected_section(t["features"], robot),
         _variance_section(res),
         _figures_section(figs),
         _quality_section(t["positions"], t["compensate"])

@@ -27,6 +27,7 @@ from pipeline.rig.plan import (
     tool_positions,
 )
 from pipeline.rig.recorder import Message, write_recording
+from pipeline.rig.resettle import resettle
 from pipeline.rig.true_robot import ErrorSigmas, draw_true_robot
 from pipeline.robots import get_robot
 from pipeline.robots.description import description_to_dict
@@ -61,6 +62,7 @@ class SimulationOptions:
     wac_error_cm: float = 0.0  # W_AC calibration error (Section 7.3)
     noiseless: bool = False
     max_sweep_deg: float = 300.0  # cap of every revolute sweep (B-3 experiments)
+    resettle_counts: int = 0  # held joints re-settle by ±1..K counts between sweeps
     sensor: str = "sonic"  # or "tracker" (pipeline.rig.tracker)
     targets: int = 1  # tracker: reflectors per sweep (a nest), ids T1..TK
     nest_on_axis: int = 0  # tracker: joint whose sweep's last reflector is on its axis
@@ -96,6 +98,21 @@ def _check(opts: SimulationOptions) -> None:
             expected="--points >= 3 and --repeats >= 1",
             got=f"points={opts.points}, repeats={opts.repeats}",
         )
+    if opts.resettle_counts < 0:
+        raise ArmsigError(
+            "simulation option resettle_counts must be >= 0",
+            got=str(opts.resettle_counts),
+            fix="--resettle-counts 2 (or 0: held joints never move)",
+        )
+
+
+def _options_for_truth(opts: SimulationOptions) -> dict[str, object]:
+    """The options as rig-truth.json records them; ``resettle_counts`` only when set, so
+    that sessions simulated without it keep their bytes."""
+    out = {**asdict(opts), "faults": list(opts.faults)}
+    if not opts.resettle_counts:
+        del out["resettle_counts"]
+    return out
 
 
 def _check_tracker(opts: SimulationOptions) -> None:
@@ -213,6 +230,10 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             held = q_cmd[k] == q_cmd[k - 1]
             q_reached[k, held] = q_reached[k - 1, held]
         q_enc = np.round(q_reached / res) * res
+    if opts.resettle_counts > 0:  # the arm parked between sweeps, the brakes engaging
+        sweep_of = [c[0] for c in commands]
+        q_reached = resettle(q_reached, sweep_of, res, opts.resettle_counts, rng_servo.spawn(1)[0])
+        q_enc = q_reached.copy() if opts.noiseless else np.round(q_reached / res) * res
 
     # Timing: move, settle, N_avg cycles; a pause to swap fixtures between sweeps.
     t = 0.0
@@ -337,7 +358,7 @@ def _truth(
     return {
         "robot": robot.name,
         "seed": opts.seed,
-        "options": {**asdict(opts), "faults": list(opts.faults)},
+        "options": _options_for_truth(opts),
         "true_kinematics": {
             "frame": "sensor",
             "length_unit": "cm",

@@ -18,6 +18,7 @@ import pyarrow as pa
 from pipeline.errors import ArmsigError, StageError
 from pipeline.features.accuracy import revolute_accuracy
 from pipeline.features.circle import fit_circle
+from pipeline.features.expected import prismatic_expected, revolute_expected
 from pipeline.features.line import fit_line
 from pipeline.features.plane import fit_plane_eigen, fit_plane_lsq, frame_about, orient_normal
 from pipeline.features.targets import (
@@ -36,6 +37,15 @@ from pipeline.stages.session import session_robot
 
 PLANE_METHODS = ("lsq", "eigen")
 LIST_COLUMNS = ("warnings", "targets_used", "targets_not_used")
+#: Columns of :meth:`pipeline.features.expected.ExpectedAccuracy.columns` (two not float).
+EXPECTED_COLUMNS = (
+    "residual_dof",
+    "noise_gain",
+    "expected_axis_deg",
+    "expected_center_cm",
+    "expected_basis",
+)
+NOT_FLOAT = ("residual_dof", "expected_basis")
 
 
 @dataclass(frozen=True)
@@ -82,8 +92,9 @@ def _fit_row(p: np.ndarray, prismatic: bool, plane_method: str) -> dict[str, Any
     """The feature of one target's positions ``p`` (N, 3), by increasing reading."""
     if prismatic:
         line = fit_line(p)
+        expected = prismatic_expected(p, line)
         x_dir = frame_about(line.direction)[:, 0]
-        row = dict(
+        row: dict[str, Any] = dict(
             plane_method="line",
             axis=line.direction,
             eigen=None,
@@ -112,6 +123,8 @@ def _fit_row(p: np.ndarray, prismatic: bool, plane_method: str) -> dict[str, Any
         axis = n_lsq if plane_method == "lsq" else n_eig
         circle = fit_circle(p, plane)
         acc = revolute_accuracy(p, plane, circle)
+        thesis = (float(acc.sigma_delta_empirical), float(acc.sigma_c))
+        expected = revolute_expected(p, plane, circle, thesis)
         angle = np.degrees(np.arctan2(np.linalg.norm(np.cross(n_eig, n_lsq)), n_eig @ n_lsq))
         row = dict(
             plane_method=plane_method,
@@ -136,6 +149,7 @@ def _fit_row(p: np.ndarray, prismatic: bool, plane_method: str) -> dict[str, Any
             sigma_c_cm=_nan(acc.sigma_c) if circle.sweep >= np.pi else None,
             warnings=list(dict.fromkeys([*plane.warnings, *circle.warnings])),
         )
+    row.update(expected.columns(), warnings=[*row["warnings"], *expected.warnings])
     return row
 
 
@@ -157,8 +171,8 @@ def _fit_target(
     except (ArmsigError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return f"its fit fails: {exc}"
     if sigma is None:  # no recorded noise (sonic): the fit's own residual scatter
-        rad = row["sigma_radial_cm"] or 0.0
-        sigma = float(np.sqrt((row["sigma_normal_cm"] ** 2 + rad**2) / 2.0))
+        rad = row["sigma_radial_cm"] or 0.0  # null: unknown (3 points), taken as 0
+        sigma = float(np.sqrt(((row["sigma_normal_cm"] or 0.0) ** 2 + rad**2) / 2.0))
     return TargetFit(target, len(p), sigma, row)
 
 
@@ -246,6 +260,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             "sigma_c_cm",
         ):
             put(name, r[name])
+        for name in EXPECTED_COLUMNS:
+            put(name, r[name])
         put("warnings", [str(w) for w in r["warnings"]])
         put("targets_used", r["targets_used"])
         put("targets_not_used", r["targets_not_used"])
@@ -253,7 +269,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     return pa.table(
         {
             k: pa.array(out[k], type=pa.float64())
-            if k not in ("joint", "type", "n_points", "plane_method", *LIST_COLUMNS)
+            if k not in ("joint", "type", "n_points", "plane_method", *LIST_COLUMNS, *NOT_FLOAT)
             else pa.array(out[k], type=pa.list_(pa.string()))
             if k in LIST_COLUMNS
             else out[k]
@@ -264,7 +280,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "features",
-    4,
+    5,  # 5: expected accuracy per sweep, sparse / short sweep warnings
     ("positions", "joints", "session"),
     Params(),
     compute,

@@ -11,6 +11,15 @@ q̄_n^s is joint n's reading at the tool measurement, which also fixes the tool:
 ``tool = T_sig(q_tool)^{-1} · p_tool`` with the orientation of ``S_n``. A tool
 measurement repeated as several steps of the ``tool`` sweep gives the mean of the
 tools of its usable steps, each paired with its own joint state by (sweep, step).
+
+Common configuration: a held joint may read differently in different sweeps (the
+arm parked between sweeps, the brake engaging: it re-settles by a count or two).
+Sweep i's features are measured with joints 1 … i-1 at the readings recorded
+during sweep i (median over the sweep), not at q̄^s. Each ``S̄_{i-1}`` is brought
+to q̄^s with those readings and the frames already identified for joints
+1 … i-1, in order from sweep 2 to n
+(:func:`~pipeline.kinematics.signature.frames_at_signature`); exact on noiseless
+data. When the readings equal q̄^s (no re-settling) the frames are unchanged.
 """
 
 from __future__ import annotations
@@ -24,7 +33,11 @@ import pyarrow.compute as pc
 
 from pipeline.errors import StageError
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
-from pipeline.kinematics.signature import frame_from_features, signature_chain
+from pipeline.kinematics.signature import (
+    frame_from_features,
+    frames_at_signature,
+    signature_chain,
+)
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.positions import positions, sweep_rows
 from pipeline.stages.recording import TOOL_SWEEP, sweep_name
@@ -109,6 +122,23 @@ def signature_readings(joints: pa.Table, prismatic: np.ndarray, source: str) -> 
     return qs
 
 
+def held_readings(joints: pa.Table, prismatic: np.ndarray) -> np.ndarray:
+    """Readings (n, n) during every joint sweep, boundary units: row i-1 holds the
+    median over sweep i's configurations of each joint's reading (module docstring)."""
+    n = len(prismatic)
+    out = np.zeros((n, n))
+    for i in range(1, n + 1):
+        q = joint_readings(joints, i, n, prismatic)
+        if len(q) == 0:
+            raise StageError(
+                f"joints: no joint states for sweep {i}",
+                expected=f"every joint sweep 1..{n} and the tool measurement",
+                fix="re-record the missing sweep",
+            )
+        out[i - 1] = np.median(q, axis=0)
+    return out
+
+
 def tool_from_probe(chain: SerialChain, q_tool: np.ndarray, p_tool: np.ndarray) -> np.ndarray:
     """Tool of a signature chain from the probe measurement (module docstring).
 
@@ -149,8 +179,11 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         origin = [row["center_x_cm"], row["center_y_cm"], row["center_z_cm"]]
         toward = [row["first_x_cm"], row["first_y_cm"], row["first_z_cm"]]
         F[i - 1] = frame_from_features(axis, origin, toward)  # Eq. (4.49), (4.50)
-    F[n] = F[n - 1]  # S̄_n = S̄_{n-1}
     qs = signature_readings(inputs["joints"], pris, "joints")
+    # Each sweep's frame from the readings recorded during it to q̄^s (module docstring).
+    held = joints_to_internal(held_readings(inputs["joints"], pris), pris)
+    F[:n] = frames_at_signature(F[:n], held, joints_to_internal(qs, pris), pris)
+    F[n] = F[n - 1]  # S̄_n = S̄_{n-1}
     # The tool sweep measures one target (the recording reader refuses others).
     tool_rows = sweep_rows(inputs["positions"], TOOL_SWEEP)
     p_tool = positions(tool_rows)
@@ -202,7 +235,7 @@ def chain_from_frames(frames: pa.Table, prismatic: np.ndarray):  # -> SerialChai
 
 STAGE = Stage(
     "frames",
-    3,
+    4,  # 4: frames brought to q̄^s with each sweep's recorded readings
     ("features", "joints", "positions", "session"),
     NoParams(),
     compute,
