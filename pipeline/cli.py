@@ -301,6 +301,33 @@ SessionArg = Annotated[str, typer.Argument(help="Session folder, e.g. sessions/r
 JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON on stdout for machines.")]
 
 
+@app.command("import")
+def import_(
+    file: Annotated[str, typer.Argument(help="The foreign file of measured points.")],
+    name: Annotated[str, typer.Argument(help="Session name (sessions/NAME) or a folder path.")],
+    format: Annotated[str, typer.Option(help="sscanss2 | table | rct (docs/import.md).")],
+    robot: Annotated[str, typer.Option(help="Robot description .toml of the measured machine.")],
+    map: Annotated[
+        str | None, typer.Option(help="Map file (TOML): columns, units, sweeps (docs/import.md).")
+    ] = None,
+    force: Annotated[
+        bool, typer.Option(help="Replace the recording of an existing session (else refused).")
+    ] = False,
+) -> None:
+    """Convert a file of measured points into a point session (recording.mcap)."""
+    from pathlib import Path
+
+    from pipeline.importers import import_file
+
+    folder = Path(name) if ("/" in name or Path(name).is_absolute()) else Path("sessions") / name
+    out = import_file(file, format, robot, folder, map, force)
+    n_check = int((out.rows.sweep < 0).sum())
+    typer.echo(
+        f"wrote {out.recording}: {len(out.rows.where)} configurations "
+        f"({n_check} for validation), tool from {out.tool.note}"
+    )
+
+
 @app.command()
 def identify(
     session: SessionArg,

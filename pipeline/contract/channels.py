@@ -12,6 +12,13 @@ CHANNELS = {
     "/robot/joint_state": "joint_state",
     "/sonic/ranges": "sonic_ranges",
 }
+#: topic -> schema file of a point-sensor session recording (/rig/description sensor 'points')
+POINT_CHANNELS = {
+    "/rig/description": "rig_description",
+    "/robot/description": "robot_description",
+    "/robot/joint_state": "joint_state",
+    "/points": "points",
+}
 #: topic -> schema file of the evaluation recording ``evaluation.mcap`` (docs/evaluation.md)
 EVAL_CHANNELS = {
     "/eval/description": "eval_description",

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.atomic import check_writable, write_text_atomic
+from pipeline.atomic import write_text_atomic
 from pipeline.errors import ArmsigError
 from pipeline.rig.atmosphere import Atmosphere, random_atmosphere
 from pipeline.rig.digitizer import DigitizerModel, digitize
@@ -23,7 +23,7 @@ from pipeline.rig.plan import (
     target_positions,
     tool_positions,
 )
-from pipeline.rig.recorder import Message, write_recording
+from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
 from pipeline.rig.true_robot import ErrorSigmas, draw_true_robot
 from pipeline.robots import get_robot
 from pipeline.robots.description import description_to_dict
@@ -89,19 +89,6 @@ def _check(opts: SimulationOptions) -> None:
         )
 
 
-def _refuse_existing(out: Path, force: bool) -> None:
-    """A session folder that already holds a recording is never overwritten unless
-    ``force``: it may be the only copy of a real one."""
-    check_writable(out, "session folder", folder=True)
-    recording = out / "recording.mcap"
-    if recording.exists() and not force:
-        raise ArmsigError(
-            f"{out} already holds a recording ({recording})",
-            expected="a new session folder",
-            fix=f"choose another name, or `--force` to replace {recording} by a simulated one",
-        )
-
-
 def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bool = False) -> Path:
     """Simulate a rig session and write it to ``session_dir``; returns the recording path.
 
@@ -109,7 +96,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     """
     _check(opts)
     out = Path(session_dir)
-    _refuse_existing(out, force)
+    refuse_existing_recording(out, force, "a simulated one")
     robot = get_robot(opts.robot)
     rng = np.random.default_rng(opts.seed)
     rng_robot, rng_world, rng_servo, rng_sensor = rng.spawn(4)
@@ -283,7 +270,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     # Under the session lock, like every pipeline run on the folder: no run reads a
     # recording half replaced, and a recording that appeared meanwhile is still refused.
     with session_lock(out):
-        _refuse_existing(out, force)
+        refuse_existing_recording(out, force, "a simulated one")
         write_recording(recording, messages)
         write_text_atomic(out / "rig-truth.json", json.dumps(truth, indent=1) + "\n")
     return recording

@@ -26,6 +26,7 @@ from pipeline.errors import ArmsigError, RecordingError
 
 TOPICS = tuple(CHANNELS)
 TOOL_SWEEP = 0  # the tool-probe measurement's sweep id in tables ("tool" in the recording)
+CHECK_SWEEP = -1  # validation configurations' sweep id in tables ("check" in the recording)
 #: Recorded joint values may pass the robot's limits by this much (deg or cm): far
 #: above a servo's settling error (a few encoder counts) and an encoder offset
 #: (tenths of a degree), far below what garbage or a wrong unit gives.

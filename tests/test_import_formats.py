@@ -1,0 +1,91 @@
+"""`pipeline import`: each format becomes a point session per the contract (schemas/mcap/)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from import_data import TWO_LINK, TWO_LINK_MAP, TWO_LINK_VALUES, sscanss2_text, two_link_table
+from mcap.reader import make_reader
+
+from pipeline.contract.channels import POINT_CHANNELS
+from pipeline.contract.mcap_read import read_mcap
+from pipeline.errors import ArmsigError
+from pipeline.importers import import_file
+from pipeline.importers.write import SOURCE_METADATA
+from pipeline.stages.recording import file_sha256
+
+
+def _read(session: Path) -> dict[str, list[dict]]:
+    content = read_mcap(session / "recording.mcap", POINT_CHANNELS, "re-import")
+    return {t: [m for _, m in msgs] for t, msgs in content.messages.items()}
+
+
+def _metadata(session: Path) -> dict[str, str]:
+    with (session / "recording.mcap").open("rb") as fh:
+        for rec in make_reader(fh).iter_metadata():
+            if rec.name == SOURCE_METADATA:
+                return dict(rec.metadata)
+    raise AssertionError("no armsig.source metadata")
+
+
+@pytest.mark.parametrize("sep", ["\t", ","])
+def test_sscanss2_session(tmp_path: Path, sep: str) -> None:
+    src = tmp_path / "two.txt"
+    src.write_text(sscanss2_text(TWO_LINK, TWO_LINK_VALUES, sep))
+    out = import_file(src, "sscanss2", TWO_LINK, tmp_path / "s")
+    msgs = _read(tmp_path / "s")
+    desc = msgs["/robot/description"][0]
+    assert desc["mode"] == "imported"
+    assert msgs["/rig/description"][0]["sensor"] == "points"
+    sweeps = {s["joint"]: s for s in desc["plan"]["sweeps"]}
+    assert sweeps[1]["n_points"] == 7 and sweeps[2]["q_first"] == -120.0
+    assert desc["plan"]["order"] == [1, 2, "tool"]
+    # steps ordered by reading, q_commanded = q_encoder = the reading
+    j2 = sorted((m["step"], m["q_encoder"][1]) for m in msgs["/robot/joint_state"]
+                if m["sweep"] == 2)  # fmt: skip
+    assert [q for _, q in j2] == sorted(q for _, q in j2)
+    assert all(m["q_commanded"] == m["q_encoder"] for m in msgs["/robot/joint_state"])
+    # tool: both rows at home (each joint's 0)
+    assert len(out.tool.rows) == 2 and desc["signature_q"] == [0.0, 0.0]
+    meta = _metadata(tmp_path / "s")
+    assert meta["file"] == "two.txt" and meta["sha256"] == file_sha256(src)
+    assert meta["format"] == "sscanss2" and meta["map_sha256"] == ""
+
+
+def test_table_infer_two_targets_units(tmp_path: Path) -> None:
+    src = two_link_table(tmp_path / "two.csv")
+    mp = tmp_path / "map.toml"
+    mp.write_text(TWO_LINK_MAP)
+    import_file(src, "table", TWO_LINK, tmp_path / "s", mp)
+    msgs = _read(tmp_path / "s")
+    pts = msgs["/points"]
+    assert {p["target"] for p in pts} == {"a", "b"}
+    js = {(m["sweep"], m["step"]): m["q_encoder"] for m in msgs["/robot/joint_state"]}
+    assert js[(2, 0)][1] == pytest.approx(-120.0, abs=1e-9)  # rad -> deg
+    a = {(p["sweep"], p["step"]): p for p in pts if p["target"] == "a"}
+    b = {(p["sweep"], p["step"]): p for p in pts if p["target"] == "b"}
+    assert b[(1, 0)]["z_cm"] - a[(1, 0)]["z_cm"] == pytest.approx(0.05)  # mm -> cm
+    assert _metadata(tmp_path / "s")["map_sha256"] == file_sha256(mp)
+
+
+def test_existing_recording_refused_unless_force(tmp_path: Path) -> None:
+    src = tmp_path / "two.txt"
+    src.write_text(sscanss2_text(TWO_LINK, TWO_LINK_VALUES))
+    import_file(src, "sscanss2", TWO_LINK, tmp_path / "s")
+    before = (tmp_path / "s" / "recording.mcap").read_bytes()
+    with pytest.raises(ArmsigError, match="already holds a recording"):
+        import_file(src, "sscanss2", TWO_LINK, tmp_path / "s")
+    assert (tmp_path / "s" / "recording.mcap").read_bytes() == before
+    import_file(src, "sscanss2", TWO_LINK, tmp_path / "s", force=True)
+
+
+def test_no_home_row_uses_last_sweep_nearest_home(tmp_path: Path) -> None:
+    src = tmp_path / "two.txt"
+    src.write_text(sscanss2_text(TWO_LINK, [[-150, -50, 50, 150], [-120, -40, 40, 120]]))
+    with pytest.warns(UserWarning, match="no row has every joint at home"):
+        out = import_file(src, "sscanss2", TWO_LINK, tmp_path / "s")
+    desc = _read(tmp_path / "s")["/robot/description"][0]
+    assert desc["signature_q"] == [0.0, -40.0] and len(out.tool.rows) == 1
+    np.testing.assert_array_equal(out.tool.signature_q, [0.0, -40.0])
