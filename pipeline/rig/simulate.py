@@ -187,6 +187,8 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     raw = digitize(model, atmosphere, p_target[cyc_cfg], cyc_t, rng_sensor)
 
     units = ["cm" if p else "deg" for p in pris]
+    # The controller reports readings: through the inverse of the robot's coupling, if any.
+    read_cmd, read_enc = robot.readings_from_joints(q_cmd), robot.readings_from_joints(q_enc)
     messages = [
         Message("/rig/description", T0_NS, geometry_recorded.to_dict()),
         Message(
@@ -194,7 +196,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             T0_NS,
             {
                 "robot": description_to_dict(robot),
-                "signature_q": list(plan.signature_q),
+                "signature_q": [float(v) for v in robot.readings_from_joints(qs)],
                 "plan": plan.to_dict(),
                 "mode": "simulated",
             },
@@ -210,9 +212,9 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
                 {
                     "sweep": sweep_id,
                     "step": step,
-                    "q_commanded": [round(float(v), 6) for v in q_cmd[k]],
+                    "q_commanded": [round(float(v), 6) for v in read_cmd[k]],
                     "q_encoder": [
-                        float(v) if opts.noiseless else round(float(v), 6) for v in q_enc[k]
+                        float(v) if opts.noiseless else round(float(v), 6) for v in read_enc[k]
                     ],
                     "units": units,
                 },
