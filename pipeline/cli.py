@@ -329,6 +329,37 @@ def import_(
 
 
 @app.command()
+def validate(
+    session: SessionArg,
+    against: Annotated[str, typer.Option(help="A second file of measured points.")],
+    format: Annotated[str, typer.Option(help="sscanss2 | table | rct (docs/import.md).")],
+    map: Annotated[str | None, typer.Option(help="Map file (TOML) of the second file.")] = None,
+    as_json: JsonOption = False,
+) -> None:
+    """The signature's position error on a second file (read in memory, nothing written)."""
+    from pipeline.evaluation.validation import validate_against
+
+    r = validate_against(session, against, format, map)
+    if as_json:
+        _print_json(r)
+        return
+    typer.echo(
+        f"{r['file']}: {r['n']} points of target {r['target']} vs the signature of {session}"
+    )
+    typer.echo(
+        f"  as measured:      mean {r['mean_cm']:.4g}  RMS {r['rms_cm']:.4g}  "
+        f"max {r['max_cm']:.4g} cm"
+    )
+    if r["registered_rms_cm"] is None:
+        typer.echo("  base registered:  not possible (fewer than 3 points, or collinear)")
+    else:
+        typer.echo(
+            f"  base registered:  mean {r['registered_mean_cm']:.4g}  "
+            f"RMS {r['registered_rms_cm']:.4g}  max {r['registered_max_cm']:.4g} cm"
+        )
+
+
+@app.command()
 def identify(
     session: SessionArg,
     force: Annotated[bool, typer.Option(help="Rerun every stage.")] = False,
