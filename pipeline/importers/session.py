@@ -83,6 +83,7 @@ def session_messages(
         "sweeps": sweeps,
         "tool_local_cm": list(robot.tool.xyz_cm),
         "tool_target": ids[0],
+        "sweeps_measure_tool": True,  # every row measured every target on the end link
     }
     if len(check):
         plan["check"] = {"n_points": len(check)}
