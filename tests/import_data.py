@@ -22,7 +22,9 @@ def tool_points_mm(robot_toml: Path, q: np.ndarray) -> np.ndarray:
     return T[..., :3, 3] * 10.0
 
 
-def sscanss2_text(robot_toml: Path, values: list[list[float]], sep: str = "\t") -> str:
+def sscanss2_text(
+    robot_toml: Path, values: list[list[float]], sep: str = "\t", digits: int = 9
+) -> str:
     """SScanSS-2 rows: joint j moves alone through ``values[j]`` (deg / mm), home 0."""
     robot = load_description(robot_toml)
     lines = []
@@ -32,7 +34,7 @@ def sscanss2_text(robot_toml: Path, values: list[list[float]], sep: str = "\t") 
             q = np.zeros(robot.n_joints)
             q[j] = v / 10.0 if spec.prismatic else v
             p = tool_points_mm(robot_toml, q[None])[0]
-            cells = [j + 1, *(f"{c:.9f}" for c in p), v, spec.type, 0]
+            cells = [j + 1, *(f"{c:.{digits}f}" for c in p), v, spec.type, 0]
             lines.append(sep.join(str(c) for c in cells))
     return "\n".join(lines) + "\n"
 
