@@ -255,6 +255,22 @@ def simulate(
             min=1.0, max=720.0, help="Cap of every revolute sweep (deg); under 180 violates B-3."
         ),
     ] = 300.0,
+    sensor: Annotated[
+        str,
+        typer.Option(
+            help="sonic (the sparker digitizer) or tracker (a laser tracker, docs/rig.md)."
+        ),
+    ] = "sonic",
+    targets: Annotated[
+        int, typer.Option(min=1, help="Tracker: reflectors per sweep in a nest, ids T1..TK.")
+    ] = 1,
+    nest_on_axis: Annotated[
+        int,
+        typer.Option(min=0, help="Tracker: put this joint's last nest reflector on its axis."),
+    ] = 0,
+    check: Annotated[
+        int, typer.Option(min=0, help="Tracker: random validation configurations (sweep check).")
+    ] = 0,
     force: Annotated[
         bool, typer.Option(help="Replace the recording of an existing session (else refused).")
     ] = False,
@@ -277,6 +293,10 @@ def simulate(
         wac_error_cm=wac_error_cm,
         noiseless=noiseless,
         max_sweep_deg=max_sweep_deg,
+        sensor=sensor,
+        targets=targets,
+        nest_on_axis=nest_on_axis,
+        check=check,
     )
     path = simulate_session(folder, opts, force=force)
     typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")
@@ -431,11 +451,15 @@ def status(
     The identification stages, signature.json, then, once the session has an
     evaluation.mcap, the `pipeline evaluate` stages.
     """
-    from pipeline.stages.runner import EVALUATE_STAGE_MODULES, STAGE_MODULES, session_folder
+    from pipeline.stages.runner import (
+        EVALUATE_STAGE_MODULES,
+        identification_modules,
+        session_folder,
+    )
     from pipeline.stages.runner import status as stage_status
 
     evaluated = (session_folder(session) / "evaluation.mcap").is_file()
-    modules = STAGE_MODULES + (EVALUATE_STAGE_MODULES if evaluated else ())
+    modules = identification_modules(session) + (EVALUATE_STAGE_MODULES if evaluated else ())
     states = stage_status(session, modules=modules)
     if as_json:
         _print_json([{"name": s.name, "state": s.state, "reason": s.reason} for s in states])

@@ -23,7 +23,7 @@ _TYPES: dict[str, pa.DataType] = {
     "list<float64>": pa.list_(pa.float64()),
     "list<string>": pa.list_(pa.string()),
 }
-UNITS = ("", "cm", "deg", "s", "degF")
+UNITS = ("", "cm", "cm2", "deg", "s", "degF")
 
 
 def schema_dir() -> Path:

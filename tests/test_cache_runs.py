@@ -40,10 +40,10 @@ def _failing_features(monkeypatch) -> None:
     stage = features.STAGE
 
     def compute(inputs, params):
-        tri = inputs["triangulate"]
-        k = tri.schema.get_field_index("x_cm")
-        lost = tri.set_column(k, "x_cm", pa.nulls(tri.num_rows, pa.float64()).fill_null(np.nan))
-        return stage.compute({**inputs, "triangulate": lost}, params)
+        pos = inputs["positions"]
+        k = pos.schema.get_field_index("x_cm")
+        lost = pos.set_column(k, "x_cm", pa.nulls(pos.num_rows, pa.float64()).fill_null(np.nan))
+        return stage.compute({**inputs, "positions": lost}, params)
 
     monkeypatch.setattr(features, "STAGE", dataclasses.replace(stage, compute=compute))
 
@@ -52,22 +52,23 @@ def test_failed_run_keeps_its_outputs_and_points_at_them(
     identified_session: Path, tmp_path: Path, monkeypatch
 ) -> None:
     d = shutil.copytree(identified_session, tmp_path / "s")
-    good = stage_path(d, "compensate").read_bytes()
+    good = stage_path(d, "positions").read_bytes()
     _failing_features(monkeypatch)
     with pytest.raises(StageError, match="sweep 1: 0 usable") as exc:
         run(d, force=True)
     msg = str(exc.value)
     assert "\n" not in msg
-    assert "stages/failed/compensate.arrow" in msg and "stages/compensate.arrow" not in msg
+    assert "stages/failed/positions.arrow" in msg and "stages/positions.arrow" not in msg
     failed = failed_dir(d)
     assert sorted(p.name for p in failed.iterdir()) == [
         "compensate.arrow",
         "joints.arrow",
+        "positions.arrow",
         "ranges.arrow",
         "session.arrow",
         "triangulate.arrow",
     ]
-    assert stage_path(d, "compensate").read_bytes() == good  # the last good run's
+    assert stage_path(d, "positions").read_bytes() == good  # the last good run's
     monkeypatch.undo()
     identify(d, report=False)
     assert not failed.exists()
@@ -79,8 +80,8 @@ def test_cached_input_keeps_advice_on_the_committed_file(
     d = shutil.copytree(identified_session, tmp_path / "s")
     _failing_features(monkeypatch)
     with pytest.raises(StageError) as exc:
-        run(d, from_stage="features")  # compensate is cached: its file is this run's input
-    assert "stages/compensate.arrow" in str(exc.value) and not failed_dir(d).exists()
+        run(d, from_stage="features")  # positions is cached: its file is this run's input
+    assert "stages/positions.arrow" in str(exc.value) and not failed_dir(d).exists()
 
 
 @pytest.mark.parametrize("kind", ["no_folder", "no_recording"])

@@ -103,9 +103,9 @@ def test_edited_smodel_then_from_smodel(identified_session: Path, tmp_path: Path
 
 def test_only_refuses_a_corrupt_input(identified_session: Path, tmp_path: Path) -> None:
     d = shutil.copytree(identified_session, tmp_path / "s")
-    _edit_value(stage_path(d, "triangulate"), "x_cm", 0.5)
+    _edit_value(stage_path(d, "positions"), "x_cm", 0.5)
     before = stage_path(d, "features").read_bytes()
-    with pytest.raises(StageError, match="needs 'triangulate', whose file fails") as exc:
+    with pytest.raises(StageError, match="needs 'positions', whose file fails") as exc:
         run(d, only="features")
     assert "\n" not in str(exc.value) and "without --only" in str(exc.value)
     assert stage_path(d, "features").read_bytes() == before

@@ -5,20 +5,21 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-#: topic -> schema file in schemas/mcap/ of a session recording ``recording.mcap``
+#: topic -> schema file in schemas/mcap/ of a sonic session recording ``recording.mcap``
 CHANNELS = {
     "/rig/description": "rig_description",
     "/robot/description": "robot_description",
     "/robot/joint_state": "joint_state",
     "/sonic/ranges": "sonic_ranges",
 }
-#: topic -> schema file of a point-sensor session recording (/rig/description sensor 'points')
+#: topic -> schema file of a point-sensor session recording (``/rig/description`` sensor
+#: ``points``): the measurement channel ``/points`` replaces ``/sonic/ranges``.
 POINT_CHANNELS = {
-    "/rig/description": "rig_description",
-    "/robot/description": "robot_description",
-    "/robot/joint_state": "joint_state",
+    **{t: s for t, s in CHANNELS.items() if t != "/sonic/ranges"},
     "/points": "points",
 }
+#: sensor kind of ``/rig/description`` (absent: ``sonic``) -> channels of its recording
+SENSOR_CHANNELS = {"sonic": CHANNELS, "points": POINT_CHANNELS}
 #: topic -> schema file of the evaluation recording ``evaluation.mcap`` (docs/evaluation.md)
 EVAL_CHANNELS = {
     "/eval/description": "eval_description",

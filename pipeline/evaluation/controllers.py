@@ -30,7 +30,6 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
-import pyarrow.compute as pc
 
 from pipeline.control import Controller, into_limits, task_axes_for
 from pipeline.evaluation.tasks import Task
@@ -232,18 +231,21 @@ def solve_with_wrist_flip(
     return q, ok
 
 
-def flange_angle(chain: SerialChain, joints: pa.Table, tri: pa.Table) -> float:
+def flange_angle(chain: SerialChain, joints: pa.Table, pos: pa.Table) -> float:
     """Angle δ (rad) of the last joint's target about the last S-Model frame's Z axis.
 
     The circular mean over the last sweep of ``atan2(y, x)`` of the target in
-    the chain's last link frame (tool excluded) at each recorded reading.
+    the chain's last link frame (tool excluded) at each recorded reading; ``pos``: the
+    ``positions`` table (its first target id of the last sweep when there are several).
     """
-    from pipeline.stages.frames import joint_readings
-    from pipeline.stages.triangulate import positions
+    from pipeline.stages.frames import readings_at
+    from pipeline.stages.positions import positions, sweep_rows, sweep_targets
 
     n = chain.n_joints
-    q = joint_readings(joints, n, n, chain.prismatic)
-    p = positions(tri.filter(pc.equal(tri.column("sweep"), n)))
+    rows = sweep_rows(pos, n, sweep_targets(pos, n)[0])
+    steps = rows.column("step").to_numpy().astype(np.int64)
+    q = readings_at(joints, n, steps, n, chain.prismatic)  # paired by (sweep, step)
+    p = positions(rows)
     ok = np.isfinite(p).all(axis=1)
     bare = SerialChain(chain.links, chain.prismatic, chain.base, np.eye(4), chain.joint_offsets)
     L = forward_kinematics(bare, joints_to_internal(q[ok], chain.prismatic))

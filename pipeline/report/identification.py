@@ -20,13 +20,15 @@ import numpy as np
 from pipeline.atomic import write_text_atomic
 from pipeline.errors import StageError
 from pipeline.report import figures
-from pipeline.stages.runner import STAGE_MODULES, stage_path
-from pipeline.stages.session import session_robot
+from pipeline.stages.recording import CHECK_SWEEP
+from pipeline.stages.runner import identification_names, stage_path
+from pipeline.stages.session import session_robot, session_sensor
 from pipeline.stages.tables import read_provenance, read_table
 
 Row = dict[str, Any]
-#: Stage tables the report reads (every stage's provenance is listed).
-USED = ("session", "compensate", "triangulate", "features", "residuals", "frames", "smodel", "dh")
+#: Stage tables the report reads (every stage's provenance is listed); ``compensate``
+#: too when the session has it (sonic).
+USED = ("session", "positions", "features", "residuals", "frames", "smodel", "dh")
 DASH = "—"
 
 
@@ -52,32 +54,49 @@ def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
 
 
 def _load(sdir: Path) -> tuple[dict[str, list[Row]], dict[str, dict[str, Any]], Any]:
-    missing = [n for n in STAGE_MODULES if not stage_path(sdir, n).is_file()]
+    session = stage_path(sdir, "session")
+    names = identification_names(
+        session_sensor(read_table(session)) if session.is_file() else "sonic"
+    )
+    missing = [n for n in names if not stage_path(sdir, n).is_file()]
     if missing:
         raise StageError(
             f"{sdir}: no identification to report (stage(s) {', '.join(missing)} have not run)",
             fix=f"run `pipeline identify {sdir}` first",
         )
-    paths = {n: stage_path(sdir, n) for n in STAGE_MODULES}
-    tables = {n: read_table(paths[n]) for n in USED}
+    paths = {n: stage_path(sdir, n) for n in names}
+    tables = {n: read_table(paths[n]) for n in (*USED, "compensate") if n in paths}
     robot = session_robot(tables["session"])
     rows = {n: t.to_pylist() for n, t in tables.items()}
     return rows, {n: read_provenance(p) for n, p in paths.items()}, robot
 
 
 def _summary(name: str, t: dict[str, list[Row]], robot: Any, mode: str) -> str:
-    tri, feats = t["triangulate"], t["features"]
-    sweeps = sorted({r["sweep"] for r in tri if r["sweep"] > 0})
-    probe = sum(r["sweep"] == 0 for r in tri)
-    total = {k: sum(r[k] for r in tri) for k in ("n_cycles", "n_dropped", "n_rejected", "n_used")}
+    pos, feats = t["positions"], t["features"]
+    sweeps = sorted({r["sweep"] for r in pos if r["sweep"] > 0})
+    configs = {(r["sweep"], r["step"]) for r in pos}
+    probe = sum(s == 0 for s, _ in configs)
+    check = sum(s == CHECK_SWEEP for s, _ in configs)
+    total = {k: sum(r[k] for r in pos) for k in ("n_samples", "n_dropped", "n_rejected", "n_used")}
     warned = [f for f in feats if f["warnings"]]
     text = (
         f"Session **{name}** ({mode}) identifies the arm signature of a {robot.name} with "
-        f"{robot.n_joints} joints from {len(tri)} configurations ({len(sweeps)} joint sweeps, "
-        f"{probe} tool-probe configuration(s)) and {total['n_cycles']} digitize cycles: "
-        f"{total['n_dropped']} cycles were dropped by the compensation, "
-        f"{total['n_rejected']} rejected as outliers, {total['n_used']} averaged. "
+        f"{robot.n_joints} joints from {len(configs) - check} configurations ({len(sweeps)} "
+        f"joint sweeps, {probe} tool-probe configuration(s)) "
     )
+    if "compensate" in t:
+        text += (
+            f"and {total['n_samples']} digitize cycles: "
+            f"{total['n_dropped']} cycles were dropped by the compensation, "
+            f"{total['n_rejected']} rejected as outliers, {total['n_used']} averaged. "
+        )
+    else:
+        targets = sorted({r["target"] for r in pos})
+        text += (
+            f"and {len(pos)} measured target positions of a point sensor ({len(targets)} "
+            f"target id(s): {', '.join(targets)})"
+            + (f"; {check} validation configuration(s) were not used. " if check else ". ")
+        )
     if not warned:
         return text + "No feature warnings."
     worst = max(warned, key=lambda f: f["sigma_normal_cm"])
@@ -154,7 +173,26 @@ def _features_section(rows: list[Row], robot: Any) -> str:
         + "\n\nσ_δ = max(σ_E, σ_F) from (6.9)-(6.10); σ_δ (6.12) and σ_c (6.13) use the "
         'thesis\' empirical constants and need enough sweep. "plane methods Δ" is the angle '
         "between the eigenvalue and repeated least-squares plane normals.\n\n"
-        "### Warnings\n\n" + ("\n".join(warned) if warned else "none")
+        + _targets_section(rows)
+        + "### Warnings\n\n"
+        + ("\n".join(warned) if warned else "none")
+    )
+
+
+def _targets_section(rows: list[Row]) -> str:
+    """Which targets of each sweep made its feature and why others did not (several
+    targets per sweep only)."""
+    if all(len(r["targets_used"]) + len(r["targets_not_used"]) <= 1 for r in rows):
+        return ""
+    body = [
+        [r["joint"], ", ".join(r["targets_used"]), "; ".join(r["targets_not_used"]) or "none"]
+        for r in rows
+    ]
+    return (
+        "### Targets\n\n"
+        + _table(["Joint", "Used (best-conditioned first)", "Not used, and why"], body)
+        + "\n\nThe used targets' planes and centres give one axis (pipeline/features/"
+        "targets.py); radius, σ and points above are those of the first used target.\n\n"
     )
 
 
@@ -189,18 +227,39 @@ def _figures_section(paths: dict[str, Path]) -> str:
     return "\n\n".join(out)
 
 
+def _point_quality_section(pos: list[Row]) -> str:
+    body = []
+    for s in sorted({r["sweep"] for r in pos}):
+        rows = [r for r in pos if r["sweep"] == s]
+        sigma = [r["sigma_cm"] for r in rows if r["sigma_cm"] is not None]
+        cov = [r for r in rows if r["cov_xx_cm2"] is not None]
+        body.append(
+            [_sweep_label(s), len({r["step"] for r in rows}), len(rows),
+             ", ".join(sorted({r["target"] for r in rows})),
+             sum(r["x_cm"] is None for r in rows),
+             cm(float(np.median(sigma))) if sigma else DASH, len(cov)]
+        )  # fmt: skip
+    head = ["Sweep", "Configurations", "Points", "Targets", "Unusable"]
+    head += ["Median σ (cm)", "Points with covariance"]
+    return "## Data quality\n\n" + _table(head, body)
+
+
+def _sweep_label(s: int) -> str:
+    return {0: "tool probe", CHECK_SWEEP: "validation (check)"}.get(s, f"joint {s}")
+
+
 def _quality_section(tri: list[Row], comp: list[Row]) -> str:
     status = {s: Counter(r["status"] for r in comp if r["sweep"] == s) for s in {
         r["sweep"] for r in comp}}  # fmt: skip
     body = []
     for s in sorted({r["sweep"] for r in tri}):
         rows = [r for r in tri if r["sweep"] == s]
-        total = {k: sum(r[k] for r in rows) for k in ("n_cycles", "n_dropped", "n_rejected")}
+        total = {k: sum(r[k] for r in rows) for k in ("n_samples", "n_dropped", "n_rejected")}
         bad = ", ".join(f"{k} {n}" for k, n in sorted(status.get(s, {}).items()) if k != "ok")
         scatter = [r["scatter_cm"] for r in rows if r["scatter_cm"] is not None]
         unusable = sum(r["x_cm"] is None for r in rows)
         body.append(
-            ["tool probe" if s == 0 else f"joint {s}", len(rows), total["n_cycles"],
+            [_sweep_label(s), len(rows), total["n_samples"],
              total["n_dropped"], bad or "none", total["n_rejected"], unusable,
              cm(float(np.median(scatter))) if scatter else DASH,
              cm(max(scatter)) if scatter else DASH]
@@ -273,7 +332,9 @@ def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -
         _features_section(t["features"], robot),
         _variance_section(res),
         _figures_section(figs),
-        _quality_section(t["triangulate"], t["compensate"]),
+        _quality_section(t["positions"], t["compensate"])
+        if "compensate" in t
+        else _point_quality_section(t["positions"]),
         _convergence_section(sdir),
         *([_audit_section(audit)] if audit is not None else []),
         _provenance_section(prov),

@@ -10,11 +10,14 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from pipeline.atomic import write_text_atomic
+from pipeline.contract.channels import SENSOR_CHANNELS
 from pipeline.errors import ArmsigError
+from pipeline.rig import tracker
 from pipeline.rig.atmosphere import Atmosphere, random_atmosphere
 from pipeline.rig.digitizer import DigitizerModel, digitize
 from pipeline.rig.plan import (
@@ -32,6 +35,7 @@ from pipeline.stages.lock import session_lock
 from pipeline.units import joints_to_internal
 
 FAULTS = ("bias", "dropouts", "outliers")
+SENSORS = ("sonic", "tracker")
 CYCLE_S = 0.25  # Section 6.4 / issue: about four digitize cycles per second
 SETTLE_S = 1.0  # servo settling after each move
 JOINT_SPEED = 30.0  # deg/s (or cm/s) while indexing between positions
@@ -57,6 +61,10 @@ class SimulationOptions:
     wac_error_cm: float = 0.0  # W_AC calibration error (Section 7.3)
     noiseless: bool = False
     max_sweep_deg: float = 300.0  # cap of every revolute sweep (B-3 experiments)
+    sensor: str = "sonic"  # or "tracker" (pipeline.rig.tracker)
+    targets: int = 1  # tracker: reflectors per sweep (a nest), ids T1..TK
+    nest_on_axis: int = 0  # tracker: joint whose sweep's last reflector is on its axis
+    check: int = 0  # tracker: validation configurations (sweep "check")
 
 
 def _check(opts: SimulationOptions) -> None:
@@ -81,12 +89,56 @@ def _check(opts: SimulationOptions) -> None:
             expected="0 < max_sweep_deg <= 720 and a finite wac_error_cm",
             got=f"max_sweep_deg={opts.max_sweep_deg}, wac_error_cm={opts.wac_error_cm}",
         )
+    _check_tracker(opts)
     if opts.points < 3 or opts.repeats < 1:
         raise ArmsigError(
             "too few measurements",
             expected="--points >= 3 and --repeats >= 1",
             got=f"points={opts.points}, repeats={opts.repeats}",
         )
+
+
+def _check_tracker(opts: SimulationOptions) -> None:
+    if opts.sensor not in SENSORS:
+        raise ArmsigError(
+            f"unknown sensor {opts.sensor!r}", expected=", ".join(SENSORS), fix="--sensor tracker"
+        )
+    if opts.sensor == "sonic" and (opts.targets != 1 or opts.nest_on_axis or opts.check):
+        raise ArmsigError(
+            "--targets, --nest-on-axis and --check need a point sensor",
+            expected="--sensor tracker",
+            got=f"--sensor {opts.sensor}",
+        )
+    if not 1 <= opts.targets <= tracker.MAX_TARGETS or not 0 <= opts.check <= 10_000:
+        raise ArmsigError(
+            "tracker options out of range",
+            expected=f"--targets 1 to {tracker.MAX_TARGETS}, --check 0 to 10000",
+            got=f"--targets {opts.targets}, --check {opts.check}",
+        )
+    robot = get_robot(opts.robot)
+    j = opts.nest_on_axis
+    if j and not (1 <= j <= robot.n_joints and not robot.prismatic[j - 1] and opts.targets > 1):
+        raise ArmsigError(
+            f"--nest-on-axis {j}: no revolute joint {j} with a nest of several targets",
+            expected=f"a revolute joint of {robot.name} (1 to {robot.n_joints}) and --targets >= 2",
+            fix="--targets 3 --nest-on-axis 6",
+        )
+
+
+def joint_state(
+    robot: Any, sweep: int | str, step: int, q_cmd: np.ndarray, q_enc: np.ndarray, exact: bool
+) -> dict[str, Any]:
+    """A /robot/joint_state payload: the controller's readings of joint values ``q_cmd`` and
+    ``q_enc`` (deg / cm; through the inverse of the robot's coupling, if any), printed to
+    1e-6 (commanded always, encoder unless ``exact``)."""
+    cmd, enc = robot.readings_from_joints(q_cmd), robot.readings_from_joints(q_enc)
+    return {
+        "sweep": sweep,
+        "step": step,
+        "q_commanded": [round(float(v), 6) for v in cmd],
+        "q_encoder": [float(v) if exact else round(float(v), 6) for v in enc],
+        "units": [j.unit for j in robot.joints],
+    }
 
 
 def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bool = False) -> Path:
@@ -136,6 +188,22 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             q[sweep.joint - 1] = value
             commands.append((sweep.joint, step, q))
     commands.append(("tool", 0, qs.copy()))
+    points = opts.sensor == "tracker"
+    nests: dict[int, np.ndarray] = {}
+    if points:
+        rng_check = rng.spawn(1)[0]  # a fifth stream: the four above stay the sonic rig's
+        nests = {
+            s.joint: tracker.nest_locals(
+                target_true[s.joint], opts.targets, s.joint == opts.nest_on_axis, rng_world, fixture
+            )
+            for s in plan.sweeps
+        }
+        q_check = tracker.check_configurations(
+            opts.check, robot.limits, true.chain, sensor_from_base, tool_true, geometry_true,
+            rng_check,
+        )  # fmt: skip
+        commands += [("check", k, q) for k, q in enumerate(q_check)]
+    n_avg = 1 if points else opts.repeats
     q_cmd = np.array([c[2] for c in commands])
     if opts.noiseless:
         q_reached = q_cmd.copy()
@@ -160,18 +228,23 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             move = float(np.max(np.abs(q - commands[k - 1][2]))) / JOINT_SPEED
         t += move + SETTLE_S
         t_config[k] = t
-        t += opts.repeats * CYCLE_S
+        t += n_avg * CYCLE_S
 
     # Where the target sparker physically is at each configuration.
     qi = joints_to_internal(q_reached, pris)
     p_target = np.zeros((len(commands), 3))
     for k, (sweep_id, _, _) in enumerate(commands):
-        if sweep_id == "tool":
+        if sweep_id in ("tool", "check"):
             p_target[k] = tool_positions(true.chain, sensor_from_base, qi[k], tool_true)
         else:
             p_target[k] = target_positions(
                 true.chain, sensor_from_base, qi[k], int(sweep_id), target_true[int(sweep_id)]
             )
+    if points:
+        return _record_points(
+            out, force, opts, robot, true, plan, sensor_from_base, commands, q_cmd, q_enc, qi,
+            t_config, nests, tool_true, target_true, rng_sensor,
+        )  # fmt: skip
     cyc_cfg = np.repeat(np.arange(len(commands)), opts.repeats)
     cyc_t = t_config[cyc_cfg] + np.tile(np.arange(opts.repeats) * CYCLE_S, len(commands))
     model = DigitizerModel(
@@ -186,9 +259,6 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     )
     raw = digitize(model, atmosphere, p_target[cyc_cfg], cyc_t, rng_sensor)
 
-    units = ["cm" if p else "deg" for p in pris]
-    # The controller reports readings: through the inverse of the robot's coupling, if any.
-    read_cmd, read_enc = robot.readings_from_joints(q_cmd), robot.readings_from_joints(q_enc)
     messages = [
         Message("/rig/description", T0_NS, geometry_recorded.to_dict()),
         Message(
@@ -196,7 +266,9 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             T0_NS,
             {
                 "robot": description_to_dict(robot),
-                "signature_q": [float(v) for v in robot.readings_from_joints(qs)],
+                "signature_q": [
+                    float(v) for v in robot.readings_from_joints(np.array(plan.signature_q))
+                ],
                 "plan": plan.to_dict(),
                 "mode": "simulated",
             },
@@ -209,15 +281,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             Message(
                 "/robot/joint_state",
                 t_ns,
-                {
-                    "sweep": sweep_id,
-                    "step": step,
-                    "q_commanded": [round(float(v), 6) for v in read_cmd[k]],
-                    "q_encoder": [
-                        float(v) if opts.noiseless else round(float(v), 6) for v in read_enc[k]
-                    ],
-                    "units": units,
-                },
+                joint_state(robot, sweep_id, step, q_cmd[k], q_enc[k], opts.noiseless),
             )
         )
         for r in range(opts.repeats):
@@ -236,9 +300,37 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
                     {"sweep": sweep_id, "step": step, "repeat": r, "ranges_cm": rows},
                 )
             )
-    messages.sort(key=lambda m: m.time_ns)  # stable: descriptions stay first
-    recording = out / "recording.mcap"
-    truth = {
+    truth = _truth(opts, robot, true, sensor_from_base, tool_true, target_true)
+    truth.update(
+        {
+            "sensor": {
+                "geometry_true": geometry_true.to_dict(),
+                "geometry_recorded": geometry_recorded.to_dict(),
+                "atmosphere": asdict(atmosphere),
+                "mic_bias_cm": list(model.mic_bias_cm),
+                "dropout_prob": model.dropout_prob,
+                "outlier_prob": model.outlier_prob,
+            },
+            "target_positions_cm": {
+                "sweep": [c[0] for c in commands],
+                "step": [c[1] for c in commands],
+                "p": p_target.tolist(),
+            },
+        }
+    )
+    return _write(out, force, messages, truth, "sonic")
+
+
+def _truth(
+    opts: SimulationOptions,
+    robot: Any,
+    true: Any,
+    sensor_from_base: np.ndarray,
+    tool_true: np.ndarray,
+    target_true: dict[int, np.ndarray],
+) -> dict[str, Any]:
+    """The part of ``rig-truth.json`` both sensors share (the audit reads the kinematics)."""
+    return {
         "robot": robot.name,
         "seed": opts.seed,
         "options": {**asdict(opts), "faults": list(opts.faults)},
@@ -254,25 +346,96 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
         "true_targets_local_cm": {str(k): v.tolist() for k, v in target_true.items()},
         "sensor_from_base": sensor_from_base.tolist(),
         "errors": true.errors,
-        "sensor": {
-            "geometry_true": geometry_true.to_dict(),
-            "geometry_recorded": geometry_recorded.to_dict(),
-            "atmosphere": asdict(atmosphere),
-            "mic_bias_cm": list(model.mic_bias_cm),
-            "dropout_prob": model.dropout_prob,
-            "outlier_prob": model.outlier_prob,
-        },
-        "target_positions_cm": {
-            "sweep": [c[0] for c in commands],
-            "step": [c[1] for c in commands],
-            "p": p_target.tolist(),
-        },
     }
+
+
+def _write(
+    out: Path, force: bool, messages: list[Message], truth: dict[str, Any], sensor: str
+) -> Path:
+    """Write the recording (messages in time order) and ``rig-truth.json``."""
+    messages.sort(key=lambda m: m.time_ns)  # stable: descriptions stay first
+    recording = out / "recording.mcap"
     out.mkdir(parents=True, exist_ok=True)
     # Under the session lock, like every pipeline run on the folder: no run reads a
     # recording half replaced, and a recording that appeared meanwhile is still refused.
     with session_lock(out):
         refuse_existing_recording(out, force, "a simulated one")
-        write_recording(recording, messages)
+        write_recording(recording, messages, SENSOR_CHANNELS[sensor])
         write_text_atomic(out / "rig-truth.json", json.dumps(truth, indent=1) + "\n")
     return recording
+
+
+def _record_points(
+    out: Path,
+    force: bool,
+    opts: SimulationOptions,
+    robot: Any,
+    true: Any,
+    plan: Any,
+    sensor_from_base: np.ndarray,
+    commands: list[tuple[int | str, int, np.ndarray]],
+    q_cmd: np.ndarray,
+    q_enc: np.ndarray,
+    qi: np.ndarray,
+    t_config: np.ndarray,
+    nests: dict[int, np.ndarray],
+    tool_true: np.ndarray,
+    target_true: dict[int, np.ndarray],
+    rng: np.random.Generator,
+) -> Path:
+    """The tracker's session: every nest reflector (sweeps) or the tool target (tool,
+    check) measured once per configuration (:mod:`pipeline.rig.tracker`)."""
+    ids = tracker.target_ids(opts.targets)
+    rows: list[tuple[int, str, np.ndarray]] = []  # (command, target, true position)
+    for k, (sweep_id, _, _) in enumerate(commands):
+        if sweep_id in ("tool", "check"):
+            p = tool_positions(true.chain, sensor_from_base, qi[k], tool_true)
+            rows.append((k, tracker.TOOL_TARGET, p))
+            continue
+        j = int(sweep_id)
+        for tid, local in zip(ids, nests[j], strict=True):
+            rows.append((k, tid, target_positions(true.chain, sensor_from_base, qi[k], j, local)))
+    p_true = np.array([r[2] for r in rows]).reshape(-1, 3)
+    p_meas, sigma = tracker.measure(p_true, rng, opts.noiseless)
+    messages = [
+        Message("/rig/description", T0_NS, tracker.rig_description()),
+        Message(
+            "/robot/description",
+            T0_NS,
+            {
+                "robot": description_to_dict(robot),
+                "signature_q": [
+                    float(v) for v in robot.readings_from_joints(np.array(plan.signature_q))
+                ],
+                "plan": tracker.plan_dict(plan, opts.targets, opts.check),
+                "mode": "simulated",
+            },
+        ),
+    ]
+    for k, (sweep_id, step, _) in enumerate(commands):
+        messages.append(
+            Message(
+                "/robot/joint_state",
+                T0_NS + int(round(t_config[k] * 1e9)),
+                joint_state(robot, sweep_id, step, q_cmd[k], q_enc[k], opts.noiseless),
+            )
+        )
+    for m, (k, tid, _) in enumerate(rows):
+        sweep_id, step, _ = commands[k]
+        t_ns = T0_NS + int(round((t_config[k] + CYCLE_S * (1 + ids.index(tid))) * 1e9))
+        payload = tracker.point_message(sweep_id, step, tid, p_meas[m], sigma[m], opts.noiseless)
+        messages.append(Message("/points", t_ns, payload))
+    truth = _truth(opts, robot, true, sensor_from_base, tool_true, target_true)
+    truth.update(
+        {
+            "true_nest_local_cm": {str(j): v.tolist() for j, v in nests.items()},
+            "sensor": {"kind": "tracker", **tracker.rig_description()},
+            "target_positions_cm": {
+                "sweep": [commands[k][0] for k, _, _ in rows],
+                "step": [commands[k][1] for k, _, _ in rows],
+                "target": [t for _, t, _ in rows],
+                "p": p_true.tolist(),
+            },
+        }
+    )
+    return _write(out, force, messages, truth, "points")

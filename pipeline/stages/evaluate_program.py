@@ -44,7 +44,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     sig = inputs["signature"]
     models = (
         DesignModel(robot, tool),
-        SignatureModel(sig, flange_angle(sig.chain, inputs["joints"], inputs["triangulate"])),
+        SignatureModel(sig, flange_angle(sig.chain, inputs["joints"], inputs["positions"])),
     )
     teach = inputs["evaluate_teach"]
     names = teach.column("task").to_pylist()
@@ -90,7 +90,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 STAGE = Stage(
     "evaluate_program",
     1,
-    ("evaluate_teach", "signature", "session", "joints", "triangulate"),
+    ("evaluate_teach", "signature", "session", "joints", "positions"),
     NoParams(),
     compute,
     "joint programs of the design and signature controllers",

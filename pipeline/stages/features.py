@@ -8,20 +8,28 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 
-from pipeline.errors import StageError
+from pipeline.errors import ArmsigError, StageError
 from pipeline.features.accuracy import revolute_accuracy
 from pipeline.features.circle import fit_circle
 from pipeline.features.line import fit_line
 from pipeline.features.plane import fit_plane_eigen, fit_plane_lsq, frame_about, orient_normal
+from pipeline.features.targets import (
+    MIN_RADIUS_CM,
+    RADIUS_SIGMAS,
+    TargetFit,
+    combine,
+    why_ill_conditioned,
+    why_not_usable,
+)
 from pipeline.schemas import arrow_schema
 from pipeline.stages.base import Stage, check_param
 from pipeline.stages.frames import readings_at
+from pipeline.stages.positions import positions, recorded_sigma_cm, sweep_rows, sweep_targets
 from pipeline.stages.session import session_robot
-from pipeline.stages.triangulate import positions
 
 PLANE_METHODS = ("lsq", "eigen")
+LIST_COLUMNS = ("warnings", "targets_used", "targets_not_used")
 
 
 @dataclass(frozen=True)
@@ -36,14 +44,19 @@ class Params:
 
 
 def sweep_points(
-    tri: pa.Table, joints: pa.Table, joint: int, n: int, prismatic: np.ndarray
+    pos: pa.Table,
+    joints: pa.Table,
+    joint: int,
+    n: int,
+    prismatic: np.ndarray,
+    target: str | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Usable target positions (N, 3) of sweep ``joint`` by increasing reading, the
-    readings (N,) and the configuration steps (N,).
+    """Usable target positions (N, 3) of sweep ``joint`` (of one ``target`` when given)
+    by increasing reading, the readings (N,) and the configuration steps (N,).
 
     Each position is paired with the joint state of its own (sweep, step) key.
     """
-    sel = tri.filter(pc.equal(tri.column("sweep"), joint))
+    sel = sweep_rows(pos, joint, target)
     p = positions(sel)
     steps = sel.column("step").to_numpy().astype(np.int64)
     try:
@@ -59,81 +72,144 @@ def _nan(v: Any) -> float | None:
     return None if v is None or not np.isfinite(v) else float(v)
 
 
+def _fit_row(p: np.ndarray, prismatic: bool, plane_method: str) -> dict[str, Any]:
+    """The feature of one target's positions ``p`` (N, 3), by increasing reading."""
+    if prismatic:
+        line = fit_line(p)
+        x_dir = frame_about(line.direction)[:, 0]
+        row = dict(
+            plane_method="line",
+            axis=line.direction,
+            eigen=None,
+            lsq=None,
+            angle=None,
+            center=line.point,
+            radius=None,
+            first=line.point + x_dir,
+            sweep_deg=None,
+            travel_cm=float(np.ptp(line.travel)),
+            sigma_normal_cm=float(np.std(line.residuals, ddof=1)),
+            sigma_radial_cm=None,
+            sigma_e_deg=None,
+            sigma_f_deg=None,
+            sigma_delta_deg=None,
+            sigma_delta_empirical_deg=None,
+            sigma_c_cm=None,
+            warnings=list(line.warnings),
+        )
+    else:
+        eig = fit_plane_eigen(p)
+        lsq = fit_plane_lsq(p)
+        n_eig = orient_normal(eig.normal, p)
+        n_lsq = orient_normal(lsq.normal, p)
+        plane = lsq if plane_method == "lsq" else eig
+        axis = n_lsq if plane_method == "lsq" else n_eig
+        circle = fit_circle(p, plane)
+        acc = revolute_accuracy(p, plane, circle)
+        angle = np.degrees(np.arctan2(np.linalg.norm(np.cross(n_eig, n_lsq)), n_eig @ n_lsq))
+        row = dict(
+            plane_method=plane_method,
+            axis=axis,
+            eigen=n_eig,
+            lsq=n_lsq,
+            angle=float(angle),
+            center=circle.center,
+            radius=float(circle.radius),
+            first=p[0],
+            sweep_deg=float(np.degrees(circle.sweep)),
+            travel_cm=None,
+            sigma_normal_cm=float(np.sqrt(acc.normal_variance)),
+            sigma_radial_cm=float(np.sqrt(acc.radial_variance)),
+            sigma_e_deg=float(np.degrees(acc.sigma_E)),
+            sigma_f_deg=float(np.degrees(acc.sigma_F)),
+            sigma_delta_deg=float(np.degrees(acc.sigma_delta)),
+            # (6.12)/(6.13) were fitted for sweeps of at least 180° (B-3): no value below.
+            sigma_delta_empirical_deg=_nan(np.degrees(acc.sigma_delta_empirical))
+            if circle.sweep >= np.pi
+            else None,
+            sigma_c_cm=_nan(acc.sigma_c) if circle.sweep >= np.pi else None,
+            warnings=list(dict.fromkeys([*plane.warnings, *circle.warnings])),
+        )
+    return row
+
+
+def _fit_target(
+    pos: pa.Table, joints: pa.Table, i: int, target: str, robot: Any, plane_method: str
+) -> TargetFit | str:
+    """One target's fit in sweep ``i``, or why it cannot be fitted."""
+    n, pris = robot.n_joints, robot.prismatic
+    p, _, _ = sweep_points(pos, joints, i, n, pris, target)
+    if len(p) < 3:
+        return f"{len(p)} usable positions (needs at least 3)"
+    sigma = recorded_sigma_cm(sweep_rows(pos, i, target))
+    spread = float(np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)))
+    why = why_not_usable(spread, sigma or 0.0, bool(pris[i - 1]))
+    if why:
+        return why
+    try:
+        row = _fit_row(p, bool(pris[i - 1]), plane_method)
+    except (ArmsigError, FloatingPointError, np.linalg.LinAlgError) as exc:
+        return f"its fit fails: {exc}"
+    if sigma is None:  # no recorded noise (sonic): the fit's own residual scatter
+        rad = row["sigma_radial_cm"] or 0.0
+        sigma = float(np.sqrt((row["sigma_normal_cm"] ** 2 + rad**2) / 2.0))
+    return TargetFit(target, len(p), sigma, row)
+
+
+def _sweep_feature(
+    pos: pa.Table, joints: pa.Table, i: int, robot: Any, plane_method: str
+) -> dict[str, Any]:
+    """Joint ``i``'s features row from the usable targets of its sweep."""
+    pris = bool(robot.prismatic[i - 1])
+    targets = sweep_targets(pos, i)
+    fits: list[TargetFit] = []
+    rejected: list[str] = []
+    for t in targets:
+        fit = _fit_target(pos, joints, i, t, robot, plane_method)
+        why = fit if isinstance(fit, str) else why_ill_conditioned(fit, pris)
+        if why is None and not isinstance(fit, str):
+            fits.append(fit)
+        else:
+            rejected.append(f"{t}: {why}")
+    if not fits:
+        if len(targets) <= 1:  # the message of a single target's sweep
+            p, _, _ = sweep_points(pos, joints, i, robot.n_joints, robot.prismatic)
+            if len(p) < 3:
+                raise StageError(
+                    f"sweep {i}: {len(p)} usable target positions",
+                    expected="at least 3 (the thesis used 5 to 100)",
+                    fix=f"re-record sweep {i} with more positions, or check its positions in "
+                    "stages/positions.arrow",
+                )
+        raise StageError(
+            f"sweep {i}: no usable target ({'; '.join(rejected) or 'none recorded'})",
+            expected=f"a target that moves well above its noise: radius (travel) > "
+            f"{MIN_RADIUS_CM:g} cm and > {RADIUS_SIGMAS:g} σ, with at least 3 positions",
+            fix=f"re-record sweep {i} with a target away from joint {i}'s axis",
+        )
+    fits.sort(key=lambda f: -f.weight(pris))  # best-conditioned first: X points at it
+    row = combine(fits, pris)
+    row.update(
+        joint=i,
+        type=robot.joints[i - 1].type,
+        n_points=fits[0].n_points,
+        targets_used=[f.target for f in fits],
+        targets_not_used=rejected,
+    )
+    return row
+
+
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     if params.plane_method not in PLANE_METHODS:
         raise StageError(
             f"unknown plane_method {params.plane_method!r}", expected=" or ".join(PLANE_METHODS)
         )
     robot = session_robot(inputs["session"])
-    n, pris = robot.n_joints, robot.prismatic
-    rows = []
-    for i in range(1, n + 1):
-        p, _, _ = sweep_points(inputs["triangulate"], inputs["joints"], i, n, pris)
-        if len(p) < 3:
-            raise StageError(
-                f"sweep {i}: {len(p)} usable target positions",
-                expected="at least 3 (the thesis used 5 to 100)",
-                fix=f"re-record sweep {i} with more positions, or check its echoes in "
-                "stages/compensate.arrow",
-            )
-        row: dict[str, Any] = {"joint": i, "type": robot.joints[i - 1].type, "n_points": len(p)}
-        if pris[i - 1]:
-            line = fit_line(p)
-            x_dir = frame_about(line.direction)[:, 0]
-            row.update(
-                plane_method="line",
-                axis=line.direction,
-                eigen=None,
-                lsq=None,
-                angle=None,
-                center=line.point,
-                radius=None,
-                first=line.point + x_dir,
-                sweep_deg=None,
-                travel_cm=float(np.ptp(line.travel)),
-                sigma_normal_cm=float(np.std(line.residuals, ddof=1)),
-                sigma_radial_cm=None,
-                sigma_e_deg=None,
-                sigma_f_deg=None,
-                sigma_delta_deg=None,
-                sigma_delta_empirical_deg=None,
-                sigma_c_cm=None,
-                warnings=list(line.warnings),
-            )
-        else:
-            eig = fit_plane_eigen(p)
-            lsq = fit_plane_lsq(p)
-            n_eig = orient_normal(eig.normal, p)
-            n_lsq = orient_normal(lsq.normal, p)
-            plane = lsq if params.plane_method == "lsq" else eig
-            axis = n_lsq if params.plane_method == "lsq" else n_eig
-            circle = fit_circle(p, plane)
-            acc = revolute_accuracy(p, plane, circle)
-            angle = np.degrees(np.arctan2(np.linalg.norm(np.cross(n_eig, n_lsq)), n_eig @ n_lsq))
-            row.update(
-                plane_method=params.plane_method,
-                axis=axis,
-                eigen=n_eig,
-                lsq=n_lsq,
-                angle=float(angle),
-                center=circle.center,
-                radius=float(circle.radius),
-                first=p[0],
-                sweep_deg=float(np.degrees(circle.sweep)),
-                travel_cm=None,
-                sigma_normal_cm=float(np.sqrt(acc.normal_variance)),
-                sigma_radial_cm=float(np.sqrt(acc.radial_variance)),
-                sigma_e_deg=float(np.degrees(acc.sigma_E)),
-                sigma_f_deg=float(np.degrees(acc.sigma_F)),
-                sigma_delta_deg=float(np.degrees(acc.sigma_delta)),
-                # (6.12)/(6.13) were fitted for sweeps of at least 180° (B-3): no value below.
-                sigma_delta_empirical_deg=_nan(np.degrees(acc.sigma_delta_empirical))
-                if circle.sweep >= np.pi
-                else None,
-                sigma_c_cm=_nan(acc.sigma_c) if circle.sweep >= np.pi else None,
-                warnings=list(dict.fromkeys([*plane.warnings, *circle.warnings])),
-            )
-        rows.append(row)
+    pos, joints = inputs["positions"], inputs["joints"]
+    rows = [
+        _sweep_feature(pos, joints, i, robot, params.plane_method)
+        for i in range(1, robot.n_joints + 1)
+    ]
     out: dict[str, list[Any]] = {}
 
     def put(name: str, value: Any) -> None:
@@ -165,13 +241,15 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         ):
             put(name, r[name])
         put("warnings", [str(w) for w in r["warnings"]])
+        put("targets_used", r["targets_used"])
+        put("targets_not_used", r["targets_not_used"])
     order = arrow_schema("features").names
     return pa.table(
         {
             k: pa.array(out[k], type=pa.float64())
-            if k not in ("joint", "type", "n_points", "plane_method", "warnings")
+            if k not in ("joint", "type", "n_points", "plane_method", *LIST_COLUMNS)
             else pa.array(out[k], type=pa.list_(pa.string()))
-            if k == "warnings"
+            if k in LIST_COLUMNS
             else out[k]
             for k in order
         }
@@ -180,8 +258,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "features",
-    3,
-    ("triangulate", "joints", "session"),
+    4,
+    ("positions", "joints", "session"),
     Params(),
     compute,
     "plane, centre and line of every joint, with accuracy",

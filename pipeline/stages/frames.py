@@ -26,9 +26,9 @@ from pipeline.errors import StageError
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.signature import frame_from_features, signature_chain
 from pipeline.stages.base import NoParams, Stage
-from pipeline.stages.recording import TOOL_SWEEP
+from pipeline.stages.positions import positions, sweep_rows
+from pipeline.stages.recording import TOOL_SWEEP, sweep_name
 from pipeline.stages.session import session_robot
-from pipeline.stages.triangulate import positions
 from pipeline.units import joints_to_internal
 
 MATRIX_COLUMNS = ("nx", "ny", "nz", "ox", "oy", "oz", "ax", "ay", "az", "px_cm", "py_cm", "pz_cm")
@@ -83,9 +83,8 @@ def readings_at(
     found = at < len(have)
     found[found] = have[at[found]] == steps[found]
     if not found.all():
-        name = "tool" if sweep == TOOL_SWEEP else sweep
         raise StageError(
-            f"no joint state for (sweep {name}, step {steps[~found][0]})",
+            f"no joint state for (sweep {sweep_name(sweep)}, step {steps[~found][0]})",
             expected="a joint state for every measured configuration",
             fix="re-record the session; the recording is inconsistent",
         )
@@ -152,8 +151,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         F[i - 1] = frame_from_features(axis, origin, toward)  # Eq. (4.49), (4.50)
     F[n] = F[n - 1]  # S̄_n = S̄_{n-1}
     qs = signature_readings(inputs["joints"], pris, "joints")
-    tri = inputs["triangulate"]
-    tool_rows = tri.filter(pc.equal(tri.column("sweep"), TOOL_SWEEP))
+    # The tool sweep measures one target (the recording reader refuses others).
+    tool_rows = sweep_rows(inputs["positions"], TOOL_SWEEP)
     p_tool = positions(tool_rows)
     usable = ~np.isnan(p_tool).any(axis=1)
     if not usable.any():
@@ -203,8 +202,8 @@ def chain_from_frames(frames: pa.Table, prismatic: np.ndarray):  # -> SerialChai
 
 STAGE = Stage(
     "frames",
-    2,
-    ("features", "joints", "triangulate", "session"),
+    3,
+    ("features", "joints", "positions", "session"),
     NoParams(),
     compute,
     "S-Model frames S̄_0..S̄_n and the tool",

@@ -5,8 +5,10 @@ contract of ``schemas/mcap/`` and nothing of the simulator. On top of the file's
 integrity and each message's schema (:mod:`pipeline.contract.mcap_read`) it checks
 what one message cannot: the recorded rig layout, the robot description, that every
 key names a planned sweep, values within the recorded limits, and that joint states
-and digitize cycles pair up by their keys. Tables come out sorted by their keys,
-so the order and the log times of the messages never change a result.
+and measurements (digitize cycles of a sonic session, points of a point-sensor
+session: :mod:`pipeline.stages.recording_points`) pair up by their keys. Tables come
+out sorted by their keys, so the order and the log times of the messages never change
+a result.
 """
 
 from __future__ import annotations
@@ -20,35 +22,55 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.contract.channels import CHANNELS
+from pipeline.contract.channels import SENSOR_CHANNELS
 from pipeline.contract.mcap_read import read_mcap
 from pipeline.errors import ArmsigError, RecordingError
+from pipeline.stages.recording_keys import (
+    CHECK_SWEEP,
+    KEY_FIX,
+    TOOL_SWEEP,
+    key_text,
+    message_keys,
+    pair_keys,
+    refuse_duplicates,
+    refuse_step_gaps,
+    sweep_id,
+    sweep_name,
+)
 
-TOPICS = tuple(CHANNELS)
-TOOL_SWEEP = 0  # the tool-probe measurement's sweep id in tables ("tool" in the recording)
-CHECK_SWEEP = -1  # validation configurations' sweep id in tables ("check" in the recording)
+__all__ = ["CHECK_SWEEP", "TOOL_SWEEP", "Recording", "read_recording", "sweep_name"]
+
+#: every channel a session recording may hold (sonic and point sensors)
+TOPICS = tuple(dict.fromkeys(t for ch in SENSOR_CHANNELS.values() for t in ch))
+_KNOWN = {t: s for ch in SENSOR_CHANNELS.values() for t, s in ch.items()}
 #: Recorded joint values may pass the robot's limits by this much (deg or cm): far
 #: above a servo's settling error (a few encoder counts) and an encoder offset
 #: (tenths of a degree), far below what garbage or a wrong unit gives.
 LIMIT_MARGIN = 5.0
 _FIX = "re-copy the file from the rig, or re-record the session"
-_KEY_FIX = "repair the rig's writer: keys are documented in schemas/mcap/ (docs/rig.md)"
 
 
 @dataclass(frozen=True)
 class Recording:
     """Everything a session recording holds.
 
+    ``sensor`` is the recorded sensor kind: ``sonic`` (the sparker digitizer: digitize
+    cycles of slant ranges) or ``points`` (a point sensor: 3-D target positions). The
+    arrays of the other kind are empty (zero rows).
+
     ``joint_*`` arrays have one row per commanded configuration, sorted by
-    ``(sweep, step)``; ``cycle_*`` one row per digitize cycle, sorted by
-    ``(sweep, step, repeat)``; ``sweep`` is the target number, or 0 for the tool probe.
-    Times are seconds after the earliest joint state.
+    ``(sweep, step)``; ``cycle_*`` (sonic) one row per digitize cycle, sorted by
+    ``(sweep, step, repeat)``; ``point_*`` (points) one row per measured target, sorted
+    by ``(sweep, step, target)``. ``sweep`` is the target number (the swept joint),
+    :data:`TOOL_SWEEP` for the tool measurement or :data:`CHECK_SWEEP` for the
+    validation configurations. Times are seconds after the earliest joint state.
     """
 
     path: Path
     sha256: str
     rig: dict[str, Any]
     robot: dict[str, Any]
+    sensor: str  # "sonic" | "points"
     joint_sweep: np.ndarray  # (K,) int
     joint_step: np.ndarray  # (K,) int
     joint_t_s: np.ndarray  # (K,)
@@ -59,6 +81,14 @@ class Recording:
     cycle_repeat: np.ndarray  # (M,) int
     cycle_t_s: np.ndarray  # (M,)
     ranges_cm: np.ndarray  # (M, 5, 4), NaN = no echo
+    point_sweep: np.ndarray  # (P,) int
+    point_step: np.ndarray  # (P,) int
+    point_target: np.ndarray  # (P,) str (target id)
+    point_t_s: np.ndarray  # (P,)
+    points_cm: np.ndarray  # (P, 3) sensor frame
+    point_sigma_cm: np.ndarray  # (P,) isotropic std per coordinate, NaN = not recorded
+    point_cov_cm2: np.ndarray  # (P, 3, 3) covariance, NaN = not recorded
+    point_wxyz: np.ndarray  # (P, 4) unit quaternion of a 6-D target, NaN = not recorded
 
 
 def file_sha256(path: Path) -> str:
@@ -68,11 +98,6 @@ def file_sha256(path: Path) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
-
-
-def sweep_name(sweep: int) -> str:
-    """A sweep id as the recording spells it: the target number, or 'tool'."""
-    return "tool" if sweep == TOOL_SWEEP else str(int(sweep))
 
 
 def read_recording(path: str | Path, sha256: str | None = None) -> Recording:
@@ -92,69 +117,112 @@ def read_recording(path: str | Path, sha256: str | None = None) -> Recording:
 
 @lru_cache(maxsize=4)
 def _read_cached(p: Path, sha: str) -> Recording:
-    msgs = read_mcap(p, CHANNELS, _FIX).messages
-    missing = [t for t in TOPICS if not msgs[t]]
+    from pipeline.stages import recording_points
+
+    msgs = read_mcap(p, _KNOWN, _FIX).messages
+    rigs = msgs["/rig/description"]
+    sensor = str(rigs[0][1].get("sensor", "sonic")) if len(rigs) == 1 else "sonic"
+    topics = tuple(SENSOR_CHANNELS[sensor])
+    missing = [t for t in topics if not msgs[t]]
     if missing:
         raise RecordingError(
             f"{p}: missing channel(s) {', '.join(missing)}",
-            expected="channels " + ", ".join(TOPICS),
+            expected="channels " + ", ".join(topics),
             fix="record every channel of schemas/mcap/ (see schemas/README.md)",
+        )
+    foreign = [t for t in TOPICS if t not in topics and msgs[t]]
+    if foreign:
+        raise RecordingError(
+            f"{p}: channel {foreign[0]} in a recording of sensor {sensor!r}",
+            expected="channels " + ", ".join(topics) + " (/rig/description sensor)",
+            got=f"{len(msgs[foreign[0]])} {foreign[0]} messages",
+            fix="record the measurement channel of the declared sensor (schemas/README.md)",
         )
     rig = _single(p, msgs, "/rig/description")
     robot = _single(p, msgs, "/robot/description")
-    desc, units = _check_rig_and_robot(p, rig, robot)
+    desc, units = _check_rig_and_robot(p, rig, robot, sensor)
     n_points, n_avg = _planned(p, robot, len(units))
 
     js = msgs["/robot/joint_state"]
-    j_sweep, j_step = _keys(p, "/robot/joint_state", [m for _, m in js], n_points)
+    j_sweep, j_step = message_keys(p, "/robot/joint_state", [m for _, m in js], n_points)
     order = np.lexsort((j_step, j_sweep))
     js = [js[k] for k in order]
     j_sweep, j_step = j_sweep[order], j_step[order]
-    _refuse_duplicates(p, "/robot/joint_state", j_sweep, j_step)
-    _refuse_step_gaps(p, j_sweep, j_step)
+    refuse_duplicates(p, "/robot/joint_state", j_sweep, j_step)
+    refuse_step_gaps(p, j_sweep, j_step)
     q_cmd, q_enc = _joint_values(p, js, j_sweep, j_step, units, desc)
+    t0 = min(t for t, _ in js)
+    joints = {
+        "joint_sweep": j_sweep,
+        "joint_step": j_step,
+        "joint_t_s": np.array([(t - t0) * 1e-9 for t, _ in js]),
+        "q_commanded": q_cmd,
+        "q_encoder": q_enc,
+    }
+    if sensor == "points":
+        measured = recording_points.read_points(p, msgs["/points"], robot["plan"], n_points, t0)
+        ps, pk, pt = measured["point_sweep"], measured["point_step"], measured["point_target"]
+        pair_keys(
+            p, j_sweep, j_step, ps, pk,
+            [key_text(s, k, target=t) for s, k, t in zip(ps, pk, pt, strict=True)],
+            "/points", "point",
+        )  # fmt: skip
+        return Recording(p, sha, rig, robot, sensor, **joints, **_no_cycles(), **measured)
+    cycles = _sonic_arrays(p, msgs["/sonic/ranges"], n_points, n_avg, rig, t0)
+    c_sweep, c_step, c_rep = cycles["cycle_sweep"], cycles["cycle_step"], cycles["cycle_repeat"]
+    pair_keys(
+        p, j_sweep, j_step, c_sweep, c_step,
+        [key_text(*k) for k in zip(c_sweep, c_step, c_rep, strict=True)],
+        "/sonic/ranges", "cycle",
+    )  # fmt: skip
+    return Recording(p, sha, rig, robot, sensor, **joints, **cycles, **recording_points.no_points())
 
-    rg = msgs["/sonic/ranges"]
-    c_sweep, c_step = _keys(p, "/sonic/ranges", [m for _, m in rg], n_points)
+
+def _no_cycles() -> dict[str, np.ndarray]:
+    """The sonic arrays of a point-sensor recording: zero rows."""
+    none = np.zeros(0, np.int64)
+    return {
+        "cycle_sweep": none,
+        "cycle_step": none,
+        "cycle_repeat": none,
+        "cycle_t_s": np.zeros(0),
+        "ranges_cm": np.zeros((0, 5, 4)),
+    }
+
+
+def _sonic_arrays(
+    p: Path,
+    rg: list[tuple[int, dict[str, Any]]],
+    n_points: dict[int, int | None],
+    n_avg: int,
+    rig: dict[str, Any],
+    t0: int,
+) -> dict[str, np.ndarray]:
+    """The ``cycle_*`` and ``ranges_cm`` arrays of the /sonic/ranges messages ``rg``,
+    sorted by key, each key naming a planned position."""
+    c_sweep, c_step = message_keys(p, "/sonic/ranges", [m for _, m in rg], n_points)
     c_rep = np.array([m["repeat"] for _, m in rg], np.int64)
     order = np.lexsort((c_rep, c_step, c_sweep))
     rg = [rg[k] for k in order]
     c_sweep, c_step, c_rep = c_sweep[order], c_step[order], c_rep[order]
-    _refuse_duplicates(p, "/sonic/ranges", c_sweep, c_step, c_rep)
+    refuse_duplicates(p, "/sonic/ranges", c_sweep, c_step, c_rep)
     over = np.flatnonzero(c_rep >= n_avg)
     if len(over):
         k = over[0]
         raise RecordingError(
-            f"{p}: /sonic/ranges cycle {_key(c_sweep[k], c_step[k], c_rep[k])} is beyond the plan",
+            f"{p}: /sonic/ranges cycle {key_text(c_sweep[k], c_step[k], c_rep[k])} is beyond "
+            "the plan",
             expected=f"repeat 0 to {n_avg - 1} (plan.n_avg = {n_avg})",
             got=f"repeat {c_rep[k]}",
-            fix=_KEY_FIX,
+            fix=KEY_FIX,
         )
-    ranges = _ranges(p, rg, c_sweep, c_step, c_rep, rig)
-    _pair(p, j_sweep, j_step, c_sweep, c_step, c_rep)
-
-    t0 = min(t for t, _ in js)
-    return Recording(
-        path=p,
-        sha256=sha,
-        rig=rig,
-        robot=robot,
-        joint_sweep=j_sweep,
-        joint_step=j_step,
-        joint_t_s=np.array([(t - t0) * 1e-9 for t, _ in js]),
-        q_commanded=q_cmd,
-        q_encoder=q_enc,
-        cycle_sweep=c_sweep,
-        cycle_step=c_step,
-        cycle_repeat=c_rep,
-        cycle_t_s=np.array([(t - t0) * 1e-9 for t, _ in rg]),
-        ranges_cm=ranges,
-    )
-
-
-def _key(sweep: Any, step: Any, repeat: Any = None) -> str:
-    out = f"(sweep {sweep_name(sweep)}, step {int(step)}"
-    return out + (")" if repeat is None else f", repeat {int(repeat)})")
+    return {
+        "cycle_sweep": c_sweep,
+        "cycle_step": c_step,
+        "cycle_repeat": c_rep,
+        "cycle_t_s": np.array([(t - t0) * 1e-9 for t, _ in rg]),
+        "ranges_cm": _ranges(p, rg, c_sweep, c_step, c_rep, rig),
+    }
 
 
 def _single(p: Path, msgs: dict[str, list[tuple[int, dict[str, Any]]]], topic: str) -> Any:
@@ -168,14 +236,16 @@ def _single(p: Path, msgs: dict[str, list[tuple[int, dict[str, Any]]]], topic: s
 
 
 def _check_rig_and_robot(
-    p: Path, rig: dict[str, Any], robot: dict[str, Any]
+    p: Path, rig: dict[str, Any], robot: dict[str, Any], sensor: str
 ) -> tuple[Any, list[str]]:
-    """Refuse an unusable rig layout or robot description; the description and units."""
+    """Refuse an unusable rig layout (sonic: the digitizer's geometry; a point sensor's
+    description is all in its schema) or robot description; the description, units."""
     from pipeline.robots.description import description_from_dict
     from pipeline.sensor.geometry import DigitizerGeometry, check_geometry
 
     try:
-        check_geometry(DigitizerGeometry.from_dict(rig))
+        if sensor == "sonic":
+            check_geometry(DigitizerGeometry.from_dict(rig))
         desc = description_from_dict(robot["robot"], source="/robot/description")
     except ArmsigError as exc:
         raise RecordingError(f"{p}: {exc}") from exc
@@ -196,7 +266,8 @@ def _check_rig_and_robot(
 
 
 def _planned(p: Path, robot: dict[str, Any], n: int) -> tuple[dict[int, int | None], int]:
-    """Sweep id -> planned positions (None: the tool, any number), and plan.n_avg."""
+    """Sweep id -> planned positions (None: the tool, any number; plan.check n_points for
+    :data:`CHECK_SWEEP`), and plan.n_avg."""
     plan = robot["plan"]
     points: dict[int, int | None] = {}
     for s in plan["sweeps"]:
@@ -208,7 +279,9 @@ def _planned(p: Path, robot: dict[str, Any], n: int) -> tuple[dict[int, int | No
             )
         points[s["joint"]] = s["n_points"]
     points[TOOL_SWEEP] = None
-    order = [TOOL_SWEEP if o == "tool" else o for o in plan["order"]]
+    if "check" in plan:
+        points[CHECK_SWEEP] = int(plan["check"]["n_points"])
+    order = [sweep_id(o) for o in plan["order"]]
     if sorted(order) != sorted(points):
         raise RecordingError(
             f"{p}: /robot/description plan.order does not list each sweep once",
@@ -217,60 +290,6 @@ def _planned(p: Path, robot: dict[str, Any], n: int) -> tuple[dict[int, int | No
             fix="repair the recorded plan",
         )
     return points, int(plan["n_avg"])
-
-
-def _keys(
-    p: Path, topic: str, payloads: list[dict[str, Any]], n_points: dict[int, int | None]
-) -> tuple[np.ndarray, np.ndarray]:
-    """(sweep, step) of each message, each naming a planned position."""
-    sweep = np.array([TOOL_SWEEP if m["sweep"] == "tool" else m["sweep"] for m in payloads])
-    step = np.array([m["step"] for m in payloads], np.int64)
-    unplanned, unlimited = -1, np.iinfo(np.int64).max
-    limit = np.array([n_points.get(int(s), unplanned) for s in sweep], dtype=object)
-    limit = np.where(limit == None, unlimited, limit).astype(np.int64)  # noqa: E711 (tool)
-    bad = np.flatnonzero((limit == unplanned) | (step >= limit))
-    if len(bad):
-        k = bad[0]
-        planned = sorted(sweep_name(s) for s in n_points)
-        raise RecordingError(
-            f"{p}: {topic} {_key(sweep[k], step[k])} names no planned position",
-            expected=f"a sweep of plan.order ({', '.join(planned)}) and a step below its "
-            "plan.sweeps n_points",
-            got=f"sweep {payloads[k]['sweep']!r}, step {step[k]}",
-            fix=_KEY_FIX,
-        )
-    return sweep.astype(np.int64), step
-
-
-def _refuse_duplicates(p: Path, topic: str, *keys: np.ndarray) -> None:
-    """``keys`` sorted; refuse two messages with the same key."""
-    same = np.ones(len(keys[0]) - 1, bool)
-    for k in keys:
-        same &= k[1:] == k[:-1]
-    dup = np.flatnonzero(same)
-    if len(dup):
-        k = dup[0]
-        raise RecordingError(
-            f"{p}: {topic} key {_key(*(a[k] for a in keys))} is recorded twice",
-            expected="one message per key",
-            fix=_KEY_FIX,
-        )
-
-
-def _refuse_step_gaps(p: Path, sweep: np.ndarray, step: np.ndarray) -> None:
-    """Steps of each sweep (sorted) must be 0, 1, ..., K-1."""
-    first = np.r_[True, sweep[1:] != sweep[:-1]]
-    start = np.maximum.accumulate(np.where(first, np.arange(len(sweep)), 0))
-    gap = np.flatnonzero(step != np.arange(len(sweep)) - start)
-    if len(gap):
-        k = gap[0]
-        want = k - start[k]
-        raise RecordingError(
-            f"{p}: /robot/joint_state sweep {sweep_name(sweep[k])} has no step {want}",
-            expected="steps 0, 1, ... of every sweep without a gap",
-            got=f"step {step[k]} after step {want - 1}" if want else f"first step {step[k]}",
-            fix=_KEY_FIX,
-        )
 
 
 def _joint_values(
@@ -287,7 +306,7 @@ def _joint_values(
     for k, (_, m) in enumerate(js):
         if m["units"] != units or len(m["q_commanded"]) != n or len(m["q_encoder"]) != n:
             raise RecordingError(
-                f"{p}: /robot/joint_state {_key(sweep[k], step[k])} does not fit the robot",
+                f"{p}: /robot/joint_state {key_text(sweep[k], step[k])} does not fit the robot",
                 expected=f"{n} joint values in units {units}",
                 got=f"units {m['units']}, {len(m['q_commanded'])} commanded, "
                 f"{len(m['q_encoder'])} encoder values",
@@ -303,7 +322,7 @@ def _joint_values(
         if len(bad):
             k, j = bad[0]
             raise RecordingError(
-                f"{p}: /robot/joint_state {_key(sweep[k], step[k])} {name} of joint {j + 1} "
+                f"{p}: /robot/joint_state {key_text(sweep[k], step[k])} {name} of joint {j + 1} "
                 "is outside its limits" + (" (through the coupling)" if desc.coupling else ""),
                 expected=f"{limits[j, 0]:g} to {limits[j, 1]:g} {units[j]} "
                 f"(± {LIMIT_MARGIN:g} {units[j]})",
@@ -332,41 +351,10 @@ def _ranges(
     if len(bad):
         k, s, m = bad[0]
         raise RecordingError(
-            f"{p}: /sonic/ranges cycle {_key(sweep[k], step[k], repeat[k])} reports a range "
+            f"{p}: /sonic/ranges cycle {key_text(sweep[k], step[k], repeat[k])} reports a range "
             f"of sparker {s + 1} to microphone {'ABCD'[m]} outside the digitizer's window",
             expected=f"{lo:g} to {hi:g} cm (range_min_cm, range_max_cm), or null for no echo",
             got=f"{ranges[k, s, m]:g} cm",
             fix="record ranges the digitizer reported; a missing echo is null",
         )
     return ranges
-
-
-def _pair(
-    p: Path,
-    j_sweep: np.ndarray,
-    j_step: np.ndarray,
-    c_sweep: np.ndarray,
-    c_step: np.ndarray,
-    c_rep: np.ndarray,
-) -> None:
-    """Every cycle has its joint state and every joint state at least one cycle."""
-    stride = np.int64(1) << 21  # steps are at most 1e6 (schema) < 2**21
-    j_key = j_sweep * stride + j_step  # sorted, unique
-    c_key = c_sweep * stride + c_step
-    orphan = np.flatnonzero(~np.isin(c_key, j_key))
-    if len(orphan):
-        k = orphan[0]
-        raise RecordingError(
-            f"{p}: /sonic/ranges cycle {_key(c_sweep[k], c_step[k], c_rep[k])} has no "
-            "/robot/joint_state",
-            expected="the joint state of every measured configuration, same (sweep, step)",
-            fix=_KEY_FIX,
-        )
-    lonely = np.flatnonzero(~np.isin(j_key, c_key))
-    if len(lonely):
-        k = lonely[0]
-        raise RecordingError(
-            f"{p}: /robot/joint_state {_key(j_sweep[k], j_step[k])} has no /sonic/ranges cycle",
-            expected="at least one digitize cycle per configuration, same (sweep, step)",
-            fix=_KEY_FIX,
-        )

@@ -1,4 +1,8 @@
-"""Stage ``residuals``: every target position's residual from its joint's features (Fig. 6-11)."""
+"""Stage ``residuals``: every target position's residual from its joint's features (Fig. 6-11).
+
+With several targets in a sweep, the residuals are those of its best-conditioned target
+(``targets_used[0]`` of the features table), whose plane and circle the features give.
+"""
 
 from __future__ import annotations
 
@@ -21,7 +25,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     }
     for row in inputs["features"].to_pylist():
         i = row["joint"]
-        p, q, steps = sweep_points(inputs["triangulate"], inputs["joints"], i, n, pris)
+        best = row["targets_used"][0]
+        p, q, steps = sweep_points(inputs["positions"], inputs["joints"], i, n, pris, best)
         axis = np.array([row["axis_x"], row["axis_y"], row["axis_z"]])
         c = np.array([row["center_x_cm"], row["center_y_cm"], row["center_z_cm"]])
         d = p - c
@@ -49,8 +54,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 STAGE = Stage(
     "residuals",
-    1,
-    ("triangulate", "joints", "features", "session"),
+    3,
+    ("positions", "joints", "features", "session"),
     NoParams(),
     compute,
     "per-point normal and radial residuals",

@@ -35,21 +35,40 @@ from pipeline.schemas import validate_table
 from pipeline.stages.base import RECORDING, Stage
 from pipeline.stages.lock import session_lock
 from pipeline.stages.recording import file_sha256, read_recording
+from pipeline.stages.session import session_sensor
 from pipeline.stages.tables import CheckedTable, check_table, content_hash, write_table
 
-#: Stage modules in pipeline order (each defines ``STAGE``).
+#: Identification stage modules of a sonic session in pipeline order (each defines
+#: ``STAGE``): ranges -> compensate -> triangulate -> the sensor-neutral ``positions``.
 STAGE_MODULES = (
     "session",
     "ranges",
     "joints",
     "compensate",
     "triangulate",
+    "positions",
     "features",
     "residuals",
     "frames",
     "smodel",
     "dh",
 )
+#: Identification stage modules of a point-sensor session: module ``points`` is the one
+#: stage that turns ``/points`` into the ``positions`` table (its stage name).
+POINT_STAGE_MODULES = (
+    "session",
+    "joints",
+    "points",
+    "features",
+    "residuals",
+    "frames",
+    "smodel",
+    "dh",
+)
+#: recorded sensor kind (``/rig/description`` sensor) -> its identification stage modules
+SENSOR_STAGE_MODULES = {"sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES}
+#: The last identification stage: a stage list holding it (and ``session``) has a product.
+LAST_STAGE = "dh"
 #: Stage modules of ``pipeline evaluate`` (run after the identification, same runner).
 EVALUATE_STAGE_MODULES = (
     "evaluate_teach",
@@ -77,8 +96,23 @@ FAILED = "failed"
 
 
 def stages(modules: tuple[str, ...] = STAGE_MODULES) -> list[Stage]:
-    """All stages of a stage list (default: the identification), in order."""
+    """All stages of a stage list (default: a sonic session's identification), in order."""
     return [importlib.import_module(f"pipeline.stages.{m}").STAGE for m in modules]
+
+
+def identification_modules(session_dir: str | Path) -> tuple[str, ...]:
+    """The identification stage modules of a session, by its recorded sensor kind."""
+    return _Hashes(session_folder(session_dir)).identification_modules()
+
+
+def identification_names(sensor: str) -> tuple[str, ...]:
+    """The names (output files ``stages/<name>.arrow``) of the identification stages of a
+    session of sensor kind ``sensor`` (``sonic`` or ``points``)."""
+    return tuple(s.name for s in stages(SENSOR_STAGE_MODULES[sensor]))
+
+
+def _is_identification(names: list[str] | set[str]) -> bool:
+    return LAST_STAGE in names and "session" in names
 
 
 def _function(ref: str) -> Callable[..., Any]:
@@ -97,7 +131,7 @@ def _load_file_input(sdir: Path, name: str, hashes: _Hashes) -> Any:
             f"{sdir}: no {fname}", fix="run `pipeline identify` / `pipeline evaluate` first"
         )
     if name == PRODUCT[0]:
-        return _function(loader)(path, {n: hashes.get(n) for n in STAGE_MODULES})
+        return _function(loader)(path, {n: hashes.get(n) for n in hashes.identification()})
     return _function(loader)(path)
 
 
@@ -185,7 +219,33 @@ class _Hashes:
         self._files: dict[str, str | None] = {}
         self._tables: dict[str, CheckedTable | None] = {}
         self._product: tuple[str, str] | None = None
+        self._sensor: str | None = None
         self.pending: set[str] = set()  # stages written in this run, not committed yet
+
+    def sensor(self) -> str:
+        """The recorded sensor kind: from the committed ``session`` table when it was made
+        from this recording (cheap), else from the recording itself."""
+        if self._sensor is None:
+            checked = self.check("session")
+            rec_hash = self.get(RECORDING)
+            if (
+                checked is not None
+                and not checked.problem
+                and checked.table is not None
+                and checked.table.column("recording_sha256")[0].as_py() == rec_hash
+            ):
+                self._sensor = session_sensor(checked.table)
+            else:
+                rec = read_recording(self.session_dir / "recording.mcap", rec_hash)
+                self._sensor = rec.sensor
+        return self._sensor
+
+    def identification_modules(self) -> tuple[str, ...]:
+        return SENSOR_STAGE_MODULES[self.sensor()]
+
+    def identification(self) -> tuple[str, ...]:
+        """Stage names of the session's identification (product inputs)."""
+        return identification_names(self.sensor())
 
     def path(self, name: str) -> Path:
         if name in self.pending:
@@ -219,7 +279,7 @@ class _Hashes:
         """``(state, reason)`` of the product file against the committed stages."""
         if self._product is None:
             check = _function(PRODUCT[2])
-            self._product = check(self.session_dir, {n: self.get(n) for n in STAGE_MODULES})
+            self._product = check(self.session_dir, {n: self.get(n) for n in self.identification()})
         return self._product
 
     def put(self, name: str, table: Any, provenance: dict[str, Any]) -> None:
@@ -231,7 +291,7 @@ def committed_hashes(session_dir: str | Path) -> dict[str, str | None]:
     """Content hash of every committed identification stage output whose file passes its
     check (None: missing or failing it)."""
     hashes = _Hashes(Path(session_dir))
-    return {s.name: hashes.get(s.name) for s in stages()}
+    return {n: hashes.get(n) for n in hashes.identification()}
 
 
 def _check(stage: Stage, params: Any, hashes: _Hashes, stale: set[str]) -> StageStatus:
@@ -259,14 +319,16 @@ def _check(stage: Stage, params: Any, hashes: _Hashes, stale: set[str]) -> Stage
 def status(
     session_dir: str | Path,
     overrides: Mapping[str, Mapping[str, Any]] | None = None,
-    modules: tuple[str, ...] = STAGE_MODULES,
+    modules: tuple[str, ...] | None = None,
 ) -> list[StageStatus]:
     """Freshness of every stage of a session, and why (``modules``: the stage list,
-    e.g. ``STAGE_MODULES + EVALUATE_STAGE_MODULES``; staleness propagates along it).
-    A list holding the identification stages also gives the status of their product
-    (``signature``) right after them."""
+    e.g. ``identification_modules(s) + EVALUATE_STAGE_MODULES``; default: the session's
+    identification; staleness propagates along it). A list holding the identification
+    stages also gives the status of their product (``signature``) right after them."""
     sdir = session_folder(session_dir)
-    return _statuses(sdir, stages(modules), overrides or {}, _Hashes(sdir))
+    hashes = _Hashes(sdir)
+    modules = hashes.identification_modules() if modules is None else modules
+    return _statuses(sdir, stages(modules), overrides or {}, hashes)
 
 
 def _statuses(
@@ -278,13 +340,13 @@ def _statuses(
 ) -> list[StageStatus]:
     out: list[StageStatus] = []
     stale: set[str] = set()
-    has_product = product and set(STAGE_MODULES) <= {s.name for s in all_stages}
+    has_product = product and _is_identification({s.name for s in all_stages})
     for stage in all_stages:
         st = _check(stage, _params(stage, overrides), hashes, stale)
         if st.state != "fresh":
             stale.add(stage.name)
         out.append(st)
-        if has_product and stage.name == STAGE_MODULES[-1]:
+        if has_product and stage.name == LAST_STAGE:
             st = _product_status(hashes, stale)
             if st.state != "fresh":
                 stale.add(st.name)
@@ -294,7 +356,7 @@ def _statuses(
 
 def _product_status(hashes: _Hashes, stale: set[str]) -> StageStatus:
     state, reason = hashes.product_status()
-    behind = [n for n in STAGE_MODULES if n in stale]
+    behind = [n for n in hashes.identification() if n in stale]
     if state == "fresh" and behind:
         state, reason = "stale", f"built from stage {behind[0]}, which is stale or missing"
     return StageStatus(PRODUCT[0], state, reason)
@@ -307,14 +369,15 @@ def run(
     from_stage: str | None = None,
     only: str | None = None,
     overrides: Mapping[str, Mapping[str, Any]] | None = None,
-    modules: tuple[str, ...] = STAGE_MODULES,
+    modules: tuple[str, ...] | None = None,
     progress: TextIO | None = None,
 ) -> list[StageRun]:
     """Bring every stage of a session up to date, then (identification) its signature.
 
     Parameters
     ----------
-    modules : the stage list (:data:`STAGE_MODULES` or :data:`EVALUATE_STAGE_MODULES`).
+    modules : the stage list (default: the session's identification, by its recorded
+        sensor: :data:`SENSOR_STAGE_MODULES`; or :data:`EVALUATE_STAGE_MODULES`).
     force : rerun every stage and rewrite the signature.
     from_stage : rerun this stage and every later one.
     only : rerun just this stage (its inputs must exist and pass their checks).
@@ -328,23 +391,23 @@ def run(
     (a stage is stale after ``only``).
     """
     sdir = session_folder(session_dir)
-    all_stages = stages(modules)
-    names = [s.name for s in all_stages]
-    for opt, value in (("--from", from_stage), ("--only", only)):
-        if value is not None and value not in names:
-            raise ArmsigError(f"{opt}: unknown stage {value!r}", expected=", ".join(names))
     overrides = overrides or {}
-    for key in overrides:
-        if key not in names:
-            raise ArmsigError(f"unknown stage {key!r} in parameters", expected=", ".join(names))
     runs: list[StageRun] = []
-    with session_lock(sdir):
+    with session_lock(sdir):  # the recorded sensor (the stage list) is read under the lock
+        hashes = _Hashes(sdir)
+        all_stages = stages(hashes.identification_modules() if modules is None else modules)
+        names = [s.name for s in all_stages]
+        for opt, value in (("--from", from_stage), ("--only", only)):
+            if value is not None and value not in names:
+                raise ArmsigError(f"{opt}: unknown stage {value!r}", expected=", ".join(names))
+        for key in overrides:
+            if key not in names:
+                raise ArmsigError(f"unknown stage {key!r} in parameters", expected=", ".join(names))
         pending = _pending_dir(sdir)
         shutil.rmtree(pending, ignore_errors=True)  # debris of a killed run
         for folder in (sdir, sdir / "stages", sdir / "report"):
             remove_debris(folder)  # temp files of killed atomic writes
-        hashes = _Hashes(sdir)
-        label = "identify" if set(STAGE_MODULES) <= set(names) else "evaluate"
+        label = "identify" if _is_identification(set(names)) else "evaluate"
         bar = Progress(label, len(all_stages), progress, unit="stages")
         try:
             try:
@@ -362,7 +425,7 @@ def run(
         finally:
             bar.close()
             shutil.rmtree(pending, ignore_errors=True)
-        if set(STAGE_MODULES) <= set(names):
+        if _is_identification(set(names)):
             runs.append(_write_product(sdir, all_stages, overrides, hashes, force))
     return runs
 
@@ -403,7 +466,8 @@ def _write_product(
     t0 = time.perf_counter()
     if any(st.state != "fresh" for st in _statuses(sdir, all_stages, overrides, hashes, False)):
         return StageRun(name, "not written", 0.0, 0)
-    _, _, written = _function(writer)(sdir, {n: hashes.get(n) for n in STAGE_MODULES}, force)
+    ident = {n: hashes.get(n) for n in hashes.identification()}
+    _, _, written = _function(writer)(sdir, ident, force)
     return StageRun(name, "written" if written else "cached", time.perf_counter() - t0, -1)
 
 

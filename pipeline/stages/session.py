@@ -39,6 +39,11 @@ def session_robot(session: pa.Table):  # -> RobotDescription
     return description_from_dict(doc["robot"], source="/robot/description")
 
 
+def session_sensor(session: pa.Table) -> str:
+    """The recorded sensor kind: ``sonic`` (also when absent) or ``points``."""
+    return str(json.loads(session.column("rig_json")[0].as_py()).get("sensor", "sonic"))
+
+
 def session_plan(session: pa.Table) -> dict[str, Any]:
     """The recorded measurement plan and signature configuration."""
     doc = json.loads(session.column("robot_json")[0].as_py())

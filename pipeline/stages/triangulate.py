@@ -25,6 +25,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.stages.base import Stage, check_param
+from pipeline.stages.positions import positions
 
 
 @dataclass(frozen=True)
@@ -39,13 +40,6 @@ class Params:
         check_param(self, "triangulate", "reject_k", 1 <= k < inf, ">= 1 and finite")
         check_param(self, "triangulate", "floor_cm", 0 <= floor < inf, ">= 0 and finite (cm)")
         check_param(self, "triangulate", "pair_max_cm", 0 < pair < inf, "> 0 and finite (cm)")
-
-
-def positions(table: pa.Table) -> np.ndarray:
-    """The ``x_cm, y_cm, z_cm`` columns of a table as an (m, 3) array; null -> NaN."""
-    return np.stack(
-        [table.column(c).to_numpy(zero_copy_only=False) for c in ("x_cm", "y_cm", "z_cm")], axis=1
-    ).astype(float)
 
 
 def robust_mean(p: np.ndarray, k: float, floor_cm: float) -> tuple[np.ndarray, np.ndarray]:

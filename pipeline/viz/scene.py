@@ -31,9 +31,7 @@ CIRCLE_SEGMENTS = 96  # a 100 cm circle drawn within 0.05 cm (r (1 - cos(pi/96))
 #: Colour of joint i's features and points (cycled): the 10 of matplotlib's tab10.
 PALETTE: tuple[fg.RGBA, ...] = tuple(
     (int(h[0:2], 16) / 255, int(h[2:4], 16) / 255, int(h[4:6], 16) / 255, 1.0)
-    for h in (
-        "1f77b4 ff7f0e 2ca02c d62728 9467bd 8c564b e377c2 7f7f7f bcbd22 17becf".split()
-    )
+    for h in ("1f77b4 ff7f0e 2ca02c d62728 9467bd 8c564b e377c2 7f7f7f bcbd22 17becf".split())
 )
 
 
@@ -47,8 +45,9 @@ class VizMessage:
 
 
 def measured_topic(sweep: int) -> str:
-    """Topic of a sweep's measured positions: ``/measured/joint_<i>``; 0 is the tool probe."""
-    return "/measured/tool" if sweep == 0 else f"/measured/joint_{sweep}"
+    """Topic of a sweep's measured positions: ``/measured/joint_<i>``; 0 is the tool probe,
+    -1 the validation configurations (sweep 'check')."""
+    return {0: "/measured/tool", -1: "/measured/check"}.get(sweep, f"/measured/joint_{sweep}")
 
 
 def frame_messages(sig: Signature, q: np.ndarray) -> list[VizMessage]:
@@ -113,11 +112,11 @@ def feature_messages(sig: Signature, features: pa.Table) -> list[VizMessage]:
     return [VizMessage(FEATURES_TOPIC, "foxglove.SceneUpdate", fg.scene_update(entities))]
 
 
-def point_messages(triangulate: pa.Table) -> list[VizMessage]:
+def point_messages(positions: pa.Table) -> list[VizMessage]:
     """One PointCloud per sweep of its measured target positions (rows without a
     position, every cycle dropped or rejected, are left out)."""
     cols = {
-        c: triangulate.column(c).to_numpy(zero_copy_only=False)  # a null position: NaN
+        c: positions.column(c).to_numpy(zero_copy_only=False)  # a null position: NaN
         for c in ("sweep", "step", "x_cm", "y_cm", "z_cm")
     }
     xyz = np.column_stack([cols["x_cm"], cols["y_cm"], cols["z_cm"]]).astype(float)

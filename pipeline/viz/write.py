@@ -1,7 +1,7 @@
 """``pipeline viz``: write a session's ``viz.mcap`` for Foxglove's 3-D panel.
 
 Reads the session's signature (refused when stale) and its committed, checked
-``triangulate`` and ``features`` tables under the session lock; validates every
+``positions`` and ``features`` tables under the session lock; validates every
 message against its published Foxglove schema; writes the file atomically. An
 existing file at the output path is replaced only when ``pipeline viz`` wrote it.
 """
@@ -126,7 +126,7 @@ def viz(
         messages = [
             *frame_messages(sig, joints_to_internal(q_b, pris)),
             *feature_messages(sig, _checked(sdir, "features")),
-            *point_messages(_checked(sdir, "triangulate")),
+            *point_messages(_checked(sdir, "positions")),
         ]
         for m in messages:
             fg.validate(m.schema, m.payload)

@@ -1,0 +1,131 @@
+"""Message keys of a session recording: sweep ids, their checks and their pairing.
+
+Shared by the sonic reader (:mod:`pipeline.stages.recording`) and the point reader
+(:mod:`pipeline.stages.recording_points`). Every refusal names the key.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.errors import RecordingError
+
+TOOL_SWEEP = 0  # the tool-probe measurement's sweep id in tables ("tool" in the recording)
+CHECK_SWEEP = -1  # validation configurations' sweep id in tables ("check" in the recording)
+_NAMED = {"tool": TOOL_SWEEP, "check": CHECK_SWEEP}
+KEY_FIX = "repair the rig's writer: keys are documented in schemas/mcap/ (docs/rig.md)"
+
+
+def sweep_name(sweep: int) -> str:
+    """A sweep id as the recording spells it: the target number, 'tool' or 'check'."""
+    return {TOOL_SWEEP: "tool", CHECK_SWEEP: "check"}.get(int(sweep), str(int(sweep)))
+
+
+def sweep_id(recorded: int | str) -> int:
+    """The table id of a recorded sweep (a joint number, 'tool' or 'check')."""
+    return _NAMED[recorded] if isinstance(recorded, str) else int(recorded)
+
+
+def key_text(sweep: Any, step: Any, repeat: Any = None, target: Any = None) -> str:
+    """``(sweep 3, step 4)``, with ``, repeat r`` or ``, target T`` when given."""
+    out = f"(sweep {sweep_name(sweep)}, step {int(step)}"
+    if target is not None:
+        out += f", target {target}"
+    return out + (")" if repeat is None else f", repeat {int(repeat)})")
+
+
+def message_keys(
+    p: Path, topic: str, payloads: list[dict[str, Any]], n_points: dict[int, int | None]
+) -> tuple[np.ndarray, np.ndarray]:
+    """(sweep, step) of each message, each naming a planned position
+    (``n_points``: sweep id -> planned positions, None: any number)."""
+    sweep = np.array([sweep_id(m["sweep"]) for m in payloads], np.int64)
+    step = np.array([m["step"] for m in payloads], np.int64)
+    unplanned, unlimited = -1, np.iinfo(np.int64).max
+    limit = np.array([n_points.get(int(s), unplanned) for s in sweep], dtype=object)
+    limit = np.where(limit == None, unlimited, limit).astype(np.int64)  # noqa: E711 (tool)
+    bad = np.flatnonzero((limit == unplanned) | (step >= limit))
+    if len(bad):
+        k = bad[0]
+        planned = [sweep_name(s) for s in sorted(n_points)]
+        raise RecordingError(
+            f"{p}: {topic} {key_text(sweep[k], step[k])} names no planned position",
+            expected=f"a sweep of plan.order ({', '.join(planned)}) and a step below its "
+            "plan.sweeps n_points",
+            got=f"sweep {payloads[k]['sweep']!r}, step {step[k]}",
+            fix=KEY_FIX,
+        )
+    return sweep, step
+
+
+def refuse_duplicates(
+    p: Path, topic: str, *keys: np.ndarray, target: np.ndarray | None = None
+) -> None:
+    """``keys`` (and ``target``) sorted; refuse two messages with the same key."""
+    same = np.ones(len(keys[0]) - 1, bool) if len(keys[0]) else np.zeros(0, bool)
+    for k in (*keys, *(() if target is None else (target,))):
+        same &= k[1:] == k[:-1]
+    dup = np.flatnonzero(same)
+    if len(dup):
+        k = dup[0]
+        sweep, step, *repeat = (a[k] for a in keys)
+        text = key_text(
+            sweep, step, repeat[0] if repeat else None, None if target is None else target[k]
+        )
+        raise RecordingError(
+            f"{p}: {topic} key {text} is recorded twice",
+            expected="one message per key",
+            fix=KEY_FIX,
+        )
+
+
+def refuse_step_gaps(p: Path, sweep: np.ndarray, step: np.ndarray) -> None:
+    """Steps of each sweep (sorted) must be 0, 1, ..., K-1."""
+    first = np.r_[True, sweep[1:] != sweep[:-1]]
+    start = np.maximum.accumulate(np.where(first, np.arange(len(sweep)), 0))
+    gap = np.flatnonzero(step != np.arange(len(sweep)) - start)
+    if len(gap):
+        k = gap[0]
+        want = k - start[k]
+        raise RecordingError(
+            f"{p}: /robot/joint_state sweep {sweep_name(sweep[k])} has no step {want}",
+            expected="steps 0, 1, ... of every sweep without a gap",
+            got=f"step {step[k]} after step {want - 1}" if want else f"first step {step[k]}",
+            fix=KEY_FIX,
+        )
+
+
+def pair_keys(
+    p: Path,
+    j_sweep: np.ndarray,
+    j_step: np.ndarray,
+    m_sweep: np.ndarray,
+    m_step: np.ndarray,
+    m_key: Callable[[int], str],
+    topic: str,
+    what: str,
+) -> None:
+    """Every measurement (``what`` of ``topic``; ``m_key(k)`` spells the key of the k-th)
+    has its joint state and every joint state at least one measurement."""
+    stride = np.int64(1) << 21  # steps are at most 1e6 (schema) < 2**21
+    j_key = j_sweep * stride + j_step  # sorted, unique
+    c_key = m_sweep * stride + m_step
+    orphan = np.flatnonzero(~np.isin(c_key, j_key))
+    if len(orphan):
+        raise RecordingError(
+            f"{p}: {topic} {what} {m_key(int(orphan[0]))} has no /robot/joint_state",
+            expected="the joint state of every measured configuration, same (sweep, step)",
+            fix=KEY_FIX,
+        )
+    lonely = np.flatnonzero(~np.isin(j_key, c_key))
+    if len(lonely):
+        k = lonely[0]
+        raise RecordingError(
+            f"{p}: /robot/joint_state {key_text(j_sweep[k], j_step[k])} has no {topic} {what}",
+            expected=f"at least one {what} per configuration, same (sweep, step)",
+            fix=KEY_FIX,
+        )

@@ -1,0 +1,165 @@
+"""Read the ``/points`` channel of a point-sensor recording (``schemas/mcap/points.json``).
+
+What one message's schema cannot check, refused with one line naming the key: a key
+``(sweep, step, target)`` recorded twice, a sweep or step the plan does not have, a
+target id the plan does not list for its sweep (``plan.sweeps[].targets``;
+``plan.tool_target`` for the tool sweep, whose only target it is), ``sigma_cm``
+together with ``cov_cm2``, a covariance that is not symmetric positive definite, a
+quaternion that is not of unit length. Pairing with the joint states is the caller's.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.errors import RecordingError
+from pipeline.stages.recording_keys import (
+    KEY_FIX,
+    TOOL_SWEEP,
+    key_text,
+    message_keys,
+    refuse_duplicates,
+    sweep_name,
+)
+
+TOPIC = "/points"
+#: A recorded covariance may be asymmetric by this fraction of its largest entry: the
+#: rounding of a writer that prints 15 significant digits, far below a transposed or
+#: mistyped entry.
+SYMMETRY_REL = 1e-9
+#: A recorded quaternion's length may differ from 1 by this much: a float32 quaternion
+#: renormalised in float32 is within 1e-7; a non-rotation is off by far more.
+UNIT_TOL = 1e-6
+
+
+def no_points() -> dict[str, np.ndarray]:
+    """The point arrays of a sonic recording: zero rows."""
+    return {
+        "point_sweep": np.zeros(0, np.int64),
+        "point_step": np.zeros(0, np.int64),
+        "point_target": np.zeros(0, str),
+        "point_t_s": np.zeros(0),
+        "points_cm": np.zeros((0, 3)),
+        "point_sigma_cm": np.zeros(0),
+        "point_cov_cm2": np.zeros((0, 3, 3)),
+        "point_wxyz": np.zeros((0, 4)),
+    }
+
+
+def read_points(
+    p: Path,
+    msgs: list[tuple[int, dict[str, Any]]],
+    plan: dict[str, Any],
+    n_points: dict[int, int | None],
+    t0: int,
+) -> dict[str, np.ndarray]:
+    """The ``point_*`` arrays of :class:`pipeline.stages.recording.Recording`, sorted by
+    ``(sweep, step, target)``; ``n_points``: sweep id -> planned positions; ``t0``: the
+    earliest joint state's log time (ns)."""
+    payloads = [m for _, m in msgs]
+    sweep, step = message_keys(p, TOPIC, payloads, n_points)
+    target = np.array([m["target"] for m in payloads], str)
+    order = np.lexsort((target, step, sweep))
+    sweep, step, target = sweep[order], step[order], target[order]
+    msgs = [msgs[k] for k in order]
+    refuse_duplicates(p, TOPIC, sweep, step, target=target)
+    _refuse_unplanned_targets(p, sweep, step, target, plan)
+    n = len(msgs)
+    sigma = np.full(n, np.nan)
+    cov = np.full((n, 3, 3), np.nan)
+    wxyz = np.full((n, 4), np.nan)
+    for k, (_, m) in enumerate(msgs):
+        key = key_text(sweep[k], step[k], target=target[k])
+        if "sigma_cm" in m and "cov_cm2" in m:
+            raise RecordingError(
+                f"{p}: {TOPIC} {key} carries both sigma_cm and cov_cm2",
+                expected="one uncertainty per point: sigma_cm (isotropic) or cov_cm2 (3x3)",
+                fix="record either, not both (schemas/mcap/points.json)",
+            )
+        if "sigma_cm" in m:
+            sigma[k] = m["sigma_cm"]
+        if "cov_cm2" in m:
+            cov[k] = _checked_cov(p, key, np.array(m["cov_cm2"], float))
+        if "orientation_wxyz" in m:
+            wxyz[k] = _checked_quaternion(p, key, np.array(m["orientation_wxyz"], float))
+    return {
+        "point_sweep": sweep,
+        "point_step": step,
+        "point_target": target,
+        "point_t_s": np.array([(t - t0) * 1e-9 for t, _ in msgs]),
+        "points_cm": np.array([[m["x_cm"], m["y_cm"], m["z_cm"]] for _, m in msgs], float).reshape(
+            -1, 3
+        ),
+        "point_sigma_cm": sigma,
+        "point_cov_cm2": cov,
+        "point_wxyz": wxyz,
+    }
+
+
+def _refuse_unplanned_targets(
+    p: Path, sweep: np.ndarray, step: np.ndarray, target: np.ndarray, plan: dict[str, Any]
+) -> None:
+    """Targets of a joint sweep within its ``targets`` (when listed); the tool sweep
+    measures ``tool_target`` (when given), else exactly one target."""
+    allowed: dict[int, list[str]] = {
+        int(s["joint"]): list(s["targets"]) for s in plan["sweeps"] if "targets" in s
+    }
+    if "tool_target" in plan:
+        allowed[TOOL_SWEEP] = [str(plan["tool_target"])]
+    else:
+        tool_ids = sorted(set(target[sweep == TOOL_SWEEP].tolist()))
+        if len(tool_ids) > 1:
+            raise RecordingError(
+                f"{p}: {TOPIC} sweep tool measures {len(tool_ids)} targets "
+                f"({', '.join(tool_ids)}) and plan.tool_target does not say which is the tool",
+                expected="one target in sweep tool, or plan.tool_target",
+                fix="record plan.tool_target in /robot/description",
+            )
+    for k in range(len(sweep)):
+        ids = allowed.get(int(sweep[k]))
+        if ids is not None and target[k] not in ids:
+            where = "plan.tool_target" if sweep[k] == TOOL_SWEEP else "its plan.sweeps targets"
+            raise RecordingError(
+                f"{p}: {TOPIC} {key_text(sweep[k], step[k], target=target[k])} names a target "
+                f"that sweep {sweep_name(sweep[k])} does not plan",
+                expected=f"a target of {where}: {', '.join(ids)}",
+                got=f"target {target[k]}",
+                fix=KEY_FIX,
+            )
+
+
+def _checked_cov(p: Path, key: str, c: np.ndarray) -> np.ndarray:
+    """``c`` (3, 3), refused unless symmetric positive definite."""
+    scale = float(np.max(np.abs(c)))
+    if scale == 0.0 or np.max(np.abs(c - c.T)) > SYMMETRY_REL * scale:
+        raise RecordingError(
+            f"{p}: {TOPIC} {key} cov_cm2 is not symmetric",
+            expected="cov_cm2[i][j] == cov_cm2[j][i]",
+            got=str(c.tolist()),
+            fix="record the covariance of (x, y, z) in cm^2",
+        )
+    c = 0.5 * (c + c.T)
+    if np.linalg.eigvalsh(c)[0] <= 0.0:
+        raise RecordingError(
+            f"{p}: {TOPIC} {key} cov_cm2 is not positive definite",
+            expected="a covariance with positive eigenvalues",
+            got=f"eigenvalues {np.linalg.eigvalsh(c).tolist()}",
+            fix="record the covariance of (x, y, z) in cm^2, or sigma_cm",
+        )
+    return c
+
+
+def _checked_quaternion(p: Path, key: str, q: np.ndarray) -> np.ndarray:
+    """``q`` (4,), refused unless of unit length within :data:`UNIT_TOL`."""
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > UNIT_TOL:
+        raise RecordingError(
+            f"{p}: {TOPIC} {key} orientation_wxyz is not a unit quaternion",
+            expected=f"length 1 (± {UNIT_TOL:g})",
+            got=f"length {norm:.9g}",
+            fix="normalise the quaternion (w, x, y, z) before recording it",
+        )
+    return q
