@@ -89,3 +89,20 @@ def test_no_home_row_uses_last_sweep_nearest_home(tmp_path: Path) -> None:
     desc = _read(tmp_path / "s")["/robot/description"][0]
     assert desc["signature_q"] == [0.0, -40.0] and len(out.tool.rows) == 1
     np.testing.assert_array_equal(out.tool.signature_q, [0.0, -40.0])
+
+
+def test_small_robot_identifies_exactly(tmp_path: Path) -> None:
+    """A two-link arm with radii of 1 and 2 mm (SScanSS-2's example scale): its only target
+    per sweep is used (no absolute 1 cm floor), and the model error is exact."""
+    from pipeline.identify import identify
+    from pipeline.stages.tables import read_table
+
+    src = tmp_path / "two.txt"
+    src.write_text(sscanss2_text(TWO_LINK, TWO_LINK_VALUES, digits=15))
+    import_file(src, "sscanss2", TWO_LINK, tmp_path / "s")
+    identify(tmp_path / "s", report=True)
+    rows = read_table(tmp_path / "s" / "stages" / "validation.arrow").to_pylist()
+    assert len(rows) == 7 + 7 + 2 and {r["role"] for r in rows} == {"fit"}
+    assert max(r["error_cm"] for r in rows) <= 1e-9
+    report = (tmp_path / "s" / "report" / "report.md").read_text()
+    assert "## Validation: model position error on measured points" in report
