@@ -164,7 +164,7 @@ def _read_cached(p: Path, sha: str) -> Recording:
         ps, pk, pt = measured["point_sweep"], measured["point_step"], measured["point_target"]
         pair_keys(
             p, j_sweep, j_step, ps, pk,
-            [key_text(s, k, target=t) for s, k, t in zip(ps, pk, pt, strict=True)],
+            lambda k: key_text(ps[k], pk[k], target=pt[k]),
             "/points", "point",
         )  # fmt: skip
         return Recording(p, sha, rig, robot, sensor, **joints, **_no_cycles(), **measured)
@@ -172,7 +172,7 @@ def _read_cached(p: Path, sha: str) -> Recording:
     c_sweep, c_step, c_rep = cycles["cycle_sweep"], cycles["cycle_step"], cycles["cycle_repeat"]
     pair_keys(
         p, j_sweep, j_step, c_sweep, c_step,
-        [key_text(*k) for k in zip(c_sweep, c_step, c_rep, strict=True)],
+        lambda k: key_text(c_sweep[k], c_step[k], c_rep[k]),
         "/sonic/ranges", "cycle",
     )  # fmt: skip
     return Recording(p, sha, rig, robot, sensor, **joints, **cycles, **recording_points.no_points())
