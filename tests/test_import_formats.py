@@ -106,3 +106,21 @@ def test_small_robot_identifies_exactly(tmp_path: Path) -> None:
     assert max(r["error_cm"] for r in rows) <= 1e-9
     report = (tmp_path / "s" / "report" / "report.md").read_text()
     assert "## Validation: model position error on measured points" in report
+
+
+def test_prismatic_rotary_prismatic_prismatic_identifies_exactly(tmp_path: Path) -> None:
+    """SScanSS-2's table layout (P R P P, two prismatic joints in a row, mm-scale target
+    offsets) from its design model: the S-Model chain needs nothing more, model error exact."""
+    from import_data import TABLE
+
+    from pipeline.identify import identify
+    from pipeline.stages.tables import read_table
+
+    values = [[0, 100, 200, 300, 400, 500], [-180, -108, -36, 36, 108, 180],
+              [-200, -120, -40, 40, 120, 200], [-200, -120, -40, 40, 120, 200]]  # fmt: skip
+    src = tmp_path / "table.txt"
+    src.write_text(sscanss2_text(TABLE, values, digits=15))
+    import_file(src, "sscanss2", TABLE, tmp_path / "s")
+    identify(tmp_path / "s", report=False)
+    rows = read_table(tmp_path / "s" / "stages" / "validation.arrow").to_pylist()
+    assert len(rows) == 25 and max(r["error_cm"] for r in rows) <= 1e-9
