@@ -124,3 +124,43 @@ def test_prismatic_rotary_prismatic_prismatic_identifies_exactly(tmp_path: Path)
     identify(tmp_path / "s", report=False)
     rows = read_table(tmp_path / "s" / "stages" / "validation.arrow").to_pylist()
     assert len(rows) == 25 and max(r["error_cm"] for r in rows) <= 1e-9
+
+
+def test_import_refused_while_the_session_is_locked(tmp_path: Path) -> None:
+    from recording_data import locked_elsewhere
+
+    from pipeline.errors import SessionLockedError
+
+    src = tmp_path / "two.txt"
+    src.write_text(sscanss2_text(TWO_LINK, TWO_LINK_VALUES))
+    (tmp_path / "s").mkdir()
+    with locked_elsewhere(tmp_path / "s"), pytest.raises(SessionLockedError):
+        import_file(src, "sscanss2", TWO_LINK, tmp_path / "s")
+    assert not (tmp_path / "s" / "recording.mcap").exists()
+
+
+def test_validate_command_against_a_second_file(tmp_path: Path) -> None:
+    import json
+
+    from typer.testing import CliRunner
+
+    from pipeline.cli import EXIT_REFUSED, app
+    from pipeline.identify import identify
+
+    src = tmp_path / "two.txt"
+    src.write_text(sscanss2_text(TWO_LINK, TWO_LINK_VALUES, digits=15))
+    other = tmp_path / "other.txt"  # the same arm measured at other readings
+    other.write_text(sscanss2_text(TWO_LINK, [[-170, -10, 95], [-100, 5, 130]], digits=15))
+    runner = CliRunner()
+    args = ["validate", str(tmp_path / "s"), "--against", str(other), "--format", "sscanss2"]
+    r = runner.invoke(app, args)
+    assert r.exit_code == EXIT_REFUSED and r.stderr.startswith("error: cannot read signature")
+    assert len(r.stderr.splitlines()) == 1
+    import_file(src, "sscanss2", TWO_LINK, tmp_path / "s")
+    identify(tmp_path / "s", report=False)
+    before = sorted(p.name for p in (tmp_path / "s").rglob("*"))
+    r = runner.invoke(app, [*args, "--json"])
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    assert out["n"] == 6 and out["max_cm"] <= 1e-9 and out["registered_max_cm"] <= 1e-9
+    assert sorted(p.name for p in (tmp_path / "s").rglob("*")) == before  # nothing written
