@@ -164,3 +164,31 @@ def test_validate_command_against_a_second_file(tmp_path: Path) -> None:
     out = json.loads(r.stdout)
     assert out["n"] == 6 and out["max_cm"] <= 1e-9 and out["registered_max_cm"] <= 1e-9
     assert sorted(p.name for p in (tmp_path / "s").rglob("*")) == before  # nothing written
+
+
+def test_table_unwraps_angle_jumps(tmp_path: Path) -> None:
+    """A revolute reading that wraps (170, -170 = 190 deg) is one sweep once unwrapped."""
+    from import_data import tool_points_mm
+
+    q1 = [110.0, 150.0, -170.0, -130.0, -90.0]  # 110 .. 270 deg with a wrap
+    rows = []
+    for v in q1:
+        rows.append([v, 0.0, *tool_points_mm(TWO_LINK, np.array([[v, 0.0]]))[0]])
+    for v in (-60.0, 0.0, 60.0):
+        rows.append([0.0, v, *tool_points_mm(TWO_LINK, np.array([[0.0, v]]))[0]])
+    src = tmp_path / "wrap.csv"
+    src.write_text("j1,j2,x,y,z\n" + "\n".join(",".join(f"{c:.12g}" for c in r) for r in rows))
+    mp = tmp_path / "map.toml"
+    mp.write_text(
+        'length_unit = "mm"\n[[targets]]\nx = "x"\ny = "y"\nz = "z"\n'
+        '[[joints]]\ncolumn = "j1"\nunit = "deg"\nunwrap = true\n'
+        '[[joints]]\ncolumn = "j2"\nunit = "deg"\n[sweeps]\ncolumn = "infer"\n'
+    )
+    robot = tmp_path / "wide.toml"  # joint 1 turns 270 deg either way
+    robot.write_text(TWO_LINK.read_text().replace("[-180.0, 180.0]", "[-270.0, 270.0]", 1))
+    import_file(src, "table", robot, tmp_path / "s", mp)
+    plan = _read(tmp_path / "s")["/robot/description"][0]["plan"]
+    sweeps = {s["joint"]: s for s in plan["sweeps"]}
+    assert sweeps[1]["q_first"] == 110.0 and sweeps[1]["q_last"] == pytest.approx(270.0)
+    with pytest.raises(ArmsigError, match=r"wrap.csv: line 4: joint 1 \(link1\) reads 190"):
+        import_file(src, "table", TWO_LINK, tmp_path / "s2", mp)  # limits -180 to 180

@@ -15,7 +15,7 @@ import numpy as np
 
 from pipeline.errors import ImportFileError
 from pipeline.robots.description import RobotDescription
-from pipeline.stages.recording import CHECK_SWEEP
+from pipeline.stages.recording import CHECK_SWEEP, LIMIT_MARGIN
 
 #: Length units of imported points and prismatic readings -> cm.
 LENGTH_CM = {"mm": 0.1, "cm": 1.0, "m": 100.0}
@@ -104,6 +104,18 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: np.ndarray) -
             fix="delete the row, or mark it as skipped in the map",
         )
     names = [j.name for j in robot.joints]
+    q = robot.joints_from_readings(rows.q)
+    lim = robot.limits
+    out = np.argwhere((q < lim[:, 0] - LIMIT_MARGIN) | (q > lim[:, 1] + LIMIT_MARGIN))
+    if len(out):
+        k, j = out[0]
+        unit = robot.joints[j].unit
+        raise ImportFileError(
+            f"{src}: {rows.where[k]}: joint {j + 1} ({names[j]}) reads {q[k, j]:g} {unit}, "
+            "outside its limits",
+            expected=f"{lim[j, 0]:g} to {lim[j, 1]:g} {unit} (± {LIMIT_MARGIN:g})",
+            fix="check the joint's unit and unwrap setting in the map, or the robot's limits",
+        )
     for j in range(robot.n_joints):
         sel = np.flatnonzero(rows.sweep == j + 1)
         if len(sel) == 0:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -112,9 +113,6 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
         raise ImportFileError(f"{src}: no rows", fix="check skip_rows and header in the map")
     units = [j.unit for j in imap.joints]
     qq = readings_in_boundary_units(np.array(q), units, robot, f"{mname}: [[joints]] unit")
-    for j, spec in enumerate(imap.joints):
-        if spec.unwrap and not robot.joints[j].prismatic:
-            qq[:, j] = np.unwrap(qq[:, j], period=360.0)
     rows = MeasuredRows(
         path, tuple(where), np.array(sweep or [0] * len(where), np.int64), qq,
         {t: np.array(v, float) for t, v in pts.items()},
@@ -130,8 +128,19 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
                 expected="finite joint readings in every row",
                 fix="delete the row, or list it in the map's skip_lines",
             )
-        return MeasuredRows(path, rows.where, infer_sweeps(rows, tol), qq, rows.targets)
-    return rows
+        rows = replace(rows, sweep=infer_sweeps(rows, tol))  # a wrap is a change: it infers
+    return _unwrapped(rows, imap, robot)
+
+
+def _unwrapped(rows: MeasuredRows, imap: ImportMap, robot: RobotDescription) -> MeasuredRows:
+    """The swept joint's readings of each sweep with 360 deg jumps removed (file order),
+    for the joints whose map says ``unwrap``."""
+    q = rows.q.copy()
+    for j, spec in enumerate(imap.joints):
+        if spec.unwrap and not robot.joints[j].prismatic:
+            sel = np.flatnonzero(rows.sweep == j + 1)
+            q[sel, j] = np.unwrap(q[sel, j], period=360.0)
+    return replace(rows, q=q)
 
 
 def _sweep_cell(fields: list[str], k: int, src: str, line: int, n: int) -> int:
