@@ -31,3 +31,27 @@ def test_collinear_points_are_not_registered() -> None:
     assert register_rigid(line, line + 1.0) is None
     e = position_errors(*error_distances(line, line + [0.0, 0.0, 1.0]))
     assert e.n == 5 and e.mean_cm == pytest.approx(1.0) and e.registered_rms_cm is None
+
+
+def test_tracker_check_configurations_are_validated(tmp_path_factory) -> None:
+    """A simulated tracker session with validation configurations: the stage compares them
+    (exact when noiseless) and, its sweep targets sitting on the links, only the tool
+    measurement as fit data."""
+    from recording_data import small_session
+
+    from pipeline.identify import identify
+    from pipeline.stages.tables import read_table
+
+    d = small_session(tmp_path_factory, sensor="tracker", seed=3, noiseless=True, points=5,
+                      check=7)  # fmt: skip
+    identify(d, report=True)
+    rows = read_table(d / "stages" / "validation.arrow").to_pylist()
+    check = [r for r in rows if r["role"] == "check"]
+    fit = [r for r in rows if r["role"] == "fit"]
+    assert len(check) == 7 and {r["sweep"] for r in fit} == {0}
+    assert max(r["error_cm"] for r in check) <= 1e-6
+    assert max(r["registered_error_cm"] for r in check) <= 1e-6
+    assert (
+        "validation configurations (not used by the fit) | 7 |"
+        in (d / "report" / "report.md").read_text()
+    )
