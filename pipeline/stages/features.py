@@ -1,4 +1,10 @@
-"""Stage ``features``: plane, centre or line of every joint (Section 4.3.2) and their accuracy."""
+"""Stage ``features``: plane, centre or line of every joint (Section 4.3.2) and their accuracy.
+
+Reads the sensor-neutral ``positions`` table. Every target of a sweep is fitted on its
+own; the well-conditioned ones make the joint's feature (:mod:`pipeline.features.targets`),
+and the table says which were used and why others were not. A sweep of one target
+(every sonic session) gives exactly that target's fit.
+"""
 
 from __future__ import annotations
 
