@@ -330,6 +330,64 @@ SessionArg = Annotated[str, typer.Argument(help="Session folder, e.g. sessions/r
 JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON on stdout for machines.")]
 
 
+@app.command("import")
+def import_(
+    file: Annotated[str, typer.Argument(help="The foreign file of measured points.")],
+    name: Annotated[str, typer.Argument(help="Session name (sessions/NAME) or a folder path.")],
+    format: Annotated[str, typer.Option(help="sscanss2 | table | rct (docs/import.md).")],
+    robot: Annotated[str, typer.Option(help="Robot description .toml of the measured machine.")],
+    map: Annotated[
+        str | None, typer.Option(help="Map file (TOML): columns, units, sweeps (docs/import.md).")
+    ] = None,
+    force: Annotated[
+        bool, typer.Option(help="Replace the recording of an existing session (else refused).")
+    ] = False,
+) -> None:
+    """Convert a file of measured points into a point session (recording.mcap)."""
+    from pathlib import Path
+
+    from pipeline.importers import import_file
+
+    folder = Path(name) if ("/" in name or Path(name).is_absolute()) else Path("sessions") / name
+    out = import_file(file, format, robot, folder, map, force)
+    n_check = int((out.rows.sweep < 0).sum())
+    typer.echo(
+        f"wrote {out.recording}: {len(out.rows.where)} configurations "
+        f"({n_check} for validation), tool from {out.tool.note}"
+    )
+
+
+@app.command()
+def validate(
+    session: SessionArg,
+    against: Annotated[str, typer.Option(help="A second file of measured points.")],
+    format: Annotated[str, typer.Option(help="sscanss2 | table | rct (docs/import.md).")],
+    map: Annotated[str | None, typer.Option(help="Map file (TOML) of the second file.")] = None,
+    as_json: JsonOption = False,
+) -> None:
+    """The signature's position error on a second file (read in memory, nothing written)."""
+    from pipeline.evaluation.validation import validate_against
+
+    r = validate_against(session, against, format, map)
+    if as_json:
+        _print_json(r)
+        return
+    typer.echo(
+        f"{r['file']}: {r['n']} points of target {r['target']} vs the signature of {session}"
+    )
+    typer.echo(
+        f"  as measured:      mean {r['mean_cm']:.4g}  RMS {r['rms_cm']:.4g}  "
+        f"max {r['max_cm']:.4g} cm"
+    )
+    if r["registered_rms_cm"] is None:
+        typer.echo("  base registered:  not possible (fewer than 3 points, or collinear)")
+    else:
+        typer.echo(
+            f"  base registered:  mean {r['registered_mean_cm']:.4g}  "
+            f"RMS {r['registered_rms_cm']:.4g}  max {r['registered_max_cm']:.4g} cm"
+        )
+
+
 @app.command()
 def identify(
     session: SessionArg,

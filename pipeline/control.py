@@ -310,7 +310,9 @@ def solve_poses(
 
     ``near``: start configuration (n,) or one per pose (m, n), in boundary units
     (deg / cm), see :meth:`Controller.solve`'s ``q_near``.
-    Returns the joint readings in boundary units (m, n) and the raw result.
+    Returns the joint readings in boundary units (m, n) and the raw result (joint
+    values, rad / cm): readings and joint values differ for a coupled robot
+    (:class:`~pipeline.robots.description.Coupling`), whose readings go in and come out.
     Targets are grouped by branch so every group is one batched solve. An arm with
     fewer than six joints solves the components it controls (:func:`task_axes_for`).
     """
@@ -324,6 +326,7 @@ def solve_poses(
     task_axes = None if axes == ALL_AXES else axes
     q_near = None if near is None else np.asarray(near, float)
     if q_near is not None and q_near.shape[-1:] == (controller.robot.n_joints,):
+        q_near = controller.robot.joints_from_readings(q_near)
         q_near = joints_to_internal(q_near, controller.robot.prismatic)  # else: _starts says why
     results: dict[str | None, tuple[np.ndarray, IKResult]] = {}
     for label in dict.fromkeys(labels):
@@ -354,7 +357,8 @@ def solve_poses(
         status=fields["status"],
         task_axes=axes,
     )
-    return joints_to_boundary(out.q, controller.robot.prismatic), out
+    q_joint = joints_to_boundary(out.q, controller.robot.prismatic)
+    return controller.robot.readings_from_joints(q_joint), out
 
 
 #: Columns of an ``ik --targets`` file: the poses, in the design base frame.

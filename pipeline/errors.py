@@ -59,3 +59,7 @@ class StageError(ArmsigError):
 
 class SessionLockedError(ArmsigError):
     """Another pipeline run holds the session's lock."""
+
+
+class ImportFileError(ArmsigError):
+    """A foreign measurement file (or its map) given to ``pipeline import`` cannot be converted."""

@@ -60,34 +60,40 @@ class TargetFit:
         return self.n_points / s2 * (1.0 if prismatic else self.extent_cm**2)
 
 
-def bound_cm(sigma_cm: float) -> float:
-    """Least radius (travel) of a usable target with point noise ``sigma_cm``."""
-    return max(MIN_RADIUS_CM, RADIUS_SIGMAS * sigma_cm)
+def bound_cm(sigma_cm: float, floor_cm: float = MIN_RADIUS_CM) -> float:
+    """Least radius (travel) of a usable target with point noise ``sigma_cm``; ``floor_cm``
+    0 for a sweep's only target (no other to prefer: a small robot's, e.g. SScanSS-2's
+    two-link example with radii of 1-2 mm, is judged by its noise alone)."""
+    return max(floor_cm, RADIUS_SIGMAS * sigma_cm)
 
 
-def why_not_usable(spread_cm: float, sigma_cm: float, prismatic: bool) -> str | None:
+def why_not_usable(
+    spread_cm: float, sigma_cm: float, prismatic: bool, floor_cm: float = MIN_RADIUS_CM
+) -> str | None:
     """Why a target whose positions spread ``spread_cm`` (largest distance from their mean)
     cannot be fitted, or None."""
-    if spread_cm * 2.0 < bound_cm(sigma_cm):  # an arc of radius R spans up to 2R
+    if spread_cm * 2.0 < bound_cm(sigma_cm, floor_cm):  # an arc of radius R spans up to 2R
         what = "travel" if prismatic else "motion (on or near the axis)"
         return (
             f"too little {what}: its positions lie within {spread_cm:.3g} cm of their mean "
-            f"(needs {bound_cm(sigma_cm):.3g} cm = max({MIN_RADIUS_CM:g} cm, "
+            f"(needs {bound_cm(sigma_cm, floor_cm):.3g} cm = max({floor_cm:g} cm, "
             f"{RADIUS_SIGMAS:g} σ) with σ = {sigma_cm:.3g} cm)"
         )
     return None
 
 
-def why_ill_conditioned(fit: TargetFit, prismatic: bool) -> str | None:
+def why_ill_conditioned(
+    fit: TargetFit, prismatic: bool, floor_cm: float = MIN_RADIUS_CM
+) -> str | None:
     """Why a fitted target is not used, or None."""
-    need = bound_cm(fit.sigma_cm)
+    need = bound_cm(fit.sigma_cm, floor_cm)
     if fit.extent_cm > need:
         return None
     what = "travel" if prismatic else "radius"
     where = "" if prismatic else " (on or near the axis)"
     return (
         f"{what} {fit.extent_cm:.3g} cm{where} not above {need:.3g} cm = "
-        f"max({MIN_RADIUS_CM:g} cm, {RADIUS_SIGMAS:g} σ) with σ = {fit.sigma_cm:.3g} cm"
+        f"max({floor_cm:g} cm, {RADIUS_SIGMAS:g} σ) with σ = {fit.sigma_cm:.3g} cm"
     )
 
 

@@ -113,8 +113,11 @@ def residual_histograms(joints: Sequence[JointResiduals], kind: str, path: Path)
             ax.text(0.5, 0.5, f"no {kind} residuals", ha="center", transform=ax.transAxes)
             continue
         # One filled step patch, not a bar per bin: same look, a fraction of the drawing time.
+        # Exact data (residuals within 1e-9 cm, rounding only) get one bin: numpy's "auto"
+        # bins cannot split a range of a few ulps.
+        bins: Any = "auto" if float(np.ptp(values)) > 1e-9 else 1
         counts, edges, _ = ax.hist(
-            values, bins="auto", color="C0", alpha=0.7, edgecolor="k", histtype="stepfilled"
+            values, bins=bins, color="C0", alpha=0.7, edgecolor="k", histtype="stepfilled"
         )
         mu, sd = float(np.mean(values)), float(np.std(values, ddof=1))
         if sd > 0:

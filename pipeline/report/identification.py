@@ -20,6 +20,7 @@ import numpy as np
 from pipeline.atomic import write_text_atomic
 from pipeline.errors import StageError
 from pipeline.report import figures
+from pipeline.report.validation import validation_section
 from pipeline.stages.recording import CHECK_SWEEP
 from pipeline.stages.runner import identification_names, stage_path
 from pipeline.stages.session import session_robot, session_sensor
@@ -65,7 +66,7 @@ def _load(sdir: Path) -> tuple[dict[str, list[Row]], dict[str, dict[str, Any]], 
             fix=f"run `pipeline identify {sdir}` first",
         )
     paths = {n: stage_path(sdir, n) for n in names}
-    tables = {n: read_table(paths[n]) for n in (*USED, "compensate") if n in paths}
+    tables = {n: read_table(paths[n]) for n in (*USED, "compensate", "validation") if n in paths}
     robot = session_robot(tables["session"])
     rows = {n: t.to_pylist() for n, t in tables.items()}
     return rows, {n: read_provenance(p) for n, p in paths.items()}, robot
@@ -363,6 +364,7 @@ def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -
         _quality_section(t["positions"], t["compensate"])
         if "compensate" in t
         else _point_quality_section(t["positions"]),
+        *([validation_section(t["validation"])] if "validation" in t else []),
         _convergence_section(sdir),
         *([_audit_section(audit)] if audit is not None else []),
         _provenance_section(prov),

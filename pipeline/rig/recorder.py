@@ -13,13 +13,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pipeline.atomic import atomic_write
+from pipeline.atomic import atomic_write, check_writable
 from pipeline.contract.channels import CHANNELS, EVAL_CHANNELS
 from pipeline.contract.digest import DIGEST_NAME, content_digest
 from pipeline.contract.mcap_write import checked_writer, json_bytes
+from pipeline.errors import ArmsigError
 from pipeline.schemas import mcap_json_schema
 
-__all__ = ["CHANNELS", "EVAL_CHANNELS", "Message", "write_recording"]
+__all__ = ["CHANNELS", "EVAL_CHANNELS", "Message", "refuse_existing_recording", "write_recording"]
 
 PROFILE = "armsig"
 LIBRARY = "armsig-rig"  # fixed so that the same seed gives the same bytes
@@ -35,9 +36,13 @@ class Message:
 
 
 def write_recording(
-    path: str | Path, messages: list[Message], channels: dict[str, str] = CHANNELS
+    path: str | Path,
+    messages: list[Message],
+    channels: dict[str, str] = CHANNELS,
+    metadata: dict[str, dict[str, str]] | None = None,
 ) -> None:
-    """Write ``messages`` (in time order) to ``path`` atomically; ``channels``: topic -> schema."""
+    """Write ``messages`` (in time order) to ``path`` atomically; ``channels``: topic -> schema;
+    ``metadata``: extra MCAP metadata records, name -> string map (e.g. ``armsig.source``)."""
     encoded = [(m, json_bytes(m.payload)) for m in messages]
     with atomic_write(path, "wb") as fh:
         writer = checked_writer(fh, PROFILE, LIBRARY)  # type: ignore[arg-type]
@@ -62,5 +67,21 @@ def write_recording(
                 data=data,
             )
             sequence[msg.topic] += 1
+        for name, record in (metadata or {}).items():
+            writer.add_metadata(name, record)
         writer.add_metadata(DIGEST_NAME, content_digest((m.topic, d) for m, d in encoded))
         writer.finish()
+
+
+def refuse_existing_recording(out: Path, force: bool, replacement: str) -> None:
+    """A session folder that already holds a recording is never overwritten unless
+    ``force``: it may be the only copy of a real one. ``replacement`` names what would
+    replace it in the message ("a simulated one")."""
+    check_writable(out, "session folder", folder=True)
+    recording = out / "recording.mcap"
+    if recording.exists() and not force:
+        raise ArmsigError(
+            f"{out} already holds a recording ({recording})",
+            expected="a new session folder",
+            fix=f"choose another name, or `--force` to replace {recording} by {replacement}",
+        )

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.atomic import check_writable, write_text_atomic
+from pipeline.atomic import write_text_atomic
 from pipeline.contract.channels import SENSOR_CHANNELS
 from pipeline.errors import ArmsigError
 from pipeline.rig import tracker
@@ -26,7 +26,7 @@ from pipeline.rig.plan import (
     target_positions,
     tool_positions,
 )
-from pipeline.rig.recorder import Message, write_recording
+from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
 from pipeline.rig.resettle import resettle
 from pipeline.rig.true_robot import ErrorSigmas, draw_true_robot
 from pipeline.robots import get_robot
@@ -142,17 +142,20 @@ def _check_tracker(opts: SimulationOptions) -> None:
         )
 
 
-def _refuse_existing(out: Path, force: bool) -> None:
-    """A session folder that already holds a recording is never overwritten unless
-    ``force``: it may be the only copy of a real one."""
-    check_writable(out, "session folder", folder=True)
-    recording = out / "recording.mcap"
-    if recording.exists() and not force:
-        raise ArmsigError(
-            f"{out} already holds a recording ({recording})",
-            expected="a new session folder",
-            fix=f"choose another name, or `--force` to replace {recording} by a simulated one",
-        )
+def joint_state(
+    robot: Any, sweep: int | str, step: int, q_cmd: np.ndarray, q_enc: np.ndarray, exact: bool
+) -> dict[str, Any]:
+    """A /robot/joint_state payload: the controller's readings of joint values ``q_cmd`` and
+    ``q_enc`` (deg / cm; through the inverse of the robot's coupling, if any), printed to
+    1e-6 (commanded always, encoder unless ``exact``)."""
+    cmd, enc = robot.readings_from_joints(q_cmd), robot.readings_from_joints(q_enc)
+    return {
+        "sweep": sweep,
+        "step": step,
+        "q_commanded": [round(float(v), 6) for v in cmd],
+        "q_encoder": [float(v) if exact else round(float(v), 6) for v in enc],
+        "units": [j.unit for j in robot.joints],
+    }
 
 
 def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bool = False) -> Path:
@@ -162,7 +165,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     """
     _check(opts)
     out = Path(session_dir)
-    _refuse_existing(out, force)
+    refuse_existing_recording(out, force, "a simulated one")
     robot = get_robot(opts.robot)
     rng = np.random.default_rng(opts.seed)
     rng_robot, rng_world, rng_servo, rng_sensor = rng.spawn(4)
@@ -277,7 +280,6 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     )
     raw = digitize(model, atmosphere, p_target[cyc_cfg], cyc_t, rng_sensor)
 
-    units = ["cm" if p else "deg" for p in pris]
     messages = [
         Message("/rig/description", T0_NS, geometry_recorded.to_dict()),
         Message(
@@ -285,7 +287,9 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             T0_NS,
             {
                 "robot": description_to_dict(robot),
-                "signature_q": list(plan.signature_q),
+                "signature_q": [
+                    float(v) for v in robot.readings_from_joints(np.array(plan.signature_q))
+                ],
                 "plan": plan.to_dict(),
                 "mode": "simulated",
             },
@@ -298,15 +302,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             Message(
                 "/robot/joint_state",
                 t_ns,
-                {
-                    "sweep": sweep_id,
-                    "step": step,
-                    "q_commanded": [round(float(v), 6) for v in q_cmd[k]],
-                    "q_encoder": [
-                        float(v) if opts.noiseless else round(float(v), 6) for v in q_enc[k]
-                    ],
-                    "units": units,
-                },
+                joint_state(robot, sweep_id, step, q_cmd[k], q_enc[k], opts.noiseless),
             )
         )
         for r in range(opts.repeats):
@@ -384,7 +380,7 @@ def _write(
     # Under the session lock, like every pipeline run on the folder: no run reads a
     # recording half replaced, and a recording that appeared meanwhile is still refused.
     with session_lock(out):
-        _refuse_existing(out, force)
+        refuse_existing_recording(out, force, "a simulated one")
         write_recording(recording, messages, SENSOR_CHANNELS[sensor])
         write_text_atomic(out / "rig-truth.json", json.dumps(truth, indent=1) + "\n")
     return recording
@@ -429,27 +425,20 @@ def _record_points(
             T0_NS,
             {
                 "robot": description_to_dict(robot),
-                "signature_q": list(plan.signature_q),
+                "signature_q": [
+                    float(v) for v in robot.readings_from_joints(np.array(plan.signature_q))
+                ],
                 "plan": tracker.plan_dict(plan, opts.targets, opts.check),
                 "mode": "simulated",
             },
         ),
     ]
-    units = ["cm" if p else "deg" for p in robot.prismatic]
     for k, (sweep_id, step, _) in enumerate(commands):
         messages.append(
             Message(
                 "/robot/joint_state",
                 T0_NS + int(round(t_config[k] * 1e9)),
-                {
-                    "sweep": sweep_id,
-                    "step": step,
-                    "q_commanded": [round(float(v), 6) for v in q_cmd[k]],
-                    "q_encoder": [
-                        float(v) if opts.noiseless else round(float(v), 6) for v in q_enc[k]
-                    ],
-                    "units": units,
-                },
+                joint_state(robot, sweep_id, step, q_cmd[k], q_enc[k], opts.noiseless),
             )
         )
     for m, (k, tid, _) in enumerate(rows):

@@ -72,6 +72,28 @@ class Pose:
 
 
 @dataclass(frozen=True)
+class Coupling:
+    """Linear joint coupling: joint = C · reading + offset (boundary units, deg / cm).
+
+    Controllers of coupled axes report readings, not joint values (FANUC: physical
+    J3 = reading J3 + reading J2). ``matrix`` is C, shape (n, n), invertible;
+    ``offset`` shape (n,).
+    """
+
+    matrix: tuple[tuple[float, ...], ...]
+    offset: tuple[float, ...]
+
+    def joints(self, readings: np.ndarray) -> np.ndarray:
+        """Joint values (..., n) of readings (..., n)."""
+        return np.asarray(readings, float) @ np.array(self.matrix).T + np.array(self.offset)
+
+    def readings(self, joints: np.ndarray) -> np.ndarray:
+        """Readings (..., n) that give joint values (..., n): C⁻¹ (joint − offset)."""
+        c = np.array(self.matrix)
+        return np.linalg.solve(c, (np.asarray(joints, float) - np.array(self.offset)).T).T
+
+
+@dataclass(frozen=True)
 class RobotDescription:
     """A serial robot as its maker specifies it.
 
@@ -86,6 +108,8 @@ class RobotDescription:
         Last D-H frame to the nominal tool frame.
     notes : str
         Free text: where the numbers come from.
+    coupling : Coupling, optional
+        How the controller's readings give joint values; None: they are the joint values.
     """
 
     name: str
@@ -93,6 +117,17 @@ class RobotDescription:
     base: Pose = Pose()
     tool: Pose = Pose()
     notes: str = ""
+    coupling: Coupling | None = None
+
+    def joints_from_readings(self, readings: np.ndarray) -> np.ndarray:
+        """Joint values (..., n) of controller readings (..., n), deg / cm."""
+        q = np.asarray(readings, float)
+        return q if self.coupling is None else self.coupling.joints(q)
+
+    def readings_from_joints(self, joints: np.ndarray) -> np.ndarray:
+        """Controller readings (..., n) that give joint values (..., n), deg / cm."""
+        q = np.asarray(joints, float)
+        return q if self.coupling is None else self.coupling.readings(q)
 
     @property
     def n_joints(self) -> int:
@@ -134,6 +169,10 @@ class RobotDescription:
 MAX_JOINTS = 12
 MAX_ANGLE_DEG = 720.0
 MAX_LENGTH_CM = 1000.0
+#: A coupling matrix must be this well conditioned: readings carry about 7 significant
+#: digits (1e-5 deg of 180 deg), so a condition number of 1e6 still resolves joint
+#: values to about 0.1 deg; a worse C is a typo or a singular map, not a controller.
+MAX_COUPLING_COND = 1e6
 
 
 def _is_number(x: Any) -> bool:
@@ -252,6 +291,37 @@ def _joint(jt: Any, where: str) -> JointSpec:
     return JointSpec(jname, jtype, lower, upper, res, row)
 
 
+def _coupling(table: Any, n: int, where: str) -> Coupling | None:
+    """The optional ``[coupling]`` table: ``matrix`` n x n, invertible; ``offset`` n."""
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise RobotDescriptionError(f"{where} is not a table", got=repr(table))
+    _known(table, ("matrix", "offset"), where)
+    matrix = _field(table, "matrix", where, list)
+    if len(matrix) != n or any(not isinstance(r, list) or len(r) != n for r in matrix):
+        raise RobotDescriptionError(
+            f"{where}: field 'matrix' must be {n} rows of {n} numbers (one per joint)",
+            got=repr(matrix)[:120],
+        )
+    c = tuple(tuple(_bounded(x, "matrix", where, 1e3, "") for x in r) for r in matrix)
+    offset = table.get("offset", [0.0] * n)
+    if not isinstance(offset, list) or len(offset) != n:
+        raise RobotDescriptionError(
+            f"{where}: field 'offset' must be a list of {n} numbers", got=repr(offset)[:120]
+        )
+    off = tuple(_bounded(x, "offset", where, MAX_ANGLE_DEG, "deg or cm") for x in offset)
+    cond = float(np.linalg.cond(np.array(c)))
+    if not cond < MAX_COUPLING_COND:
+        raise RobotDescriptionError(
+            f"{where}: field 'matrix' is not invertible",
+            expected=f"a condition number below {MAX_COUPLING_COND:g}",
+            got=f"{cond:.3g}",
+            fix="joint = matrix · reading + offset; check the matrix rows",
+        )
+    return Coupling(c, off)
+
+
 def description_from_dict(data: Any, source: str = "<dict>") -> RobotDescription:
     """Validate a parsed description (the TOML document as a dict).
 
@@ -262,7 +332,7 @@ def description_from_dict(data: Any, source: str = "<dict>") -> RobotDescription
     """
     if not isinstance(data, dict):
         raise RobotDescriptionError(f"{source} is not a table", got=repr(data)[:80])
-    _known(data, ("name", "notes", "base", "tool", "joints"), source)
+    _known(data, ("name", "notes", "base", "tool", "joints", "coupling"), source)
     name = _field(data, "name", source, str)
     notes = data.get("notes", "")
     if not isinstance(notes, str):
@@ -290,12 +360,21 @@ def description_from_dict(data: Any, source: str = "<dict>") -> RobotDescription
         base=_pose(data.get("base"), f"{source}: base"),
         tool=_pose(data.get("tool"), f"{source}: tool"),
         notes=notes,
+        coupling=_coupling(data.get("coupling"), len(joints), f"{source}: coupling"),
     )
 
 
 def description_to_dict(robot: RobotDescription) -> dict[str, Any]:
     """The TOML document of ``robot`` as a dict; inverse of :func:`description_from_dict`."""
+    coupling = robot.coupling
+    extra = (
+        {}
+        if coupling is None
+        else {"coupling": {"matrix": [list(r) for r in coupling.matrix],
+                           "offset": list(coupling.offset)}}
+    )  # fmt: skip
     return {
+        **extra,
         "name": robot.name,
         "notes": robot.notes,
         "base": {"xyz_cm": list(robot.base.xyz_cm), "rpy_deg": list(robot.base.rpy_deg)},

@@ -43,7 +43,7 @@ def chain_pose(
     robot: RobotDescription, chain: SerialChain, q: list[float] | np.ndarray
 ) -> ToolPose:
     """Forward kinematics of ``chain``, a chain of ``robot`` (same joints), at joint
-    readings ``q`` (n,) in deg (revolute) / cm (prismatic)."""
+    readings ``q`` (n,) in deg (revolute) / cm (prismatic), through the robot's coupling."""
     qq = np.asarray(q, float)
     if qq.shape != (robot.n_joints,):
         raise KinematicsError(
@@ -51,7 +51,9 @@ def chain_pose(
             expected=f"{robot.n_joints} values ({', '.join(j.name for j in robot.joints)})",
             got=f"{qq.size}",
         )
-    T = forward_kinematics(chain, joints_to_internal(qq, robot.prismatic))
+    T = forward_kinematics(
+        chain, joints_to_internal(robot.joints_from_readings(qq), robot.prismatic)
+    )
     xyz, rpy = xyz_rpy_from_transform(T)
     lim = robot.limits
     outside = tuple(

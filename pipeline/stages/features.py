@@ -154,7 +154,13 @@ def _fit_row(p: np.ndarray, prismatic: bool, plane_method: str) -> dict[str, Any
 
 
 def _fit_target(
-    pos: pa.Table, joints: pa.Table, i: int, target: str, robot: Any, plane_method: str
+    pos: pa.Table,
+    joints: pa.Table,
+    i: int,
+    target: str,
+    robot: Any,
+    plane_method: str,
+    floor_cm: float,
 ) -> TargetFit | str:
     """One target's fit in sweep ``i``, or why it cannot be fitted."""
     n, pris = robot.n_joints, robot.prismatic
@@ -163,7 +169,7 @@ def _fit_target(
         return f"{len(p)} usable positions (needs at least 3)"
     sigma = recorded_sigma_cm(sweep_rows(pos, i, target))
     spread = float(np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)))
-    why = why_not_usable(spread, sigma or 0.0, bool(pris[i - 1]))
+    why = why_not_usable(spread, sigma or 0.0, bool(pris[i - 1]), floor_cm)
     if why:
         return why
     try:
@@ -184,9 +190,10 @@ def _sweep_feature(
     targets = sweep_targets(pos, i)
     fits: list[TargetFit] = []
     rejected: list[str] = []
+    floor = MIN_RADIUS_CM if len(targets) > 1 else 0.0  # an only target: its noise decides
     for t in targets:
-        fit = _fit_target(pos, joints, i, t, robot, plane_method)
-        why = fit if isinstance(fit, str) else why_ill_conditioned(fit, pris)
+        fit = _fit_target(pos, joints, i, t, robot, plane_method, floor)
+        why = fit if isinstance(fit, str) else why_ill_conditioned(fit, pris, floor)
         if why is None and not isinstance(fit, str):
             fits.append(fit)
         else:

@@ -11,6 +11,8 @@ q̄_n^s is joint n's reading at the tool measurement, which also fixes the tool:
 ``tool = T_sig(q_tool)^{-1} · p_tool`` with the orientation of ``S_n``. A tool
 measurement repeated as several steps of the ``tool`` sweep gives the mean of the
 tools of its usable steps, each paired with its own joint state by (sweep, step).
+When the joint sweeps measured the tool point too (``plan.sweeps_measure_tool``:
+imports where every row measured the end effector) their points join the mean.
 
 Common configuration: a held joint may read differently in different sweeps (the
 arm parked between sweeps, the brake engaging: it re-settles by a count or two).
@@ -41,7 +43,7 @@ from pipeline.kinematics.signature import (
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.positions import positions, sweep_rows
 from pipeline.stages.recording import TOOL_SWEEP, sweep_name
-from pipeline.stages.session import session_robot
+from pipeline.stages.session import session_plan, session_robot
 from pipeline.units import joints_to_internal
 
 MATRIX_COLUMNS = ("nx", "ny", "nz", "ox", "oy", "oz", "ax", "ay", "az", "px_cm", "py_cm", "pz_cm")
@@ -164,6 +166,28 @@ def tool_from_probe(chain: SerialChain, q_tool: np.ndarray, p_tool: np.ndarray) 
     return tool
 
 
+def tool_points_of_sweeps(
+    inputs: Mapping[str, Any], n: int, pris: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Readings (m, n) and positions (m, 3) of the tool point measured in the joint sweeps:
+    the usable ``plan.tool_target`` rows when ``plan.sweeps_measure_tool`` (imports where
+    every row measured the end effector, e.g. SScanSS-2's), else none. With them the tool
+    is the mean of the tools of every measurement of the tool point: its least-squares
+    position given the chain, not one measurement's."""
+    plan = session_plan(inputs["session"])
+    if not plan.get("sweeps_measure_tool", False):
+        return np.zeros((0, n)), np.zeros((0, 3))
+    qs, ps = [], []
+    for i in range(1, n + 1):
+        rows = sweep_rows(inputs["positions"], i, plan.get("tool_target"))
+        p = positions(rows)
+        ok = ~np.isnan(p).any(axis=1)
+        steps = rows.column("step").to_numpy().astype(np.int64)[ok]
+        qs.append(readings_at(inputs["joints"], i, steps, n, pris))
+        ps.append(p[ok])
+    return np.vstack(qs), np.vstack(ps)
+
+
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     robot = session_robot(inputs["session"])
     n, pris = robot.n_joints, robot.prismatic
@@ -196,6 +220,9 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         )
     steps = tool_rows.column("step").to_numpy().astype(np.int64)[usable]
     q_tool = readings_at(inputs["joints"], TOOL_SWEEP, steps, n, pris)
+    q_more, p_more = tool_points_of_sweeps(inputs, n, pris)  # imports: the end effector
+    q_tool, p_tool = np.vstack([q_tool, q_more]), np.vstack([p_tool[usable], p_more])
+    usable = np.ones(len(p_tool), bool)
     chain = signature_chain(F, joints_to_internal(qs, pris), pris)
     # Every usable probe measurement (repeated steps of the tool sweep): the mean of
     # their tools, each from its own reading; one measurement gives exactly its tool.
@@ -235,7 +262,7 @@ def chain_from_frames(frames: pa.Table, prismatic: np.ndarray):  # -> SerialChai
 
 STAGE = Stage(
     "frames",
-    4,  # 4: frames brought to q̄^s with each sweep's recorded readings
+    5,  # 4: frames brought to q̄^s with each sweep's recorded readings; 5: imports' sweep points join the tool
     ("features", "joints", "positions", "session"),
     NoParams(),
     compute,

@@ -1,4 +1,9 @@
-"""Stage ``joints``: commanded and encoder joint positions of every configuration."""
+"""Stage ``joints``: commanded and encoder joint positions of every configuration.
+
+Readings become joint values here, through the robot's coupling when it has one
+(joint = C · reading + offset, schemas/robot_description.md); every later stage
+sees joint values only.
+"""
 
 from __future__ import annotations
 
@@ -12,12 +17,14 @@ from pipeline.stages.base import RECORDING, NoParams, Stage
 
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
+    from pipeline.robots.description import description_from_dict
+
     rec = inputs[RECORDING]
     k, n = rec.q_encoder.shape
-    pris = np.array([j["type"] == "prismatic" for j in rec.robot["robot"]["joints"]])
-    is_p = np.tile(pris, k)
-    cmd = rec.q_commanded.ravel()
-    enc = rec.q_encoder.ravel()
+    robot = description_from_dict(rec.robot["robot"], source="/robot/description")
+    is_p = np.tile(robot.prismatic, k)
+    cmd = robot.joints_from_readings(rec.q_commanded).ravel()
+    enc = robot.joints_from_readings(rec.q_encoder).ravel()
     return pa.table(
         {
             "sweep": np.repeat(rec.joint_sweep, n).astype(np.int32),

@@ -139,7 +139,7 @@ def _read_cached(p: Path, sha: str) -> Recording:
         )
     rig = _single(p, msgs, "/rig/description")
     robot = _single(p, msgs, "/robot/description")
-    limits, units = _check_rig_and_robot(p, rig, robot, sensor)
+    desc, units = _check_rig_and_robot(p, rig, robot, sensor)
     n_points, n_avg = _planned(p, robot, len(units))
 
     js = msgs["/robot/joint_state"]
@@ -149,7 +149,7 @@ def _read_cached(p: Path, sha: str) -> Recording:
     j_sweep, j_step = j_sweep[order], j_step[order]
     refuse_duplicates(p, "/robot/joint_state", j_sweep, j_step)
     refuse_step_gaps(p, j_sweep, j_step)
-    q_cmd, q_enc = _joint_values(p, js, j_sweep, j_step, units, limits)
+    q_cmd, q_enc = _joint_values(p, js, j_sweep, j_step, units, desc)
     t0 = min(t for t, _ in js)
     joints = {
         "joint_sweep": j_sweep,
@@ -236,9 +236,9 @@ def _single(p: Path, msgs: dict[str, list[tuple[int, dict[str, Any]]]], topic: s
 
 def _check_rig_and_robot(
     p: Path, rig: dict[str, Any], robot: dict[str, Any], sensor: str
-) -> tuple[np.ndarray, list[str]]:
+) -> tuple[Any, list[str]]:
     """Refuse an unusable rig layout (sonic: the digitizer's geometry; a point sensor's
-    description is all in its schema) or robot description; joint limits (n, 2), units."""
+    description is all in its schema) or robot description; the description, units."""
     from pipeline.robots.description import description_from_dict
     from pipeline.sensor.geometry import DigitizerGeometry, check_geometry
 
@@ -261,7 +261,7 @@ def _check_rig_and_robot(
             expected=f"{len(units)} joint values",
             got=str(len(robot["signature_q"])),
         )
-    return desc.limits, units
+    return desc, units
 
 
 def _planned(p: Path, robot: dict[str, Any], n: int) -> tuple[dict[int, int | None], int]:
@@ -297,9 +297,10 @@ def _joint_values(
     sweep: np.ndarray,
     step: np.ndarray,
     units: list[str],
-    limits: np.ndarray,
+    desc: Any,  # RobotDescription
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Commanded and encoder readings (K, n), checked against units and limits."""
+    """Commanded and encoder readings (K, n), checked against units and the joint limits
+    (the joint values, through the robot's coupling when it has one)."""
     n = len(units)
     for k, (_, m) in enumerate(js):
         if m["units"] != units or len(m["q_commanded"]) != n or len(m["q_encoder"]) != n:
@@ -312,14 +313,16 @@ def _joint_values(
             )
     q_cmd = np.array([m["q_commanded"] for _, m in js], float).reshape(-1, n)
     q_enc = np.array([m["q_encoder"] for _, m in js], float).reshape(-1, n)
+    limits = desc.limits
     lo, hi = limits[:, 0] - LIMIT_MARGIN, limits[:, 1] + LIMIT_MARGIN
-    for name, q in (("q_encoder", q_enc), ("q_commanded", q_cmd)):
+    for name, q_read in (("q_encoder", q_enc), ("q_commanded", q_cmd)):
+        q = desc.joints_from_readings(q_read)
         bad = np.argwhere(~((q >= lo) & (q <= hi)))
         if len(bad):
             k, j = bad[0]
             raise RecordingError(
                 f"{p}: /robot/joint_state {key_text(sweep[k], step[k])} {name} of joint {j + 1} "
-                "is outside its limits",
+                "is outside its limits" + (" (through the coupling)" if desc.coupling else ""),
                 expected=f"{limits[j, 0]:g} to {limits[j, 1]:g} {units[j]} "
                 f"(± {LIMIT_MARGIN:g} {units[j]})",
                 got=f"{q[k, j]:g} {units[j]}",

@@ -64,6 +64,7 @@ POINT_STAGE_MODULES = (
     "frames",
     "smodel",
     "dh",
+    "validation",
 )
 #: recorded sensor kind (``/rig/description`` sensor) -> its identification stage modules
 SENSOR_STAGE_MODULES = {"sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES}

@@ -1,0 +1,114 @@
+"""``pipeline import``: foreign measurement files -> point-session recordings.
+
+One module per format parses a file into :class:`~pipeline.importers.rows.MeasuredRows`
+(armsig's units, a sweep per row); :mod:`~pipeline.importers.session` turns checked
+rows into the recording's messages and :mod:`~pipeline.importers.write` writes them.
+Formats and the map file: docs/import.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import ImportFileError
+from pipeline.importers.mapping import ImportMap, load_map
+from pipeline.importers.rows import MeasuredRows, checked_rows
+from pipeline.importers.session import ToolChoice, session_messages, tool_rows
+from pipeline.importers.sweeps import home_readings, select_sweeps, tolerance
+from pipeline.importers.write import source_metadata, write_imported
+from pipeline.robots.description import RobotDescription, load_description
+
+FORMATS = ("sscanss2", "table", "rct")
+
+
+@dataclass(frozen=True)
+class Imported:
+    """A converted file: its checked rows, the tool choice, where it was written."""
+
+    rows: MeasuredRows
+    tool: ToolChoice
+    robot: RobotDescription
+    recording: Path | None
+
+
+def _tolerance(fmt: str, imap: ImportMap, robot: RobotDescription) -> np.ndarray:
+    """How far a held joint may read from its sweep's value (deg / cm)."""
+    if fmt == "sscanss2":
+        return robot.encoder_resolution / 2  # the file states each configuration exactly
+    return tolerance(imap, robot)
+
+
+def parse_foreign(
+    path: Path, fmt: str, robot: RobotDescription, imap: ImportMap
+) -> tuple[MeasuredRows, np.ndarray]:
+    """Parse a foreign file (not yet checked for a session); its rows and the home
+    readings. robot_cal_tools' YAML without a sweep selection: every row a ``check``."""
+    if fmt not in FORMATS:
+        raise ImportFileError(
+            f"unknown import format {fmt!r}", expected=" | ".join(FORMATS), fix="--format sscanss2"
+        )
+    if not path.is_file():
+        raise ImportFileError(f"{path}: no such file", fix="check the path")
+    if fmt == "sscanss2":
+        from pipeline.importers.sscanss2 import read_sscanss2
+
+        return read_sscanss2(path, robot)
+    if fmt == "table":
+        from pipeline.importers.table import read_table
+
+        if imap.path is None:
+            raise ImportFileError(
+                f"{path.name}: --format table needs --map MAP.toml",
+                fix="write a map of the columns (docs/import.md)",
+            )
+        rows = read_table(path, imap, robot)
+    else:
+        from pipeline.importers.rct import read_rct
+
+        rows = read_rct(path, robot)
+        if imap.select:
+            rows = select_sweeps(rows, imap, _tolerance(fmt, imap, robot))
+    if not (rows.sweep > 0).any():
+        return rows, np.zeros(robot.n_joints)
+    return rows, home_readings(rows, imap, robot)
+
+
+def read_foreign(
+    path: Path, fmt: str, robot: RobotDescription, map_path: Path | None
+) -> tuple[MeasuredRows, ToolChoice]:
+    """Parse and check a foreign file for a session; its rows and the tool measurement."""
+    imap = load_map(map_path) if map_path is not None else ImportMap()
+    if fmt == "rct" and not imap.select:
+        raise ImportFileError(
+            f"{path.name}: --format rct needs [[sweeps.select]] in --map",
+            expected="which rows form each joint's sweep (docs/import.md)",
+            fix='e.g. joint = 2 with held = { "1" = 0.0 }',
+        )
+    rows, home = parse_foreign(path, fmt, robot, imap)
+    tol = _tolerance(fmt, imap, robot)
+    rows = checked_rows(rows, robot, tol)
+    return rows, tool_rows(rows, home, tol)
+
+
+def import_file(
+    path: str | Path,
+    fmt: str,
+    robot_path: str | Path,
+    session_dir: str | Path,
+    map_path: str | Path | None = None,
+    force: bool = False,
+) -> Imported:
+    """Convert ``path`` into ``session_dir/recording.mcap`` (a point session)."""
+    src = Path(path)
+    robot = load_description(robot_path)
+    mp = None if map_path is None else Path(map_path)
+    rows, tool = read_foreign(src, fmt, robot, mp)
+    messages = session_messages(rows, robot, tool, f"{fmt} file {src.name} (imported)")
+    recording = write_imported(Path(session_dir), messages, source_metadata(src, fmt, mp), force)
+    return Imported(rows, tool, robot, recording)
+
+
+__all__ = ["FORMATS", "Imported", "import_file", "parse_foreign", "read_foreign"]

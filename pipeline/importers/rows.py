@@ -1,0 +1,165 @@
+"""Measured rows: what every import format is parsed into before it becomes a session.
+
+One row per measured configuration: the source position (for error messages), the
+sweep it belongs to, the joint readings (deg / cm) and the measured target
+positions (cm). :func:`checked_rows` refuses what would give a wrong session, with
+one line naming the file, the line and what to do.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import ImportFileError
+from pipeline.robots.description import RobotDescription
+from pipeline.stages.recording import CHECK_SWEEP, LIMIT_MARGIN
+
+#: Length units of imported points and prismatic readings -> cm.
+LENGTH_CM = {"mm": 0.1, "cm": 1.0, "m": 100.0}
+#: Angle units of revolute readings -> deg.
+ANGLE_DEG = {"deg": 1.0, "rad": float(np.rad2deg(1.0))}
+
+
+@dataclass(frozen=True)
+class MeasuredRows:
+    """Rows of a foreign file, in armsig's units.
+
+    Attributes
+    ----------
+    source : Path
+        The foreign file.
+    where : tuple of str, shape (R,)
+        Each row's place in the file ("line 12", "entry '1593701755'").
+    sweep : ndarray of int, shape (R,)
+        Swept joint (1-based), or ``CHECK_SWEEP`` for a validation configuration.
+    q : ndarray, shape (R, n)
+        Joint readings, deg (revolute) / cm (prismatic).
+    targets : dict of str to ndarray, shape (R, 3)
+        Target id -> measured position, cm, sensor frame.
+    orientation_wxyz : ndarray, shape (R, 4), optional
+        Unit quaternion of a 6-D target frame (the first target), when measured.
+    """
+
+    source: Path
+    where: tuple[str, ...]
+    sweep: np.ndarray
+    q: np.ndarray
+    targets: dict[str, np.ndarray]
+    orientation_wxyz: np.ndarray | None = None
+
+    def take(self, keep: np.ndarray) -> MeasuredRows:
+        """The rows ``keep`` (indices or mask), in that order."""
+        idx = np.arange(len(self.where))[keep]
+        return replace(
+            self,
+            where=tuple(self.where[k] for k in idx),
+            sweep=self.sweep[idx],
+            q=self.q[idx],
+            targets={t: p[idx] for t, p in self.targets.items()},
+            orientation_wxyz=None if self.orientation_wxyz is None else self.orientation_wxyz[idx],
+        )
+
+
+def unit_factor(unit: str, table: dict[str, float], what: str, where: str) -> float:
+    """The factor of ``unit`` in ``table`` (to cm or deg); an unknown unit is refused."""
+    if unit not in table:
+        raise ImportFileError(
+            f"{where}: unknown {what} unit {unit!r}",
+            expected=" | ".join(table),
+            fix=f"write the {what} unit as one of {', '.join(table)}",
+        )
+    return table[unit]
+
+
+def readings_in_boundary_units(
+    values: np.ndarray, units: list[str], robot: RobotDescription, where: str
+) -> np.ndarray:
+    """Readings (R, n) in the file's per-joint units -> deg / cm, by the robot's joint types."""
+    out = np.array(values, float)
+    for j, (unit, spec) in enumerate(zip(units, robot.joints, strict=True)):
+        table = LENGTH_CM if spec.prismatic else ANGLE_DEG
+        kind = "prismatic joint" if spec.prismatic else "revolute joint"
+        out[:, j] *= unit_factor(unit, table, f"{kind} {spec.name!r}", where)
+    return out
+
+
+def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: np.ndarray) -> MeasuredRows:
+    """Refuse rows that would make a wrong session; ``tol`` (n,): how far a held joint
+    may read from its sweep's median (deg / cm).
+
+    Refused: a non-finite value; a row measured twice (same sweep, same readings); a
+    joint without a sweep or whose sweep does not move it; a sweep in which another
+    joint moves too.
+    """
+    src = rows.source.name
+    values = np.column_stack([rows.q, *rows.targets.values()])
+    bad = np.flatnonzero(~np.isfinite(values).all(axis=1))
+    if len(bad):
+        raise ImportFileError(
+            f"{src}: {rows.where[bad[0]]}: a value is missing or not a number (NaN)",
+            expected="finite joint readings and coordinates in every row",
+            fix="delete the row, or mark it as skipped in the map",
+        )
+    names = [j.name for j in robot.joints]
+    q = robot.joints_from_readings(rows.q)
+    lim = robot.limits
+    out = np.argwhere((q < lim[:, 0] - LIMIT_MARGIN) | (q > lim[:, 1] + LIMIT_MARGIN))
+    if len(out):
+        k, j = out[0]
+        unit = robot.joints[j].unit
+        raise ImportFileError(
+            f"{src}: {rows.where[k]}: joint {j + 1} ({names[j]}) reads {q[k, j]:g} {unit}, "
+            "outside its limits",
+            expected=f"{lim[j, 0]:g} to {lim[j, 1]:g} {unit} (± {LIMIT_MARGIN:g})",
+            fix="check the joint's unit and unwrap setting in the map, or the robot's limits",
+        )
+    for j in range(robot.n_joints):
+        sel = np.flatnonzero(rows.sweep == j + 1)
+        if len(sel) == 0:
+            raise ImportFileError(
+                f"{src}: joint {j + 1} ({names[j]}) never moves alone (no sweep)",
+                expected="rows where this joint moves alone",
+                fix="add its sweep, or check the sweep column / map",
+            )
+        q = rows.q[sel]
+        if np.ptp(q[:, j]) <= tol[j]:
+            raise ImportFileError(
+                f"{src}: joint {j + 1} ({names[j]}) never moves in its sweep "
+                f"({rows.where[sel[0]]} on)",
+                expected=f"readings spread by more than {tol[j]:g}",
+                fix="check the joint's column and the sweep column of the map",
+            )
+        order = np.argsort(q[:, j], kind="stable")
+        same = np.flatnonzero(np.abs(np.diff(q[order, j])) <= tol[j])
+        if len(same):
+            a, b = sel[order[same[0]]], sel[order[same[0] + 1]]
+            raise ImportFileError(
+                f"{src}: {rows.where[a]} and {rows.where[b]} measure joint {j + 1} "
+                f"({names[j]}) at the same reading {q[order[same[0]], j]:g}",
+                expected="each configuration of a sweep once (duplicated rows)",
+                fix="delete one of the two rows (or average them)",
+            )
+        held = np.abs(q - np.median(q, axis=0)) > tol
+        held[:, j] = False
+        if held.any():
+            k, m = np.argwhere(held)[0]
+            raise ImportFileError(
+                f"{src}: {rows.where[sel[k]]}: joint {m + 1} ({names[m]}) moves in the sweep "
+                f"of joint {j + 1} (reading {q[k, m]:g}, median {np.median(q[:, m]):g})",
+                expected=f"one joint moving per sweep, the others within {tol[m]:g}",
+                fix="split the rows into one sweep per joint, or raise the map's tolerance",
+            )
+    unknown = np.flatnonzero(
+        (rows.sweep != CHECK_SWEEP) & ~np.isin(rows.sweep, np.arange(1, robot.n_joints + 1))
+    )
+    if len(unknown):
+        k = unknown[0]
+        raise ImportFileError(
+            f"{src}: {rows.where[k]}: sweep {rows.sweep[k]} names no joint of {robot.name}",
+            expected=f"joint 1 to {robot.n_joints}",
+            fix="check the joint numbering and the robot description",
+        )
+    return rows

@@ -1,0 +1,121 @@
+"""Measured rows -> the messages of a point-session recording (schemas/mcap/).
+
+Each joint's sweep becomes sweep ``j`` with its steps ordered by reading; the rows
+measured with every joint at home become the tool measurement (sweep ``tool``,
+signature configuration q^s = their mean reading); every other row that is in no
+sweep becomes a validation configuration (sweep ``check``). The readings are
+recorded as both commanded and encoder values: a file holds only what the joints read.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pipeline.importers.rows import MeasuredRows
+from pipeline.rig.recorder import Message
+from pipeline.robots.description import RobotDescription, description_to_dict
+from pipeline.stages.recording import CHECK_SWEEP
+
+T0_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z: the recording carries no foreign time
+STEP_NS = 10**9  # one configuration per second, in the order they are written
+
+
+@dataclass(frozen=True)
+class ToolChoice:
+    """Rows of the tool measurement and the signature configuration q^s (deg / cm)."""
+
+    rows: np.ndarray  # (m,) row indices
+    signature_q: np.ndarray  # (n,)
+    note: str  # how they were chosen, for the user
+
+
+def tool_rows(rows: MeasuredRows, home: np.ndarray, tol: np.ndarray) -> ToolChoice:
+    """The rows where every joint reads home (within ``tol``); q^s = their mean reading.
+
+    When no row is at home, the row of the last joint's sweep nearest home is the
+    tool measurement and q^s its readings (home except the last joint): a warning says so.
+    """
+    at_home = np.flatnonzero((np.abs(rows.q - home) <= tol).all(axis=1))
+    if len(at_home):
+        return ToolChoice(at_home, rows.q[at_home].mean(axis=0), "rows with every joint at home")
+    n = rows.q.shape[1]
+    last = np.flatnonzero(rows.sweep == n)
+    k = last[np.argmin(np.abs(rows.q[last, -1] - home[-1]))]
+    note = (
+        f"no row has every joint at home; the tool is the point of {rows.where[k]} "
+        f"(joint {n} at {rows.q[k, -1]:g} instead of {home[-1]:g}), and q^s its readings"
+    )
+    warnings.warn(f"{rows.source.name}: {note}", stacklevel=2)
+    return ToolChoice(np.array([k]), rows.q[k].copy(), note)
+
+
+def session_messages(
+    rows: MeasuredRows, robot: RobotDescription, tool: ToolChoice, instrument: str
+) -> list[Message]:
+    """The recording's messages: descriptions, then joint states and points by (sweep, step)."""
+    units = [j.unit for j in robot.joints]
+    ids = list(rows.targets)
+    configs: list[tuple[str | int, int, int]] = []  # (sweep name, step, row)
+    sweeps: list[dict[str, Any]] = []
+    for j in range(1, robot.n_joints + 1):
+        sel = np.flatnonzero(rows.sweep == j)
+        sel = sel[np.argsort(rows.q[sel, j - 1], kind="stable")]
+        configs += [(j, s, int(k)) for s, k in enumerate(sel)]
+        sweeps.append(
+            {
+                "joint": j,
+                "n_points": len(sel),
+                "q_first": float(rows.q[sel[0], j - 1]),
+                "q_last": float(rows.q[sel[-1], j - 1]),
+                "targets": ids,
+            }
+        )
+    configs += [("tool", s, int(k)) for s, k in enumerate(tool.rows)]
+    check = np.flatnonzero(rows.sweep == CHECK_SWEEP)
+    configs += [("check", s, int(k)) for s, k in enumerate(check)]
+    plan: dict[str, Any] = {
+        "n_avg": 1,
+        "order": [*range(1, robot.n_joints + 1), "tool"] + (["check"] if len(check) else []),
+        "sweeps": sweeps,
+        "tool_local_cm": list(robot.tool.xyz_cm),
+        "tool_target": ids[0],
+        "sweeps_measure_tool": True,  # every row measured every target on the end link
+    }
+    if len(check):
+        plan["check"] = {"n_points": len(check)}
+    messages = [
+        Message("/rig/description", T0_NS, {"sensor": "points", "instrument": instrument}),
+        Message(
+            "/robot/description",
+            T0_NS,
+            {
+                "robot": description_to_dict(robot),
+                "signature_q": [float(v) for v in tool.signature_q],
+                "plan": plan,
+                "mode": "imported",
+            },
+        ),
+    ]
+    for c, (sweep, step, k) in enumerate(configs):
+        t_ns = T0_NS + (c + 1) * STEP_NS
+        q = [float(v) for v in rows.q[k]]
+        messages.append(
+            Message(
+                "/robot/joint_state",
+                t_ns,
+                {"sweep": sweep, "step": step, "q_commanded": q, "q_encoder": q, "units": units},
+            )
+        )
+        for t, target in enumerate(ids):
+            x, y, z = (float(v) for v in rows.targets[target][k])
+            point: dict[str, Any] = {
+                "sweep": sweep, "step": step, "target": target, "x_cm": x, "y_cm": y, "z_cm": z
+            }  # fmt: skip
+            if rows.orientation_wxyz is not None and t == 0:
+                point["orientation_wxyz"] = [float(v) for v in rows.orientation_wxyz[k]]
+            messages.append(Message("/points", t_ns, point))
+    return messages

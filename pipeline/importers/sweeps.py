@@ -1,0 +1,113 @@
+"""Which rows form which joint's sweep: a sweep column, ``infer``, or a selection."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.errors import ImportFileError
+from pipeline.importers.mapping import ImportMap
+from pipeline.importers.rows import MeasuredRows
+from pipeline.robots.description import RobotDescription
+from pipeline.stages.recording import CHECK_SWEEP
+
+
+def tolerance(imap: ImportMap, robot: RobotDescription) -> np.ndarray:
+    """Held-joint tolerance per joint (deg / cm): the map's, else the encoder resolution."""
+    if imap.tolerance is None:
+        return robot.encoder_resolution
+    tol = np.broadcast_to(np.asarray(imap.tolerance, float), (robot.n_joints,)).copy()
+    return tol
+
+
+def infer_sweeps(rows: MeasuredRows, tol: np.ndarray) -> np.ndarray:
+    """Sweep of each row from consecutive rows: a run of rows in which one joint changes
+    and the others hold (within ``tol``) is that joint's sweep.
+
+    A row after which two joints change at once starts a new run; a run of one row
+    that moves into another run with two joints changing belongs to no sweep and is refused.
+    """
+    src = rows.source.name
+    moved = np.abs(np.diff(rows.q, axis=0)) > tol  # (R-1, n)
+    sweep = np.zeros(len(rows.where), np.int64)
+    start = 0
+    while start < len(sweep):
+        end = start + 1
+        joint = None
+        while end < len(sweep):
+            changed = np.flatnonzero(moved[end - 1])
+            if len(changed) == 1 and (joint is None or changed[0] == joint):
+                joint = int(changed[0])
+                end += 1
+            elif len(changed) == 0 and joint is not None:
+                end += 1  # the same configuration again: the duplicate check names it
+            else:
+                break
+        if joint is None:
+            nxt = f" and {rows.where[end]}" if end < len(sweep) else ""
+            raise ImportFileError(
+                f"{src}: {rows.where[start]}{nxt}: no single joint moves here "
+                f"({'two or more joints change' if nxt else 'the last row stands alone'})",
+                expected="runs of rows in which one joint moves and the others hold",
+                fix="give a sweep column in the map, or list the row in skip_lines",
+            )
+        if (sweep == joint + 1).any():
+            raise ImportFileError(
+                f"{src}: {rows.where[start]}: joint {joint + 1} is swept a second time",
+                expected="one run of rows per joint",
+                fix="give a sweep column in the map, or skip one run (skip_lines)",
+            )
+        sweep[start:end] = joint + 1
+        start = end
+    return sweep
+
+
+def select_sweeps(rows: MeasuredRows, imap: ImportMap, tol: np.ndarray) -> MeasuredRows:
+    """Rows of each ``[[sweeps.select]]`` form that joint's sweep (a row may serve two,
+    e.g. home); every row in no sweep becomes a validation configuration (``check``)."""
+    parts, used = [], np.zeros(len(rows.where), bool)
+    for sel in imap.select:
+        ok = np.ones(len(rows.where), bool)
+        for j, value in sel.held.items():
+            ok &= np.abs(rows.q[:, j - 1] - value) <= tol[j - 1]
+        used |= ok
+        part = rows.take(ok)
+        parts.append((part, np.full(int(ok.sum()), sel.joint)))
+    parts.append((rows.take(~used), np.full(int((~used).sum()), CHECK_SWEEP)))
+    return _concat(parts)
+
+
+def _concat(parts: list[tuple[MeasuredRows, np.ndarray]]) -> MeasuredRows:
+    first = parts[0][0]
+    orient = (
+        None
+        if first.orientation_wxyz is None
+        else np.vstack(
+            [p.orientation_wxyz for p, _ in parts]  # type: ignore[misc]
+        )
+    )
+    return MeasuredRows(
+        source=first.source,
+        where=tuple(w for p, _ in parts for w in p.where),
+        sweep=np.concatenate([s for _, s in parts]),
+        q=np.vstack([p.q for p, _ in parts]),
+        targets={t: np.vstack([p.targets[t] for p, _ in parts]) for t in first.targets},
+        orientation_wxyz=orient,
+    )
+
+
+def home_readings(rows: MeasuredRows, imap: ImportMap, robot: RobotDescription) -> np.ndarray:
+    """The tool configuration's readings (deg / cm): the map's ``home``, else each joint's
+    median reading over the other joints' sweeps."""
+    if imap.home is not None:
+        if len(imap.home) != robot.n_joints:
+            raise ImportFileError(
+                f"{imap.path.name if imap.path else 'map'}: sweeps.home has {len(imap.home)} "
+                "values",
+                expected=f"{robot.n_joints} (one per joint)",
+                fix="list one reading per joint",
+            )
+        return np.array(imap.home)
+    swept = rows.sweep > 0
+    return np.array(
+        [np.median(rows.q[swept & (rows.sweep != j + 1), j]) for j in range(robot.n_joints)]
+    )

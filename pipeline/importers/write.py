@@ -1,0 +1,37 @@
+"""Write an imported point session: ``SESSION/recording.mcap`` under the session lock."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pipeline.contract.channels import POINT_CHANNELS
+from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
+from pipeline.stages.lock import session_lock
+from pipeline.stages.recording import file_sha256
+
+#: MCAP metadata record naming the foreign file a recording was converted from.
+SOURCE_METADATA = "armsig.source"
+
+
+def source_metadata(source: Path, fmt: str, map_file: Path | None) -> dict[str, str]:
+    """``armsig.source``: the file's name and SHA-256, the format, the map file's SHA-256."""
+    return {
+        "file": source.name,
+        "sha256": file_sha256(source),
+        "format": fmt,
+        "map_sha256": "" if map_file is None else file_sha256(map_file),
+    }
+
+
+def write_imported(
+    session_dir: Path, messages: list[Message], source: dict[str, str], force: bool
+) -> Path:
+    """Write the recording atomically (temp file + rename) under the session lock; an
+    existing recording is refused unless ``force``. Returns the recording's path."""
+    refuse_existing_recording(session_dir, force, "the imported one")
+    session_dir.mkdir(parents=True, exist_ok=True)
+    recording = session_dir / "recording.mcap"
+    with session_lock(session_dir):
+        refuse_existing_recording(session_dir, force, "the imported one")
+        write_recording(recording, messages, POINT_CHANNELS, {SOURCE_METADATA: source})
+    return recording

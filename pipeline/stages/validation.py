@@ -1,0 +1,100 @@
+"""Stage ``validation``: the signature's position error on measured tool-target points.
+
+For every measured position of the tool target (``plan.tool_target``) the model's
+prediction is the S-Model chain's forward kinematics with its tool at the recorded
+joint values (:func:`pipeline.evaluation.validation.model_points`). Rows of sweep
+``check`` are validation configurations the identification never used (role
+``check``); the tool measurement, and the joint sweeps' rows of the tool target when
+they measured the tool point itself (``plan.sweeps_measure_tool``, SScanSS-2 style:
+every row measures the end effector), are fit data (role ``fit``). Each role's
+distances are also given after registering the base: the least-squares rigid motion
+of that role's predicted points onto its measured ones.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from pipeline.evaluation.validation import error_distances, model_points
+from pipeline.stages.base import NoParams, Stage
+from pipeline.stages.frames import chain_from_frames, readings_at
+from pipeline.stages.recording import CHECK_SWEEP
+from pipeline.stages.session import session_plan, session_robot
+
+ROLES = ("check", "fit")
+
+
+def tool_target(plan: dict[str, Any], positions: pa.Table) -> str:
+    """``plan.tool_target``, else the only target of the tool measurement."""
+    if plan.get("tool_target"):
+        return str(plan["tool_target"])
+    tool = positions.filter(pc.equal(positions.column("sweep"), 0))
+    ids = sorted(set(tool.column("target").to_pylist()))
+    return ids[0] if len(ids) == 1 else ""
+
+
+def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
+    robot = session_robot(inputs["session"])
+    plan = session_plan(inputs["session"])
+    n, pris = robot.n_joints, robot.prismatic
+    chain = chain_from_frames(inputs["frames"], pris)
+    pos = inputs["positions"]
+    pos = pos.filter(pc.equal(pos.column("target"), tool_target(plan, pos)))
+    xyz = np.column_stack(
+        [
+            pos.column(c).to_numpy(zero_copy_only=False).astype(float)
+            for c in ("x_cm", "y_cm", "z_cm")
+        ]
+    )
+    sweep = pos.column("sweep").to_numpy().astype(np.int64)
+    step = pos.column("step").to_numpy().astype(np.int64)
+    ok = np.isfinite(xyz).all(axis=1)
+    if not plan.get("sweeps_measure_tool", False):
+        ok &= sweep <= 0  # sweep targets sit on the links: not the tool point
+    cols: dict[str, list[Any]] = {k: [] for k in ("sweep", "step", "role")}
+    arrays: dict[str, list[np.ndarray]] = {k: [] for k in ("p", "m", "raw", "reg")}
+    for role in ROLES:
+        sel = ok & ((sweep == CHECK_SWEEP) == (role == "check"))
+        if not sel.any():
+            continue
+        q = np.zeros((int(sel.sum()), n))
+        for s in np.unique(sweep[sel]):
+            at = sweep[sel] == s
+            q[at] = readings_at(inputs["joints"], int(s), step[sel][at], n, pris)
+        model = model_points(chain, q, pris)
+        raw, reg = error_distances(model, xyz[sel])
+        cols["sweep"] += sweep[sel].tolist()
+        cols["step"] += step[sel].tolist()
+        cols["role"] += [role] * int(sel.sum())
+        arrays["p"].append(xyz[sel])
+        arrays["m"].append(model)
+        arrays["raw"].append(raw)
+        arrays["reg"].append(np.full(len(raw), np.nan) if reg is None else reg)
+    p, m = (np.vstack(arrays[k]) if arrays[k] else np.zeros((0, 3)) for k in ("p", "m"))
+    raw, reg = (np.concatenate(arrays[k]) if arrays[k] else np.zeros(0) for k in ("raw", "reg"))
+    return pa.table(
+        {
+            "sweep": pa.array(cols["sweep"], pa.int32()),
+            "step": pa.array(cols["step"], pa.int32()),
+            "role": pa.array(cols["role"], pa.string()),
+            **{f"{a}_cm": pa.array(p[:, k], pa.float64()) for k, a in enumerate("xyz")},
+            **{f"model_{a}_cm": pa.array(m[:, k], pa.float64()) for k, a in enumerate("xyz")},
+            "error_cm": pa.array(raw, pa.float64()),
+            "registered_error_cm": pa.array(reg, pa.float64(), mask=np.isnan(reg)),
+        }
+    )
+
+
+STAGE = Stage(
+    "validation",
+    1,
+    ("positions", "joints", "frames", "session"),
+    NoParams(),
+    compute,
+    "model position error on validation (check) and fit points",
+)

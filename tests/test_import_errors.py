@@ -1,0 +1,116 @@
+"""Bad import input: one line naming the file, the line and the fix; nothing written."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from import_data import TWO_LINK, TWO_LINK_MAP, TWO_LINK_VALUES, sscanss2_text, two_link_table
+from typer.testing import CliRunner
+
+from pipeline.cli import EXIT_REFUSED, app
+
+
+def _sscanss2(edit: Callable[[list[str]], list[str]]) -> Callable[[Path], list[str]]:
+    def make(tmp: Path) -> list[str]:
+        lines = sscanss2_text(TWO_LINK, TWO_LINK_VALUES).splitlines()
+        (tmp / "f.txt").write_text("\n".join(edit(lines)) + "\n")
+        return [str(tmp / "f.txt"), "--format", "sscanss2"]
+
+    return make
+
+
+def _table(
+    edit_csv: Callable[[list[str]], list[str]], edit_map: Callable[[str], str] = str
+) -> Callable[[Path], list[str]]:
+    def make(tmp: Path) -> list[str]:
+        src = two_link_table(tmp / "f.csv")
+        src.write_text("\n".join(edit_csv(src.read_text().splitlines())) + "\n")
+        (tmp / "map.toml").write_text(edit_map(TWO_LINK_MAP))
+        return [str(src), "--format", "table", "--map", str(tmp / "map.toml")]
+
+    return make
+
+
+def _cell(lines: list[str], k: int, col: int, value: str, sep: str = "\t") -> list[str]:
+    cells = lines[k].split(sep)
+    cells[col] = value
+    return [*lines[:k], sep.join(cells), *lines[k + 1 :]]
+
+
+def _moves_j1(lines: list[str]) -> list[str]:
+    # line 12 of the CSV (sweep of joint 2) with joint 1 at 3 deg instead of 0
+    return [*lines[:11], "3" + lines[11][lines[11].index(",") :], *lines[12:]]
+
+
+CASES = {
+    "missing column (sscanss2)": (
+        _sscanss2(lambda ls: [*ls[:2], ls[2].rsplit("\t", 1)[0], *ls[3:]]),
+        ["f.txt: line 3: 6 columns", "missing column"],
+    ),
+    "missing column (table)": (
+        _table(lambda ls: ls, lambda m: m.replace('x = "x2"', 'x = "x9"')),
+        ["f.csv: line 2: missing column 'x9'", "try:"],
+    ),
+    "unknown unit": (
+        _table(lambda ls: ls, lambda m: m.replace('unit = "rad"', 'unit = "grad"')),
+        ["map.toml", "unknown revolute joint 'link2' unit 'grad'", "deg | rad"],
+    ),
+    "joint never moves (sscanss2)": (
+        _sscanss2(
+            lambda ls: [_cell(ls, k, 4, "0")[k] if k >= 7 else ls[k] for k in range(len(ls))]
+        ),
+        ["f.txt: joint 2 (link2) never moves", "try:"],
+    ),
+    "joint never moves (table, infer)": (
+        _table(lambda ls: ls[:9]),
+        ["f.csv: joint 2 (link2) never moves", "try:"],
+    ),
+    "two joints move in one sweep (infer)": (
+        _table(_moves_j1),
+        ["f.csv: line 12 and line 13", "two or more joints change"],
+    ),
+    "two joints move in one sweep (sweep column)": (
+        _table(
+            lambda ls: [
+                ls[0],
+                ls[1] + ",sweep",
+                *(x + (",1" if k < 7 else ",2") for k, x in enumerate(_moves_j1(ls)[2:])),
+            ],  # fmt: skip
+            lambda m: m.replace('column = "infer"', 'column = "sweep"'),
+        ),
+        ["f.csv: line 12: joint 1 (link1) moves in the sweep of joint 2", "try:"],
+    ),
+    "NaN row (sscanss2)": (
+        _sscanss2(lambda ls: _cell(ls, 4, 2, "nan")),
+        ["f.txt: line 5: a value is missing or not a number (NaN)", "try:"],
+    ),
+    "NaN row (table)": (
+        _table(lambda ls: [*ls[:4], ls[4].replace(ls[4].split(",")[3], "", 1), *ls[5:]]),
+        ["f.csv: line 5: a value is missing", "skip"],
+    ),
+    "duplicated row": (
+        _sscanss2(lambda ls: [*ls[:4], ls[3], *ls[4:]]),
+        ["f.txt: line 4 and line 5 measure joint 1 (link1) at the same reading", "duplicated"],
+    ),
+    "type disagrees with the robot": (
+        _sscanss2(lambda ls: _cell(ls, 0, 5, "prismatic")),
+        ["f.txt: line 1: joint 1 is 'prismatic' in the file but 'revolute'", "try:"],
+    ),
+}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_bad_input_one_line_nothing_written(tmp_path: Path, case: str) -> None:
+    make, fragments = CASES[case]
+    args = make(tmp_path)
+    session = tmp_path / "sessions" / "s"
+    r = CliRunner().invoke(app, ["import", *args, "--robot", str(TWO_LINK), str(session)])
+    assert r.exit_code == EXIT_REFUSED, (r.exit_code, r.output)
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), r.stderr
+    for f in fragments:
+        assert f in lines[0], (f, lines[0])
+    assert not (session / "recording.mcap").exists()
+    assert not session.exists() or not any(session.iterdir())
