@@ -91,7 +91,7 @@ def residuals_vs_q(joints: Sequence[JointResiduals], path: Path) -> Path:
         ax.plot(j.q, j.normal, "*", ms=6, color="C0", label="normal")
         if j.radial is not None:
             ax.plot(j.q, j.radial, "o", ms=4, mfc="none", color="C3", label="radial")
-        ax.set_title(f"joint {j.joint} ({j.name})")
+        ax.set_title(f"joint {j.joint} ({j.name})", y=1.0)
         ax.set_xlabel(f"q{j.joint} ({j.unit})")
         ax.set_ylabel("residual (cm)")
         ax.grid(alpha=0.3)
@@ -106,7 +106,7 @@ def residual_histograms(joints: Sequence[JointResiduals], kind: str, path: Path)
     fig, axes = _figure(len(joints))
     for ax, j in zip(axes, joints, strict=True):
         values = j.normal if kind == "normal" else j.radial
-        ax.set_title(f"joint {j.joint} ({j.name})")
+        ax.set_title(f"joint {j.joint} ({j.name})", y=1.0)
         ax.set_xlabel(f"{kind} residual (cm)")
         ax.set_ylabel("count")
         if values is None or len(values) < 2:
