@@ -42,7 +42,9 @@ def test_ties_resolve_as_the_dense_argmax(rng: np.random.Generator) -> None:
 
 
 def test_batch_equals_loop_and_dense(rng: np.random.Generator) -> None:
-    p = np.stack([_ring(rng, 120, s, 0.01) for s in (30.0, 200.0, 360.0, 90.0)]).reshape(2, 2, 120, 3)
+    p = np.stack([_ring(rng, 120, s, 0.01) for s in (30.0, 200.0, 360.0, 90.0)]).reshape(
+        2, 2, 120, 3
+    )
     first, second = farthest_pair(p)
     want_first, want_second = _dense(p)
     assert first.shape == (2, 2)
