@@ -239,7 +239,7 @@ _BOUND_SLACK = 1e-9
 _PAIRS_PER_SLICE = 4096
 
 
-def farthest_pair(p: Array) -> tuple[Array, Array]:
+def farthest_pair(p: Array) -> tuple[np.ndarray, np.ndarray]:
     """Indices ``(i, j)``, ``i < j``, of the two mutually farthest points of each set.
 
     The pair ``argmax`` of the squared distances ``((p_i − p_j)²).sum()`` would pick over
