@@ -108,5 +108,10 @@ def main() -> None:
                 f"{COLD_TARGET}), warm {r['warm']:.3f} (CPU {r['warm CPU']:.3f}, target <= "
                 f"{WARM_TARGET})"
             )
+        else:
+            print(
+                "(for the issue-18 ratios set BENCH_BASELINE to a checkout of ace4dae with "
+                "its own .venv)"
+            )
         if os.environ.get("BENCH_SCALING", "1") != "0":
             _scaling(exes["this checkout"], Path(tmp))
