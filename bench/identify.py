@@ -4,9 +4,9 @@ Issue 4 targets: cold (every stage from the recording) <= 2 s, warm (all cached)
 Issue 18: cold CPU <= 0.5x and warm CPU <= 0.6x those of commit ace4dae, measured in the
 same run; identify time linear or better in points per sweep from 400 to 1,600.
 
-With ``BENCH_BASELINE=DIR`` (another armsig checkout with its own ``.venv``, e.g.
+With ``BENCH_BASELINE=DIR[:DIR...]`` (other armsig checkout with its own ``.venv``, e.g.
 ``git worktree add --detach ../armsig-ace4dae ace4dae && make -C ../armsig-ace4dae install``)
-the two are run alternately in the same run and the ratios are printed, since the machines
+all are run alternately in the same run and the ratios to each are printed, since the machines
 are shared and noisy. CPU is user + system time of the child process (interpreter start,
 imports, stages, signature and report included).
 """
@@ -75,8 +75,8 @@ def _scaling(exe: str, tmp: Path) -> None:
 
 def main() -> None:
     exes = {"this checkout": str(Path(sys.executable).with_name("pipeline"))}
-    base = os.environ.get("BENCH_BASELINE")
-    if base:
+    bases = [b for b in os.environ.get("BENCH_BASELINE", "").split(os.pathsep) if b]
+    for base in bases:  # several: e.g. ace4dae and main, all in the same run
         exes["baseline " + base] = str(Path(base) / ".venv" / "bin" / "pipeline")
     keys = ("cold", "cold CPU", "warm", "warm CPU")
     times: dict[str, dict[str, list[float]]] = {k: {w: [] for w in keys} for k in exes}
@@ -100,15 +100,16 @@ def main() -> None:
             for what in keys:
                 name = f"pipeline identify robot3, {what}, {label}"
                 print(f"{name:60s} {min(times[label][what]):7.3f} s (best of {RUNS})")
-        if base:
-            this, other = (times[k] for k in exes)
+        this = times["this checkout"]
+        for base in bases:
+            other = times["baseline " + base]
             r = {w: min(this[w]) / min(other[w]) for w in keys}
             print(
-                f"this / baseline: cold {r['cold']:.3f} (CPU {r['cold CPU']:.3f}, target <= "
+                f"this / {base}: cold {r['cold']:.3f} (CPU {r['cold CPU']:.3f}, target <= "
                 f"{COLD_TARGET}), warm {r['warm']:.3f} (CPU {r['warm CPU']:.3f}, target <= "
                 f"{WARM_TARGET})"
             )
-        else:
+        if not bases:
             print(
                 "(for the issue-18 ratios set BENCH_BASELINE to a checkout of ace4dae with "
                 "its own .venv)"
