@@ -347,10 +347,15 @@ def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -
     out = sdir / "report"
     out.mkdir(parents=True, exist_ok=True)
     res = figures.joint_residuals(t["residuals"], robot)
-    figs = {"residuals": figures.residuals_vs_q(res, out / "residuals.png")}
-    figs["hist_normal"] = figures.residual_histograms(res, "normal", out / "hist_normal.png")
+    panels = figures.Panels(len(res))  # one figure, drawn three times
+    figs = {"residuals": figures.residuals_vs_q(res, out / "residuals.png", panels)}
+    figs["hist_normal"] = figures.residual_histograms(
+        res, "normal", out / "hist_normal.png", panels
+    )
     if any(j.radial is not None for j in res):
-        figs["hist_radial"] = figures.residual_histograms(res, "radial", out / "hist_radial.png")
+        figs["hist_radial"] = figures.residual_histograms(
+            res, "radial", out / "hist_radial.png", panels
+        )
     name, mode = sdir.resolve().name, t["session"][0]["mode"]
     parts = [
         f"# Arm signature identification: {name}\n\nRobot **{robot.name}**, mode **{mode}**.",
