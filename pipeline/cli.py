@@ -875,12 +875,12 @@ def montecarlo(
     from pipeline.montecarlo.studies import run_montecarlo
 
     if scheduler is None:
-        lines = run_montecarlo(study, robots=robots, seed=seed, out=out, workers=workers)
+        lines = run_montecarlo(study, robots, seed, out, workers, progress=sys.stderr)
     else:
         from pipeline.fleet.engine import dask_client
 
         with dask_client(scheduler, workers) as client:
-            lines = run_montecarlo(study, robots=robots, seed=seed, out=out, client=client)
+            lines = run_montecarlo(study, robots, seed, out, progress=sys.stderr, client=client)
     for line in lines:
         typer.echo(line)
 

@@ -56,7 +56,7 @@ def dask_client(
             threads_per_worker=1,
             processes=processes,
             host="127.0.0.1",
-            dashboard_address=None,
+            dashboard_address=":0",  # a free port: no clash with another cluster
         ) as cluster,
         Client(cluster) as client,
     ):
