@@ -42,6 +42,7 @@ def _sessions(folder: Path) -> list[Path]:
 
 
 def _peak_rss_mb() -> float:
+    """Peak resident memory of this process (MB; Linux reports kB)."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
@@ -50,20 +51,23 @@ def fleet() -> None:
         warm = _sessions(Path(tmp) / "warm")[0]
         identify(warm)  # untimed: imports and numba caches
         seq = _sessions(Path(tmp) / "seq")
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for d in seq:
             identify(d)
-        t_seq = time.perf_counter() - t0
+        t_seq, c_seq = time.perf_counter() - t0, time.process_time() - c0
         fl = Path(tmp) / "fleet"
         _sessions(fl)
         t0 = time.perf_counter()
         with dask_client(None, WORKERS) as client:
             t_start = time.perf_counter() - t0
+            c0s = client.run(time.process_time)
             r = run_fleet("identify", [str(fl)], client, fl, progress=None)
+            c1s = client.run(time.process_time)
             rss = client.run(_peak_rss_mb)
         t_all = time.perf_counter() - t0
     assert not r.failed, r.failed
     per = sorted(row["task_s"] for row in r.rows)
+    c_fleet = sum(c1s[w] - c0s[w] for w in c1s)
     print(f"{'identify, sequential loop in one process':52s} {t_seq:7.1f} s "
           f"({t_seq / SESSIONS:.2f} s per session)")  # fmt: skip
     print(f"{'fleet identify, 2 workers (run_fleet wall)':52s} {r.wall_s:7.1f} s "
@@ -73,6 +77,10 @@ def fleet() -> None:
     print(f"{'fleet task time per session: median, max':52s} {per[len(per) // 2]:7.2f} s "
           f"{per[-1]:.2f} s")  # fmt: skip
     print(f"{'fleet worker peak RSS (max over workers)':52s} {max(rss.values()):7.0f} MB")
+    # CPU seconds do not depend on what else runs on the machine (much less than wall time):
+    # on 2 idle cores, a balanced fleet would take c_fleet / 2.
+    print(f"{'CPU: sequential, fleet workers (sum)':52s} {c_seq:7.1f} s {c_fleet:.1f} s; "
+          f"speed-up on 2 idle cores at this CPU {2 * c_seq / c_fleet:.2f}x")  # fmt: skip
 
 
 def montecarlo() -> None:

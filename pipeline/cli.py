@@ -778,11 +778,14 @@ def _fleet(
 ) -> None:
     """Run ``command`` over the sessions; print one line per session, and refuse (exit 1)
     when any session failed, after every other one is done and fleet.arrow is written."""
+    from pipeline.atomic import check_writable
     from pipeline.fleet.engine import dask_client
-    from pipeline.fleet.run import run_fleet
+    from pipeline.fleet.run import find_sessions, run_fleet
 
+    sessions = find_sessions(dirs)  # refused before a cluster starts
+    folder = check_writable(out or dirs[0], "--out", folder=True)
     with dask_client(scheduler, workers) as client:
-        r = run_fleet(command, dirs, client, out or dirs[0], progress=sys.stderr)
+        r = run_fleet(command, sessions, client, folder, progress=sys.stderr)
     for row in r.rows:
         if row["error"] is not None:
             typer.echo(f"  FAILED {row['session']}: {row['error']}")

@@ -262,7 +262,9 @@ def chain_from_frames(frames: pa.Table, prismatic: np.ndarray):  # -> SerialChai
 
 STAGE = Stage(
     "frames",
-    5,  # 4: frames brought to q̄^s with each sweep's recorded readings; 5: imports' sweep points join the tool
+    # 4: frames brought to q̄^s with each sweep's recorded readings;
+    # 5: imports' sweep points join the tool
+    5,
     ("features", "joints", "positions", "session"),
     NoParams(),
     compute,
