@@ -34,6 +34,7 @@ def dask_client(
 ) -> Iterator[Any]:
     """A :class:`distributed.Client`: on ``scheduler`` (see :func:`scheduler_address`), else
     on a local cluster of ``workers`` (default: the machine's cores) started for the block."""
+    import dask
     from distributed import Client, LocalCluster
 
     address = scheduler_address(scheduler)
@@ -50,14 +51,16 @@ def dask_client(
             yield client
         return
     n = workers or os.cpu_count() or 1
-    with (
-        LocalCluster(
+    # The workers inherit this environment, as the process pool's workers do, without
+    # Dask's one-thread caps of OpenBLAS / OpenMP / MKL: with them the Monte-Carlo noise
+    # study took ~40 % more CPU time (docs/scale.md). Nannies read it when they start.
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": {}}):
+        cluster = LocalCluster(
             n_workers=n,
             threads_per_worker=1,
             processes=processes,
             host="127.0.0.1",
             dashboard_address=":0",  # a free port: no clash with another cluster
-        ) as cluster,
-        Client(cluster) as client,
-    ):
+        )
+    with cluster, Client(cluster) as client:
         yield client
