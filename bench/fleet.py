@@ -83,21 +83,31 @@ def fleet() -> None:
           f"speed-up on 2 idle cores at this CPU {2 * c_seq / c_fleet:.2f}x")  # fmt: skip
 
 
+def _children_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def montecarlo() -> None:
     study = get_study("noise")
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _children_cpu()
     pool = run_study(study, ROBOTS, seed=0, workers=WORKERS, progress=None)
-    t_pool = time.perf_counter() - t0
+    t_pool, c_pool = time.perf_counter() - t0, _children_cpu() - c0
     t0 = time.perf_counter()
     with dask_client(None, WORKERS) as client:
         t_start = time.perf_counter() - t0
+        c0s = client.run(time.process_time)
         on_dask = run_study(study, ROBOTS, seed=0, progress=None, client=client)
+        c1s = client.run(time.process_time)
     t_dask = time.perf_counter() - t0
+    c_dask = sum(c1s[w] - c0s[w] for w in c1s)
     same = bool((pool.values == on_dask.values).all())
-    print(f"{'montecarlo noise 500 robots, process pool (2)':52s} {t_pool:7.1f} s")
+    print(f"{'montecarlo noise 500 robots, process pool (2)':52s} {t_pool:7.1f} s "
+          f"CPU {c_pool:.1f} s")  # fmt: skip
     print(f"{'montecarlo noise 500 robots, Dask (2 workers)':52s} {on_dask.wall_s:7.1f} s "
-          f"ratio {on_dask.wall_s / t_pool:.3f}; incl. cluster start+stop {t_dask:.1f} s "
-          f"(start {t_start:.1f} s) ratio {t_dask / t_pool:.3f}; identical: {same}")  # fmt: skip
+          f"CPU {c_dask:.1f} s; wall ratio {on_dask.wall_s / t_pool:.3f}, CPU ratio "
+          f"{c_dask / c_pool:.3f}; incl. cluster start+stop {t_dask:.1f} s "
+          f"(start {t_start:.1f} s); identical: {same}")  # fmt: skip
 
 
 def main() -> None:
