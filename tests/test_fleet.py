@@ -211,3 +211,14 @@ def test_montecarlo_scheduler_option_gives_the_same_tables(tmp_path: Path, threa
     assert res.exit_code == 0, res.output
     a, b = (read_table(tmp_path / d / "machining" / "indices.arrow") for d in ("a", "b"))
     assert a.equals(b, check_metadata=False)
+
+
+def test_scheduler_address_from_option_environment_or_local(monkeypatch) -> None:
+    from pipeline.fleet.engine import SCHEDULER_ENV, scheduler_address
+
+    monkeypatch.delenv(SCHEDULER_ENV, raising=False)
+    assert scheduler_address(None) is None  # a local cluster
+    monkeypatch.setenv(SCHEDULER_ENV, "tcp://10.0.0.1:8786")
+    assert scheduler_address(None) == "tcp://10.0.0.1:8786"
+    assert scheduler_address("tcp://h:1") == "tcp://h:1"
+    assert scheduler_address("local") is None
