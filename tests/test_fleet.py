@@ -222,3 +222,11 @@ def test_scheduler_address_from_option_environment_or_local(monkeypatch) -> None
     assert scheduler_address(None) == "tcp://10.0.0.1:8786"
     assert scheduler_address("tcp://h:1") == "tcp://h:1"
     assert scheduler_address("local") is None
+
+
+def test_fleet_evaluate_gives_the_measured_gain(recorded: Path, tmp_path: Path, threads) -> None:
+    fleet = tmp_path / "fleet"
+    shutil.copytree(recorded / "r0", fleet / "r0")
+    (row,) = run_fleet("evaluate", [str(fleet)], threads, fleet, progress=None).rows
+    assert row["error"] is None and row["gain_evaluation"] > 1.0
+    assert (fleet / "r0" / "evaluation.mcap").is_file()
