@@ -1,6 +1,6 @@
 """`make bench`: every benchmark, printed; never asserted in tests."""
 
-from bench import evaluate, identify, ik, kinematics, montecarlo, simulate
+from bench import evaluate, fleet, identify, ik, kinematics, montecarlo, simulate
 
 if __name__ == "__main__":
     kinematics.main()
@@ -14,3 +14,5 @@ if __name__ == "__main__":
     evaluate.main()
     print()
     montecarlo.main()
+    print()
+    fleet.main()
