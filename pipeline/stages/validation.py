@@ -22,7 +22,7 @@ import pyarrow as pa
 from pipeline.evaluation.validation import error_distances, model_points
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.frames import chain_from_frames, readings_at
-from pipeline.stages.positions import sweep_rows
+from pipeline.stages.positions import positions, sweep_rows
 from pipeline.stages.recording import CHECK_SWEEP
 from pipeline.stages.session import session_plan, session_robot
 
@@ -47,12 +47,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     import pyarrow.compute as pc  # lazy: ~70 ms of import, which a warm run never needs
 
     pos = pos.filter(pc.equal(pos.column("target"), tool_target(plan, pos)))
-    xyz = np.column_stack(
-        [
-            pos.column(c).to_numpy(zero_copy_only=False).astype(float)
-            for c in ("x_cm", "y_cm", "z_cm")
-        ]
-    )
+    xyz = positions(pos)
     sweep = pos.column("sweep").to_numpy().astype(np.int64)
     step = pos.column("step").to_numpy().astype(np.int64)
     ok = np.isfinite(xyz).all(axis=1)
