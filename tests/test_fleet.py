@@ -242,7 +242,7 @@ def _worker_state(dask_worker) -> tuple[bool, bool]:
 def test_fleet_local_workers_start_with_the_pipeline_imported_and_no_profiler() -> None:
     """The engine's local cluster for `pipeline fleet`: each worker imports the stages as it
     starts (preload), not in its first task, and runs no statistical profiler (it took
-    ~20 % of a worker's CPU on identify, docs/scale.md). A replaced worker does the same."""
+    ~11 % of a worker's CPU on identify, docs/scale.md). A replaced worker does the same."""
     from pipeline.fleet.engine import FLEET_PRELOAD, dask_client
 
     with dask_client(None, workers=1, preload=FLEET_PRELOAD) as client:

@@ -26,8 +26,8 @@ FLEET_PRELOAD = ("pipeline.fleet.preload",)
 #:   pool's workers do, without Dask's one-thread caps of OpenBLAS / OpenMP / MKL (with
 #:   them the Monte-Carlo noise study took ~40 % more CPU time).
 #: - no statistical profiler: it samples the task thread's Python stack every 10 ms, under
-#:   the GIL; identify's deep stacks of small numpy calls made that ~20 % of a worker's CPU.
-#:   Only the dashboard's profile page reads it.
+#:   the GIL: 4-22 % (mean 11 %) of a worker's CPU on identify. Only the dashboard's
+#:   profile page reads it.
 LOCAL_CONFIG = {
     "distributed.nanny.pre-spawn-environ": {},
     "distributed.worker.profile.enabled": False,
