@@ -779,12 +779,12 @@ def _fleet(
     """Run ``command`` over the sessions; print one line per session, and refuse (exit 1)
     when any session failed, after every other one is done and fleet.arrow is written."""
     from pipeline.atomic import check_writable
-    from pipeline.fleet.engine import dask_client
+    from pipeline.fleet.engine import FLEET_PRELOAD, dask_client
     from pipeline.fleet.run import find_sessions, run_fleet
 
     sessions = find_sessions(dirs)  # refused before a cluster starts
     folder = check_writable(out or dirs[0], "--out", folder=True)
-    with dask_client(scheduler, workers) as client:
+    with dask_client(scheduler, workers, preload=FLEET_PRELOAD) as client:
         r = run_fleet(command, sessions, client, folder, progress=sys.stderr)
     for row in r.rows:
         if row["error"] is not None:

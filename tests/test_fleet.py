@@ -230,3 +230,22 @@ def test_fleet_evaluate_gives_the_measured_gain(recorded: Path, tmp_path: Path, 
     (row,) = run_fleet("evaluate", [str(fleet)], threads, fleet, progress=None).rows
     assert row["error"] is None and row["gain_evaluation"] > 1.0
     assert (fleet / "r0" / "evaluation.mcap").is_file()
+
+
+def _worker_state(dask_worker) -> tuple[bool, bool]:
+    """(the identification imported, the statistical profiler scheduled) in a worker."""
+    import sys
+
+    return "pipeline.identify" in sys.modules, "profile" in dask_worker.periodic_callbacks
+
+
+def test_fleet_local_workers_start_with_the_pipeline_imported_and_no_profiler() -> None:
+    """The engine's local cluster for `pipeline fleet`: each worker imports the stages as it
+    starts (preload), not in its first task, and runs no statistical profiler (it took
+    ~11 % of a worker's CPU on identify, docs/scale.md). A replaced worker does the same."""
+    from pipeline.fleet.engine import FLEET_PRELOAD, dask_client
+
+    with dask_client(None, workers=1, preload=FLEET_PRELOAD) as client:
+        assert list(client.run(_worker_state).values()) == [(True, False)]
+        client.restart()
+        assert list(client.run(_worker_state).values()) == [(True, False)]

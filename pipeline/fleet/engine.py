@@ -19,6 +19,19 @@ from pipeline.errors import ArmsigError
 SCHEDULER_ENV = "DASK_SCHEDULER_ADDRESS"
 #: ``--scheduler local``: the embedded default, even when the environment names a scheduler.
 LOCAL = "local"
+#: ``preload`` of a fleet's local workers: the modules a session's task imports.
+FLEET_PRELOAD = ("pipeline.fleet.preload",)
+#: Dask configuration of the local cluster's workers (docs/scale.md has the numbers):
+#: - ``pre-spawn-environ`` empty: the workers inherit this environment, as the process
+#:   pool's workers do, without Dask's one-thread caps of OpenBLAS / OpenMP / MKL (with
+#:   them the Monte-Carlo noise study took ~40 % more CPU time).
+#: - no statistical profiler: it samples the task thread's Python stack every 10 ms, under
+#:   the GIL: 4-22 % (mean 11 %) of a worker's CPU on identify. Only the dashboard's
+#:   profile page reads it.
+LOCAL_CONFIG = {
+    "distributed.nanny.pre-spawn-environ": {},
+    "distributed.worker.profile.enabled": False,
+}
 
 
 def scheduler_address(scheduler: str | None) -> str | None:
@@ -30,10 +43,15 @@ def scheduler_address(scheduler: str | None) -> str | None:
 
 @contextlib.contextmanager
 def dask_client(
-    scheduler: str | None = None, workers: int | None = None, processes: bool = True
+    scheduler: str | None = None,
+    workers: int | None = None,
+    processes: bool = True,
+    preload: tuple[str, ...] = (),
 ) -> Iterator[Any]:
     """A :class:`distributed.Client`: on ``scheduler`` (see :func:`scheduler_address`), else
-    on a local cluster of ``workers`` (default: the machine's cores) started for the block."""
+    on a local cluster of ``workers`` (default: the machine's cores) started for the block,
+    each worker importing the modules ``preload`` (e.g. :data:`FLEET_PRELOAD`) as it starts.
+    An existing cluster is used as it is configured."""
     import dask
     from distributed import Client, LocalCluster
 
@@ -51,16 +69,18 @@ def dask_client(
             yield client
         return
     n = workers or os.cpu_count() or 1
-    # The workers inherit this environment, as the process pool's workers do, without
-    # Dask's one-thread caps of OpenBLAS / OpenMP / MKL: with them the Monte-Carlo noise
-    # study took ~40 % more CPU time (docs/scale.md). Nannies read it when they start.
-    with dask.config.set({"distributed.nanny.pre-spawn-environ": {}}):
+    # Thread workers read the config as they are created; a nanny keeps its ``config``
+    # for the worker processes it starts and restarts (dask.config.set is undone on exit).
+    nanny = {"config": LOCAL_CONFIG} if processes else {}
+    with dask.config.set(LOCAL_CONFIG):
         cluster = LocalCluster(
             n_workers=n,
             threads_per_worker=1,
             processes=processes,
             host="127.0.0.1",
             dashboard_address=":0",  # a free port: no clash with another cluster
+            preload=list(preload),
+            **nanny,
         )
     with cluster, Client(cluster) as client:
         yield client
