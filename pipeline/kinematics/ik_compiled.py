@@ -50,6 +50,17 @@ FAST_DEFERRED = 1
 #: pool, and its fork-safe layer must not be entered from two threads at once.
 THREADED_MIN_TARGETS = 2000
 
+#: Levenberg-Marquardt: the first damping μ as a fraction of the largest diagonal
+#: entry of the unit-scaled ``JᵀJ``. 1e-3 is Nielsen's choice for a start near
+#: the solution (the Newton iterate it takes over from).
+LM_TAU = 1e-3
+#: Levenberg-Marquardt steps per target after the Newton steps. Measured on
+#: robot3: the targets that need them take 5-60 (see bench/ik.py).
+LM_MAX_ITER = 200
+#: μ (relative to the largest diagonal entry at the LM start) above which no
+#: step lowers the cost: the step is ~1e-16 of the gradient step, round-off.
+LM_MU_MAX = 1e16
+
 
 Kernel = TypeVar("Kernel", bound=Callable[..., Any])
 IntArray = npt.NDArray[np.int64]
@@ -185,7 +196,8 @@ def _solve_one(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     target: Buf, q: Buf, res: Buf, limit: Buf, settings: Buf, delta: Buf,
 ) -> tuple[int, int]:  # fmt: skip
-    """Plain Newton-Raphson on one target; ``q`` (n,) in: the start, out: the solution.
+    """Newton-Raphson on one target, then Levenberg-Marquardt where it stops descending;
+    ``q`` (n,) in: the start, out: the solution.
 
     ``settings`` = (max_iter, length scale L, position tol. cm, orientation tol. rad).
     Returns (outcome, iterations); ``delta`` (6,) receives the final δ.
@@ -204,7 +216,10 @@ def _solve_one(
     e = ep * (1.0 / length) + eo
     for it in range(1, max_iter + 1):
         if not _lu_solve(J, delta, dq, M):  # Eq. (5.4): dq = J⁻¹ δ
-            return FAST_DEFERRED, it
+            return _levenberg_marquardt(
+                base, links, tool, offsets, prismatic, target, q, res, limit, settings,
+                delta, J, it - 1,
+            )  # fmt: skip
         worst = 1.0  # C.1 step 7, the step capped per joint (ik._cap_step)
         for j in range(n):
             worst = max(worst, abs(dq[j]) / limit[j])
@@ -216,8 +231,12 @@ def _solve_one(
         _delta(T, target, d_new)
         ep, eo = _errors(d_new)
         e_new = ep * (1.0 / length) + eo
-        if not e_new < e:  # the numpy iteration's safeguard takes over
-            return FAST_DEFERRED, it
+        if not e_new < e:  # the Newton step does not descend: damped steps from q
+            _pose_jacobian(base, links, tool, offsets, prismatic, q, T, J, F, G, axes)
+            return _levenberg_marquardt(
+                base, links, tool, offsets, prismatic, target, q, res, limit, settings,
+                delta, J, it - 1,
+            )  # fmt: skip
         accurate = ep <= tol_p and eo <= tol_o
         moved = False
         for j in range(n):
@@ -228,9 +247,128 @@ def _solve_one(
         if small and accurate:
             return FAST_CONVERGED, it
         if not accurate and not e_new < STALL_RATIO * e and not moved:
-            return FAST_DEFERRED, it  # a stall: the numpy loop decides
+            return _levenberg_marquardt(
+                base, links, tool, offsets, prismatic, target, q, res, limit, settings,
+                delta, J, it,
+            )  # fmt: skip
         e = e_new
-    return FAST_DEFERRED, max_iter
+    return _levenberg_marquardt(
+        base, links, tool, offsets, prismatic, target, q, res, limit, settings, delta, J, max_iter
+    )
+
+
+@_jit
+def _levenberg_marquardt(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    target: Buf, q: Buf, res: Buf, limit: Buf, settings: Buf, delta: Buf, J: Buf, done: int,
+) -> tuple[int, int]:  # fmt: skip
+    """Damped least squares from ``q`` (δ and J given there) after ``done`` Newton steps.
+
+    Minimises ``½|W δ|²``, ``W = diag(1/L, 1/L, 1/L, 1, 1, 1)``, by steps
+    ``h = (JᵀWᵀWJ + μ I)⁻¹ JᵀWᵀW δ`` capped per joint; μ follows Nielsen's rule
+    (Madsen, Nielsen & Tingleff 2004, Algorithm 3.16): start at
+    :data:`LM_TAU` × the largest diagonal entry, shrink after a step that
+    lowers the cost, double (then quadruple, ...) after one that does not.
+    After every step that lowers the cost the undamped (Gauss-Newton, μ = 0)
+    step is tried first, so the iteration is Newton's again, quadratic, as
+    soon as it descends; μ resumes where it was when it does not.
+    The target converges when its pose error is within tolerance and every
+    increment of the accepted step is below one encoder count (Appendix C.1
+    step 8), or when it is within tolerance and no step lowers the cost any
+    more (round-off). Deferred when μ grows beyond :data:`LM_MU_MAX` (a
+    minimum of the residual) or after :data:`LM_MAX_ITER` steps.
+    """
+    n = q.shape[0]
+    length = settings[1]
+    tol_p, tol_o = settings[2], settings[3]
+    w = 1.0 / length
+    T = np.empty((4, 4))
+    J_new = np.empty((6, n))
+    F, G = np.empty((3, 4)), np.empty((3, 4))
+    axes, M = np.empty((n, 6)), np.empty((n, n + 1))
+    A, Am, g = np.empty((n, n)), np.empty((n, n)), np.empty(n)
+    h, q_new, d_new, r = np.empty(n), np.empty(n), np.empty(6), np.empty(6)
+    Js = np.empty((6, n))
+
+    def normal_equations(J: Buf, d: Buf) -> float:  # A = JsᵀJs, g = Jsᵀ r; returns ½|r|²
+        for i in range(6):
+            s = w if i < 3 else 1.0
+            r[i] = s * d[i]
+            for j in range(n):
+                Js[i, j] = s * J[i, j]
+        for a in range(n):
+            acc = 0.0
+            for i in range(6):
+                acc += Js[i, a] * r[i]
+            g[a] = acc
+            for b in range(a, n):
+                acc = 0.0
+                for i in range(6):
+                    acc += Js[i, a] * Js[i, b]
+                A[a, b] = acc
+                A[b, a] = acc
+        return 0.5 * (r[0] * r[0] + r[1] * r[1] + r[2] * r[2] + r[3] * r[3] + r[4] * r[4]
+                      + r[5] * r[5])  # fmt: skip
+
+    cost = normal_equations(J, delta)
+    top = 0.0
+    for a in range(n):
+        top = max(top, A[a, a])
+    mu, nu = LM_TAU * top, 2.0
+    gauss_newton = False  # try μ = 0 first (after a step that lowered the cost)
+    ep, eo = _errors(delta)
+    for it in range(done + 1, done + LM_MAX_ITER + 1):
+        damp = 0.0 if gauss_newton else mu
+        for a in range(n):
+            for b in range(n):
+                Am[a, b] = A[a, b]
+            Am[a, a] += damp
+        if not _lu_solve(Am, g, h, M):
+            if gauss_newton:
+                gauss_newton = False
+                continue
+            return FAST_DEFERRED, it
+        worst = 1.0
+        for j in range(n):
+            worst = max(worst, abs(h[j]) / limit[j])
+        small = True
+        for j in range(n):
+            h[j] = h[j] / worst if worst > 1.0 else h[j]
+            q_new[j] = q[j] + h[j]
+            small = small and abs(h[j]) < res[j]
+        _pose_jacobian(base, links, tool, offsets, prismatic, q_new, T, J_new, F, G, axes)
+        _delta(T, target, d_new)
+        c_new = 0.5 * (
+            (w * d_new[0]) ** 2 + (w * d_new[1]) ** 2 + (w * d_new[2]) ** 2
+            + d_new[3] ** 2 + d_new[4] ** 2 + d_new[5] ** 2
+        )  # fmt: skip
+        if c_new < cost:
+            predicted = 0.0  # ½ hᵀ(μ h + g), the model's decrease (> 0)
+            for j in range(n):
+                predicted += 0.5 * h[j] * (damp * h[j] + g[j])
+            rho = (cost - c_new) / predicted if predicted > 0.0 else 1.0
+            for j in range(n):
+                q[j] = q_new[j]
+            for i in range(6):
+                delta[i] = d_new[i]
+            ep, eo = _errors(delta)
+            if small and ep <= tol_p and eo <= tol_o:
+                return FAST_CONVERGED, it
+            cost = normal_equations(J_new, delta)
+            if not gauss_newton:
+                mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                nu = 2.0
+            gauss_newton = True
+        elif gauss_newton:  # the undamped step did not descend: damp from here on
+            gauss_newton = False
+        else:
+            if ep <= tol_p and eo <= tol_o:  # within tolerance, at round-off
+                return FAST_CONVERGED, it - 1
+            mu *= nu
+            nu *= 2.0
+            if not mu <= LM_MU_MAX * top:
+                return FAST_DEFERRED, it
+    return FAST_DEFERRED, done + LM_MAX_ITER
 
 
 @_jit
