@@ -1,5 +1,5 @@
-"""Compiled plain Newton-Raphson iteration (5.4) for one robot: the fast path of
-:func:`pipeline.kinematics.ik.newton_raphson`.
+"""Compiled Newton-Raphson iteration (5.4), then Levenberg-Marquardt steps, for one
+robot: the fast path of :func:`pipeline.kinematics.ik.newton_raphson`.
 
 Why compiled: a numpy solve of one target costs ~500 small numpy calls of
 0.5-1 µs each (four pose-and-Jacobian evaluations, three 6×6 solves and the
@@ -7,16 +7,18 @@ per-iteration bookkeeping), ~430 µs measured; the same arithmetic as scalar
 loops takes a few µs. The kernel is compiled once by numba and cached beside
 this module (``__pycache__``).
 
-What it does: for each target independently, the iteration of
-:func:`~pipeline.kinematics.ik.newton_raphson` as long as it is *plain*: the
-Newton step ``J⁻¹ δ`` (LU with partial pivoting), capped per joint, reduces the
-scaled error ``|dp|/L + |rotation|``, and the target stops by the module's
-stopping rule (encoder rule and pose-error tolerances). Whenever the numpy
-iteration would do anything else (a safeguard step, the SVD of a singular
-Jacobian, a stall, the iteration cap), the kernel *defers* the target instead,
-and the numpy iteration solves it from its start. A target's result never
-depends on the other targets in the call (each is solved alone, serially or on
-one of a few threads), so a batch equals a loop of single solves bit for bit.
+What it does: for each target independently, the plain Newton iteration of
+:func:`~pipeline.kinematics.ik.newton_raphson`: the Newton step ``J⁻¹ δ`` (LU
+with partial pivoting), capped per joint, while it reduces the scaled error
+``|dp|/L + |rotation|``, the target stopping by the module's stopping rule
+(encoder rule and pose-error tolerances). Where the Newton step does not
+descend, the Jacobian is singular, the target stalls or the iteration cap is
+reached, the kernel goes on with Levenberg-Marquardt steps from that iterate
+(:func:`_levenberg_marquardt`). Only a target on which those find no step that
+lowers the error is *deferred*: the numpy iteration solves it from its start and
+gives its status. A target's result never depends on the other targets in the
+call (each is solved alone, serially or on one of a few threads), so a batch
+equals a loop of single solves bit for bit.
 
 The pose and Jacobian are those of
 :func:`pipeline.kinematics.jacobian.pose_and_jacobian` and δ that of
@@ -40,7 +42,7 @@ from pipeline.kinematics.transforms import Array
 
 #: Kernel outcome of a target: converged by the stopping rule.
 FAST_CONVERGED = 0
-#: Kernel outcome of a target: left to the numpy iteration.
+#: Kernel outcome of a target: no step lowers its error; left to the numpy iteration.
 FAST_DEFERRED = 1
 
 #: Targets per call above which the kernel runs in one Python thread per core
@@ -307,8 +309,8 @@ def _levenberg_marquardt(
                     acc += Js[i, a] * Js[i, b]
                 A[a, b] = acc
                 A[b, a] = acc
-        return 0.5 * (r[0] * r[0] + r[1] * r[1] + r[2] * r[2] + r[3] * r[3] + r[4] * r[4]
-                      + r[5] * r[5])  # fmt: skip
+        return float(0.5 * (r[0] * r[0] + r[1] * r[1] + r[2] * r[2] + r[3] * r[3]
+                            + r[4] * r[4] + r[5] * r[5]))  # fmt: skip
 
     cost = normal_equations(J, delta)
     top = 0.0
