@@ -337,7 +337,9 @@ def _levenberg_marquardt(
         for j in range(n):
             h[j] = h[j] / worst if worst > 1.0 else h[j]
             q_new[j] = q[j] + h[j]
-            small = small and abs(h[j]) < res[j]
+            # the encoder rule tests an undamped increment only: a short damped
+            # step says nothing about being near the solution
+            small = small and damp == 0.0 and abs(h[j]) < res[j]
         _pose_jacobian(base, links, tool, offsets, prismatic, q_new, T, J_new, F, G, axes)
         _delta(T, target, d_new)
         c_new = 0.5 * (
@@ -364,8 +366,9 @@ def _levenberg_marquardt(
         elif gauss_newton:  # the undamped step did not descend: damp from here on
             gauss_newton = False
         else:
-            if ep <= tol_p and eo <= tol_o:  # within tolerance, at round-off
-                return FAST_CONVERGED, it - 1
+            # within (finite) tolerances, at round-off
+            if ep <= tol_p and eo <= tol_o and tol_p < np.inf and tol_o < np.inf:
+                return FAST_CONVERGED, it  # the rejected trial counts, as in numpy
             mu *= nu
             nu *= 2.0
             if not mu <= LM_MU_MAX * top:
