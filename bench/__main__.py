@@ -1,6 +1,6 @@
 """`make bench`: every benchmark, printed; never asserted in tests."""
 
-from bench import evaluate, identify, ik, kinematics, montecarlo, peers, simulate
+from bench import evaluate, fleet, identify, ik, kinematics, montecarlo, peers, simulate
 
 if __name__ == "__main__":
     kinematics.main()
@@ -17,3 +17,5 @@ if __name__ == "__main__":
     evaluate.main()
     print()
     montecarlo.main()
+    print()
+    fleet.main()

@@ -1,14 +1,19 @@
-"""Cold and warm `pipeline identify` on robot3, wall time including interpreter start.
+"""Cold and warm `pipeline identify` on robot3, and identify time against points per sweep.
 
 Issue 4 targets: cold (every stage from the recording) <= 2 s, warm (all cached) <= 0.5 s.
-Issue 13: cold no slower than before by more than 10 %. With ``BENCH_BASELINE=DIR`` (another
-armsig checkout with its own ``.venv``, e.g. a ``git worktree`` of an older commit) the two
-are run alternately in the same run and the ratio is printed, since the machines are shared
-and noisy.
+Issue 18: cold CPU <= 0.5x and warm CPU <= 0.6x those of commit ace4dae, measured in the
+same run; identify time linear or better in points per sweep from 400 to 1,600.
+
+With ``BENCH_BASELINE=DIR[:DIR...]`` (other armsig checkout with its own ``.venv``, e.g.
+``git worktree add --detach ../armsig-ace4dae ace4dae && make -C ../armsig-ace4dae install``)
+all are run alternately in the same run and the ratios to each are printed, since the machines
+are shared and noisy. CPU is user + system time of the child process (interpreter start,
+imports, stages, signature and report included).
 """
 
 from __future__ import annotations
 
+import math
 import os
 import resource
 import shutil
@@ -20,12 +25,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 RUNS = int(os.environ.get("BENCH_RUNS", "5"))
-
-
-def _wall(cmd: list[str]) -> float:
-    t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True)
-    return time.perf_counter() - t0
+#: Points per sweep of the scaling measurement (issue 18: 400 to 1,600).
+SCALING_POINTS = (400, 800, 1600)
+COLD_TARGET, WARM_TARGET = 0.5, 0.6
 
 
 def _cpu() -> float:
@@ -34,21 +36,50 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def _cold(exe: str, d: Path) -> float:
+def _run(cmd: list[str]) -> tuple[float, float]:
+    """Wall and CPU seconds of one command."""
+    c0, t0 = _cpu(), time.perf_counter()
+    subprocess.run(cmd, check=True, capture_output=True)
+    return time.perf_counter() - t0, _cpu() - c0
+
+
+def _cold(exe: str, d: Path) -> tuple[float, float]:
     for name in ("stages", "report"):
         shutil.rmtree(d / name, ignore_errors=True)
     (d / "signature.json").unlink(missing_ok=True)
-    return _wall([exe, "identify", str(d)])
+    return _run([exe, "identify", str(d)])
+
+
+def _scaling(exe: str, tmp: Path) -> None:
+    """Cold identify CPU of simulated sessions against points per sweep; the fitted exponent."""
+    from pipeline.rig.simulate import SimulationOptions, simulate_session
+
+    cpu = []
+    for n in SCALING_POINTS:
+        d = tmp / f"p{n}"
+        simulate_session(d, SimulationOptions(seed=3, points=n))
+        _cold(exe, d)  # untimed: caches
+        cpu.append(min(_cold(exe, d)[1] for _ in range(max(1, RUNS // 2))))
+        name = f"pipeline identify, {n} points per sweep, cold CPU"
+        print(f"{name:60s} {cpu[-1]:7.3f} s")
+    x, y = (math.log(v) for v in SCALING_POINTS), (math.log(c) for c in cpu)
+    xs, ys = list(x), list(y)
+    mx, my = sum(xs) / len(xs), sum(ys) / len(ys)
+    slope = sum((a - mx) * (b - my) for a, b in zip(xs, ys, strict=True)) / sum(
+        (a - mx) ** 2 for a in xs
+    )
+    lo, hi = SCALING_POINTS[0], SCALING_POINTS[-1]
+    verdict = "linear or better" if slope <= 1.0 else "WORSE than linear"
+    print(f"identify CPU ~ P^{slope:.2f} for P = {lo} to {hi} points per sweep ({verdict})")
 
 
 def main() -> None:
     exes = {"this checkout": str(Path(sys.executable).with_name("pipeline"))}
-    base = os.environ.get("BENCH_BASELINE")
-    if base:
+    bases = [b for b in os.environ.get("BENCH_BASELINE", "").split(os.pathsep) if b]
+    for base in bases:  # several: e.g. ace4dae and main, all in the same run
         exes["baseline " + base] = str(Path(base) / ".venv" / "bin" / "pipeline")
-    cold: dict[str, list[float]] = {k: [] for k in exes}
-    cold_cpu: dict[str, list[float]] = {k: [] for k in exes}
-    warm: dict[str, list[float]] = {k: [] for k in exes}
+    keys = ("cold", "cold CPU", "warm", "warm CPU")
+    times: dict[str, dict[str, list[float]]] = {k: {w: [] for w in keys} for k in exes}
     with tempfile.TemporaryDirectory() as tmp:
         dirs = {label: Path(tmp) / str(k) / "robot3" for k, label in enumerate(exes)}
         for label, exe in exes.items():  # one untimed run each: numba and .pyc caches
@@ -57,23 +88,31 @@ def main() -> None:
             _cold(exe, dirs[label])
         for _ in range(RUNS):  # alternate, so both see the same machine load
             for label, exe in exes.items():
-                c0 = _cpu()
-                cold[label].append(_cold(exe, dirs[label]))
-                cold_cpu[label].append(_cpu() - c0)
+                wall, cpu = _cold(exe, dirs[label])
+                times[label]["cold"].append(wall)
+                times[label]["cold CPU"].append(cpu)
         for _ in range(RUNS):
             for label, exe in exes.items():
-                warm[label].append(_wall([exe, "identify", str(dirs[label])]))
-    for label in exes:
-        name = f"pipeline identify robot3, cold CPU, {label}"
-        print(f"{name:60s} {min(cold_cpu[label]):7.3f} s (best of {RUNS}, user + system)")
-        for what, times in (("cold", cold[label]), ("warm", warm[label])):
-            name = f"pipeline identify robot3, {what}, {label}"
-            print(f"{name:60s} {min(times):7.3f} s (best of {RUNS})")
-    if base:
-        c_this, c_base = (min(cold[k]) for k in exes)
-        w_this, w_base = (min(warm[k]) for k in exes)
-        u_this, u_base = (min(cold_cpu[k]) for k in exes)
-        print(
-            f"this / baseline: cold {c_this / c_base:.3f} (CPU {u_this / u_base:.3f}), "
-            f"warm {w_this / w_base:.3f}"
-        )
+                wall, cpu = _run([exe, "identify", str(dirs[label])])
+                times[label]["warm"].append(wall)
+                times[label]["warm CPU"].append(cpu)
+        for label in exes:
+            for what in keys:
+                name = f"pipeline identify robot3, {what}, {label}"
+                print(f"{name:60s} {min(times[label][what]):7.3f} s (best of {RUNS})")
+        this = times["this checkout"]
+        for base in bases:
+            other = times["baseline " + base]
+            r = {w: min(this[w]) / min(other[w]) for w in keys}
+            print(
+                f"this / {base}: cold {r['cold']:.3f} (CPU {r['cold CPU']:.3f}, target <= "
+                f"{COLD_TARGET}), warm {r['warm']:.3f} (CPU {r['warm CPU']:.3f}, target <= "
+                f"{WARM_TARGET})"
+            )
+        if not bases:
+            print(
+                "(for the issue-18 ratios set BENCH_BASELINE to a checkout of ace4dae with "
+                "its own .venv)"
+            )
+        if os.environ.get("BENCH_SCALING", "1") != "0":
+            _scaling(exes["this checkout"], Path(tmp))

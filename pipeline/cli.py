@@ -748,6 +748,108 @@ def export(
     )
 
 
+fleet_app = typer.Typer(
+    help="Many sessions at once on Dask: one task per session, one fleet.arrow for all.",
+    no_args_is_help=True,
+)
+app.add_typer(fleet_app, name="fleet")
+
+FleetDirs = Annotated[
+    list[str], typer.Argument(help="Session folders, or folders to search for sessions.")
+]
+SchedulerOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Dask scheduler tcp://HOST:PORT (else $DASK_SCHEDULER_ADDRESS, else a local "
+        "cluster for this command; `local` forces it)."
+    ),
+]
+FleetWorkers = Annotated[
+    int | None,
+    typer.Option(min=1, max=256, help="Workers of the local cluster (default: the cores)."),
+]
+FleetOut = Annotated[
+    str | None, typer.Option(help="Folder of fleet.arrow (default: the first DIR).")
+]
+
+
+def _fleet(
+    command: str, dirs: list[str], scheduler: str | None, workers: int | None, out: str | None
+) -> None:
+    """Run ``command`` over the sessions; print one line per session, and refuse (exit 1)
+    when any session failed, after every other one is done and fleet.arrow is written."""
+    from pipeline.atomic import check_writable
+    from pipeline.fleet.engine import dask_client
+    from pipeline.fleet.run import find_sessions, run_fleet
+
+    sessions = find_sessions(dirs)  # refused before a cluster starts
+    folder = check_writable(out or dirs[0], "--out", folder=True)
+    with dask_client(scheduler, workers) as client:
+        r = run_fleet(command, sessions, client, folder, progress=sys.stderr)
+    for row in r.rows:
+        if row["error"] is not None:
+            typer.echo(f"  FAILED {row['session']}: {row['error']}")
+            continue
+        extra = (
+            f"  check RMS {row['check_rms_cm']:.4g} cm" if row["check_rms_cm"] is not None
+            else ""
+        ) + (
+            f"  gain {row['gain_evaluation']:.3g}" if row["gain_evaluation"] is not None else ""
+        )  # fmt: skip
+        typer.echo(f"  ok     {row['session']}: {row['signature_sha256'][:12]}{extra}")
+        for w in row["warnings"]:
+            typer.echo(f"warning: {row['session']}: {w}", err=True)
+    typer.echo(f"{len(r.rows)} sessions in {r.wall_s:.1f} s; wrote {r.table}")
+    if r.failed:
+        raise ArmsigError(
+            f"{len(r.failed)} of {len(r.rows)} sessions failed (the others are done)",
+            fix=f"see the error column of {r.table}; a rerun redoes only what is stale",
+        )
+
+
+@fleet_app.command("identify")
+def fleet_identify(
+    dirs: FleetDirs,
+    scheduler: SchedulerOption = None,
+    workers: FleetWorkers = None,
+    out: FleetOut = None,
+) -> None:
+    """`pipeline identify` on every session, one Dask task each; writes fleet.arrow."""
+    _fleet("identify", dirs, scheduler, workers, out)
+
+
+@fleet_app.command("evaluate")
+def fleet_evaluate(
+    dirs: FleetDirs,
+    scheduler: SchedulerOption = None,
+    workers: FleetWorkers = None,
+    out: FleetOut = None,
+) -> None:
+    """`pipeline evaluate` on every session (design vs signature gain); writes fleet.arrow."""
+    _fleet("evaluate", dirs, scheduler, workers, out)
+
+
+@fleet_app.command("validate")
+def fleet_validate(
+    dirs: FleetDirs,
+    scheduler: SchedulerOption = None,
+    workers: FleetWorkers = None,
+    out: FleetOut = None,
+) -> None:
+    """The validation (check) errors of every point session; sonic sessions have none."""
+    _fleet("validate", dirs, scheduler, workers, out)
+
+
+@fleet_app.command("report")
+def fleet_report(
+    folder: Annotated[str, typer.Argument(help="Folder holding fleet.arrow.")],
+) -> None:
+    """Write FOLDER/fleet-report/fleet.md with figures from FOLDER/fleet.arrow."""
+    from pipeline.fleet.report import write_fleet_report
+
+    typer.echo(f"wrote {write_fleet_report(folder)}")
+
+
 @app.command()
 def montecarlo(
     study: Annotated[
@@ -761,12 +863,28 @@ def montecarlo(
     ] = 500,
     seed: Annotated[int, typer.Option(min=0, help="Study seed (same seed, same numbers).")] = 0,
     out: Annotated[str, typer.Option(help="Output folder.")] = "montecarlo",
-    workers: Annotated[int, typer.Option(min=1, max=256, help="Worker processes.")] = 1,
+    workers: Annotated[
+        int, typer.Option(min=1, max=256, help="Worker processes (or local Dask workers).")
+    ] = 1,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            help="Run the batches on Dask: tcp://HOST:PORT, or `local` for a local cluster "
+            "of --workers (same numbers as without)."
+        ),
+    ] = None,
 ) -> None:
     """Monte-Carlo study of design-model and signature control (Chapter 7, Appendix G)."""
     from pipeline.montecarlo.studies import run_montecarlo
 
-    for line in run_montecarlo(study, robots=robots, seed=seed, out=out, workers=workers):
+    if scheduler is None:
+        lines = run_montecarlo(study, robots, seed, out, workers, progress=sys.stderr)
+    else:
+        from pipeline.fleet.engine import dask_client
+
+        with dask_client(scheduler, workers) as client:
+            lines = run_montecarlo(study, robots, seed, out, progress=sys.stderr, client=client)
+    for line in lines:
         typer.echo(line)
 
 

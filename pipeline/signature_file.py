@@ -54,15 +54,26 @@ def design_alignment(
     Uses only the signature and the design model (random configurations within
     the joint limits, fixed seed): no ground truth.
     """
+    return chain_alignment(signature_chain, robot.design_chain(), robot, samples)
+
+
+def chain_alignment(
+    chain_a: SerialChain,
+    chain_b: SerialChain,
+    robot: RobotDescription,
+    samples: int = ALIGNMENT_SAMPLES,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Base ``X`` and tool ``Y`` with ``F_a(q) ≈ X · F_b(q) · Y`` over random configurations
+    of ``robot`` (fixed seed), and the RMS position misfit (cm) that remains."""
     rng = np.random.default_rng(0)  # fixed: the same signature gives the same file
     lim = robot.limits
     q = joints_to_internal(
         rng.uniform(lim[:, 0], lim[:, 1], (samples, robot.n_joints)), robot.prismatic
     )
-    T_s = forward_kinematics(signature_chain, q)
-    T_d = forward_kinematics(robot.design_chain(), q)
-    X, Y = fit_alignment(T_s, T_d)
-    dp, _ = pose_error(T_s, X @ T_d @ Y)
+    T_a = forward_kinematics(chain_a, q)
+    T_b = forward_kinematics(chain_b, q)
+    X, Y = fit_alignment(T_a, T_b)
+    dp, _ = pose_error(T_a, X @ T_b @ Y)
     return X, Y, float(np.sqrt(np.mean(dp**2)))
 
 

@@ -17,7 +17,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from pipeline.errors import ArmsigError
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
@@ -54,6 +53,8 @@ def register_rigid(model: np.ndarray, measured: np.ndarray) -> np.ndarray | None
     s = np.linalg.svd(model - cm, compute_uv=False)
     if not s[1] > MIN_SPREAD * max(s[0], 1e-300):
         return None
+    from scipy.spatial.transform import Rotation  # lazy: ~0.3 s of import (warm runs)
+
     rot, _ = Rotation.align_vectors(measured - cp, model - cm)
     T = np.eye(4)
     T[:3, :3] = rot.as_matrix()

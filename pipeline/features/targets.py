@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.evaluation.geometry import angle_between
+
 #: A target must move / sit at least this far from the axis (cm): far above a tracker's
 #: or the sonic rig's noise, far below any real target radius (10-40 cm in the thesis).
 MIN_RADIUS_CM = 1.0
@@ -118,8 +120,7 @@ def combine(fits: list[TargetFit], prismatic: bool) -> dict[str, Any]:
         return row
     row["eigen"] = _mean_direction([f.vec("eigen") for f in fits], w)
     row["lsq"] = _mean_direction([f.vec("lsq") for f in fits], w)
-    cos = float(np.clip(row["eigen"] @ row["lsq"], -1.0, 1.0))
-    row["angle"] = float(np.degrees(np.arccos(cos)))
+    row["angle"] = float(np.degrees(angle_between(row["eigen"], row["lsq"])))
     wc = np.array([f.n_points / max(f.sigma_cm, SIGMA_FLOOR_CM) ** 2 for f in fits])
     mean_c = np.einsum("k,ki->i", wc / wc.sum(), np.array([f.vec("center") for f in fits]))
     c = best.vec("center")

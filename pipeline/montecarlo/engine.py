@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from typing import TextIO
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -92,6 +92,7 @@ def run_study(
     workers: int = 1,
     progress: TextIO | None = sys.stderr,
     batch: int | None = None,
+    client: Any = None,
 ) -> StudyResult:
     """Evaluate every setting of ``study`` on ``robots`` robots.
 
@@ -108,6 +109,9 @@ def run_study(
         Where the progress bar goes (None: silent).
     batch : int, optional
         Robots per batch; the study's default if omitted.
+    client : distributed.Client, optional
+        Run the batches as Dask tasks on this client instead (``workers`` unused); the
+        same batches and seeds, so the same numbers.
     """
     if robots < 2:
         raise ValueError(f"--robots must be at least 2 (the std needs two), got {robots}")
@@ -124,7 +128,15 @@ def run_study(
     bar = Progress(study.name, len(jobs), progress)
     t0 = time.perf_counter()
     results: list[Array] = []
-    if workers <= 1:
+    if client is not None:
+        futures = client.map(
+            _run_batch, [study] * len(jobs), *zip(*[(st, sd) for st, _, sd in jobs], strict=True),
+            pure=False,
+        )  # fmt: skip
+        for f in futures:  # in submission order: deterministic assembly
+            results.append(f.result())
+            bar.step()
+    elif workers <= 1:
         for settings, _, seeds in jobs:
             results.append(_run_batch(study, settings, seeds))
             bar.step()

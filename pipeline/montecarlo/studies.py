@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from pipeline.atomic import check_writable
 from pipeline.errors import ArmsigError
@@ -125,8 +125,10 @@ def run_montecarlo(
     out: str | Path = "montecarlo",
     workers: int = 1,
     progress: TextIO | None = sys.stderr,
+    client: Any = None,
 ) -> list[str]:
-    """Run ``study`` (or ``all``), write tables, figures and ``montecarlo.md`` under ``out``.
+    """Run ``study`` (or ``all``), write tables, figures and ``montecarlo.md`` under ``out``
+    (``client``: a Dask client to run the batches on instead of ``workers`` processes).
 
     Returns the lines to print: one per study with its wall time.
     """
@@ -145,7 +147,7 @@ def run_montecarlo(
             output.write_features(out_dir, feat)
             lines.append(f"features: 36 configurations, {feat.wall_s:.1f} s")
             continue
-        res = run_study(get_study(name), robots, seed, workers, progress)
+        res = run_study(get_study(name), robots, seed, workers, progress, client=client)
         output.write_study(out_dir, res)
         lines.append(
             f"{name}: {robots} robots x {len(res.study.values)} settings, {res.wall_s:.1f} s"

@@ -68,6 +68,47 @@ def _figure(n: int) -> tuple[Any, list[Any]]:
     return fig, list(axes[:n])
 
 
+class Panels:
+    """One figure of ``n`` panels, drawn again for each joint figure of a report.
+
+    Building the axes and their ticks is about half of drawing a figure; :meth:`clear`
+    takes the data, labels and legends off so the next figure reuses them. The PNG is
+    the same, byte for byte, as that of a new figure (``tests/test_report_figures.py``).
+    """
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.fig, self.axes = _figure(n)
+        self._used = False
+
+    def clear(self) -> tuple[Any, list[Any]]:
+        """The figure and its axes, as a new :func:`_figure` would give them."""
+        if self._used:
+            for legend in list(self.fig.legends):
+                legend.remove()
+            for ax in self.axes:
+                for artist in [*ax.lines, *ax.patches, *ax.texts, *ax.collections]:
+                    artist.remove()
+                ax.grid(False)
+                ax.set_title("")
+                ax.set_xlabel("")
+                ax.set_ylabel("")
+                ax.relim()
+                ax.set_xlim(0.0, 1.0)  # a new axes' view, then autoscaled again
+                ax.set_ylim(0.0, 1.0)
+                ax.set_autoscale_on(True)
+        self._used = True
+        return self.fig, self.axes
+
+
+def _panels(n: int, panels: Panels | None) -> tuple[Any, list[Any]]:
+    if panels is None:
+        return _figure(n)
+    if panels.n != n:
+        raise ValueError(f"panels of {panels.n} joints given for {n} joints")
+    return panels.clear()
+
+
 def save_png(fig: Any, path: Path) -> Path:
     """Save ``fig`` to a temp file beside ``path``, then rename it over ``path``."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -83,15 +124,18 @@ def save_png(fig: Any, path: Path) -> Path:
     return path
 
 
-def residuals_vs_q(joints: Sequence[JointResiduals], path: Path) -> Path:
-    """Figure 6-11 for every joint: normal (*) and radial (o) residuals against the reading."""
-    fig, axes = _figure(len(joints))
+def residuals_vs_q(
+    joints: Sequence[JointResiduals], path: Path, panels: Panels | None = None
+) -> Path:
+    """Figure 6-11 for every joint: normal (*) and radial (o) residuals against the reading
+    (``panels``: a figure to draw on again, see :class:`Panels`; default a new one)."""
+    fig, axes = _panels(len(joints), panels)
     for ax, j in zip(axes, joints, strict=True):
         ax.axhline(0.0, color="0.6", lw=0.8)
         ax.plot(j.q, j.normal, "*", ms=6, color="C0", label="normal")
         if j.radial is not None:
             ax.plot(j.q, j.radial, "o", ms=4, mfc="none", color="C3", label="radial")
-        ax.set_title(f"joint {j.joint} ({j.name})")
+        ax.set_title(f"joint {j.joint} ({j.name})", y=1.0)
         ax.set_xlabel(f"q{j.joint} ({j.unit})")
         ax.set_ylabel("residual (cm)")
         ax.grid(alpha=0.3)
@@ -101,12 +145,15 @@ def residuals_vs_q(joints: Sequence[JointResiduals], path: Path) -> Path:
     return save_png(fig, path)
 
 
-def residual_histograms(joints: Sequence[JointResiduals], kind: str, path: Path) -> Path:
-    """Figures 6-12 (``kind="normal"``) and 6-13 (``"radial"``) with a fitted normal curve."""
-    fig, axes = _figure(len(joints))
+def residual_histograms(
+    joints: Sequence[JointResiduals], kind: str, path: Path, panels: Panels | None = None
+) -> Path:
+    """Figures 6-12 (``kind="normal"``) and 6-13 (``"radial"``) with a fitted normal curve
+    (``panels``: as for :func:`residuals_vs_q`)."""
+    fig, axes = _panels(len(joints), panels)
     for ax, j in zip(axes, joints, strict=True):
         values = j.normal if kind == "normal" else j.radial
-        ax.set_title(f"joint {j.joint} ({j.name})")
+        ax.set_title(f"joint {j.joint} ({j.name})", y=1.0)
         ax.set_xlabel(f"{kind} residual (cm)")
         ax.set_ylabel("count")
         if values is None or len(values) < 2:

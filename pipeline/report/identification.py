@@ -108,17 +108,20 @@ def _summary(name: str, t: dict[str, list[Row]], robot: Any, mode: str) -> str:
     )
 
 
+def _sweep_cells(r: Row, robot: Any) -> list[Any]:
+    """Joint, name, points and sweep (deg) or travel (cm) of a features row."""
+    pris = r["type"] == "prismatic"
+    extent = f"{cm(r['travel_cm'])} cm" if pris else f"{deg(r['sweep_deg'])}°"
+    return [r["joint"], robot.joints[r["joint"] - 1].name, r["n_points"], extent]
+
+
 def _expected_section(rows: list[Row], robot: Any) -> str:
     """Expected feature accuracy of every sweep and why (pipeline/features/expected.py)."""
-    body = []
-    for r in rows:
-        pris = r["type"] == "prismatic"
-        extent = f"{cm(r['travel_cm'])} cm" if pris else f"{deg(r['sweep_deg'])}°"
-        body.append(
-            [r["joint"], robot.joints[r["joint"] - 1].name, r["n_points"], extent,
-             r["residual_dof"], f"{r['noise_gain']:.3g}", sig(r["expected_axis_deg"]),
-             sig(r["expected_center_cm"]), r["expected_basis"]]
-        )  # fmt: skip
+    body = [
+        [*_sweep_cells(r, robot), r["residual_dof"], f"{r['noise_gain']:.3g}",
+         sig(r["expected_axis_deg"]), sig(r["expected_center_cm"]), r["expected_basis"]]
+        for r in rows
+    ]  # fmt: skip
     head = ["Joint", "Name", "Points", "Sweep / travel", "Residual dof", "Noise gain"]
     head += ["Axis σ (deg)", "Centre σ (cm)", "From"]
     return (
@@ -182,16 +185,12 @@ def _smodel_section(rows: list[Row], frames: list[Row], robot: Any) -> str:
 
 
 def _features_section(rows: list[Row], robot: Any) -> str:
-    body = []
-    for r in rows:
-        pris = r["type"] == "prismatic"
-        extent = f"{cm(r['travel_cm'])} cm" if pris else f"{deg(r['sweep_deg'])}°"
-        body.append(
-            [r["joint"], robot.joints[r["joint"] - 1].name, r["n_points"], extent,
-             cm(r["radius_cm"]), sig(r["sigma_normal_cm"]), sig(r["sigma_radial_cm"]),
-             sig(r["sigma_delta_deg"]), sig(r["sigma_delta_empirical_deg"]),
-             sig(r["sigma_c_cm"]), sig(r["methods_angle_deg"])]
-        )  # fmt: skip
+    body = [
+        [*_sweep_cells(r, robot), cm(r["radius_cm"]), sig(r["sigma_normal_cm"]),
+         sig(r["sigma_radial_cm"]), sig(r["sigma_delta_deg"]),
+         sig(r["sigma_delta_empirical_deg"]), sig(r["sigma_c_cm"]), sig(r["methods_angle_deg"])]
+        for r in rows
+    ]  # fmt: skip
     head = ["Joint", "Name", "Points", "Sweep / travel", "Radius (cm)", "σ_normal (cm)"]
     head += ["σ_radial (cm)", "σ_δ (deg)", "σ_δ (6.12) (deg)", "σ_c (cm)", "plane methods Δ (deg)"]
     warned = [f"- Joint {r['joint']}: {w}" for r in rows for w in r["warnings"]]
@@ -347,10 +346,15 @@ def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -
     out = sdir / "report"
     out.mkdir(parents=True, exist_ok=True)
     res = figures.joint_residuals(t["residuals"], robot)
-    figs = {"residuals": figures.residuals_vs_q(res, out / "residuals.png")}
-    figs["hist_normal"] = figures.residual_histograms(res, "normal", out / "hist_normal.png")
+    panels = figures.Panels(len(res))  # one figure, drawn three times
+    figs = {"residuals": figures.residuals_vs_q(res, out / "residuals.png", panels)}
+    figs["hist_normal"] = figures.residual_histograms(
+        res, "normal", out / "hist_normal.png", panels
+    )
     if any(j.radial is not None for j in res):
-        figs["hist_radial"] = figures.residual_histograms(res, "radial", out / "hist_radial.png")
+        figs["hist_radial"] = figures.residual_histograms(
+            res, "radial", out / "hist_radial.png", panels
+        )
     name, mode = sdir.resolve().name, t["session"][0]["mode"]
     parts = [
         f"# Arm signature identification: {name}\n\nRobot **{robot.name}**, mode **{mode}**.",

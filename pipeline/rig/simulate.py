@@ -158,6 +158,21 @@ def joint_state(
     }
 
 
+def _robot_message(robot: Any, signature_q: Any, plan: dict[str, Any]) -> Message:
+    """The ``/robot/description`` message: design model, q^s as readings, the plan."""
+    readings = robot.readings_from_joints(np.array(signature_q))
+    return Message(
+        "/robot/description",
+        T0_NS,
+        {
+            "robot": description_to_dict(robot),
+            "signature_q": [float(v) for v in readings],
+            "plan": plan,
+            "mode": "simulated",
+        },
+    )
+
+
 def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bool = False) -> Path:
     """Simulate a rig session and write it to ``session_dir``; returns the recording path.
 
@@ -282,18 +297,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
 
     messages = [
         Message("/rig/description", T0_NS, geometry_recorded.to_dict()),
-        Message(
-            "/robot/description",
-            T0_NS,
-            {
-                "robot": description_to_dict(robot),
-                "signature_q": [
-                    float(v) for v in robot.readings_from_joints(np.array(plan.signature_q))
-                ],
-                "plan": plan.to_dict(),
-                "mode": "simulated",
-            },
-        ),
+        _robot_message(robot, plan.signature_q, plan.to_dict()),
     ]
     digits = None if opts.noiseless else 2  # quantized ranges print as 0.01 cm
     for k, (sweep_id, step, _) in enumerate(commands):
@@ -420,18 +424,7 @@ def _record_points(
     p_meas, sigma = tracker.measure(p_true, rng, opts.noiseless)
     messages = [
         Message("/rig/description", T0_NS, tracker.rig_description()),
-        Message(
-            "/robot/description",
-            T0_NS,
-            {
-                "robot": description_to_dict(robot),
-                "signature_q": [
-                    float(v) for v in robot.readings_from_joints(np.array(plan.signature_q))
-                ],
-                "plan": tracker.plan_dict(plan, opts.targets, opts.check),
-                "mode": "simulated",
-            },
-        ),
+        _robot_message(robot, plan.signature_q, tracker.plan_dict(plan, opts.targets, opts.check)),
     ]
     for k, (sweep_id, step, _) in enumerate(commands):
         messages.append(

@@ -18,7 +18,7 @@ import pyarrow as pa
 from pipeline.errors import ArmsigError, StageError
 from pipeline.features.accuracy import revolute_accuracy
 from pipeline.features.circle import fit_circle
-from pipeline.features.expected import prismatic_expected, revolute_expected
+from pipeline.features.expected import SIGMA_COLUMNS, prismatic_expected, revolute_expected
 from pipeline.features.line import fit_line
 from pipeline.features.plane import fit_plane_eigen, fit_plane_lsq, frame_about, orient_normal
 from pipeline.features.targets import (
@@ -255,17 +255,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             for k, c in enumerate("xyz"):
                 put(f"{pre}_{c}_cm", float(r[key][k]))
         put("radius_cm", r["radius"])
-        for name in (
-            "sweep_deg",
-            "travel_cm",
-            "sigma_normal_cm",
-            "sigma_radial_cm",
-            "sigma_e_deg",
-            "sigma_f_deg",
-            "sigma_delta_deg",
-            "sigma_delta_empirical_deg",
-            "sigma_c_cm",
-        ):
+        for name in ("sweep_deg", "travel_cm", *SIGMA_COLUMNS):
             put(name, r[name])
         for name in EXPECTED_COLUMNS:
             put(name, r[name])

@@ -31,7 +31,6 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 
 from pipeline.errors import StageError
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
@@ -75,6 +74,8 @@ def sweep_readings(
     joints: pa.Table, sweep: int, n: int, prismatic: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Steps (K,) and encoder readings (K, n) of one sweep's configurations, by step."""
+    import pyarrow.compute as pc  # lazy: ~70 ms of import, which a warm run never needs
+
     sel = joints.filter(pc.equal(joints.column("sweep"), sweep))
     if sel.num_rows == 0:
         return np.zeros(0, np.int64), np.zeros((0, n))
@@ -262,7 +263,9 @@ def chain_from_frames(frames: pa.Table, prismatic: np.ndarray):  # -> SerialChai
 
 STAGE = Stage(
     "frames",
-    5,  # 4: frames brought to q̄^s with each sweep's recorded readings; 5: imports' sweep points join the tool
+    # 4: frames brought to q̄^s with each sweep's recorded readings;
+    # 5: imports' sweep points join the tool
+    5,
     ("features", "joints", "positions", "session"),
     NoParams(),
     compute,

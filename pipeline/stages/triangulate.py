@@ -82,8 +82,12 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         )
     }
     order = np.argsort(first)  # the order of the compensate table: by (sweep, step)
+    # Each configuration's cycles, ascending, by one stable sort (not a scan per group).
+    by_group = np.argsort(inverse, kind="stable")
+    ends = np.cumsum(np.bincount(inverse, minlength=len(uniq)))
+    starts = ends - np.bincount(inverse, minlength=len(uniq))
     for g in order:
-        members = np.flatnonzero(inverse == g)
+        members = by_group[starts[g] : ends[g]]
         good = members[ok[members]]
         rows["sweep"].append(int(sweep[first[g]]))
         rows["step"].append(int(step[first[g]]))

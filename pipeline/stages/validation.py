@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 
 from pipeline.evaluation.validation import error_distances, model_points
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.frames import chain_from_frames, readings_at
+from pipeline.stages.positions import positions, sweep_rows
 from pipeline.stages.recording import CHECK_SWEEP
 from pipeline.stages.session import session_plan, session_robot
 
@@ -33,7 +33,7 @@ def tool_target(plan: dict[str, Any], positions: pa.Table) -> str:
     """``plan.tool_target``, else the only target of the tool measurement."""
     if plan.get("tool_target"):
         return str(plan["tool_target"])
-    tool = positions.filter(pc.equal(positions.column("sweep"), 0))
+    tool = sweep_rows(positions, 0)
     ids = sorted(set(tool.column("target").to_pylist()))
     return ids[0] if len(ids) == 1 else ""
 
@@ -44,13 +44,10 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     n, pris = robot.n_joints, robot.prismatic
     chain = chain_from_frames(inputs["frames"], pris)
     pos = inputs["positions"]
+    import pyarrow.compute as pc  # lazy: ~70 ms of import, which a warm run never needs
+
     pos = pos.filter(pc.equal(pos.column("target"), tool_target(plan, pos)))
-    xyz = np.column_stack(
-        [
-            pos.column(c).to_numpy(zero_copy_only=False).astype(float)
-            for c in ("x_cm", "y_cm", "z_cm")
-        ]
-    )
+    xyz = positions(pos)
     sweep = pos.column("sweep").to_numpy().astype(np.int64)
     step = pos.column("step").to_numpy().astype(np.int64)
     ok = np.isfinite(xyz).all(axis=1)

@@ -1,0 +1,1 @@
+"""Many sessions at once on Dask: ``pipeline fleet`` (issue 17)."""

@@ -1,0 +1,174 @@
+"""``pipeline fleet report DIR``: Markdown and figures from ``DIR/fleet.arrow``.
+
+Figures: design-vs-signature gain per robot, the accuracy distribution, and the drift
+of a robot's S-Model parameters between its sessions. "Robot" is the robot description
+name recorded in the session (a plant that names one description per machine gets one
+robot per machine); sessions of a robot are ordered by their identification time.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.errors import ArmsigError
+from pipeline.fleet.run import TABLE_NAME
+from pipeline.report.figures import _figure, save_png
+from pipeline.report.identification import _table, sig
+from pipeline.signature_checks import DIGEST_KEY
+from pipeline.signature_file import FILE_NAME, chain_alignment
+
+REPORT_DIR = "fleet-report"
+
+
+def load_rows(folder: Path) -> list[dict[str, Any]]:
+    """The rows of ``folder/fleet.arrow`` (checked on read, as every armsig table)."""
+    from pipeline.stages.tables import read_table
+
+    path = folder / TABLE_NAME
+    if not path.is_file():
+        raise ArmsigError(f"{path}: no such file", fix=f"`pipeline fleet identify {folder}`")
+    return read_table(path).to_pylist()
+
+
+def drift(rows: list[dict[str, Any]]) -> dict[str, list[tuple[str, float | None]]]:
+    """Per robot with two or more identified sessions, in identification order: each later
+    session's RMS tool position difference (cm) from the one before, after aligning the two
+    signatures' bases and tools (:func:`~pipeline.signature_file.chain_alignment`: no
+    ground truth, independent of each session's sensor frame). None when a session's
+    signature.json is no longer the one ``fleet.arrow`` recorded."""
+    by_robot: dict[str, list[dict[str, Any]]] = {}
+    for r in rows:
+        if r["error"] is None:
+            by_robot.setdefault(r["robot"], []).append(r)
+    out: dict[str, list[tuple[str, float | None]]] = {}
+    for robot, rs in sorted(by_robot.items()):
+        rs.sort(key=lambda r: (r["identified_utc"], r["session"]))
+        sigs = [_signature(r) for r in rs]
+        steps: list[tuple[str, float | None]] = []
+        for (a, b), r in zip(zip(sigs, sigs[1:], strict=False), rs[1:], strict=True):
+            rms = None if a is None or b is None else chain_alignment(b.chain, a.chain, b.robot)[2]
+            steps.append((r["session"], rms))
+        if steps:
+            out[robot] = steps
+    return out
+
+
+def _signature(row: dict[str, Any]) -> Any:
+    """The session's signature if it is still the one of ``row`` (same digest), else None."""
+    from pipeline.signature_file import read_signature_document, signature_from_document
+
+    path = Path(row["session"]) / FILE_NAME
+    try:
+        doc = read_signature_document(path)
+    except ArmsigError:
+        return None
+    if doc[DIGEST_KEY] != row["signature_sha256"]:
+        return None
+    return signature_from_document(doc, str(path))
+
+
+def _gain_figure(rows: list[dict[str, Any]], path: Path) -> Path:
+    robots = sorted({r["robot"] for r in rows if r["error"] is None})
+    fig, (ax_g, ax_m) = _figure(2)
+    for k, robot in enumerate(robots):
+        rs = [r for r in rows if r["error"] is None and r["robot"] == robot]
+        g = [r["gain_evaluation"] for r in rs if r["gain_evaluation"] is not None]
+        ax_g.plot([k] * len(g), g, "o", color="C0")
+        ax_m.plot([k] * len(rs), [r["design_misfit_rms_cm"] for r in rs], "o", color="C1")
+    for ax, label in (
+        (ax_g, "gain: design / signature error (evaluation)"),
+        (ax_m, "design vs signature RMS difference (cm)"),
+    ):
+        ax.set_xticks(range(len(robots)), robots, rotation=30)
+        ax.set_ylabel(label, fontsize=8)
+        ax.grid(alpha=0.3)
+    fig.suptitle("Design model against signature, per robot")
+    return save_png(fig, path)
+
+
+def _accuracy_figure(rows: list[dict[str, Any]], path: Path) -> Path:
+    fig, axes = _figure(2)
+    for ax, col, label in (
+        (axes[0], "check_rms_cm", "validation RMS error (cm)"),
+        (axes[1], "sigma_normal_max_cm", "largest feature normal σ (cm)"),
+    ):
+        v = [r[col] for r in rows if r[col] is not None]
+        if v:
+            ax.hist(v, bins="auto" if np.ptp(v) > 1e-12 else 1, color="C0", alpha=0.7)
+        else:
+            ax.text(0.5, 0.5, "no session has it", ha="center", transform=ax.transAxes)
+        ax.set_xlabel(label)
+        ax.set_ylabel("sessions")
+    fig.suptitle("Accuracy across the fleet")
+    return save_png(fig, path)
+
+
+def _drift_figure(steps: dict[str, list[tuple[str, float | None]]], path: Path) -> Path:
+    fig, (ax,) = _figure(1)
+    for robot, s in steps.items():
+        ax.plot(range(1, len(s) + 1), [np.nan if v is None else v for _, v in s], "o-",
+                label=robot)  # fmt: skip
+    ax.set_xlabel("session (identification order) vs the one before")
+    ax.set_ylabel("aligned RMS tool position difference (cm)")
+    ax.grid(alpha=0.3)
+    if steps:
+        ax.legend(fontsize=7)
+    fig.suptitle("Drift of each robot's signature between its sessions")
+    return save_png(fig, path)
+
+
+def write_fleet_report(folder: str | Path) -> Path:
+    """Write ``folder/fleet-report/fleet.md`` and its figures; returns the Markdown path."""
+    from pipeline.atomic import write_text_atomic
+
+    d = Path(folder)
+    rows = load_rows(d)
+    out = d / REPORT_DIR
+    out.mkdir(parents=True, exist_ok=True)
+    steps = drift(rows)
+    figs = {
+        "gain.png": _gain_figure(rows, out / "gain.png"),
+        "accuracy.png": _accuracy_figure(rows, out / "accuracy.png"),
+        "drift.png": _drift_figure(steps, out / "drift.png"),
+    }
+    failed = [r for r in rows if r["error"] is not None]
+    table = _table(
+        ["session", "robot", "sensor", "points", "σ normal max (cm)", "check RMS (cm)",
+         "gain", "warnings", "error"],
+        [
+            [r["session"], r["robot"] or "—", r["sensor"] or "—", r["points"] or "—",
+             sig(r["sigma_normal_max_cm"]), sig(r["check_rms_cm"]), sig(r["gain_evaluation"]),
+             len(r["warnings"] or []), r["error"] or ""]
+            for r in rows
+        ],
+    )  # fmt: skip
+    drift_rows = [
+        [robot, s, "signature changed since fleet.arrow" if v is None else sig(v)]
+        for robot, vs in steps.items()
+        for s, v in vs
+    ]
+    parts = [
+        f"# Fleet: {len(rows)} sessions, {len(failed)} failed\n",
+        table,
+        "\n## Design model against signature\n",
+        "Gain: the median over the evaluation's tasks of the median |design| / |signature| "
+        "index, measured on the rig (`pipeline fleet evaluate`; no ground truth). The design "
+        "vs signature difference is the RMS position difference of the two models after "
+        "aligning their bases and tools (from signature.json).\n",
+        f"![gain]({figs['gain.png'].name})",
+        "\n## Accuracy\n",
+        f"![accuracy]({figs['accuracy.png'].name})",
+        "\n## Drift between sessions\n",
+        "Each session against the robot's session before it: RMS tool position difference "
+        "of the two signatures over 500 random configurations after aligning their bases "
+        "and tools (sensor frames differ between sessions).\n",
+        _table(["robot", "session", "RMS difference (cm)"], drift_rows)
+        if drift_rows else "No robot has two identified sessions.",
+        f"\n![drift]({figs['drift.png'].name})\n",
+    ]  # fmt: skip
+    md = out / "fleet.md"
+    write_text_atomic(md, "\n".join(parts))
+    return md
