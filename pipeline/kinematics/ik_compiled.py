@@ -216,6 +216,7 @@ def _solve_one(
     _delta(T, target, delta)  # Appendix C.1 steps 1-2 at q⁰
     ep, eo = _errors(delta)
     e = ep * (1.0 / length) + eo
+    accurate_q = ep <= tol_p and eo <= tol_o  # the pose error at q
     for it in range(1, max_iter + 1):
         if not _lu_solve(J, delta, dq, M):  # Eq. (5.4): dq = J⁻¹ δ
             return _levenberg_marquardt(
@@ -233,6 +234,10 @@ def _solve_one(
         _delta(T, target, d_new)
         ep, eo = _errors(d_new)
         e_new = ep * (1.0 / length) + eo
+        if not e_new < e and small and accurate_q:
+            # Round-off: q is within tolerance and its Newton increment below one
+            # count (an exact start); the numpy iteration stops here too (C.1 step 8).
+            return FAST_CONVERGED, it
         if not e_new < e:  # the Newton step does not descend: damped steps from q
             _pose_jacobian(base, links, tool, offsets, prismatic, q, T, J, F, G, axes)
             return _levenberg_marquardt(
@@ -248,6 +253,7 @@ def _solve_one(
             delta[r] = d_new[r]
         if small and accurate:
             return FAST_CONVERGED, it
+        accurate_q = accurate
         if not accurate and not e_new < STALL_RATIO * e and not moved:
             return _levenberg_marquardt(
                 base, links, tool, offsets, prismatic, target, q, res, limit, settings,
