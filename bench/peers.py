@@ -106,13 +106,19 @@ def main(c: Controller | None = None) -> None:
     def ours_full(k: int) -> None:
         c.solve(_base[k], branch=branch)
 
+    solver = c.realtime(branch)
+
+    def ours_realtime(k: int) -> None:
+        solver.solve_one(_base[k])
+
     def theirs(k: int) -> None:
         ets.ik_LM(T[k], q0=q0[k] - offsets, ilimit=RTB_ILIMIT, slimit=1, tol=RTB_TOL,
                   joint_limits=False)  # fmt: skip
 
-    _base = _targets(c, SINGLE, branch)
-    ours(0), ours_full(0)
+    _base = np.ascontiguousarray(_targets(c, SINGLE, branch))
+    ours(0), ours_full(0), ours_realtime(0)
     lat = {
+        "armsig realtime solve_one (design start + NR)": _percentiles(ours_realtime, SINGLE),
         "armsig Controller.solve (design start + NR)": _percentiles(ours_full, SINGLE),
         "armsig newton_raphson (same start)": _percentiles(ours, SINGLE),
         f"rtb {roboticstoolbox.__version__} ik_LM (same start)": _percentiles(theirs, SINGLE),
@@ -129,11 +135,11 @@ def main(c: Controller | None = None) -> None:
     rtb_name = f"rtb {roboticstoolbox.__version__} ik_LM"
     print(f"peer comparison, robot3 signature, same targets and starts "
           f"(success: within {POSITION_CM:g} cm / {ORIENTATION_DEG:g}°)")  # fmt: skip
-    print(f"{'one target':45s} {'median µs':>10s} {'p99 µs':>9s}")
+    print(f"{'one target':45s} {'median µs':>10s} {'p99 µs':>9s} {'p99/med':>8s}")
     for name, (p50, p99) in lat.items():
-        print(f"{name:45s} {p50:10.1f} {p99:9.1f}")
+        print(f"{name:45s} {p50:10.1f} {p99:9.1f} {p99 / p50:8.1f}")
     ref = lat[f"{rtb_name} (same start)"][0]
-    for name, (p50, _) in list(lat.items())[:2]:
+    for name, (p50, _) in list(lat.items())[:3]:
         print(f"  ratio {name} / rtb median: {p50 / ref:.2f}")
     print(f"{'batch of ' + str(BATCH):45s} {'s':>10s} {'targets/s':>10s} {'success':>8s} "
           f"{'on branch':>9s}")  # fmt: skip

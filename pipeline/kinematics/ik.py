@@ -728,7 +728,7 @@ def _newton_compiled(
 ) -> IKResult:
     """:func:`newton_raphson` by the compiled plain iteration, the numpy iteration for
     the targets it defers (same arguments, after :func:`_prepare`)."""
-    from pipeline.kinematics.ik_compiled import FAST_CONVERGED, plain_newton
+    from pipeline.kinematics.ik_compiled import plain_newton
 
     n, length = chain.n_joints, chain.length_scale
     limit = np.broadcast_to(_step_limit(chain, max_step, length), (n,))
@@ -738,6 +738,40 @@ def _newton_compiled(
         chain.base, chain.links, chain.tool, np.asarray(chain.joint_offsets), chain.prismatic,
         T, q0, res, limit, max_iter, length, tol_p, tol_o,
     )  # fmt: skip
+    return finish_deferred(
+        chain, T, q0, res, q, outcome, iterations, delta, max_iter=max_iter, damping=damping,
+        position_tol_cm=position_tol_cm, orientation_tol_rad=orientation_tol_rad,
+        max_step=max_step,
+    )  # fmt: skip
+
+
+def finish_deferred(
+    chain: SerialChain,
+    T: Array,
+    q0: Array,
+    res: Array,
+    q: Array,
+    outcome: IntArray,
+    iterations: IntArray,
+    delta: Array,
+    *,
+    max_iter: int = 50,
+    damping: float = 1e-3,
+    position_tol_cm: float | None = 1e-7,
+    orientation_tol_rad: float | None = 1e-10,
+    max_step: float = 0.5,
+) -> IKResult:
+    """The :class:`IKResult` of a compiled solve (:mod:`pipeline.kinematics.ik_compiled`).
+
+    ``q``, ``outcome``, ``iterations``, ``delta`` (m, n), (m,), (m,), (m, 6) are the
+    kernel's outputs for targets ``T`` (m, 4, 4) started at ``q0`` (m, n); rows
+    the kernel deferred are solved again by the numpy iteration from ``q0``
+    (the fallback's last stage, :func:`newton_raphson`), which gives their
+    status. ``q`` and ``iterations`` are updated in place; the remaining
+    arguments are those of :func:`newton_raphson`.
+    """
+    from pipeline.kinematics.ik_compiled import FAST_CONVERGED
+
     errors = _errors(delta)
     status = np.full(len(q), STATUS_CONVERGED, np.int64)
     deferred = np.flatnonzero(outcome != FAST_CONVERGED)

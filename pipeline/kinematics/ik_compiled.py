@@ -70,12 +70,12 @@ IntArray = npt.NDArray[np.int64]
 Buf = npt.NDArray[Any]
 
 
-def _jit(func: Kernel) -> Kernel:
+def jit(func: Kernel) -> Kernel:
     """Compile ``func`` with numba (no Python objects, GIL released, cached on disk)."""
     return cast(Kernel, numba.njit(cache=True, nogil=True)(func))
 
 
-@_jit
+@jit
 def _pose_jacobian(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     q: Buf, T: Buf, J: Buf, F: Buf, G: Buf, axes: Buf,
@@ -131,7 +131,7 @@ def _pose_jacobian(
             J[3, i], J[4, i], J[5, i] = zx, zy, zz
 
 
-@_jit
+@jit
 def _delta(T_from: Buf, T_to: Buf, out: Buf) -> None:
     """``differential_motion(T_from, T_to)`` into ``out`` (6,): origin difference and
     the axis-angle vector of ``R_to R_fromᵀ``."""
@@ -151,7 +151,7 @@ def _delta(T_from: Buf, T_to: Buf, out: Buf) -> None:
     out[3], out[4], out[5] = sx * scale, sy * scale, sz * scale
 
 
-@_jit
+@jit
 def _lu_solve(A: Buf, b: Buf, x: Buf, M: Buf) -> bool:
     """``x = A⁻¹ b`` for a square ``A`` (n, n) by LU with partial pivoting (``M``: scratch
     (n, n + 1)). False when a pivot is zero or the solution is not finite."""
@@ -184,7 +184,7 @@ def _lu_solve(A: Buf, b: Buf, x: Buf, M: Buf) -> bool:
     return True
 
 
-@_jit
+@jit
 def _errors(d: Buf) -> tuple[float, float]:
     """Radial position error (cm) and rotation angle (rad) of δ (6,)."""
     return (
@@ -193,8 +193,8 @@ def _errors(d: Buf) -> tuple[float, float]:
     )
 
 
-@_jit
-def _solve_one(
+@jit
+def solve_one_target(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     target: Buf, q: Buf, res: Buf, limit: Buf, settings: Buf, delta: Buf,
 ) -> tuple[int, int]:  # fmt: skip
@@ -265,7 +265,7 @@ def _solve_one(
     )
 
 
-@_jit
+@jit
 def _levenberg_marquardt(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     target: Buf, q: Buf, res: Buf, limit: Buf, settings: Buf, delta: Buf, J: Buf, done: int,
@@ -382,14 +382,14 @@ def _levenberg_marquardt(
     return FAST_DEFERRED, done + LM_MAX_ITER
 
 
-@_jit
+@jit
 def _solve_serial(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     targets: Buf, q: Buf, res: Buf, limit: Buf, settings: Buf,
     outcome: Buf, iterations: Buf, delta: Buf,
 ) -> None:  # fmt: skip
     for k in range(targets.shape[0]):
-        outcome[k], iterations[k] = _solve_one(
+        outcome[k], iterations[k] = solve_one_target(
             base, links, tool, offsets, prismatic, targets[k], q[k], res, limit, settings, delta[k]
         )
 
@@ -458,12 +458,20 @@ def plain_newton(
         _solve_serial(*model, T[rows], q[rows], res_c, limit_c, settings,
                       outcome[rows], iterations[rows], delta[rows])  # fmt: skip
 
+    run_in_shares(run, m)
+    return q, outcome, iterations, delta
+
+
+def run_in_shares(run: Callable[[slice], None], m: int) -> None:
+    """``run(rows)`` over ``m`` targets: one call, or for a batch of at least
+    :data:`THREADED_MIN_TARGETS` one contiguous share per core on threads (the
+    kernels release the GIL). Each target is still solved alone, so the split
+    does not change any result."""
     # The cores are counted only for a batch that may use them (not per single target).
     workers = len(os.sched_getaffinity(0)) if m >= THREADED_MIN_TARGETS else 1
     if workers < 2:
         run(slice(0, m))
-    else:  # one contiguous share per core; each target is still solved alone
+    else:
         bounds = np.linspace(0, m, workers + 1).astype(int)
         with ThreadPoolExecutor(workers) as pool:
             list(pool.map(run, [slice(a, b) for a, b in zip(bounds, bounds[1:], strict=False)]))
-    return q, outcome, iterations, delta

@@ -1,0 +1,363 @@
+"""Compiled Puma 560 control: the design-model start (Appendix B.2) and the
+Newton-Raphson solve (5.4) of the signature in one kernel per target.
+
+:class:`PumaSolver` is the pre-bound solver behind
+:meth:`pipeline.control.Controller.solve` (Newton-Raphson, full pose) and its
+real-time API :meth:`~pipeline.control.Controller.realtime`. Per target the
+kernel computes, without Python objects:
+
+1. the flange pose in D-H frame 0, ``X⁻¹_0 · X · T_base · Y⁻¹`` (``X``: design
+   base to sensor, ``X_0``: the design chain's base in the sensor frame, ``Y``:
+   flange to signature tool);
+2. the closed-form design inverse on the requested branch, pulled onto the
+   design workspace where the pose lies outside it
+   (:func:`pipeline.robots.puma560_control._puma_clamp`'s rule and margins),
+   with θ4 kept from ``q_near`` at a wrist singularity and every joint in the
+   2π class nearest ``q_near`` (:func:`~pipeline.robots.puma560_control.puma_design_inverse`);
+3. the Newton-Raphson / Levenberg-Marquardt iteration of
+   :mod:`pipeline.kinematics.ik_compiled` from that start.
+
+The start agrees with the numpy design inverse to round-off (~1e-15 rad; tested),
+not bit for bit, so every Puma solve of a controller goes through this kernel:
+one target and a batch then give the same bits. Targets the kernel defers
+(:data:`~pipeline.kinematics.ik_compiled.FAST_DEFERRED`) are finished by the
+numpy iteration from the kernel's start (:func:`pipeline.kinematics.ik.finish_deferred`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pipeline.kinematics import ik
+from pipeline.kinematics.chain import SerialChain
+from pipeline.kinematics.ik_compiled import (
+    FAST_CONVERGED,
+    FAST_DEFERRED,
+    Buf,
+    IntArray,
+    jit,
+    run_in_shares,
+    solve_one_target,
+)
+from pipeline.kinematics.transforms import Array, invert_transform
+from pipeline.robots import puma560
+from pipeline.robots.puma560 import Branch
+
+#: Kernel outcome: the design inverse has no start (the clamped pose is still out
+#: of reach; not met with finite poses, kept so no NaN reaches the iteration).
+NO_START = 2
+
+_D1, _D3, _, _D4, _, _D6 = puma560.DESIGN_D_CM
+_A2, _A3 = puma560.DESIGN_A_CM[1], puma560.DESIGN_A_CM[2]
+_RHO2 = _D4**2 + _A3**2
+_PHI = math.atan2(_A3, _D4)
+_TWO_PI = 2.0 * math.pi
+_SINGULAR = puma560.WRIST_SINGULAR_TOL
+
+
+@jit
+def _wrap(t: float) -> float:
+    """:func:`pipeline.kinematics.transforms.wrap_angle` of one angle: (-π, π]."""
+    return math.pi - np.mod(math.pi - t, _TWO_PI)
+
+
+@jit
+def _design_start(
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, target: Buf, q_near: Buf, q: Buf, Tw: Buf
+) -> bool:
+    """The design inverse of one target into ``q`` (6,) (module docstring, steps 1-2).
+
+    ``pre``, ``post`` (4, 4): world (sensor) to D-H frame 0 and tool to flange;
+    ``branch`` (3,): shoulder, elbow, wrist flags (±1); ``margins`` (2,): the clamp's
+    elbow margin (rad) and shoulder margin (cm); ``Tw`` (4, 4): scratch.
+    False when even the clamped pose has no solution.
+    """
+    for r in range(4):  # Tw = (pre · target) · post, as puma_design_inverse
+        for c in range(4):
+            Tw[r, c] = (pre[r, 0] * target[0, c] + pre[r, 1] * target[1, c]
+                        + pre[r, 2] * target[2, c] + pre[r, 3] * target[3, c])  # fmt: skip
+    for r in range(4):
+        a0, a1, a2, a3 = Tw[r, 0], Tw[r, 1], Tw[r, 2], Tw[r, 3]
+        for c in range(4):
+            Tw[r, c] = a0 * post[0, c] + a1 * post[1, c] + a2 * post[2, c] + a3 * post[3, c]
+    wx, wy, wz = (Tw[0, 3] - _D6 * Tw[0, 2], Tw[1, 3] - _D6 * Tw[1, 2],
+                  Tw[2, 3] - _D6 * Tw[2, 2])  # fmt: skip  # the wrist centre
+    px, py, pz = wx, wy, wz - _D1
+    rr = px**2 + py**2 - _D3**2
+    root_rr = math.sqrt(max(rr, 0.0))
+    Kc = (root_rr**2 + pz**2 - (_D4**2 + _A3**2 + _A2**2)) / (2.0 * _A2)  # (B.22)
+    disc = (_D4**2 + _A3**2) - Kc**2
+    if not (rr >= 0.0 and disc >= 0.0):  # _puma_clamp: onto the design workspace
+        r_c = math.sqrt(max(px**2 + py**2 - _D3**2, margins[1] ** 2))
+        D2 = r_c**2 + pz**2
+        K_lim = math.sqrt(_RHO2) * math.cos(margins[0])
+        K = min(max((D2 - _RHO2 - _A2**2) / (2.0 * _A2), -K_lim), K_lim)
+        scale = math.sqrt((_RHO2 + _A2**2 + 2.0 * _A2 * K) / D2)
+        r_new, pz_new = r_c * scale, pz * scale
+        rad = math.hypot(px, py)
+        ux, uy = (px / rad, py / rad) if rad > 0.0 else (1.0, 0.0)
+        R_new = math.sqrt(r_new**2 + _D3**2)
+        Tw[0, 3] += ux * R_new - wx
+        Tw[1, 3] += uy * R_new - wy
+        Tw[2, 3] += pz_new + _D1 - wz
+        wx, wy, wz = (Tw[0, 3] - _D6 * Tw[0, 2], Tw[1, 3] - _D6 * Tw[1, 2],
+                      Tw[2, 3] - _D6 * Tw[2, 2])  # fmt: skip
+        px, py, pz = wx, wy, wz - _D1
+        rr = px**2 + py**2 - _D3**2
+        root_rr = math.sqrt(max(rr, 0.0))
+        Kc = (root_rr**2 + pz**2 - (_D4**2 + _A3**2 + _A2**2)) / (2.0 * _A2)
+        disc = (_D4**2 + _A3**2) - Kc**2
+        if not (rr >= 0.0 and disc >= 0.0):
+            return False
+    # puma560.inverse_kinematics on one branch
+    reach = branch[0] * root_rr
+    t1 = math.atan2(py, px) - math.atan2(_D3, reach)
+    t3 = math.atan2(Kc, branch[1] * math.sqrt(max(disc, 0.0))) - _PHI
+    S3, C3 = math.sin(t3), math.cos(t3)
+    u = _A2 + _D4 * S3 + _A3 * C3
+    v = _D4 * C3 - _A3 * S3
+    t2 = math.atan2(v * reach - u * pz, u * reach + v * pz)
+    c1, s1, c23, s23 = math.cos(t1), math.sin(t1), math.cos(t2 + t3), math.sin(t2 + t3)
+    R36 = np.empty((3, 3))  # _wrist_rotation: R03ᵀ R06
+    for c in range(3):
+        a = c1 * Tw[0, c] + s1 * Tw[1, c]
+        R36[0, c] = c23 * a - s23 * Tw[2, c]
+        R36[1, c] = c1 * Tw[1, c] - s1 * Tw[0, c]
+        R36[2, c] = s23 * a + c23 * Tw[2, c]
+    w = branch[2]
+    s5 = math.hypot(R36[0, 2], R36[1, 2])
+    q[0], q[1], q[2] = t1, t2, t3
+    q[4] = math.atan2(s5 if w > 0 else -s5, R36[2, 2])
+    q[3] = math.atan2(w * R36[1, 2], w * R36[0, 2])
+    q[5] = math.atan2(w * R36[2, 1], -(w * R36[2, 0]))
+    if s5 < _SINGULAR:
+        q[3] = 0.0
+        if R36[2, 2] > 0:
+            q[5] = math.atan2(R36[1, 0], R36[0, 0])
+        else:
+            q[5] = math.atan2(R36[1, 0], -R36[0, 0])
+    for j in range(6):
+        q[j] = _wrap(q[j])
+    # puma_design_inverse: θ4 from q_near at a wrist singularity, 2π class of q_near
+    if abs(math.sin(q[4])) < _SINGULAR:
+        t4 = q_near[3]
+        if math.cos(q[4]) > 0:
+            q[5] = q[5] + q[3] - t4
+        else:
+            q[5] = q[5] - q[3] + t4
+        q[3] = t4
+    for j in range(6):
+        q[j] = q_near[j] + _wrap(q[j] - q_near[j])
+    return True
+
+
+@jit
+def _into_limits(q: Buf, lower: Buf, upper: Buf, turn: Buf) -> None:
+    """``pipeline.control._shift_into`` of one configuration (6,), in place."""
+    for j in range(q.shape[0]):
+        if q[j] < lower[j] or q[j] > upper[j]:
+            up, down = q[j] + turn[j], q[j] - turn[j]
+            if lower[j] <= up <= upper[j]:
+                q[j] = up
+            elif lower[j] <= down <= upper[j]:
+                q[j] = down
+
+
+@jit
+def _solve_target(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
+    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf, Tw: Buf,
+) -> tuple[int, int]:  # fmt: skip
+    """One target ``T_base`` (4, 4) in the design base frame: ``target = X · T_base``
+    (sensor frame), the start ``q0`` from ``q_near`` and the solution ``q`` (6,).
+    Returns the outcome and the iteration count; ``Tw``: scratch."""
+    for r in range(4):
+        for c in range(4):
+            target[r, c] = (X[r, 0] * T_base[0, c] + X[r, 1] * T_base[1, c]
+                            + X[r, 2] * T_base[2, c] + X[r, 3] * T_base[3, c])  # fmt: skip
+    if not _design_start(pre, post, branch, margins, target, q_near, q0, Tw):
+        return NO_START, 0
+    for j in range(q.shape[0]):
+        q[j] = q0[j]
+    return solve_one_target(
+        base, links, tool, offsets, prismatic, target, q, res, limit, settings, delta
+    )
+
+
+@jit
+def _solve_targets(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
+    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf,
+    outcome: Buf, iterations: Buf,
+) -> None:  # fmt: skip
+    """:func:`_solve_target` for each of ``T_base`` (m, 4, 4); outputs by row."""
+    Tw = np.empty((4, 4))
+    for k in range(T_base.shape[0]):
+        outcome[k], iterations[k] = _solve_target(
+            base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
+            settings, X, T_base[k], q_near[k], q0[k], q[k], delta[k], target[k], Tw,
+        )  # fmt: skip
+
+
+@jit
+def _solve_realtime(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
+    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf, Tw: Buf,
+    info: Buf, lower: Buf, upper: Buf, turn: Buf,
+) -> None:  # fmt: skip
+    """:func:`_solve_target` of one target, then the joint-limit shift of a converged
+    solution; ``info`` (2,) receives the outcome and the iteration count."""
+    info[0], info[1] = _solve_target(
+        base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
+        settings, X, T_base, q_near, q0, q, delta, target, Tw,
+    )  # fmt: skip
+    if info[0] == FAST_CONVERGED:
+        _into_limits(q, lower, upper, turn)
+
+
+class PumaSolver:
+    """Newton-Raphson from the Puma design start, bound to one signature and branch.
+
+    Made by :meth:`pipeline.control.Controller.realtime` (or from the parts
+    here). Every array the kernel reads is made once, contiguous, at
+    construction; :meth:`solve_one` writes into buffers owned by the solver.
+
+    Parameters
+    ----------
+    chain : SerialChain
+        The signature chain (unbatched, six joints), sensor frame, cm.
+    design_base, flange_to_tool : ndarray, shape (4, 4)
+        The design chain's base in the sensor frame (``X · base``) and the flange
+        to the signature tool ``Y``.
+    sensor_from_base : ndarray, shape (4, 4)
+        ``X``: design base frame to sensor frame (for :meth:`solve_one`).
+    branch : Branch
+    resolution : ndarray, shape (6,)
+        Encoder resolution, rad.
+    limits : tuple of ndarray
+        Lower and upper joint limits and the turn (2π) per joint, rad
+        (``pipeline.control._limit_arrays``).
+    margins : tuple of float
+        The design inverse's clamp margins (elbow rad, shoulder cm).
+    """
+
+    def __init__(
+        self,
+        chain: SerialChain,
+        design_base: Array,
+        flange_to_tool: Array,
+        sensor_from_base: Array,
+        branch: Branch,
+        resolution: Array,
+        limits: tuple[Array, Array, Array],
+        margins: tuple[float, float],
+        max_iter: int = 50,
+        position_tol_cm: float = 1e-7,
+        orientation_tol_rad: float = 1e-10,
+        max_step: float = 0.5,
+    ) -> None:
+        n = chain.n_joints
+        if not ik._compilable(chain) or chain.prismatic.any():
+            raise ValueError("PumaSolver needs an unbatched six-revolute-joint chain")
+        c = np.ascontiguousarray
+        self.chain = chain
+        self.branch = branch
+        self.resolution = c(np.broadcast_to(resolution, (n,)), float)
+        self.settings = (max_iter, position_tol_cm, orientation_tol_rad, max_step)
+        self._model = (
+            c(chain.base, float), c(chain.links, float), c(chain.tool, float),
+            c(chain.joint_offsets, float), c(chain.prismatic, np.bool_),
+            c(invert_transform(design_base)), c(invert_transform(flange_to_tool)),
+            np.array([branch.shoulder, branch.elbow, branch.wrist], float),
+            np.array(margins, float), self.resolution,
+            np.full(n, max_step), np.array(
+                [max_iter, chain.length_scale, position_tol_cm, orientation_tol_rad], float
+            ),
+        )  # fmt: skip
+        self._X = c(sensor_from_base, float)
+        self._limits = tuple(c(a, float) for a in limits)
+        self._q_ref = c(chain.joint_offsets, float)  # q^s: the default q_near
+        #: The last solution of :meth:`solve_one` (6,), rad; overwritten by the next call.
+        self.q = np.empty(n)
+        #: The last start (the design inverse) of :meth:`solve_one` (6,), rad.
+        self.q0 = np.empty(n)
+        #: The last final δ of :meth:`solve_one` (6,): cm and rad.
+        self.delta = np.empty(6)
+        #: The last outcome and iteration count of :meth:`solve_one`.
+        self.info = np.zeros(2, np.int64)
+        self._target, self._Tw = np.empty((4, 4)), np.empty((4, 4))
+
+    def solve_one(self, T_base: Array, q_near: Array | None = None) -> bool:
+        """Solve one pose (4, 4) given in the design base frame; True when converged.
+
+        The real-time call: no array is allocated when the kernel converges
+        (all but ~1e-3 of random reachable targets); :attr:`q` then holds the
+        joints (rad, shifted into the limits by ±2π where that helps, as
+        :meth:`pipeline.control.Controller.solve`) and :attr:`info` the
+        iteration count. ``q_near`` (6,), rad (contiguous float): the 2π class
+        and, at a wrist singularity, θ4 of the start; default q^s (pass the
+        previous solution in a trajectory). A target the kernel defers is
+        finished by the numpy iteration (allocates; ~1 ms), with the same
+        result as ``Controller.solve``.
+        """
+        near = self._q_ref if q_near is None else q_near
+        _solve_realtime(*self._model, self._X, T_base, near, self.q0, self.q, self.delta,
+                        self._target, self._Tw, self.info, *self._limits)  # fmt: skip
+        if self.info[0] == FAST_CONVERGED:
+            return True
+        res = self.finish(self._target[None], near[None], self.q0[None], self.q[None],
+                          self.info[:1].copy(), self.info[1:].copy(), self.delta[None])  # fmt: skip
+        _shift(res.q, self._limits)
+        self.q[:] = res.q[0]
+        self.info[1] = res.iterations[0]
+        return bool(res.converged[0])
+
+    def solve(self, T_base: Array, q_near: Array) -> ik.IKResult:
+        """Solve targets (m, 4, 4) given in the design base frame from ``q_near``
+        (m, 6), rad.
+
+        Batched: one kernel call (threads for large batches:
+        :func:`~pipeline.kinematics.ik_compiled.run_in_shares`); every target
+        is solved alone by the arithmetic of :meth:`solve_one`, so a batch
+        equals a loop bit for bit. Joints are not shifted into the limits
+        (the controller does that, as :meth:`solve_one` does).
+        """
+        Tb = np.ascontiguousarray(T_base, float)
+        m, n = len(Tb), self.chain.n_joints
+        near = np.ascontiguousarray(np.broadcast_to(q_near, (m, n)), float)
+        q0, q, delta, T = np.empty((m, n)), np.empty((m, n)), np.empty((m, 6)), np.empty_like(Tb)
+        outcome, iterations = np.empty(m, np.int64), np.empty(m, np.int64)
+
+        def run(rows: slice) -> None:
+            _solve_targets(*self._model, self._X, Tb[rows], near[rows], q0[rows], q[rows],
+                           delta[rows], T[rows], outcome[rows], iterations[rows])  # fmt: skip
+
+        run_in_shares(run, m)
+        return self.finish(T, near, q0, q, outcome, iterations, delta)
+
+    def finish(
+        self, T: Array, near: Array, q0: Array, q: Array, outcome: IntArray,
+        iterations: IntArray, delta: Array,
+    ) -> ik.IKResult:  # fmt: skip
+        """The result of kernel outputs: deferred targets by the numpy iteration from
+        their start; targets without a start from ``near`` (the numpy design inverse's
+        fallback), so the numpy iteration reports them."""
+        lost = outcome == NO_START
+        q0[lost] = near[lost]
+        outcome[lost] = FAST_DEFERRED
+        max_iter, tol_p, tol_o, max_step = self.settings
+        return ik.finish_deferred(
+            self.chain, T, q0, self.resolution, q, outcome, iterations, delta,
+            max_iter=max_iter, position_tol_cm=tol_p, orientation_tol_rad=tol_o,
+            max_step=max_step,
+        )  # fmt: skip
+
+
+def _shift(q: Array, limits: tuple[Array, ...]) -> None:
+    for row in q:
+        _into_limits(row, *limits)
