@@ -398,9 +398,12 @@ def solve_poses(
         "orientation_error_rad": np.zeros(m),
         "status": np.zeros(m, int),
     }
+    changed = np.zeros(m, bool)  # False where a solve had no branch to keep
     for sel, res in results.values():
         for key, arr in fields.items():
             arr[sel] = getattr(res, key)
+        if res.branch_changed is not None:
+            changed[sel] = res.branch_changed
     out = IKResult(
         q=fields["q"],
         converged=fields["converged"],
@@ -409,6 +412,7 @@ def solve_poses(
         orientation_error_rad=fields["orientation_error_rad"],
         status=fields["status"],
         task_axes=axes,
+        branch_changed=changed,
     )
     q_joint = joints_to_boundary(out.q, controller.robot.prismatic)
     return controller.robot.readings_from_joints(q_joint), out
@@ -516,6 +520,7 @@ def solve_arrow(
         position_error_cm=pa.array(res.position_error_cm, pa.float64()),
         orientation_error_deg=pa.array(np.degrees(res.orientation_error_rad), pa.float64()),
         status=pa.array([STATUS_NAMES[int(s)] for s in res.status], pa.string()),
+        branch_changed=pa.array(res.branch_changed, pa.bool_()),
     )
     replaced = [c for c in table.column_names if c in extra]
     table = table.drop_columns(replaced)

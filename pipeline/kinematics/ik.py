@@ -155,6 +155,11 @@ class IKResult:
         "Task axes"): ``position_error_cm`` is the norm of the selected
         position components, ``orientation_error_rad`` of the selected
         rotation components. All six unless the solve selected fewer.
+    branch_changed : ndarray of bool, shape (m,), or None
+        True where a converged solution lies on another configuration branch
+        than the one requested (a solver's last resort, see
+        :class:`pipeline.robots.puma560_solver.PumaSolver`); None where the
+        solve had no branch to keep (a start given by the caller).
     """
 
     q: Array
@@ -165,6 +170,7 @@ class IKResult:
     status: IntArray
     history: IKHistory | None = None
     task_axes: tuple[int, ...] = (0, 1, 2, 3, 4, 5)
+    branch_changed: BoolArray | None = None
 
 
 # --------------------------------------------------------------------------- helpers

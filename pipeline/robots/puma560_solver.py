@@ -27,6 +27,7 @@ numpy iteration from the kernel's start (:func:`pipeline.kinematics.ik.finish_de
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -165,26 +166,76 @@ def _into_limits(q: Buf, lower: Buf, upper: Buf, turn: Buf) -> None:
                 q[j] = down
 
 
+#: Kernel outcome: converged, but on another branch than requested (flagged:
+#: :attr:`pipeline.kinematics.ik.IKResult.branch_changed`).
+OFF_BRANCH = 3
+
+#: Restarts (fallback step 3, see :class:`PumaSolver`): θ4 turned by each angle and
+#: θ6 by its negative, which keeps θ4 + θ6 and so the pose at the wrist
+#: singularity. Near it (θ5 within ~2°) the design start fixes θ4 + θ6 but not
+#: θ4 alone: with 0.03° of model error the signature's θ4 can lie 1-2 rad from
+#: the design's, behind a local minimum of the residual at θ5 ≈ 0. Measured on
+#: robot3 (100,000 targets of one branch): all 73 targets the first solve left
+#: unsolved converge from one of the first four, in 4-15 iterations.
+WRIST_TURNS = np.array([1.0, -1.0, 2.0, -2.0, 3.0, -3.0, 4.0]) * (np.pi / 4.0)
+
+
+@jit
+def _on_branch(q: Buf, branch: Buf) -> bool:
+    """:func:`pipeline.robots.puma560.branch_of` of ``q`` (6,) equals ``branch`` (3,)."""
+    s23, c23 = math.sin(q[1] + q[2]), math.cos(q[1] + q[2])
+    reach = _D4 * s23 + _A3 * c23 + _A2 * math.cos(q[1])
+    elbow = math.cos(q[2] + _PHI)
+    wrist = math.sin(q[4])
+    return (
+        (1.0 if reach >= 0 else -1.0) == branch[0]
+        and (1.0 if elbow >= 0 else -1.0) == branch[1]
+        and (1.0 if wrist >= 0 else -1.0) == branch[2]
+    )
+
+
 @jit
 def _solve_target(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
     X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf, Tw: Buf,
+    spare: Buf,
 ) -> tuple[int, int]:  # fmt: skip
     """One target ``T_base`` (4, 4) in the design base frame: ``target = X · T_base``
-    (sensor frame), the start ``q0`` from ``q_near`` and the solution ``q`` (6,).
-    Returns the outcome and the iteration count; ``Tw``: scratch."""
+    (sensor frame), the start ``q0`` from ``q_near`` and the solution ``q`` (6,),
+    by the fallback order of :class:`PumaSolver` (steps 1-4). Returns the outcome
+    (converged, :data:`OFF_BRANCH`, deferred or :data:`NO_START`) and the
+    iterations of all solves; ``Tw`` (4, 4), ``spare`` (2, 6): scratch."""
     for r in range(4):
         for c in range(4):
             target[r, c] = (X[r, 0] * T_base[0, c] + X[r, 1] * T_base[1, c]
                             + X[r, 2] * T_base[2, c] + X[r, 3] * T_base[3, c])  # fmt: skip
     if not _design_start(pre, post, branch, margins, target, q_near, q0, Tw):
         return NO_START, 0
-    for j in range(q.shape[0]):
-        q[j] = q0[j]
-    return solve_one_target(
-        base, links, tool, offsets, prismatic, target, q, res, limit, settings, delta
-    )
+    found = False  # a converged solution on another branch, kept in spare
+    total = 0
+    for attempt in range(WRIST_TURNS.shape[0] + 1):
+        for j in range(q.shape[0]):
+            q[j] = q0[j]
+        if attempt:
+            q[3] += WRIST_TURNS[attempt - 1]
+            q[5] -= WRIST_TURNS[attempt - 1]
+        outcome, it = solve_one_target(
+            base, links, tool, offsets, prismatic, target, q, res, limit, settings, delta
+        )
+        total += it
+        if outcome == FAST_CONVERGED:
+            if _on_branch(q, branch):
+                return FAST_CONVERGED, total
+            if not found:
+                found = True
+                for j in range(6):
+                    spare[0, j], spare[1, j] = q[j], delta[j]
+    if found:
+        for j in range(6):
+            q[j], delta[j] = spare[0, j], spare[1, j]
+        return OFF_BRANCH, total
+    return FAST_DEFERRED, total
 
 
 @jit
@@ -195,11 +246,11 @@ def _solve_targets(
     outcome: Buf, iterations: Buf,
 ) -> None:  # fmt: skip
     """:func:`_solve_target` for each of ``T_base`` (m, 4, 4); outputs by row."""
-    Tw = np.empty((4, 4))
+    Tw, spare = np.empty((4, 4)), np.empty((2, 6))
     for k in range(T_base.shape[0]):
         outcome[k], iterations[k] = _solve_target(
             base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
-            settings, X, T_base[k], q_near[k], q0[k], q[k], delta[k], target[k], Tw,
+            settings, X, T_base[k], q_near[k], q0[k], q[k], delta[k], target[k], Tw, spare,
         )  # fmt: skip
 
 
@@ -208,15 +259,15 @@ def _solve_realtime(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
     X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf, Tw: Buf,
-    info: Buf, lower: Buf, upper: Buf, turn: Buf,
+    spare: Buf, info: Buf, lower: Buf, upper: Buf, turn: Buf,
 ) -> None:  # fmt: skip
     """:func:`_solve_target` of one target, then the joint-limit shift of a converged
     solution; ``info`` (2,) receives the outcome and the iteration count."""
     info[0], info[1] = _solve_target(
         base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
-        settings, X, T_base, q_near, q0, q, delta, target, Tw,
+        settings, X, T_base, q_near, q0, q, delta, target, Tw, spare,
     )  # fmt: skip
-    if info[0] == FAST_CONVERGED:
+    if info[0] == FAST_CONVERGED or info[0] == OFF_BRANCH:
         _into_limits(q, lower, upper, turn)
 
 
@@ -226,6 +277,19 @@ class PumaSolver:
     Made by :meth:`pipeline.control.Controller.realtime` (or from the parts
     here). Every array the kernel reads is made once, contiguous, at
     construction; :meth:`solve_one` writes into buffers owned by the solver.
+
+    Fallback order, per target, each step only where the previous one left the
+    target unsolved or off the requested branch:
+
+    1. Newton-Raphson (5.4) from the design start, Levenberg-Marquardt steps
+       where a Newton step does not descend (:mod:`pipeline.kinematics.ik_compiled`);
+    2. (branch-preserving) the same from the start with θ4 and θ6 turned
+       against each other (:data:`WRIST_TURNS`), the first solution on the branch;
+    3. (any branch, flagged) the first solution of 1-2 on another branch,
+       with :attr:`~pipeline.kinematics.ik.IKResult.branch_changed` set;
+    4. the numpy iteration of :func:`pipeline.kinematics.ik.newton_raphson`
+       from the design start, which gives the status of a target it cannot
+       solve either (its solution's branch flagged as in 3).
 
     Parameters
     ----------
@@ -288,9 +352,11 @@ class PumaSolver:
         self.q0 = np.empty(n)
         #: The last final δ of :meth:`solve_one` (6,): cm and rad.
         self.delta = np.empty(6)
-        #: The last outcome and iteration count of :meth:`solve_one`.
+        #: The last kernel outcome and iteration count of :meth:`solve_one`.
         self.info = np.zeros(2, np.int64)
-        self._target, self._Tw = np.empty((4, 4)), np.empty((4, 4))
+        #: Whether the last solution of :meth:`solve_one` lies on another branch (step 3).
+        self.branch_changed = False
+        self._target, self._Tw, self._spare = np.empty((4, 4)), np.empty((4, 4)), np.empty((2, 6))
 
     def solve_one(self, T_base: Array, q_near: Array | None = None) -> bool:
         """Solve one pose (4, 4) given in the design base frame; True when converged.
@@ -307,14 +373,16 @@ class PumaSolver:
         """
         near = self._q_ref if q_near is None else q_near
         _solve_realtime(*self._model, self._X, T_base, near, self.q0, self.q, self.delta,
-                        self._target, self._Tw, self.info, *self._limits)  # fmt: skip
-        if self.info[0] == FAST_CONVERGED:
+                        self._target, self._Tw, self._spare, self.info, *self._limits)  # fmt: skip
+        if self.info[0] == FAST_CONVERGED or self.info[0] == OFF_BRANCH:
+            self.branch_changed = self.info[0] == OFF_BRANCH
             return True
         res = self.finish(self._target[None], near[None], self.q0[None], self.q[None],
                           self.info[:1].copy(), self.info[1:].copy(), self.delta[None])  # fmt: skip
         _shift(res.q, self._limits)
         self.q[:] = res.q[0]
         self.info[1] = res.iterations[0]
+        self.branch_changed = bool(res.branch_changed is not None and res.branch_changed[0])
         return bool(res.converged[0])
 
     def solve(self, T_base: Array, q_near: Array) -> ik.IKResult:
@@ -346,16 +414,21 @@ class PumaSolver:
     ) -> ik.IKResult:  # fmt: skip
         """The result of kernel outputs: deferred targets by the numpy iteration from
         their start; targets without a start from ``near`` (the numpy design inverse's
-        fallback), so the numpy iteration reports them."""
+        fallback), so the numpy iteration reports them. Converged solutions off the
+        requested branch are flagged (:attr:`~pipeline.kinematics.ik.IKResult.branch_changed`)."""
         lost = outcome == NO_START
         q0[lost] = near[lost]
         outcome[lost] = FAST_DEFERRED
+        outcome[outcome == OFF_BRANCH] = FAST_CONVERGED
         max_iter, tol_p, tol_o, max_step = self.settings
-        return ik.finish_deferred(
+        res = ik.finish_deferred(
             self.chain, T, q0, self.resolution, q, outcome, iterations, delta,
             max_iter=max_iter, position_tol_cm=tol_p, orientation_tol_rad=tol_o,
             max_step=max_step,
         )  # fmt: skip
+        b = self.branch
+        off = np.any(puma560.branch_of(res.q) != [b.shoulder, b.elbow, b.wrist], axis=-1)
+        return replace(res, branch_changed=res.converged & off)
 
 
 def _shift(q: Array, limits: tuple[Array, ...]) -> None:
