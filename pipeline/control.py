@@ -205,9 +205,11 @@ class Controller:
         T_sensor = self.sensor_from_base @ T
         if self.robot.name == "puma560" and branch is None and q_near is None:
             branch = self.default_branch()
-        if method == "nr" and not record_history and self._compiled(branch):
-            near = self._starts(T.shape[0], q_near)
-            return self._into_limits(self.realtime(branch).solve(T, near))
+        if not record_history and self._compiled(branch):
+            near, solver = self._starts(T.shape[0], q_near), self.realtime(branch)
+            if method == "nr":
+                return self._into_limits(solver.solve(T, near))
+            return self._into_limits(solver.solve_jacobi(T, near))
         q0 = self.initial_estimate(T_sensor, branch, q_near)
         if method == "nr":
             res = newton_raphson(
@@ -277,6 +279,8 @@ class Controller:
                 self.signature.chain, self.sensor_from_base, self.flange_to_tool,
                 self.sensor_from_base, branch, self.resolution, self._limits,
                 (pc.PUMA_ELBOW_MARGIN_RAD, pc.PUMA_SHOULDER_MARGIN_CM),
+                design=self._design_model(self.sensor_from_base),
+                jacobi_margins=(pc.JACOBI_ELBOW_MARGIN_RAD, pc.JACOBI_SHOULDER_MARGIN_CM),
             )  # fmt: skip
             self._solvers[branch] = solver
         return solver

@@ -297,3 +297,32 @@ def test_near_wrist_singularity_every_target_is_solved(robot3: Controller) -> No
     assert r.branch_changed is not None
     np.testing.assert_array_equal(r.branch_changed, ~on)
     assert on.mean() >= 0.99
+
+
+def test_jacobi_compiled_agrees_with_numpy(robot3: Controller, monkeypatch) -> None:
+    """The compiled Jacobi iteration (issue 18 item 4) against the numpy one from the
+    same start: same convergence, solutions within the tolerances' reach; a
+    threaded batch equals single solves bit for bit."""
+    from pipeline.kinematics import ik, ik_compiled
+    from pipeline.robots.puma560 import wrap_angle
+
+    b = parse_branch("right-up-noflip")
+    q, T = _targets(robot3, 3000, 13)
+    T = T[np.all(puma560.branch_of(q) == [1, 1, 1], axis=1)]
+    monkeypatch.setattr(ik_compiled, "THREADED_MIN_TARGETS", 2)
+    fast = robot3.solve(T, branch=b, method="jacobi")
+    T_s = robot3.sensor_from_base @ T
+    design = robot3._design_model(robot3.sensor_from_base)
+    inv = robot3._design_inverse(b, jacobi=True)
+    q0 = robot3.initial_estimate(T_s, b)
+    slow = ik.jacobi_iterative(robot3.signature.chain, design, inv, T_s, q0, robot3.resolution)
+    np.testing.assert_array_equal(fast.converged, slow.converged)
+    ok = fast.converged
+    assert ok.mean() >= 0.99
+    np.testing.assert_allclose(wrap_angle(fast.q[ok] - slow.q[ok]), 0.0, rtol=0, atol=1e-7)
+    assert fast.position_error_cm[ok].max() <= 1e-7
+    assert fast.orientation_error_rad[ok].max() <= 1e-10
+    for k in range(0, len(T), 17):
+        one = robot3.solve(T[k], branch=b, method="jacobi")
+        np.testing.assert_array_equal(one.q[0], fast.q[k])
+        assert one.iterations[0] == fast.iterations[k] and one.status[0] == fast.status[k]

@@ -38,6 +38,9 @@ from pipeline.kinematics.ik_compiled import (
     FAST_DEFERRED,
     Buf,
     IntArray,
+    _delta,
+    _errors,
+    _pose_jacobian,
     jit,
     run_in_shares,
     solve_one_target,
@@ -181,6 +184,15 @@ WRIST_TURNS = np.array([1.0, -1.0, 2.0, -2.0, 3.0, -3.0, 4.0]) * (np.pi / 4.0)
 
 
 @jit
+def _to_sensor(X: Buf, T_base: Buf, target: Buf) -> None:
+    """``target = X · T_base`` (4, 4): a pose in the design base frame in the sensor frame."""
+    for r in range(4):
+        for c in range(4):
+            target[r, c] = (X[r, 0] * T_base[0, c] + X[r, 1] * T_base[1, c]
+                            + X[r, 2] * T_base[2, c] + X[r, 3] * T_base[3, c])  # fmt: skip
+
+
+@jit
 def _on_branch(q: Buf, branch: Buf) -> bool:
     """:func:`pipeline.robots.puma560.branch_of` of ``q`` (6,) equals ``branch`` (3,)."""
     s23, c23 = math.sin(q[1] + q[2]), math.cos(q[1] + q[2])
@@ -206,10 +218,7 @@ def _solve_target(
     by the fallback order of :class:`PumaSolver` (steps 1-4). Returns the outcome
     (converged, :data:`OFF_BRANCH`, deferred or :data:`NO_START`) and the
     iterations of all solves; ``Tw`` (4, 4), ``spare`` (2, 6): scratch."""
-    for r in range(4):
-        for c in range(4):
-            target[r, c] = (X[r, 0] * T_base[0, c] + X[r, 1] * T_base[1, c]
-                            + X[r, 2] * T_base[2, c] + X[r, 3] * T_base[3, c])  # fmt: skip
+    _to_sensor(X, T_base, target)
     if not _design_start(pre, post, branch, margins, target, q_near, q0, Tw):
         return NO_START, 0
     found = False  # a converged solution on another branch, kept in spare
@@ -271,6 +280,95 @@ def _solve_realtime(
         _into_limits(q, lower, upper, turn)
 
 
+#: Jacobi kernel: an iterate whose scaled error is above this fraction of the
+#: previous one is where the numpy iteration starts accelerating
+#: (:data:`pipeline.kinematics.ik.JACOBI_SLOW_RATIO`); the kernel defers it.
+_JACOBI_SLOW = ik.JACOBI_SLOW_RATIO
+
+
+@jit
+def _jacobi_one(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, settings: Buf,
+    target: Buf, q: Buf, delta: Buf, Tw: Buf,
+) -> tuple[int, int]:  # fmt: skip
+    """The plain Jacobi iteration (5.8) of one target from ``q`` (6,) (in: the start,
+    out: the solution), as :func:`pipeline.kinematics.ik.jacobi_iterative` runs it
+    while the map contracts: ``q ← F_d⁻¹[F_d(q) · F_s(q)⁻¹ · T*]`` with the design
+    inverse on ``branch`` nearest ``q`` (``margins``: the Jacobi clamp margins),
+    stopping by the encoder rule and the pose tolerances. Deferred where the
+    numpy iteration would do anything else: the design inverse has no solution,
+    the error falls by less than half (Anderson acceleration takes over there),
+    or the iteration cap. Returns the outcome and the iteration count."""
+    n = q.shape[0]
+    max_iter, length = int(settings[0]), settings[1]
+    tol_p, tol_o = settings[2], settings[3]
+    Ts, Td, J = np.empty((4, 4)), np.empty((4, 4)), np.empty((6, n))
+    F, G, axes = np.empty((3, 4)), np.empty((3, 4)), np.empty((n, 6))
+    Delta, Tk = np.empty((4, 4)), np.empty((4, 4))
+    q_next, d_new = np.empty(n), np.empty(6)
+    _pose_jacobian(base, links, tool, offsets, prismatic, q, Ts, J, F, G, axes)
+    _delta(Ts, target, delta)
+    ep, eo = _errors(delta)
+    e = ep * (1.0 / length) + eo
+    for it in range(1, max_iter + 1):
+        _pose_jacobian(d_base, d_links, d_tool, d_offsets, prismatic, q, Td, J, F, G, axes)
+        for r in range(3):  # Eq. (5.9): Δ = F_s(q)⁻¹ T*, C.2 step 4
+            for c in range(4):
+                acc = Ts[0, r] * target[0, c] + Ts[1, r] * target[1, c] + Ts[2, r] * target[2, c]
+                if c == 3:
+                    acc -= Ts[0, r] * Ts[0, 3] + Ts[1, r] * Ts[1, 3] + Ts[2, r] * Ts[2, 3]
+                Delta[r, c] = acc
+        Delta[3, 0], Delta[3, 1], Delta[3, 2], Delta[3, 3] = 0.0, 0.0, 0.0, 1.0
+        for r in range(4):  # Eq. (5.10): T^k = F_d(q) Δ, C.2 step 5
+            for c in range(4):
+                Tk[r, c] = (Td[r, 0] * Delta[0, c] + Td[r, 1] * Delta[1, c]
+                            + Td[r, 2] * Delta[2, c] + Td[r, 3] * Delta[3, c])  # fmt: skip
+        if not _design_start(pre, post, branch, margins, Tk, q, q_next, Tw):  # Eq. (5.8)
+            return FAST_DEFERRED, it
+        _pose_jacobian(base, links, tool, offsets, prismatic, q_next, Ts, J, F, G, axes)
+        _delta(Ts, target, d_new)
+        ep, eo = _errors(d_new)
+        e_new = ep * (1.0 / length) + eo
+        small = True  # Appendix C.1 step 8 on the Jacobi increment
+        for j in range(n):
+            small = small and abs(q_next[j] - q[j]) < res[j]
+            q[j] = q_next[j]
+        for r in range(6):
+            delta[r] = d_new[r]
+        if small and ep <= tol_p and eo <= tol_o:
+            return FAST_CONVERGED, it
+        if e_new > _JACOBI_SLOW * e:
+            return FAST_DEFERRED, it
+        e = e_new
+    return FAST_DEFERRED, max_iter
+
+
+@jit
+def _jacobi_targets(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
+    d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf, j_margins: Buf,
+    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf,
+    outcome: Buf, iterations: Buf,
+) -> None:  # fmt: skip
+    """Start (``margins``) and Jacobi iteration (``j_margins``) of each of ``T_base``
+    (m, 4, 4) (design base frame); outputs by row as :func:`_solve_targets`."""
+    Tw = np.empty((4, 4))
+    for k in range(T_base.shape[0]):
+        _to_sensor(X, T_base[k], target[k])
+        if not _design_start(pre, post, branch, margins, target[k], q_near[k], q0[k], Tw):
+            outcome[k], iterations[k] = NO_START, 0
+            continue
+        for j in range(q.shape[1]):
+            q[k, j] = q0[k, j]
+        outcome[k], iterations[k] = _jacobi_one(
+            base, links, tool, offsets, prismatic, d_base, d_links, d_tool, d_offsets,
+            pre, post, branch, j_margins, res, settings, target[k], q[k], delta[k], Tw,
+        )  # fmt: skip
+
+
 class PumaSolver:
     """Newton-Raphson from the Puma design start, bound to one signature and branch.
 
@@ -308,6 +406,11 @@ class PumaSolver:
         (``pipeline.control._limit_arrays``).
     margins : tuple of float
         The design inverse's clamp margins (elbow rad, shoulder cm).
+    design : SerialChain, optional
+        The design model in the sensor frame with the signature's tool, for
+        :meth:`solve_jacobi`.
+    jacobi_margins : tuple of float
+        The clamp margins of the design inverse inside the Jacobi iteration.
     """
 
     def __init__(
@@ -320,6 +423,8 @@ class PumaSolver:
         resolution: Array,
         limits: tuple[Array, Array, Array],
         margins: tuple[float, float],
+        design: SerialChain | None = None,
+        jacobi_margins: tuple[float, float] = (0.0, 0.0),
         max_iter: int = 50,
         position_tol_cm: float = 1e-7,
         orientation_tol_rad: float = 1e-10,
@@ -343,6 +448,12 @@ class PumaSolver:
                 [max_iter, chain.length_scale, position_tol_cm, orientation_tol_rad], float
             ),
         )  # fmt: skip
+        self.design = design
+        self._design = None if design is None else (
+            c(design.base, float), c(design.links, float), c(design.tool, float),
+            c(design.joint_offsets, float), np.array(jacobi_margins, float),
+        )  # fmt: skip
+        self._frames = (design_base, flange_to_tool)  # for the numpy design inverse
         self._X = c(sensor_from_base, float)
         self._limits = tuple(c(a, float) for a in limits)
         self._q_ref = c(chain.joint_offsets, float)  # q^s: the default q_near
@@ -407,6 +518,52 @@ class PumaSolver:
 
         run_in_shares(run, m)
         return self.finish(T, near, q0, q, outcome, iterations, delta)
+
+    def solve_jacobi(self, T_base: Array, q_near: Array) -> ik.IKResult:
+        """The Jacobi iteration (5.8) of targets (m, 4, 4) in the design base frame from
+        the design start near ``q_near`` (m, 6), rad (:meth:`solve`'s arguments).
+
+        Compiled while the map contracts (:func:`_jacobi_one`); the targets it
+        defers run :func:`pipeline.kinematics.ik.jacobi_iterative` (Anderson
+        acceleration) from their start. Batch equals loop bit for bit.
+        """
+        if self.design is None or self._design is None:
+            raise ValueError("PumaSolver made without the design chain: no Jacobi iteration")
+        design = self._design
+        Tb = np.ascontiguousarray(T_base, float)
+        m, n = len(Tb), self.chain.n_joints
+        near = np.ascontiguousarray(np.broadcast_to(q_near, (m, n)), float)
+        q0, q, delta, T = np.empty((m, n)), np.empty((m, n)), np.empty((m, 6)), np.empty_like(Tb)
+        outcome, iterations = np.empty(m, np.int64), np.empty(m, np.int64)
+
+        def run(rows: slice) -> None:
+            _jacobi_targets(*self._model, *design, self._X, Tb[rows], near[rows],
+                            q0[rows], q[rows], delta[rows], T[rows], outcome[rows],
+                            iterations[rows])  # fmt: skip
+
+        run_in_shares(run, m)
+        lost = outcome == NO_START
+        q0[lost] = near[lost]
+        errors = ik._errors(delta)
+        status = np.full(m, ik.STATUS_CONVERGED, np.int64)
+        deferred = np.flatnonzero(outcome != FAST_CONVERGED)
+        if deferred.size:
+            from pipeline.robots.puma560_control import puma_design_inverse
+
+            inv = puma_design_inverse(
+                self.branch, tool=self._frames[1], base=self._frames[0],
+                elbow_margin_rad=float(design[4][0]), shoulder_margin_cm=float(design[4][1]),
+            )  # fmt: skip
+            max_iter, tol_p, tol_o, _ = self.settings
+            rest = ik.jacobi_iterative(
+                self.chain, self.design, inv, T[deferred], q0[deferred], self.resolution,
+                max_iter, position_tol_cm=tol_p, orientation_tol_rad=tol_o,
+            )  # fmt: skip
+            q[deferred], iterations[deferred] = rest.q, rest.iterations
+            status[deferred], errors[deferred] = rest.status, np.c_[
+                rest.position_error_cm, rest.orientation_error_rad
+            ]
+        return ik._result(q, status, iterations, errors)
 
     def finish(
         self, T: Array, near: Array, q0: Array, q: Array, outcome: IntArray,
