@@ -467,13 +467,7 @@ def _iterate(
             hist_q[-1][rows], hist_d[-1][rows] = q_a, d_a
     q[rows], delta[rows], iterations[rows] = q_a, d_a, done_iterations
 
-    left = np.flatnonzero(status == STATUS_MAX_ITER)
-    if left.size:
-        _, mask = _task_mask(task_axes)
-        J = _masked_rows(geometric_jacobian(_take(chain, left, m), q[left]), mask)
-        rank = min(len(task_axes), chain.n_joints)  # the masked rows add zero singular values
-        s_min = _scaled_svd(J, length)[1][:, rank - 1]
-        status[left[s_min < SINGULAR_SIGMA]] = STATUS_SINGULAR
+    mark_singular(chain, q, status, task_axes)
     errors = _errors(delta)  # |dp| and the rotation angle of the final pose error
     history = None
     if record_history:
@@ -483,6 +477,21 @@ def _iterate(
             q=hq, delta=hd, position_error_cm=he[..., 0], orientation_error_rad=he[..., 1]
         )
     return _result(q, status, iterations, errors, history, task_axes)
+
+
+def mark_singular(
+    chain: SerialChain, q: Array, status: IntArray, task_axes: tuple[int, ...] = ALL_AXES
+) -> None:
+    """Set ``status`` (m,) to :data:`STATUS_SINGULAR` where it is :data:`STATUS_MAX_ITER`
+    and the unit-scaled Jacobian (of the ``task_axes`` rows) at ``q`` (m, n) has its
+    smallest singular value below :data:`SINGULAR_SIGMA`; in place."""
+    left = np.flatnonzero(status == STATUS_MAX_ITER)
+    if left.size:
+        _, mask = _task_mask(task_axes)
+        J = _masked_rows(geometric_jacobian(_take(chain, left, len(q)), q[left]), mask)
+        rank = min(len(task_axes), chain.n_joints)  # the masked rows add zero singular values
+        s_min = _scaled_svd(J, chain.length_scale)[1][:, rank - 1]
+        status[left[s_min < SINGULAR_SIGMA]] = STATUS_SINGULAR
 
 
 def _result(

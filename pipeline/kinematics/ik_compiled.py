@@ -76,16 +76,16 @@ def jit(func: Kernel) -> Kernel:
 
 
 @jit
-def _pose_jacobian(
+def pose(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
-    q: Buf, T: Buf, J: Buf, F: Buf, G: Buf, axes: Buf,
+    q: Buf, T: Buf, F: Buf, G: Buf, axes: Buf,
 ) -> None:  # fmt: skip
-    """Tool pose ``T`` (4, 4) and geometric Jacobian ``J`` (6, n) at ``q`` (n,).
+    """Tool pose ``T`` (4, 4) at ``q`` (n,), and each joint's axis and origin in
+    ``axes`` (n, 6): ``[z_i, p_i]``.
 
     Eq. (5.1): ``T = base · Π Rot(z, q_i − q0_i) · K̄_i · tool`` (Eq. (5.2); a
-    prismatic joint ``Trans(0, 0, q_i − q0_i)``, Eq. (5.3)). Column ``i`` of J
-    is ``[z_i × (p_tool − p_i); z_i]`` (revolute) or ``[z_i; 0]`` (prismatic).
-    ``F``, ``G`` (3, 4) and ``axes`` (n, 6) are scratch.
+    prismatic joint ``Trans(0, 0, q_i − q0_i)``, Eq. (5.3)). ``F``, ``G`` (3, 4)
+    are scratch.
     """
     n = q.shape[0]
     for r in range(3):
@@ -118,6 +118,19 @@ def _pose_jacobian(
         for c in range(4):
             T[r, c] = a0 * tool[0, c] + a1 * tool[1, c] + a2 * tool[2, c] + a3 * tool[3, c]
     T[3, 0], T[3, 1], T[3, 2], T[3, 3] = 0.0, 0.0, 0.0, 1.0
+
+
+@jit
+def _pose_jacobian(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    q: Buf, T: Buf, J: Buf, F: Buf, G: Buf, axes: Buf,
+) -> None:  # fmt: skip
+    """Tool pose ``T`` (4, 4) (:func:`pose`) and geometric Jacobian ``J`` (6, n) at
+    ``q`` (n,). Column ``i`` of J is ``[z_i × (p_tool − p_i); z_i]`` (revolute) or
+    ``[z_i; 0]`` (prismatic). ``F``, ``G`` (3, 4) and ``axes`` (n, 6) are scratch.
+    """
+    n = q.shape[0]
+    pose(base, links, tool, offsets, prismatic, q, T, F, G, axes)
     for i in range(n):
         zx, zy, zz = axes[i, 0], axes[i, 1], axes[i, 2]
         if prismatic[i]:

@@ -32,7 +32,7 @@ from dataclasses import replace
 import numpy as np
 
 from pipeline.kinematics import ik
-from pipeline.kinematics.chain import SerialChain
+from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.ik_compiled import (
     FAST_CONVERGED,
     FAST_DEFERRED,
@@ -40,12 +40,13 @@ from pipeline.kinematics.ik_compiled import (
     IntArray,
     _delta,
     _errors,
-    _pose_jacobian,
     jit,
+    pose,
     run_in_shares,
     solve_one_target,
 )
-from pipeline.kinematics.transforms import Array, invert_transform
+from pipeline.kinematics.ik_stall import STALL_RATIO
+from pipeline.kinematics.transforms import Array, differential_motion, invert_transform
 from pipeline.robots import puma560
 from pipeline.robots.puma560 import Branch
 
@@ -280,10 +281,79 @@ def _solve_realtime(
         _into_limits(q, lower, upper, turn)
 
 
-#: Jacobi kernel: an iterate whose scaled error is above this fraction of the
-#: previous one is where the numpy iteration starts accelerating
-#: (:data:`pipeline.kinematics.ik.JACOBI_SLOW_RATIO`); the kernel defers it.
+#: Jacobi kernel outcomes besides converged: stalled (no progress in
+#: :data:`~pipeline.kinematics.ik.JACOBI_STALL_PATIENCE` iterations), no design
+#: inverse (both ``STATUS_UNREACHABLE``), and the iteration cap.
+J_STALLED, J_NO_INVERSE, J_MAX_ITER = 4, 5, 6
 _JACOBI_SLOW = ik.JACOBI_SLOW_RATIO
+_JACOBI_PATIENCE = ik.JACOBI_STALL_PATIENCE
+_ANDERSON_RCOND = ik.ANDERSON_RCOND
+_STALL = STALL_RATIO
+
+
+@jit
+def _anderson(Qh: Buf, Gh: Buf, count: int, out: Buf) -> None:
+    """:func:`pipeline.kinematics.ik._anderson` of one target: ``Qh``, ``Gh`` (h, n)
+    oldest first, the last ``count`` rows valid; the accelerated iterate into ``out``."""
+    h, n = Qh.shape
+    dF, dG = np.zeros((n, h - 1)), np.zeros((h - 1, n))
+    first = h - min(count, h)
+    for j in range(first, h - 1):
+        for i in range(n):
+            dF[i, j] = (Gh[j + 1, i] - Qh[j + 1, i]) - (Gh[j, i] - Qh[j, i])
+            dG[j, i] = Gh[j + 1, i] - Gh[j, i]
+    f = np.empty(n)
+    for i in range(n):
+        f[i] = Gh[h - 1, i] - Qh[h - 1, i]
+    gamma = np.linalg.pinv(dF, _ANDERSON_RCOND) @ f
+    for i in range(n):
+        acc = Gh[h - 1, i]
+        for j in range(h - 1):
+            acc -= dG[j, i] * gamma[j]
+        out[i] = acc
+
+
+@jit
+def _jacobi_map(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf,
+    target: Buf, q: Buf, Ts: Buf, q_next: Buf, Tw: Buf,
+) -> bool:  # fmt: skip
+    """(5.8): ``q_next = F_d⁻¹[F_d(q) · F_s(q)⁻¹ · T*]`` (``Ts``: F_s(q)); False when
+    the design inverse has none."""
+    n = q.shape[0]
+    Td = np.empty((4, 4))
+    F, G, axes = np.empty((3, 4)), np.empty((3, 4)), np.empty((n, 6))
+    Delta, Tk = np.empty((4, 4)), np.empty((4, 4))
+    pose(d_base, d_links, d_tool, d_offsets, prismatic, q, Td, F, G, axes)
+    for r in range(3):  # Eq. (5.9): Δ = F_s(q)⁻¹ T*, C.2 step 4
+        for c in range(4):
+            acc = Ts[0, r] * target[0, c] + Ts[1, r] * target[1, c] + Ts[2, r] * target[2, c]
+            if c == 3:
+                acc -= Ts[0, r] * Ts[0, 3] + Ts[1, r] * Ts[1, 3] + Ts[2, r] * Ts[2, 3]
+            Delta[r, c] = acc
+    Delta[3, 0], Delta[3, 1], Delta[3, 2], Delta[3, 3] = 0.0, 0.0, 0.0, 1.0
+    for r in range(4):  # Eq. (5.10): T^k = F_d(q) Δ, C.2 step 5
+        for c in range(4):
+            Tk[r, c] = (Td[r, 0] * Delta[0, c] + Td[r, 1] * Delta[1, c]
+                        + Td[r, 2] * Delta[2, c] + Td[r, 3] * Delta[3, c])  # fmt: skip
+    return _design_start(pre, post, branch, margins, Tk, q, q_next, Tw)  # C.2 step 6
+
+
+@jit
+def _error_at(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    target: Buf, q: Buf, Ts: Buf, d: Buf, length: float,
+) -> tuple[float, float, float]:  # fmt: skip
+    """F_s(q) into ``Ts``, its δ into ``d``; the position and rotation errors and the
+    scaled error."""
+    n = q.shape[0]
+    F, G, axes = np.empty((3, 4)), np.empty((3, 4)), np.empty((n, 6))
+    pose(base, links, tool, offsets, prismatic, q, Ts, F, G, axes)
+    _delta(Ts, target, d)
+    ep, eo = _errors(d)
+    return ep, eo, ep * (1.0 / length) + eo
 
 
 @jit
@@ -293,56 +363,71 @@ def _jacobi_one(
     pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, settings: Buf,
     target: Buf, q: Buf, delta: Buf, Tw: Buf,
 ) -> tuple[int, int]:  # fmt: skip
-    """The plain Jacobi iteration (5.8) of one target from ``q`` (6,) (in: the start,
-    out: the solution), as :func:`pipeline.kinematics.ik.jacobi_iterative` runs it
-    while the map contracts: ``q ← F_d⁻¹[F_d(q) · F_s(q)⁻¹ · T*]`` with the design
-    inverse on ``branch`` nearest ``q`` (``margins``: the Jacobi clamp margins),
-    stopping by the encoder rule and the pose tolerances. Deferred where the
-    numpy iteration would do anything else: the design inverse has no solution,
-    the error falls by less than half (Anderson acceleration takes over there),
-    or the iteration cap. Returns the outcome and the iteration count."""
+    """:func:`pipeline.kinematics.ik.jacobi_iterative` (``accelerate=True``) of one
+    target from ``q`` (6,) (in: the start, out: the last iterate): (5.8) with the
+    design inverse on ``branch`` nearest the iterate (``margins``: the Jacobi
+    clamp margins); where an iterate's error falls by less than half, Anderson
+    acceleration of the same map whenever it gives the smaller error; the
+    encoder rule and the pose tolerances to stop; no progress in
+    :data:`~pipeline.kinematics.ik.JACOBI_STALL_PATIENCE` iterations of
+    accelerated steps, a stall. Returns the outcome and the iteration count."""
     n = q.shape[0]
     max_iter, length = int(settings[0]), settings[1]
     tol_p, tol_o = settings[2], settings[3]
-    Ts, Td, J = np.empty((4, 4)), np.empty((4, 4)), np.empty((6, n))
-    F, G, axes = np.empty((3, 4)), np.empty((3, 4)), np.empty((n, 6))
-    Delta, Tk = np.empty((4, 4)), np.empty((4, 4))
-    q_next, d_new = np.empty(n), np.empty(6)
-    _pose_jacobian(base, links, tool, offsets, prismatic, q, Ts, J, F, G, axes)
-    _delta(Ts, target, delta)
-    ep, eo = _errors(delta)
-    e = ep * (1.0 / length) + eo
+    h = n + 1
+    Qh, Gh = np.zeros((h, n)), np.zeros((h, n))
+    Ts, T_plain, T_acc = np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4))
+    q_next, q_acc, d_new, d_acc = np.empty(n), np.empty(n), np.empty(6), np.empty(6)
+    ep, eo, e = _error_at(base, links, tool, offsets, prismatic, target, q, Ts, delta, length)
+    count, slow, idle = 0, False, 0
     for it in range(1, max_iter + 1):
-        _pose_jacobian(d_base, d_links, d_tool, d_offsets, prismatic, q, Td, J, F, G, axes)
-        for r in range(3):  # Eq. (5.9): Δ = F_s(q)⁻¹ T*, C.2 step 4
-            for c in range(4):
-                acc = Ts[0, r] * target[0, c] + Ts[1, r] * target[1, c] + Ts[2, r] * target[2, c]
-                if c == 3:
-                    acc -= Ts[0, r] * Ts[0, 3] + Ts[1, r] * Ts[1, 3] + Ts[2, r] * Ts[2, 3]
-                Delta[r, c] = acc
-        Delta[3, 0], Delta[3, 1], Delta[3, 2], Delta[3, 3] = 0.0, 0.0, 0.0, 1.0
-        for r in range(4):  # Eq. (5.10): T^k = F_d(q) Δ, C.2 step 5
-            for c in range(4):
-                Tk[r, c] = (Td[r, 0] * Delta[0, c] + Td[r, 1] * Delta[1, c]
-                            + Td[r, 2] * Delta[2, c] + Td[r, 3] * Delta[3, c])  # fmt: skip
-        if not _design_start(pre, post, branch, margins, Tk, q, q_next, Tw):  # Eq. (5.8)
-            return FAST_DEFERRED, it
-        _pose_jacobian(base, links, tool, offsets, prismatic, q_next, Ts, J, F, G, axes)
-        _delta(Ts, target, d_new)
-        ep, eo = _errors(d_new)
-        e_new = ep * (1.0 / length) + eo
-        small = True  # Appendix C.1 step 8 on the Jacobi increment
+        if not _jacobi_map(base, links, tool, offsets, prismatic, d_base, d_links, d_tool,
+                           d_offsets, pre, post, branch, margins, target, q, Ts, q_next, Tw):
+            return J_NO_INVERSE, it - 1  # fmt: skip
+        ep, eo, e_plain = _error_at(
+            base, links, tool, offsets, prismatic, target, q_next, T_plain, d_new, length
+        )
+        taken = T_plain
+        for k in range(h - 1):  # the history, oldest first
+            for j in range(n):
+                Qh[k, j], Gh[k, j] = Qh[k + 1, j], Gh[k + 1, j]
+        for j in range(n):
+            Qh[h - 1, j], Gh[h - 1, j] = q[j], q_next[j]
+        count += 1
+        e_new = e_plain
+        was_slow = slow
+        if was_slow:
+            _anderson(Qh, Gh, count, q_acc)
+            ap, ao, e_acc = _error_at(
+                base, links, tool, offsets, prismatic, target, q_acc, T_acc, d_acc, length
+            )
+            if e_acc < e_new:  # never worse than (5.8)
+                for j in range(n):
+                    q_next[j] = q_acc[j]
+                for r in range(6):
+                    d_new[r] = d_acc[r]
+                ep, eo, e_new = ap, ao, e_acc
+                taken = T_acc
+        slow = slow or e_plain > _JACOBI_SLOW * e
+        small = True  # Appendix C.1 step 8 on the step taken
         for j in range(n):
             small = small and abs(q_next[j] - q[j]) < res[j]
+        accurate = ep <= tol_p and eo <= tol_o
+        stuck = was_slow and small and not (accurate or e_new < _STALL * e)
+        idle = idle + 1 if stuck else 0
+        for j in range(n):
             q[j] = q_next[j]
         for r in range(6):
             delta[r] = d_new[r]
-        if small and ep <= tol_p and eo <= tol_o:
-            return FAST_CONVERGED, it
-        if e_new > _JACOBI_SLOW * e:
-            return FAST_DEFERRED, it
+        for r in range(4):
+            for c in range(4):
+                Ts[r, c] = taken[r, c]  # F_s at the new iterate
         e = e_new
-    return FAST_DEFERRED, max_iter
+        if small and accurate:
+            return FAST_CONVERGED, it
+        if idle >= _JACOBI_PATIENCE:
+            return J_STALLED, it
+    return J_MAX_ITER, max_iter
 
 
 @jit
@@ -542,28 +627,31 @@ class PumaSolver:
                             iterations[rows])  # fmt: skip
 
         run_in_shares(run, m)
-        lost = outcome == NO_START
-        q0[lost] = near[lost]
-        errors = ik._errors(delta)
+        lost = np.flatnonzero(outcome == NO_START)
         status = np.full(m, ik.STATUS_CONVERGED, np.int64)
-        deferred = np.flatnonzero(outcome != FAST_CONVERGED)
-        if deferred.size:
-            from pipeline.robots.puma560_control import puma_design_inverse
-
-            inv = puma_design_inverse(
-                self.branch, tool=self._frames[1], base=self._frames[0],
-                elbow_margin_rad=float(design[4][0]), shoulder_margin_cm=float(design[4][1]),
-            )  # fmt: skip
-            max_iter, tol_p, tol_o, _ = self.settings
+        status[(outcome == J_STALLED) | (outcome == J_NO_INVERSE)] = ik.STATUS_UNREACHABLE
+        status[outcome == J_MAX_ITER] = ik.STATUS_MAX_ITER
+        if lost.size:  # no design start: the numpy iteration from near reports them
             rest = ik.jacobi_iterative(
-                self.chain, self.design, inv, T[deferred], q0[deferred], self.resolution,
-                max_iter, position_tol_cm=tol_p, orientation_tol_rad=tol_o,
+                self.chain, self.design, self._numpy_inverse(), T[lost], near[lost],
+                self.resolution, self.settings[0], position_tol_cm=self.settings[1],
+                orientation_tol_rad=self.settings[2],
             )  # fmt: skip
-            q[deferred], iterations[deferred] = rest.q, rest.iterations
-            status[deferred], errors[deferred] = rest.status, np.c_[
-                rest.position_error_cm, rest.orientation_error_rad
-            ]
-        return ik._result(q, status, iterations, errors)
+            q[lost], iterations[lost], status[lost] = rest.q, rest.iterations, rest.status
+            delta[lost] = differential_motion(forward_kinematics(self.chain, rest.q), T[lost])
+        ik.mark_singular(self.chain, q, status)
+        return ik._result(q, status, iterations, ik._errors(delta))
+
+    def _numpy_inverse(self) -> ik.DesignInverse:
+        """The numpy design inverse of the Jacobi iteration (same branch and margins)."""
+        from pipeline.robots.puma560_control import puma_design_inverse
+
+        assert self._design is not None
+        margins = self._design[4]
+        return puma_design_inverse(
+            self.branch, tool=self._frames[1], base=self._frames[0],
+            elbow_margin_rad=float(margins[0]), shoulder_margin_cm=float(margins[1]),
+        )  # fmt: skip
 
     def finish(
         self, T: Array, near: Array, q0: Array, q: Array, outcome: IntArray,
