@@ -126,12 +126,17 @@ def main(c: Controller | None = None) -> None:
     t0 = time.perf_counter()
     r = ik.newton_raphson(chain, T, q0, res)
     t_ours = time.perf_counter() - t0
+    T_base = _targets(c, BATCH, branch)
+    t0 = time.perf_counter()
+    r_ctl = c.solve(T_base, branch=branch)  # its own start: the kernel's design inverse
+    t_ctl = time.perf_counter() - t0
     t0 = time.perf_counter()
     q_rtb = _rtb_loop(ets, T, q0, offsets)
     t_rtb = time.perf_counter() - t0
     ok_rtb = np.isfinite(q_rtb).all(axis=1)
     ok_rtb[ok_rtb] = _accurate(chain, T[ok_rtb], q_rtb[ok_rtb])
     ok_ours = r.converged & _accurate(chain, T, r.q)
+    ok_ctl = r_ctl.converged & _accurate(chain, T, r_ctl.q)
     rtb_name = f"rtb {roboticstoolbox.__version__} ik_LM"
     print(f"peer comparison, robot3 signature, same targets and starts "
           f"(success: within {POSITION_CM:g} cm / {ORIENTATION_DEG:g}°)")  # fmt: skip
@@ -144,13 +149,20 @@ def main(c: Controller | None = None) -> None:
     print(f"{'batch of ' + str(BATCH):45s} {'s':>10s} {'targets/s':>10s} {'success':>8s} "
           f"{'on branch':>9s}")  # fmt: skip
     for name, sec, ok, q in (
-        ("armsig newton_raphson, batched", t_ours, ok_ours, r.q),
+        ("armsig Controller.solve nr, batched", t_ctl, ok_ctl, r_ctl.q),
+        ("armsig newton_raphson, batched (same start)", t_ours, ok_ours, r.q),
         (f"{rtb_name}, loop", t_rtb, ok_rtb, q_rtb),
     ):
         on = int(np.count_nonzero(ok & _on_branch(np.nan_to_num(q), branch)))
         print(f"{name:45s} {sec:10.3f} {BATCH / sec:10.0f} {np.count_nonzero(ok):8d} {on:9d}")
-    print(f"  ratio throughput armsig / rtb: {t_rtb / t_ours:.1f}")
-    print(
-        f"  solved by rtb, not armsig: {np.count_nonzero(ok_rtb & ~ok_ours)}; "
-        f"by armsig, not rtb: {np.count_nonzero(ok_ours & ~ok_rtb)}"
-    )
+    flagged = r_ctl.branch_changed if r_ctl.branch_changed is not None else np.zeros(BATCH, bool)
+    silent = ok_ctl & ~flagged & ~_on_branch(r_ctl.q, branch)
+    print(f"  Controller.solve: off the branch and flagged {np.count_nonzero(ok_ctl & flagged)}, "
+          f"off the branch unflagged {np.count_nonzero(silent)}")  # fmt: skip
+    print(f"  ratio throughput armsig Controller.solve / rtb: {t_rtb / t_ctl:.1f}")
+    print(f"  ratio throughput armsig newton_raphson / rtb: {t_rtb / t_ours:.1f}")
+    for name, ok in (("Controller.solve", ok_ctl), ("newton_raphson", ok_ours)):
+        print(
+            f"  solved by rtb, not armsig {name}: {np.count_nonzero(ok_rtb & ~ok)}; "
+            f"by armsig, not rtb: {np.count_nonzero(ok & ~ok_rtb)}"
+        )

@@ -381,9 +381,12 @@ def _jacobi_one(
     ep, eo, e = _error_at(base, links, tool, offsets, prismatic, target, q, Ts, delta, length)
     count, slow, idle = 0, False, 0
     for it in range(1, max_iter + 1):
-        if not _jacobi_map(base, links, tool, offsets, prismatic, d_base, d_links, d_tool,
-                           d_offsets, pre, post, branch, margins, target, q, Ts, q_next, Tw):
-            return J_NO_INVERSE, it - 1  # fmt: skip
+        found = _jacobi_map(
+            base, links, tool, offsets, prismatic, d_base, d_links, d_tool, d_offsets,
+            pre, post, branch, margins, target, q, Ts, q_next, Tw,
+        )  # fmt: skip
+        if not found:
+            return J_NO_INVERSE, it - 1
         ep, eo, e_plain = _error_at(
             base, links, tool, offsets, prismatic, target, q_next, T_plain, d_new, length
         )
@@ -594,6 +597,17 @@ class PumaSolver:
         Tb = np.ascontiguousarray(T_base, float)
         m, n = len(Tb), self.chain.n_joints
         near = np.ascontiguousarray(np.broadcast_to(q_near, (m, n)), float)
+        solved = m == 1 and self.solve_one(Tb[0], near[0])
+        if solved and self.info[0] in (FAST_CONVERGED, OFF_BRANCH):
+            # One target the kernel solved: the real-time call's buffers (its q is
+            # already shifted into the limits, which the controller's shift keeps).
+            return ik.IKResult(
+                q=self.q[None].copy(), converged=np.ones(1, bool),
+                iterations=self.info[1:].copy(), position_error_cm=(e := ik._errors(
+                    self.delta[None]))[:, 0], orientation_error_rad=e[:, 1],
+                status=np.zeros(1, np.int64),
+                branch_changed=np.array([self.info[0] == OFF_BRANCH]),
+            )  # fmt: skip
         q0, q, delta, T = np.empty((m, n)), np.empty((m, n)), np.empty((m, 6)), np.empty_like(Tb)
         outcome, iterations = np.empty(m, np.int64), np.empty(m, np.int64)
 
