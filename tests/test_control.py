@@ -326,3 +326,22 @@ def test_jacobi_compiled_agrees_with_numpy(robot3: Controller, monkeypatch) -> N
         one = robot3.solve(T[k], branch=b, method="jacobi")
         np.testing.assert_array_equal(one.q[0], fast.q[k])
         assert one.iterations[0] == fast.iterations[k] and one.status[0] == fast.status[k]
+
+
+def test_realtime_trajectory_passes_its_own_solution_back(robot3: Controller) -> None:
+    """``solve_one(T, solver.q)`` (the README's loop) reads q_near before it writes q."""
+    b = parse_branch("right-up-noflip")
+    lim = np.deg2rad(robot3.robot.limits)
+    q_path = np.linspace(lim[:, 0] * 0.3, lim[:, 1] * 0.3, 40)
+    q_path[:, 4] = np.abs(q_path[:, 4]) + 0.2  # the wrist stays on its branch
+    T = invert_transform(robot3.sensor_from_base) @ forward_kinematics(
+        robot3.signature.chain, q_path
+    )
+    solver = robot3.realtime(b)
+    solver.q[:] = robot3.signature.chain.joint_offsets
+    prev = solver.q.copy()
+    for k in range(len(T)):
+        assert solver.solve_one(T[k], solver.q)
+        ref = robot3.solve(T[k], branch=b, q_near=prev)
+        np.testing.assert_array_equal(solver.q, ref.q[0])
+        prev = solver.q.copy()

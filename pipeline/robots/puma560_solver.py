@@ -545,8 +545,9 @@ class PumaSolver:
         self._X = c(sensor_from_base, float)
         self._limits = tuple(c(a, float) for a in limits)
         self._q_ref = c(chain.joint_offsets, float)  # q^s: the default q_near
-        #: The last solution of :meth:`solve_one` (6,), rad; overwritten by the next call.
-        self.q = np.empty(n)
+        #: The last solution of :meth:`solve_one` (6,), rad; overwritten by the next call
+        #: (before the first: q^s). May be passed back as ``q_near``.
+        self.q = self._q_ref.copy()
         #: The last start (the design inverse) of :meth:`solve_one` (6,), rad.
         self.q0 = np.empty(n)
         #: The last final δ of :meth:`solve_one` (6,): cm and rad.
