@@ -1,11 +1,14 @@
 """`make bench`: every benchmark, printed; never asserted in tests."""
 
-from bench import evaluate, fleet, identify, ik, kinematics, montecarlo, simulate
+from bench import evaluate, fleet, identify, ik, kinematics, montecarlo, peers, simulate
 
 if __name__ == "__main__":
     kinematics.main()
     print()
-    ik.main()
+    robot3 = ik.controller()
+    ik.main(robot3)
+    print()
+    peers.main(robot3)
     print()
     simulate.main()
     print()

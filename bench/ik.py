@@ -36,13 +36,18 @@ def _targets(c: Controller, n: int, branch: puma560.Branch) -> np.ndarray:
     return invert_transform(c.sensor_from_base) @ forward_kinematics(c.signature.chain, q)
 
 
-def main() -> None:
+def controller() -> Controller:
+    """robot3 identified in a temporary copy (no report), as a controller."""
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp) / "robot3"
         d.mkdir()
         shutil.copy(ROOT / "sessions/robot3/recording.mcap", d)
         identify(d, report=False)
-        c = Controller.from_session(d)
+        return Controller.from_session(d)
+
+
+def main(c: Controller | None = None) -> None:
+    c = controller() if c is None else c
     branch = puma560.BRANCHES[0]
     n = 100_000
     T = _targets(c, n, branch)

@@ -606,6 +606,7 @@ def ik(
     q, res = solve_poses(ctl, np.array(pose[:3]), np.array(pose[3:]), [branch], method, q_near)
     units = [j.unit for j in ctl.robot.joints]
     status_name = STATUS_NAMES[int(res.status[0])]
+    changed = res.branch_changed is not None and res.branch_changed[0]
     lim = ctl.robot.limits
     outside = [
         j.name
@@ -624,6 +625,7 @@ def ik(
                 "position_error_cm": float(res.position_error_cm[0]),
                 "orientation_error_deg": float(np.degrees(res.orientation_error_rad[0])),
                 "outside_limits": outside,
+                "branch_changed": bool(changed),
                 "tool": tool_label,
             }
         )
@@ -636,6 +638,9 @@ def ik(
         )
     if outside:
         typer.echo(f"warning: outside joint limits: {', '.join(outside)}", err=True)
+    if changed:
+        typer.echo("warning: no solution on the requested branch; this one is on another",
+                   err=True)  # fmt: skip
     if not res.converged[0]:
         raise typer.Exit(EXIT_NOT_REACHED)
 

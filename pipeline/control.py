@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import ArmsigError
-from pipeline.kinematics.chain import SerialChain, in_frame
+from pipeline.kinematics.chain import SerialChain, in_frame, is_single_robot
 from pipeline.kinematics.ik import (
     ALL_AXES,
     DesignInverse,
@@ -205,6 +205,11 @@ class Controller:
         T_sensor = self.sensor_from_base @ T
         if self.robot.name == "puma560" and branch is None and q_near is None:
             branch = self.default_branch()
+        if not record_history and self._compiled(branch):
+            near, solver = self._starts(T.shape[0], q_near), self.realtime(branch)
+            if method == "nr":
+                return self._into_limits(solver.solve(T, near))
+            return self._into_limits(solver.solve_jacobi(T, near))
         q0 = self.initial_estimate(T_sensor, branch, q_near)
         if method == "nr":
             res = newton_raphson(
@@ -227,6 +232,58 @@ class Controller:
             record_history=record_history,
         )
         return self._into_limits(res)
+
+    def _compiled(self, branch) -> bool:  # branch: Branch | None
+        """Whether Newton-Raphson on ``branch`` runs in :mod:`pipeline.robots.puma560_solver`
+        (start and solve compiled): a Puma signature of six revolute joints, one branch."""
+        c = self.signature.chain
+        return (
+            self.robot.name == "puma560" and branch is not None and is_single_robot(c)
+            and c.n_joints == 6 and not c.prismatic.any()
+        )  # fmt: skip
+
+    @cached_property
+    def _solvers(self) -> dict[Any, Any]:
+        """Pre-bound Puma solvers by branch, made on first use."""
+        return {}
+
+    def realtime(self, branch=None):  # -> PumaSolver
+        """The pre-bound Newton-Raphson solver of a Puma on ``branch`` (None: the
+        signature configuration's), for a real-time loop::
+
+            solver = controller.realtime(branch)
+            for T in poses:                       # (4, 4), design base frame, cm
+                if solver.solve_one(T, q_near=solver.q):   # previous solution: 2π class
+                    send(solver.q)                # rad; the solver's own buffer
+
+        :meth:`~pipeline.robots.puma560_solver.PumaSolver.solve_one` starts from the
+        closed-form design inverse and iterates, both compiled, in one call that
+        allocates nothing (the result is in the solver's buffers); the same
+        solver answers :meth:`solve` (Newton-Raphson, full pose), so one target
+        and a batch give the same bits. Made once per branch and kept.
+        """
+        if branch is None:
+            branch = self.default_branch()
+        if not self._compiled(branch):
+            raise ArmsigError(
+                f"{self.robot.name}: no compiled real-time solver",
+                expected="a Puma 560 signature of six revolute joints and a branch",
+                fix="use Controller.solve",
+            )
+        solver = self._solvers.get(branch)
+        if solver is None:
+            from pipeline.robots import puma560_control as pc
+            from pipeline.robots.puma560_solver import PumaSolver
+
+            solver = PumaSolver(
+                self.signature.chain, self.sensor_from_base, self.flange_to_tool,
+                self.sensor_from_base, branch, self.resolution, self._limits,
+                (pc.PUMA_ELBOW_MARGIN_RAD, pc.PUMA_SHOULDER_MARGIN_CM),
+                design=self._design_model(self.sensor_from_base),
+                jacobi_margins=(pc.JACOBI_ELBOW_MARGIN_RAD, pc.JACOBI_SHOULDER_MARGIN_CM),
+            )  # fmt: skip
+            self._solvers[branch] = solver
+        return solver
 
     def _into_limits(self, res: IKResult) -> IKResult:
         _shift_into(res.q, *self._limits)  # the solver's own array
@@ -345,9 +402,12 @@ def solve_poses(
         "orientation_error_rad": np.zeros(m),
         "status": np.zeros(m, int),
     }
+    changed = np.zeros(m, bool)  # False where a solve had no branch to keep
     for sel, res in results.values():
         for key, arr in fields.items():
             arr[sel] = getattr(res, key)
+        if res.branch_changed is not None:
+            changed[sel] = res.branch_changed
     out = IKResult(
         q=fields["q"],
         converged=fields["converged"],
@@ -356,6 +416,7 @@ def solve_poses(
         orientation_error_rad=fields["orientation_error_rad"],
         status=fields["status"],
         task_axes=axes,
+        branch_changed=changed,
     )
     q_joint = joints_to_boundary(out.q, controller.robot.prismatic)
     return controller.robot.readings_from_joints(q_joint), out
@@ -463,6 +524,7 @@ def solve_arrow(
         position_error_cm=pa.array(res.position_error_cm, pa.float64()),
         orientation_error_deg=pa.array(np.degrees(res.orientation_error_rad), pa.float64()),
         status=pa.array([STATUS_NAMES[int(s)] for s in res.status], pa.string()),
+        branch_changed=pa.array(res.branch_changed, pa.bool_()),
     )
     replaced = [c for c in table.column_names if c in extra]
     table = table.drop_columns(replaced)

@@ -81,16 +81,30 @@ def solved():
 
 def test_compiled_agrees_with_numpy(solved) -> None:
     _, _, _, fast, slow = solved
-    np.testing.assert_array_equal(fast.status, slow.status)
+    # Every target numpy solves, the kernel solves; it may solve more (its
+    # Levenberg-Marquardt steps: test_compiled_damped_steps_solve_more).
+    assert not (slow.converged & ~fast.converged).any()
     # The same iteration; a count may differ where an error sits at a tolerance.
-    assert (fast.iterations == slow.iterations).mean() >= 0.999
-    ok = fast.converged
+    assert (fast.iterations == slow.iterations).mean() >= 0.99
+    ok = slow.converged
     assert ok.mean() >= 0.95
     # Both stop within 1e-7 cm / 1e-10 rad of the target: the solutions differ by
     # that much times the inverse Jacobian (~1e-9 rad), not by a different branch.
     np.testing.assert_allclose(fast.q[ok], slow.q[ok], rtol=0, atol=1e-7)
     assert fast.position_error_cm[ok].max() <= 1e-7
     assert fast.orientation_error_rad[ok].max() <= 1e-10
+
+
+def test_compiled_damped_steps_solve_more(solved) -> None:
+    """Regression (issue 18): targets within model error of the wrist singularity
+    that the numpy safeguard gives up on (status unreachable or singular) are
+    solved by the kernel's Levenberg-Marquardt steps from the same start."""
+    _, _, _, fast, slow = solved
+    gained = np.flatnonzero(fast.converged & ~slow.converged)
+    assert gained.size >= 1
+    assert fast.position_error_cm[gained].max() <= 1e-7
+    assert fast.orientation_error_rad[gained].max() <= 1e-10
+    assert fast.converged.sum() > slow.converged.sum()
 
 
 def test_deferred_targets_are_the_numpy_solution(solved) -> None:

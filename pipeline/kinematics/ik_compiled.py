@@ -1,5 +1,5 @@
-"""Compiled plain Newton-Raphson iteration (5.4) for one robot: the fast path of
-:func:`pipeline.kinematics.ik.newton_raphson`.
+"""Compiled Newton-Raphson iteration (5.4), then Levenberg-Marquardt steps, for one
+robot: the fast path of :func:`pipeline.kinematics.ik.newton_raphson`.
 
 Why compiled: a numpy solve of one target costs ~500 small numpy calls of
 0.5-1 µs each (four pose-and-Jacobian evaluations, three 6×6 solves and the
@@ -7,16 +7,18 @@ per-iteration bookkeeping), ~430 µs measured; the same arithmetic as scalar
 loops takes a few µs. The kernel is compiled once by numba and cached beside
 this module (``__pycache__``).
 
-What it does: for each target independently, the iteration of
-:func:`~pipeline.kinematics.ik.newton_raphson` as long as it is *plain*: the
-Newton step ``J⁻¹ δ`` (LU with partial pivoting), capped per joint, reduces the
-scaled error ``|dp|/L + |rotation|``, and the target stops by the module's
-stopping rule (encoder rule and pose-error tolerances). Whenever the numpy
-iteration would do anything else (a safeguard step, the SVD of a singular
-Jacobian, a stall, the iteration cap), the kernel *defers* the target instead,
-and the numpy iteration solves it from its start. A target's result never
-depends on the other targets in the call (each is solved alone, serially or on
-one of a few threads), so a batch equals a loop of single solves bit for bit.
+What it does: for each target independently, the plain Newton iteration of
+:func:`~pipeline.kinematics.ik.newton_raphson`: the Newton step ``J⁻¹ δ`` (LU
+with partial pivoting), capped per joint, while it reduces the scaled error
+``|dp|/L + |rotation|``, the target stopping by the module's stopping rule
+(encoder rule and pose-error tolerances). Where the Newton step does not
+descend, the Jacobian is singular, the target stalls or the iteration cap is
+reached, the kernel goes on with Levenberg-Marquardt steps from that iterate
+(:func:`_levenberg_marquardt`). Only a target on which those find no step that
+lowers the error is *deferred*: the numpy iteration solves it from its start and
+gives its status. A target's result never depends on the other targets in the
+call (each is solved alone, serially or on one of a few threads), so a batch
+equals a loop of single solves bit for bit.
 
 The pose and Jacobian are those of
 :func:`pipeline.kinematics.jacobian.pose_and_jacobian` and δ that of
@@ -40,7 +42,7 @@ from pipeline.kinematics.transforms import Array
 
 #: Kernel outcome of a target: converged by the stopping rule.
 FAST_CONVERGED = 0
-#: Kernel outcome of a target: left to the numpy iteration.
+#: Kernel outcome of a target: no step lowers its error; left to the numpy iteration.
 FAST_DEFERRED = 1
 
 #: Targets per call above which the kernel runs in one Python thread per core
@@ -50,6 +52,17 @@ FAST_DEFERRED = 1
 #: pool, and its fork-safe layer must not be entered from two threads at once.
 THREADED_MIN_TARGETS = 2000
 
+#: Levenberg-Marquardt: the first damping μ as a fraction of the largest diagonal
+#: entry of the unit-scaled ``JᵀJ``. 1e-3 is Nielsen's choice for a start near
+#: the solution (the Newton iterate it takes over from).
+LM_TAU = 1e-3
+#: Levenberg-Marquardt steps per target after the Newton steps. Measured on
+#: robot3: the targets that need them take 5-60 (see bench/ik.py).
+LM_MAX_ITER = 200
+#: μ (relative to the largest diagonal entry at the LM start) above which no
+#: step lowers the cost: the step is ~1e-16 of the gradient step, round-off.
+LM_MU_MAX = 1e16
+
 
 Kernel = TypeVar("Kernel", bound=Callable[..., Any])
 IntArray = npt.NDArray[np.int64]
@@ -57,22 +70,22 @@ IntArray = npt.NDArray[np.int64]
 Buf = npt.NDArray[Any]
 
 
-def _jit(func: Kernel) -> Kernel:
+def jit(func: Kernel) -> Kernel:
     """Compile ``func`` with numba (no Python objects, GIL released, cached on disk)."""
     return cast(Kernel, numba.njit(cache=True, nogil=True)(func))
 
 
-@_jit
-def _pose_jacobian(
+@jit
+def pose(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
-    q: Buf, T: Buf, J: Buf, F: Buf, G: Buf, axes: Buf,
+    q: Buf, T: Buf, F: Buf, G: Buf, axes: Buf,
 ) -> None:  # fmt: skip
-    """Tool pose ``T`` (4, 4) and geometric Jacobian ``J`` (6, n) at ``q`` (n,).
+    """Tool pose ``T`` (4, 4) at ``q`` (n,), and each joint's axis and origin in
+    ``axes`` (n, 6): ``[z_i, p_i]``.
 
     Eq. (5.1): ``T = base · Π Rot(z, q_i − q0_i) · K̄_i · tool`` (Eq. (5.2); a
-    prismatic joint ``Trans(0, 0, q_i − q0_i)``, Eq. (5.3)). Column ``i`` of J
-    is ``[z_i × (p_tool − p_i); z_i]`` (revolute) or ``[z_i; 0]`` (prismatic).
-    ``F``, ``G`` (3, 4) and ``axes`` (n, 6) are scratch.
+    prismatic joint ``Trans(0, 0, q_i − q0_i)``, Eq. (5.3)). ``F``, ``G`` (3, 4)
+    are scratch.
     """
     n = q.shape[0]
     for r in range(3):
@@ -105,6 +118,19 @@ def _pose_jacobian(
         for c in range(4):
             T[r, c] = a0 * tool[0, c] + a1 * tool[1, c] + a2 * tool[2, c] + a3 * tool[3, c]
     T[3, 0], T[3, 1], T[3, 2], T[3, 3] = 0.0, 0.0, 0.0, 1.0
+
+
+@jit
+def _pose_jacobian(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    q: Buf, T: Buf, J: Buf, F: Buf, G: Buf, axes: Buf,
+) -> None:  # fmt: skip
+    """Tool pose ``T`` (4, 4) (:func:`pose`) and geometric Jacobian ``J`` (6, n) at
+    ``q`` (n,). Column ``i`` of J is ``[z_i × (p_tool − p_i); z_i]`` (revolute) or
+    ``[z_i; 0]`` (prismatic). ``F``, ``G`` (3, 4) and ``axes`` (n, 6) are scratch.
+    """
+    n = q.shape[0]
+    pose(base, links, tool, offsets, prismatic, q, T, F, G, axes)
     for i in range(n):
         zx, zy, zz = axes[i, 0], axes[i, 1], axes[i, 2]
         if prismatic[i]:
@@ -118,7 +144,7 @@ def _pose_jacobian(
             J[3, i], J[4, i], J[5, i] = zx, zy, zz
 
 
-@_jit
+@jit
 def _delta(T_from: Buf, T_to: Buf, out: Buf) -> None:
     """``differential_motion(T_from, T_to)`` into ``out`` (6,): origin difference and
     the axis-angle vector of ``R_to R_fromᵀ``."""
@@ -138,7 +164,7 @@ def _delta(T_from: Buf, T_to: Buf, out: Buf) -> None:
     out[3], out[4], out[5] = sx * scale, sy * scale, sz * scale
 
 
-@_jit
+@jit
 def _lu_solve(A: Buf, b: Buf, x: Buf, M: Buf) -> bool:
     """``x = A⁻¹ b`` for a square ``A`` (n, n) by LU with partial pivoting (``M``: scratch
     (n, n + 1)). False when a pivot is zero or the solution is not finite."""
@@ -171,7 +197,7 @@ def _lu_solve(A: Buf, b: Buf, x: Buf, M: Buf) -> bool:
     return True
 
 
-@_jit
+@jit
 def _errors(d: Buf) -> tuple[float, float]:
     """Radial position error (cm) and rotation angle (rad) of δ (6,)."""
     return (
@@ -180,12 +206,13 @@ def _errors(d: Buf) -> tuple[float, float]:
     )
 
 
-@_jit
-def _solve_one(
+@jit
+def solve_one_target(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     target: Buf, q: Buf, res: Buf, limit: Buf, settings: Buf, delta: Buf,
 ) -> tuple[int, int]:  # fmt: skip
-    """Plain Newton-Raphson on one target; ``q`` (n,) in: the start, out: the solution.
+    """Newton-Raphson on one target, then Levenberg-Marquardt where it stops descending;
+    ``q`` (n,) in: the start, out: the solution.
 
     ``settings`` = (max_iter, length scale L, position tol. cm, orientation tol. rad).
     Returns (outcome, iterations); ``delta`` (6,) receives the final δ.
@@ -202,9 +229,13 @@ def _solve_one(
     _delta(T, target, delta)  # Appendix C.1 steps 1-2 at q⁰
     ep, eo = _errors(delta)
     e = ep * (1.0 / length) + eo
+    accurate_q = ep <= tol_p and eo <= tol_o  # the pose error at q
     for it in range(1, max_iter + 1):
         if not _lu_solve(J, delta, dq, M):  # Eq. (5.4): dq = J⁻¹ δ
-            return FAST_DEFERRED, it
+            return _levenberg_marquardt(
+                base, links, tool, offsets, prismatic, target, q, res, limit, settings,
+                delta, J, it - 1,
+            )  # fmt: skip
         worst = 1.0  # C.1 step 7, the step capped per joint (ik._cap_step)
         for j in range(n):
             worst = max(worst, abs(dq[j]) / limit[j])
@@ -216,8 +247,16 @@ def _solve_one(
         _delta(T, target, d_new)
         ep, eo = _errors(d_new)
         e_new = ep * (1.0 / length) + eo
-        if not e_new < e:  # the numpy iteration's safeguard takes over
-            return FAST_DEFERRED, it
+        if not e_new < e and small and accurate_q:
+            # Round-off: q is within tolerance and its Newton increment below one
+            # count (an exact start); the numpy iteration stops here too (C.1 step 8).
+            return FAST_CONVERGED, it
+        if not e_new < e:  # the Newton step does not descend: damped steps from q
+            _pose_jacobian(base, links, tool, offsets, prismatic, q, T, J, F, G, axes)
+            return _levenberg_marquardt(
+                base, links, tool, offsets, prismatic, target, q, res, limit, settings,
+                delta, J, it - 1,
+            )  # fmt: skip
         accurate = ep <= tol_p and eo <= tol_o
         moved = False
         for j in range(n):
@@ -227,20 +266,143 @@ def _solve_one(
             delta[r] = d_new[r]
         if small and accurate:
             return FAST_CONVERGED, it
+        accurate_q = accurate
         if not accurate and not e_new < STALL_RATIO * e and not moved:
-            return FAST_DEFERRED, it  # a stall: the numpy loop decides
+            return _levenberg_marquardt(
+                base, links, tool, offsets, prismatic, target, q, res, limit, settings,
+                delta, J, it,
+            )  # fmt: skip
         e = e_new
-    return FAST_DEFERRED, max_iter
+    return _levenberg_marquardt(
+        base, links, tool, offsets, prismatic, target, q, res, limit, settings, delta, J, max_iter
+    )
 
 
-@_jit
+@jit
+def _levenberg_marquardt(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    target: Buf, q: Buf, res: Buf, limit: Buf, settings: Buf, delta: Buf, J: Buf, done: int,
+) -> tuple[int, int]:  # fmt: skip
+    """Damped least squares from ``q`` (δ and J given there) after ``done`` Newton steps.
+
+    Minimises ``½|W δ|²``, ``W = diag(1/L, 1/L, 1/L, 1, 1, 1)``, by steps
+    ``h = (JᵀWᵀWJ + μ I)⁻¹ JᵀWᵀW δ`` capped per joint; μ follows Nielsen's rule
+    (Madsen, Nielsen & Tingleff 2004, Algorithm 3.16): start at
+    :data:`LM_TAU` × the largest diagonal entry, shrink after a step that
+    lowers the cost, double (then quadruple, ...) after one that does not.
+    After every step that lowers the cost the undamped (Gauss-Newton, μ = 0)
+    step is tried first, so the iteration is Newton's again, quadratic, as
+    soon as it descends; μ resumes where it was when it does not.
+    The target converges when its pose error is within tolerance and every
+    increment of the accepted step is below one encoder count (Appendix C.1
+    step 8), or when it is within tolerance and no step lowers the cost any
+    more (round-off). Deferred when μ grows beyond :data:`LM_MU_MAX` (a
+    minimum of the residual) or after :data:`LM_MAX_ITER` steps.
+    """
+    n = q.shape[0]
+    length = settings[1]
+    tol_p, tol_o = settings[2], settings[3]
+    w = 1.0 / length
+    T = np.empty((4, 4))
+    J_new = np.empty((6, n))
+    F, G = np.empty((3, 4)), np.empty((3, 4))
+    axes, M = np.empty((n, 6)), np.empty((n, n + 1))
+    A, Am, g = np.empty((n, n)), np.empty((n, n)), np.empty(n)
+    h, q_new, d_new, r = np.empty(n), np.empty(n), np.empty(6), np.empty(6)
+    Js = np.empty((6, n))
+
+    def normal_equations(J: Buf, d: Buf) -> float:  # A = JsᵀJs, g = Jsᵀ r; returns ½|r|²
+        for i in range(6):
+            s = w if i < 3 else 1.0
+            r[i] = s * d[i]
+            for j in range(n):
+                Js[i, j] = s * J[i, j]
+        for a in range(n):
+            acc = 0.0
+            for i in range(6):
+                acc += Js[i, a] * r[i]
+            g[a] = acc
+            for b in range(a, n):
+                acc = 0.0
+                for i in range(6):
+                    acc += Js[i, a] * Js[i, b]
+                A[a, b] = acc
+                A[b, a] = acc
+        return float(0.5 * (r[0] * r[0] + r[1] * r[1] + r[2] * r[2] + r[3] * r[3]
+                            + r[4] * r[4] + r[5] * r[5]))  # fmt: skip
+
+    cost = normal_equations(J, delta)
+    top = 0.0
+    for a in range(n):
+        top = max(top, A[a, a])
+    mu, nu = LM_TAU * top, 2.0
+    gauss_newton = False  # try μ = 0 first (after a step that lowered the cost)
+    ep, eo = _errors(delta)
+    for it in range(done + 1, done + LM_MAX_ITER + 1):
+        damp = 0.0 if gauss_newton else mu
+        for a in range(n):
+            for b in range(n):
+                Am[a, b] = A[a, b]
+            Am[a, a] += damp
+        if not _lu_solve(Am, g, h, M):
+            if gauss_newton:
+                gauss_newton = False
+                continue
+            return FAST_DEFERRED, it
+        worst = 1.0
+        for j in range(n):
+            worst = max(worst, abs(h[j]) / limit[j])
+        small = True
+        for j in range(n):
+            h[j] = h[j] / worst if worst > 1.0 else h[j]
+            q_new[j] = q[j] + h[j]
+            # the encoder rule tests an undamped increment only: a short damped
+            # step says nothing about being near the solution
+            small = small and damp == 0.0 and abs(h[j]) < res[j]
+        _pose_jacobian(base, links, tool, offsets, prismatic, q_new, T, J_new, F, G, axes)
+        _delta(T, target, d_new)
+        c_new = 0.5 * (
+            (w * d_new[0]) ** 2 + (w * d_new[1]) ** 2 + (w * d_new[2]) ** 2
+            + d_new[3] ** 2 + d_new[4] ** 2 + d_new[5] ** 2
+        )  # fmt: skip
+        if c_new < cost:
+            predicted = 0.0  # ½ hᵀ(μ h + g), the model's decrease (> 0)
+            for j in range(n):
+                predicted += 0.5 * h[j] * (damp * h[j] + g[j])
+            rho = (cost - c_new) / predicted if predicted > 0.0 else 1.0
+            for j in range(n):
+                q[j] = q_new[j]
+            for i in range(6):
+                delta[i] = d_new[i]
+            ep, eo = _errors(delta)
+            if small and ep <= tol_p and eo <= tol_o:
+                return FAST_CONVERGED, it
+            cost = normal_equations(J_new, delta)
+            if not gauss_newton:
+                mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                nu = 2.0
+            gauss_newton = True
+        elif gauss_newton:  # the undamped step did not descend: damp from here on
+            gauss_newton = False
+        else:
+            # within (finite) tolerances, at round-off
+            if ep <= tol_p and eo <= tol_o and tol_p < np.inf and tol_o < np.inf:
+                return FAST_CONVERGED, it  # the rejected trial counts, as in numpy
+            mu *= nu
+            nu *= 2.0
+            if not mu <= LM_MU_MAX * top:
+                return FAST_DEFERRED, it
+    return FAST_DEFERRED, done + LM_MAX_ITER
+
+
+@jit
 def _solve_serial(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     targets: Buf, q: Buf, res: Buf, limit: Buf, settings: Buf,
     outcome: Buf, iterations: Buf, delta: Buf,
 ) -> None:  # fmt: skip
     for k in range(targets.shape[0]):
-        outcome[k], iterations[k] = _solve_one(
+        outcome[k], iterations[k] = solve_one_target(
             base, links, tool, offsets, prismatic, targets[k], q[k], res, limit, settings, delta[k]
         )
 
@@ -309,12 +471,20 @@ def plain_newton(
         _solve_serial(*model, T[rows], q[rows], res_c, limit_c, settings,
                       outcome[rows], iterations[rows], delta[rows])  # fmt: skip
 
+    run_in_shares(run, m)
+    return q, outcome, iterations, delta
+
+
+def run_in_shares(run: Callable[[slice], None], m: int) -> None:
+    """``run(rows)`` over ``m`` targets: one call, or for a batch of at least
+    :data:`THREADED_MIN_TARGETS` one contiguous share per core on threads (the
+    kernels release the GIL). Each target is still solved alone, so the split
+    does not change any result."""
     # The cores are counted only for a batch that may use them (not per single target).
     workers = len(os.sched_getaffinity(0)) if m >= THREADED_MIN_TARGETS else 1
     if workers < 2:
         run(slice(0, m))
-    else:  # one contiguous share per core; each target is still solved alone
+    else:
         bounds = np.linspace(0, m, workers + 1).astype(int)
         with ThreadPoolExecutor(workers) as pool:
             list(pool.map(run, [slice(a, b) for a, b in zip(bounds, bounds[1:], strict=False)]))
-    return q, outcome, iterations, delta

@@ -1,0 +1,696 @@
+"""Compiled Puma 560 control: the design-model start (Appendix B.2) and the
+Newton-Raphson solve (5.4) of the signature in one kernel per target.
+
+:class:`PumaSolver` is the pre-bound solver behind
+:meth:`pipeline.control.Controller.solve` (Newton-Raphson, full pose) and its
+real-time API :meth:`~pipeline.control.Controller.realtime`. Per target the
+kernel computes, without Python objects:
+
+1. the flange pose in D-H frame 0, ``X⁻¹_0 · X · T_base · Y⁻¹`` (``X``: design
+   base to sensor, ``X_0``: the design chain's base in the sensor frame, ``Y``:
+   flange to signature tool);
+2. the closed-form design inverse on the requested branch, pulled onto the
+   design workspace where the pose lies outside it
+   (:func:`pipeline.robots.puma560_control._puma_clamp`'s rule and margins),
+   with θ4 kept from ``q_near`` at a wrist singularity and every joint in the
+   2π class nearest ``q_near`` (:func:`~pipeline.robots.puma560_control.puma_design_inverse`);
+3. the Newton-Raphson / Levenberg-Marquardt iteration of
+   :mod:`pipeline.kinematics.ik_compiled` from that start.
+
+The start agrees with the numpy design inverse to round-off (~1e-15 rad; tested),
+not bit for bit, so every Puma solve of a controller goes through this kernel:
+one target and a batch then give the same bits. Targets the kernel defers
+(:data:`~pipeline.kinematics.ik_compiled.FAST_DEFERRED`) are finished by the
+numpy iteration from the kernel's start (:func:`pipeline.kinematics.ik.finish_deferred`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from pipeline.kinematics import ik
+from pipeline.kinematics.chain import SerialChain, forward_kinematics
+from pipeline.kinematics.ik_compiled import (
+    FAST_CONVERGED,
+    FAST_DEFERRED,
+    Buf,
+    IntArray,
+    _delta,
+    _errors,
+    jit,
+    pose,
+    run_in_shares,
+    solve_one_target,
+)
+from pipeline.kinematics.ik_stall import STALL_RATIO
+from pipeline.kinematics.transforms import Array, differential_motion, invert_transform
+from pipeline.robots import puma560
+from pipeline.robots.puma560 import Branch
+
+#: Kernel outcome: the design inverse has no start (the clamped pose is still out
+#: of reach; not met with finite poses, kept so no NaN reaches the iteration).
+NO_START = 2
+
+_D1, _D3, _, _D4, _, _D6 = puma560.DESIGN_D_CM
+_A2, _A3 = puma560.DESIGN_A_CM[1], puma560.DESIGN_A_CM[2]
+_RHO2 = _D4**2 + _A3**2
+_PHI = math.atan2(_A3, _D4)
+_TWO_PI = 2.0 * math.pi
+_SINGULAR = puma560.WRIST_SINGULAR_TOL
+
+
+@jit
+def _wrap(t: float) -> float:
+    """:func:`pipeline.kinematics.transforms.wrap_angle` of one angle: (-π, π]."""
+    return math.pi - np.mod(math.pi - t, _TWO_PI)
+
+
+@jit
+def _design_start(
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, target: Buf, q_near: Buf, q: Buf, Tw: Buf
+) -> bool:
+    """The design inverse of one target into ``q`` (6,) (module docstring, steps 1-2).
+
+    ``pre``, ``post`` (4, 4): world (sensor) to D-H frame 0 and tool to flange;
+    ``branch`` (3,): shoulder, elbow, wrist flags (±1); ``margins`` (2,): the clamp's
+    elbow margin (rad) and shoulder margin (cm); ``Tw`` (4, 4): scratch.
+    False when even the clamped pose has no solution.
+    """
+    for r in range(4):  # Tw = (pre · target) · post, as puma_design_inverse
+        for c in range(4):
+            Tw[r, c] = (pre[r, 0] * target[0, c] + pre[r, 1] * target[1, c]
+                        + pre[r, 2] * target[2, c] + pre[r, 3] * target[3, c])  # fmt: skip
+    for r in range(4):
+        a0, a1, a2, a3 = Tw[r, 0], Tw[r, 1], Tw[r, 2], Tw[r, 3]
+        for c in range(4):
+            Tw[r, c] = a0 * post[0, c] + a1 * post[1, c] + a2 * post[2, c] + a3 * post[3, c]
+    wx, wy, wz = (Tw[0, 3] - _D6 * Tw[0, 2], Tw[1, 3] - _D6 * Tw[1, 2],
+                  Tw[2, 3] - _D6 * Tw[2, 2])  # fmt: skip  # the wrist centre
+    px, py, pz = wx, wy, wz - _D1
+    rr = px**2 + py**2 - _D3**2
+    root_rr = math.sqrt(max(rr, 0.0))
+    Kc = (root_rr**2 + pz**2 - (_D4**2 + _A3**2 + _A2**2)) / (2.0 * _A2)  # (B.22)
+    disc = (_D4**2 + _A3**2) - Kc**2
+    if not (rr >= 0.0 and disc >= 0.0):  # _puma_clamp: onto the design workspace
+        r_c = math.sqrt(max(px**2 + py**2 - _D3**2, margins[1] ** 2))
+        D2 = r_c**2 + pz**2
+        K_lim = math.sqrt(_RHO2) * math.cos(margins[0])
+        K = min(max((D2 - _RHO2 - _A2**2) / (2.0 * _A2), -K_lim), K_lim)
+        scale = math.sqrt((_RHO2 + _A2**2 + 2.0 * _A2 * K) / D2)
+        r_new, pz_new = r_c * scale, pz * scale
+        rad = math.hypot(px, py)
+        ux, uy = (px / rad, py / rad) if rad > 0.0 else (1.0, 0.0)
+        R_new = math.sqrt(r_new**2 + _D3**2)
+        Tw[0, 3] += ux * R_new - wx
+        Tw[1, 3] += uy * R_new - wy
+        Tw[2, 3] += pz_new + _D1 - wz
+        wx, wy, wz = (Tw[0, 3] - _D6 * Tw[0, 2], Tw[1, 3] - _D6 * Tw[1, 2],
+                      Tw[2, 3] - _D6 * Tw[2, 2])  # fmt: skip
+        px, py, pz = wx, wy, wz - _D1
+        rr = px**2 + py**2 - _D3**2
+        root_rr = math.sqrt(max(rr, 0.0))
+        Kc = (root_rr**2 + pz**2 - (_D4**2 + _A3**2 + _A2**2)) / (2.0 * _A2)
+        disc = (_D4**2 + _A3**2) - Kc**2
+        if not (rr >= 0.0 and disc >= 0.0):
+            return False
+    # puma560.inverse_kinematics on one branch
+    reach = branch[0] * root_rr
+    t1 = math.atan2(py, px) - math.atan2(_D3, reach)
+    t3 = math.atan2(Kc, branch[1] * math.sqrt(max(disc, 0.0))) - _PHI
+    S3, C3 = math.sin(t3), math.cos(t3)
+    u = _A2 + _D4 * S3 + _A3 * C3
+    v = _D4 * C3 - _A3 * S3
+    t2 = math.atan2(v * reach - u * pz, u * reach + v * pz)
+    c1, s1, c23, s23 = math.cos(t1), math.sin(t1), math.cos(t2 + t3), math.sin(t2 + t3)
+    R36 = np.empty((3, 3))  # _wrist_rotation: R03ᵀ R06
+    for c in range(3):
+        a = c1 * Tw[0, c] + s1 * Tw[1, c]
+        R36[0, c] = c23 * a - s23 * Tw[2, c]
+        R36[1, c] = c1 * Tw[1, c] - s1 * Tw[0, c]
+        R36[2, c] = s23 * a + c23 * Tw[2, c]
+    w = branch[2]
+    s5 = math.hypot(R36[0, 2], R36[1, 2])
+    q[0], q[1], q[2] = t1, t2, t3
+    q[4] = math.atan2(s5 if w > 0 else -s5, R36[2, 2])
+    q[3] = math.atan2(w * R36[1, 2], w * R36[0, 2])
+    q[5] = math.atan2(w * R36[2, 1], -(w * R36[2, 0]))
+    if s5 < _SINGULAR:
+        q[3] = 0.0
+        if R36[2, 2] > 0:
+            q[5] = math.atan2(R36[1, 0], R36[0, 0])
+        else:
+            q[5] = math.atan2(R36[1, 0], -R36[0, 0])
+    for j in range(6):
+        q[j] = _wrap(q[j])
+    # puma_design_inverse: θ4 from q_near at a wrist singularity, 2π class of q_near
+    if abs(math.sin(q[4])) < _SINGULAR:
+        t4 = q_near[3]
+        if math.cos(q[4]) > 0:
+            q[5] = q[5] + q[3] - t4
+        else:
+            q[5] = q[5] - q[3] + t4
+        q[3] = t4
+    for j in range(6):
+        q[j] = q_near[j] + _wrap(q[j] - q_near[j])
+    return True
+
+
+@jit
+def _into_limits(q: Buf, lower: Buf, upper: Buf, turn: Buf) -> None:
+    """``pipeline.control._shift_into`` of one configuration (6,), in place."""
+    for j in range(q.shape[0]):
+        if q[j] < lower[j] or q[j] > upper[j]:
+            up, down = q[j] + turn[j], q[j] - turn[j]
+            if lower[j] <= up <= upper[j]:
+                q[j] = up
+            elif lower[j] <= down <= upper[j]:
+                q[j] = down
+
+
+#: Kernel outcome: converged, but on another branch than requested (flagged:
+#: :attr:`pipeline.kinematics.ik.IKResult.branch_changed`).
+OFF_BRANCH = 3
+
+#: Restarts (fallback step 3, see :class:`PumaSolver`): θ4 turned by each angle and
+#: θ6 by its negative, which keeps θ4 + θ6 and so the pose at the wrist
+#: singularity. Near it (θ5 within ~2°) the design start fixes θ4 + θ6 but not
+#: θ4 alone: with 0.03° of model error the signature's θ4 can lie 1-2 rad from
+#: the design's, behind a local minimum of the residual at θ5 ≈ 0. Measured on
+#: robot3 (100,000 targets of one branch): all 73 targets the first solve left
+#: unsolved converge from one of the first four, in 4-15 iterations.
+WRIST_TURNS = np.array([1.0, -1.0, 2.0, -2.0, 3.0, -3.0, 4.0]) * (np.pi / 4.0)
+
+
+@jit
+def _to_sensor(X: Buf, T_base: Buf, target: Buf) -> None:
+    """``target = X · T_base`` (4, 4): a pose in the design base frame in the sensor frame."""
+    for r in range(4):
+        for c in range(4):
+            target[r, c] = (X[r, 0] * T_base[0, c] + X[r, 1] * T_base[1, c]
+                            + X[r, 2] * T_base[2, c] + X[r, 3] * T_base[3, c])  # fmt: skip
+
+
+@jit
+def _on_branch(q: Buf, branch: Buf) -> bool:
+    """:func:`pipeline.robots.puma560.branch_of` of ``q`` (6,) equals ``branch`` (3,)."""
+    s23, c23 = math.sin(q[1] + q[2]), math.cos(q[1] + q[2])
+    reach = _D4 * s23 + _A3 * c23 + _A2 * math.cos(q[1])
+    elbow = math.cos(q[2] + _PHI)
+    wrist = math.sin(q[4])
+    return (
+        (1.0 if reach >= 0 else -1.0) == branch[0]
+        and (1.0 if elbow >= 0 else -1.0) == branch[1]
+        and (1.0 if wrist >= 0 else -1.0) == branch[2]
+    )
+
+
+@jit
+def _solve_target(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
+    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf, Tw: Buf,
+    spare: Buf,
+) -> tuple[int, int]:  # fmt: skip
+    """One target ``T_base`` (4, 4) in the design base frame: ``target = X · T_base``
+    (sensor frame), the start ``q0`` from ``q_near`` and the solution ``q`` (6,),
+    by the fallback order of :class:`PumaSolver` (steps 1-4). Returns the outcome
+    (converged, :data:`OFF_BRANCH`, deferred or :data:`NO_START`) and the
+    iterations of all solves; ``Tw`` (4, 4), ``spare`` (2, 6): scratch."""
+    _to_sensor(X, T_base, target)
+    if not _design_start(pre, post, branch, margins, target, q_near, q0, Tw):
+        return NO_START, 0
+    found = False  # a converged solution on another branch, kept in spare
+    total = 0
+    for attempt in range(WRIST_TURNS.shape[0] + 1):
+        for j in range(q.shape[0]):
+            q[j] = q0[j]
+        if attempt:
+            q[3] += WRIST_TURNS[attempt - 1]
+            q[5] -= WRIST_TURNS[attempt - 1]
+        outcome, it = solve_one_target(
+            base, links, tool, offsets, prismatic, target, q, res, limit, settings, delta
+        )
+        total += it
+        if outcome == FAST_CONVERGED:
+            if _on_branch(q, branch):
+                return FAST_CONVERGED, total
+            if not found:
+                found = True
+                for j in range(6):
+                    spare[0, j], spare[1, j] = q[j], delta[j]
+    if found:
+        for j in range(6):
+            q[j], delta[j] = spare[0, j], spare[1, j]
+        return OFF_BRANCH, total
+    return FAST_DEFERRED, total
+
+
+@jit
+def _solve_targets(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
+    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf,
+    outcome: Buf, iterations: Buf,
+) -> None:  # fmt: skip
+    """:func:`_solve_target` for each of ``T_base`` (m, 4, 4); outputs by row."""
+    Tw, spare = np.empty((4, 4)), np.empty((2, 6))
+    for k in range(T_base.shape[0]):
+        outcome[k], iterations[k] = _solve_target(
+            base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
+            settings, X, T_base[k], q_near[k], q0[k], q[k], delta[k], target[k], Tw, spare,
+        )  # fmt: skip
+
+
+@jit
+def _solve_realtime(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
+    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf, Tw: Buf,
+    spare: Buf, info: Buf, lower: Buf, upper: Buf, turn: Buf,
+) -> None:  # fmt: skip
+    """:func:`_solve_target` of one target, then the joint-limit shift of a converged
+    solution; ``info`` (2,) receives the outcome and the iteration count."""
+    info[0], info[1] = _solve_target(
+        base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
+        settings, X, T_base, q_near, q0, q, delta, target, Tw, spare,
+    )  # fmt: skip
+    if info[0] == FAST_CONVERGED or info[0] == OFF_BRANCH:
+        _into_limits(q, lower, upper, turn)
+
+
+#: Jacobi kernel outcomes besides converged: stalled (no progress in
+#: :data:`~pipeline.kinematics.ik.JACOBI_STALL_PATIENCE` iterations), no design
+#: inverse (both ``STATUS_UNREACHABLE``), and the iteration cap.
+J_STALLED, J_NO_INVERSE, J_MAX_ITER = 4, 5, 6
+_JACOBI_SLOW = ik.JACOBI_SLOW_RATIO
+_JACOBI_PATIENCE = ik.JACOBI_STALL_PATIENCE
+_ANDERSON_RCOND = ik.ANDERSON_RCOND
+_STALL = STALL_RATIO
+
+
+@jit
+def _anderson(Qh: Buf, Gh: Buf, count: int, out: Buf) -> None:
+    """:func:`pipeline.kinematics.ik._anderson` of one target: ``Qh``, ``Gh`` (h, n)
+    oldest first, the last ``count`` rows valid; the accelerated iterate into ``out``."""
+    h, n = Qh.shape
+    dF, dG = np.zeros((n, h - 1)), np.zeros((h - 1, n))
+    first = h - min(count, h)
+    for j in range(first, h - 1):
+        for i in range(n):
+            dF[i, j] = (Gh[j + 1, i] - Qh[j + 1, i]) - (Gh[j, i] - Qh[j, i])
+            dG[j, i] = Gh[j + 1, i] - Gh[j, i]
+    f = np.empty(n)
+    for i in range(n):
+        f[i] = Gh[h - 1, i] - Qh[h - 1, i]
+    gamma = np.linalg.pinv(dF, _ANDERSON_RCOND) @ f
+    for i in range(n):
+        acc = Gh[h - 1, i]
+        for j in range(h - 1):
+            acc -= dG[j, i] * gamma[j]
+        out[i] = acc
+
+
+@jit
+def _jacobi_map(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf,
+    target: Buf, q: Buf, Ts: Buf, q_next: Buf, Tw: Buf,
+) -> bool:  # fmt: skip
+    """(5.8): ``q_next = F_d⁻¹[F_d(q) · F_s(q)⁻¹ · T*]`` (``Ts``: F_s(q)); False when
+    the design inverse has none."""
+    n = q.shape[0]
+    Td = np.empty((4, 4))
+    F, G, axes = np.empty((3, 4)), np.empty((3, 4)), np.empty((n, 6))
+    Delta, Tk = np.empty((4, 4)), np.empty((4, 4))
+    pose(d_base, d_links, d_tool, d_offsets, prismatic, q, Td, F, G, axes)
+    for r in range(3):  # Eq. (5.9): Δ = F_s(q)⁻¹ T*, C.2 step 4
+        for c in range(4):
+            acc = Ts[0, r] * target[0, c] + Ts[1, r] * target[1, c] + Ts[2, r] * target[2, c]
+            if c == 3:
+                acc -= Ts[0, r] * Ts[0, 3] + Ts[1, r] * Ts[1, 3] + Ts[2, r] * Ts[2, 3]
+            Delta[r, c] = acc
+    Delta[3, 0], Delta[3, 1], Delta[3, 2], Delta[3, 3] = 0.0, 0.0, 0.0, 1.0
+    for r in range(4):  # Eq. (5.10): T^k = F_d(q) Δ, C.2 step 5
+        for c in range(4):
+            Tk[r, c] = (Td[r, 0] * Delta[0, c] + Td[r, 1] * Delta[1, c]
+                        + Td[r, 2] * Delta[2, c] + Td[r, 3] * Delta[3, c])  # fmt: skip
+    return _design_start(pre, post, branch, margins, Tk, q, q_next, Tw)  # C.2 step 6
+
+
+@jit
+def _error_at(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    target: Buf, q: Buf, Ts: Buf, d: Buf, length: float,
+) -> tuple[float, float, float]:  # fmt: skip
+    """F_s(q) into ``Ts``, its δ into ``d``; the position and rotation errors and the
+    scaled error."""
+    n = q.shape[0]
+    F, G, axes = np.empty((3, 4)), np.empty((3, 4)), np.empty((n, 6))
+    pose(base, links, tool, offsets, prismatic, q, Ts, F, G, axes)
+    _delta(Ts, target, d)
+    ep, eo = _errors(d)
+    return ep, eo, ep * (1.0 / length) + eo
+
+
+@jit
+def _jacobi_one(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, settings: Buf,
+    target: Buf, q: Buf, delta: Buf, Tw: Buf,
+) -> tuple[int, int]:  # fmt: skip
+    """:func:`pipeline.kinematics.ik.jacobi_iterative` (``accelerate=True``) of one
+    target from ``q`` (6,) (in: the start, out: the last iterate): (5.8) with the
+    design inverse on ``branch`` nearest the iterate (``margins``: the Jacobi
+    clamp margins); where an iterate's error falls by less than half, Anderson
+    acceleration of the same map whenever it gives the smaller error; the
+    encoder rule and the pose tolerances to stop; no progress in
+    :data:`~pipeline.kinematics.ik.JACOBI_STALL_PATIENCE` iterations of
+    accelerated steps, a stall. Returns the outcome and the iteration count."""
+    n = q.shape[0]
+    max_iter, length = int(settings[0]), settings[1]
+    tol_p, tol_o = settings[2], settings[3]
+    h = n + 1
+    Qh, Gh = np.zeros((h, n)), np.zeros((h, n))
+    Ts, T_plain, T_acc = np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4))
+    q_next, q_acc, d_new, d_acc = np.empty(n), np.empty(n), np.empty(6), np.empty(6)
+    ep, eo, e = _error_at(base, links, tool, offsets, prismatic, target, q, Ts, delta, length)
+    count, slow, idle = 0, False, 0
+    for it in range(1, max_iter + 1):
+        found = _jacobi_map(
+            base, links, tool, offsets, prismatic, d_base, d_links, d_tool, d_offsets,
+            pre, post, branch, margins, target, q, Ts, q_next, Tw,
+        )  # fmt: skip
+        if not found:
+            return J_NO_INVERSE, it - 1
+        ep, eo, e_plain = _error_at(
+            base, links, tool, offsets, prismatic, target, q_next, T_plain, d_new, length
+        )
+        taken = T_plain
+        for k in range(h - 1):  # the history, oldest first
+            for j in range(n):
+                Qh[k, j], Gh[k, j] = Qh[k + 1, j], Gh[k + 1, j]
+        for j in range(n):
+            Qh[h - 1, j], Gh[h - 1, j] = q[j], q_next[j]
+        count += 1
+        e_new = e_plain
+        was_slow = slow
+        if was_slow:
+            _anderson(Qh, Gh, count, q_acc)
+            ap, ao, e_acc = _error_at(
+                base, links, tool, offsets, prismatic, target, q_acc, T_acc, d_acc, length
+            )
+            if e_acc < e_new:  # never worse than (5.8)
+                for j in range(n):
+                    q_next[j] = q_acc[j]
+                for r in range(6):
+                    d_new[r] = d_acc[r]
+                ep, eo, e_new = ap, ao, e_acc
+                taken = T_acc
+        slow = slow or e_plain > _JACOBI_SLOW * e
+        small = True  # Appendix C.1 step 8 on the step taken
+        for j in range(n):
+            small = small and abs(q_next[j] - q[j]) < res[j]
+        accurate = ep <= tol_p and eo <= tol_o
+        stuck = was_slow and small and not (accurate or e_new < _STALL * e)
+        idle = idle + 1 if stuck else 0
+        for j in range(n):
+            q[j] = q_next[j]
+        for r in range(6):
+            delta[r] = d_new[r]
+        for r in range(4):
+            for c in range(4):
+                Ts[r, c] = taken[r, c]  # F_s at the new iterate
+        e = e_new
+        if small and accurate:
+            return FAST_CONVERGED, it
+        if idle >= _JACOBI_PATIENCE:
+            return J_STALLED, it
+    return J_MAX_ITER, max_iter
+
+
+@jit
+def _jacobi_targets(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
+    d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf, j_margins: Buf,
+    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf,
+    outcome: Buf, iterations: Buf,
+) -> None:  # fmt: skip
+    """Start (``margins``) and Jacobi iteration (``j_margins``) of each of ``T_base``
+    (m, 4, 4) (design base frame); outputs by row as :func:`_solve_targets`."""
+    Tw = np.empty((4, 4))
+    for k in range(T_base.shape[0]):
+        _to_sensor(X, T_base[k], target[k])
+        if not _design_start(pre, post, branch, margins, target[k], q_near[k], q0[k], Tw):
+            outcome[k], iterations[k] = NO_START, 0
+            continue
+        for j in range(q.shape[1]):
+            q[k, j] = q0[k, j]
+        outcome[k], iterations[k] = _jacobi_one(
+            base, links, tool, offsets, prismatic, d_base, d_links, d_tool, d_offsets,
+            pre, post, branch, j_margins, res, settings, target[k], q[k], delta[k], Tw,
+        )  # fmt: skip
+
+
+class PumaSolver:
+    """Newton-Raphson from the Puma design start, bound to one signature and branch.
+
+    Made by :meth:`pipeline.control.Controller.realtime` (or from the parts
+    here). Every array the kernel reads is made once, contiguous, at
+    construction; :meth:`solve_one` writes into buffers owned by the solver.
+
+    Fallback order, per target, each step only where the previous one left the
+    target unsolved or off the requested branch:
+
+    1. Newton-Raphson (5.4) from the design start, Levenberg-Marquardt steps
+       where a Newton step does not descend (:mod:`pipeline.kinematics.ik_compiled`);
+    2. (branch-preserving) the same from the start with θ4 and θ6 turned
+       against each other (:data:`WRIST_TURNS`), the first solution on the branch;
+    3. (any branch, flagged) the first solution of 1-2 on another branch,
+       with :attr:`~pipeline.kinematics.ik.IKResult.branch_changed` set;
+    4. the numpy iteration of :func:`pipeline.kinematics.ik.newton_raphson`
+       from the design start, which gives the status of a target it cannot
+       solve either (its solution's branch flagged as in 3).
+
+    Parameters
+    ----------
+    chain : SerialChain
+        The signature chain (unbatched, six joints), sensor frame, cm.
+    design_base, flange_to_tool : ndarray, shape (4, 4)
+        The design chain's base in the sensor frame (``X · base``) and the flange
+        to the signature tool ``Y``.
+    sensor_from_base : ndarray, shape (4, 4)
+        ``X``: design base frame to sensor frame (for :meth:`solve_one`).
+    branch : Branch
+    resolution : ndarray, shape (6,)
+        Encoder resolution, rad.
+    limits : tuple of ndarray
+        Lower and upper joint limits and the turn (2π) per joint, rad
+        (``pipeline.control._limit_arrays``).
+    margins : tuple of float
+        The design inverse's clamp margins (elbow rad, shoulder cm).
+    design : SerialChain, optional
+        The design model in the sensor frame with the signature's tool, for
+        :meth:`solve_jacobi`.
+    jacobi_margins : tuple of float
+        The clamp margins of the design inverse inside the Jacobi iteration.
+    """
+
+    def __init__(
+        self,
+        chain: SerialChain,
+        design_base: Array,
+        flange_to_tool: Array,
+        sensor_from_base: Array,
+        branch: Branch,
+        resolution: Array,
+        limits: tuple[Array, Array, Array],
+        margins: tuple[float, float],
+        design: SerialChain | None = None,
+        jacobi_margins: tuple[float, float] = (0.0, 0.0),
+        max_iter: int = 50,
+        position_tol_cm: float = 1e-7,
+        orientation_tol_rad: float = 1e-10,
+        max_step: float = 0.5,
+    ) -> None:
+        n = chain.n_joints
+        if not ik._compilable(chain) or chain.prismatic.any():
+            raise ValueError("PumaSolver needs an unbatched six-revolute-joint chain")
+        c = np.ascontiguousarray
+        self.chain = chain
+        self.branch = branch
+        self.resolution = c(np.broadcast_to(resolution, (n,)), float)
+        self.settings = (max_iter, position_tol_cm, orientation_tol_rad, max_step)
+        self._model = (
+            c(chain.base, float), c(chain.links, float), c(chain.tool, float),
+            c(chain.joint_offsets, float), c(chain.prismatic, np.bool_),
+            c(invert_transform(design_base)), c(invert_transform(flange_to_tool)),
+            np.array([branch.shoulder, branch.elbow, branch.wrist], float),
+            np.array(margins, float), self.resolution,
+            np.full(n, max_step), np.array(
+                [max_iter, chain.length_scale, position_tol_cm, orientation_tol_rad], float
+            ),
+        )  # fmt: skip
+        self.design = design
+        self._design = None if design is None else (
+            c(design.base, float), c(design.links, float), c(design.tool, float),
+            c(design.joint_offsets, float), np.array(jacobi_margins, float),
+        )  # fmt: skip
+        self._frames = (design_base, flange_to_tool)  # for the numpy design inverse
+        self._X = c(sensor_from_base, float)
+        self._limits = tuple(c(a, float) for a in limits)
+        self._q_ref = c(chain.joint_offsets, float)  # q^s: the default q_near
+        #: The last solution of :meth:`solve_one` (6,), rad; overwritten by the next call
+        #: (before the first: q^s). May be passed back as ``q_near``.
+        self.q = self._q_ref.copy()
+        #: The last start (the design inverse) of :meth:`solve_one` (6,), rad.
+        self.q0 = np.empty(n)
+        #: The last final δ of :meth:`solve_one` (6,): cm and rad.
+        self.delta = np.empty(6)
+        #: The last kernel outcome and iteration count of :meth:`solve_one`.
+        self.info = np.zeros(2, np.int64)
+        #: Whether the last solution of :meth:`solve_one` lies on another branch (step 3).
+        self.branch_changed = False
+        self._target, self._Tw, self._spare = np.empty((4, 4)), np.empty((4, 4)), np.empty((2, 6))
+
+    def solve_one(self, T_base: Array, q_near: Array | None = None) -> bool:
+        """Solve one pose (4, 4) given in the design base frame; True when converged.
+
+        The real-time call: no array is allocated when the kernel converges
+        (all but ~1e-3 of random reachable targets); :attr:`q` then holds the
+        joints (rad, shifted into the limits by ±2π where that helps, as
+        :meth:`pipeline.control.Controller.solve`) and :attr:`info` the
+        iteration count. ``q_near`` (6,), rad (contiguous float): the 2π class
+        and, at a wrist singularity, θ4 of the start; default q^s (pass the
+        previous solution in a trajectory). A target the kernel defers is
+        finished by the numpy iteration (allocates; ~1 ms), with the same
+        result as ``Controller.solve``.
+        """
+        near = self._q_ref if q_near is None else q_near
+        _solve_realtime(*self._model, self._X, T_base, near, self.q0, self.q, self.delta,
+                        self._target, self._Tw, self._spare, self.info, *self._limits)  # fmt: skip
+        if self.info[0] == FAST_CONVERGED or self.info[0] == OFF_BRANCH:
+            self.branch_changed = self.info[0] == OFF_BRANCH
+            return True
+        res = self.finish(self._target[None], near[None], self.q0[None], self.q[None],
+                          self.info[:1].copy(), self.info[1:].copy(), self.delta[None])  # fmt: skip
+        _shift(res.q, self._limits)
+        self.q[:] = res.q[0]
+        self.info[1] = res.iterations[0]
+        self.branch_changed = bool(res.branch_changed is not None and res.branch_changed[0])
+        return bool(res.converged[0])
+
+    def solve(self, T_base: Array, q_near: Array) -> ik.IKResult:
+        """Solve targets (m, 4, 4) given in the design base frame from ``q_near``
+        (m, 6), rad.
+
+        Batched: one kernel call (threads for large batches:
+        :func:`~pipeline.kinematics.ik_compiled.run_in_shares`); every target
+        is solved alone by the arithmetic of :meth:`solve_one`, so a batch
+        equals a loop bit for bit. Joints are not shifted into the limits
+        (the controller does that, as :meth:`solve_one` does).
+        """
+        Tb = np.ascontiguousarray(T_base, float)
+        m, n = len(Tb), self.chain.n_joints
+        near = np.ascontiguousarray(np.broadcast_to(q_near, (m, n)), float)
+        solved = m == 1 and self.solve_one(Tb[0], near[0])
+        if solved and self.info[0] in (FAST_CONVERGED, OFF_BRANCH):
+            # One target the kernel solved: the real-time call's buffers (its q is
+            # already shifted into the limits, which the controller's shift keeps).
+            return ik.IKResult(
+                q=self.q[None].copy(), converged=np.ones(1, bool),
+                iterations=self.info[1:].copy(), position_error_cm=(e := ik._errors(
+                    self.delta[None]))[:, 0], orientation_error_rad=e[:, 1],
+                status=np.zeros(1, np.int64),
+                branch_changed=np.array([self.info[0] == OFF_BRANCH]),
+            )  # fmt: skip
+        q0, q, delta, T = np.empty((m, n)), np.empty((m, n)), np.empty((m, 6)), np.empty_like(Tb)
+        outcome, iterations = np.empty(m, np.int64), np.empty(m, np.int64)
+
+        def run(rows: slice) -> None:
+            _solve_targets(*self._model, self._X, Tb[rows], near[rows], q0[rows], q[rows],
+                           delta[rows], T[rows], outcome[rows], iterations[rows])  # fmt: skip
+
+        run_in_shares(run, m)
+        return self.finish(T, near, q0, q, outcome, iterations, delta)
+
+    def solve_jacobi(self, T_base: Array, q_near: Array) -> ik.IKResult:
+        """The Jacobi iteration (5.8) of targets (m, 4, 4) in the design base frame from
+        the design start near ``q_near`` (m, 6), rad (:meth:`solve`'s arguments).
+
+        Compiled while the map contracts (:func:`_jacobi_one`); the targets it
+        defers run :func:`pipeline.kinematics.ik.jacobi_iterative` (Anderson
+        acceleration) from their start. Batch equals loop bit for bit.
+        """
+        if self.design is None or self._design is None:
+            raise ValueError("PumaSolver made without the design chain: no Jacobi iteration")
+        design = self._design
+        Tb = np.ascontiguousarray(T_base, float)
+        m, n = len(Tb), self.chain.n_joints
+        near = np.ascontiguousarray(np.broadcast_to(q_near, (m, n)), float)
+        q0, q, delta, T = np.empty((m, n)), np.empty((m, n)), np.empty((m, 6)), np.empty_like(Tb)
+        outcome, iterations = np.empty(m, np.int64), np.empty(m, np.int64)
+
+        def run(rows: slice) -> None:
+            _jacobi_targets(*self._model, *design, self._X, Tb[rows], near[rows],
+                            q0[rows], q[rows], delta[rows], T[rows], outcome[rows],
+                            iterations[rows])  # fmt: skip
+
+        run_in_shares(run, m)
+        lost = np.flatnonzero(outcome == NO_START)
+        status = np.full(m, ik.STATUS_CONVERGED, np.int64)
+        status[(outcome == J_STALLED) | (outcome == J_NO_INVERSE)] = ik.STATUS_UNREACHABLE
+        status[outcome == J_MAX_ITER] = ik.STATUS_MAX_ITER
+        if lost.size:  # no design start: the numpy iteration from near reports them
+            rest = ik.jacobi_iterative(
+                self.chain, self.design, self._numpy_inverse(), T[lost], near[lost],
+                self.resolution, self.settings[0], position_tol_cm=self.settings[1],
+                orientation_tol_rad=self.settings[2],
+            )  # fmt: skip
+            q[lost], iterations[lost], status[lost] = rest.q, rest.iterations, rest.status
+            delta[lost] = differential_motion(forward_kinematics(self.chain, rest.q), T[lost])
+        ik.mark_singular(self.chain, q, status)
+        return ik._result(q, status, iterations, ik._errors(delta))
+
+    def _numpy_inverse(self) -> ik.DesignInverse:
+        """The numpy design inverse of the Jacobi iteration (same branch and margins)."""
+        from pipeline.robots.puma560_control import puma_design_inverse
+
+        assert self._design is not None
+        margins = self._design[4]
+        return puma_design_inverse(
+            self.branch, tool=self._frames[1], base=self._frames[0],
+            elbow_margin_rad=float(margins[0]), shoulder_margin_cm=float(margins[1]),
+        )  # fmt: skip
+
+    def finish(
+        self, T: Array, near: Array, q0: Array, q: Array, outcome: IntArray,
+        iterations: IntArray, delta: Array,
+    ) -> ik.IKResult:  # fmt: skip
+        """The result of kernel outputs: deferred targets by the numpy iteration from
+        their start; targets without a start from ``near`` (the numpy design inverse's
+        fallback), so the numpy iteration reports them. Converged solutions off the
+        requested branch are flagged (:attr:`~pipeline.kinematics.ik.IKResult.branch_changed`)."""
+        lost = outcome == NO_START
+        q0[lost] = near[lost]
+        outcome[lost] = FAST_DEFERRED
+        outcome[outcome == OFF_BRANCH] = FAST_CONVERGED
+        max_iter, tol_p, tol_o, max_step = self.settings
+        res = ik.finish_deferred(
+            self.chain, T, q0, self.resolution, q, outcome, iterations, delta,
+            max_iter=max_iter, position_tol_cm=tol_p, orientation_tol_rad=tol_o,
+            max_step=max_step,
+        )  # fmt: skip
+        b = self.branch
+        off = np.any(puma560.branch_of(res.q) != [b.shoulder, b.elbow, b.wrist], axis=-1)
+        return replace(res, branch_changed=res.converged & off)
+
+
+def _shift(q: Array, limits: tuple[Array, ...]) -> None:
+    for row in q:
+        _into_limits(row, *limits)
