@@ -1,0 +1,104 @@
+"""A session's refinement problem from its stage tables: model, block, start, names.
+
+The parameters, each declared once: per joint its axis line (``joint<k>.rx, ry[, tx, ty]``,
+group ``axis``), per target point its position at q̄^s (``<point id>.x, y, z``, group
+``point``; ids ``tool`` and ``sweep<j>/<target>``), then the measurement block's own
+(sensor self-calibration; group from the name's head: ``mic``, ``bias``, ``speed``).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from pipeline.errors import StageError
+from pipeline.refine.block import Array, MeasurementBlock
+from pipeline.refine.kinematics import ChainModel, model_for_keys, start_points
+from pipeline.refine.points import point_block
+from pipeline.refine.solve import Problem
+from pipeline.stages.recording import sweep_name
+from pipeline.stages.session import session_robot, session_sensor
+
+BLOCK_GROUPS = ("mic", "bias", "speed")
+
+
+@dataclass(frozen=True)
+class SessionProblem:
+    """The problem, its start and the parameters' names, units (internal) and groups."""
+
+    problem: Problem
+    x0: Array
+    point_ids: tuple[str, ...]
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    groups: tuple[str, ...]
+
+
+def parameter_labels(
+    model: ChainModel, point_ids: tuple[str, ...], block: MeasurementBlock
+) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
+    """Names, units and groups of ``x = [θ_kin, x_block]`` (module docstring)."""
+    axis = model.axis_params
+    names = list(model.param_names[axis])
+    groups = ["axis"] * len(names)
+    for pid in point_ids:
+        names += [f"{pid}.{c}" for c in "xyz"]
+        groups += ["point"] * 3
+    for name in block.param_names:
+        head = name.split(".")[0].split("_")[0]
+        groups.append(head if head in BLOCK_GROUPS else "sensor")
+    names += list(block.param_names)
+    units = (*model.param_units, *block.param_units)
+    return tuple(names), tuple(units), tuple(groups)
+
+
+def _check_coverage(block_keys: pa.Table, n: int, prismatic: np.ndarray, source: str) -> None:
+    """Refuse a session whose joint sweep or tool measurement has too few usable positions
+    for the model (a revolute axis needs 3 positions, a prismatic line 2, the tool 1)."""
+    sweep = block_keys.column("sweep").to_numpy()
+    for s in range(0, n + 1):
+        need = 1 if s == 0 else (2 if prismatic[s - 1] else 3)
+        have = int((sweep == s).sum())
+        if have < need:
+            what = "the tool measurement" if s == 0 else f"sweep {sweep_name(s)}"
+            raise StageError(
+                f"{source}: {what} has {have} usable positions",
+                expected=f"at least {need} to refine the chain",
+                got=f"{have} (the others null: no usable measurement)",
+                fix="re-record that sweep, or --param refine.enabled=false",
+            )
+
+
+def session_problem(
+    inputs: Mapping[str, Any], loss: str = "soft_l1", f_scale: float = 3.0
+) -> SessionProblem:
+    """The points-level problem of a session (``inputs``: session, joints, positions, frames)."""
+    from pipeline.sensor.geometry import DigitizerGeometry
+
+    session = inputs["session"]
+    robot = session_robot(session)
+    geometry = None
+    if session_sensor(session) == "sonic":
+        geometry = DigitizerGeometry.from_dict(json.loads(session.column("rig_json")[0].as_py()))
+    block = point_block(inputs["positions"], geometry)
+    _check_coverage(block.keys, robot.n_joints, robot.prismatic, "positions")
+    model, ids = model_for_keys(block.keys, session, inputs["joints"], inputs["frames"])
+    p0 = start_points(model, block.measured)
+    n_axis = model.axis_params.stop - (model.axis_params.start or 0)
+    x0 = np.concatenate([np.zeros(n_axis), p0.ravel(), block.x0])
+    names, units, groups = parameter_labels(model, tuple(ids), block)
+    return SessionProblem(
+        Problem(model, block, loss, f_scale), x0, tuple(ids), names, units, groups
+    )
+
+
+def refined_x(refine: pa.Table) -> Array:
+    """The fitted ``x`` (internal units) of a ``refine`` table."""
+    value = refine.column("value").to_numpy()
+    unit = refine.column("unit").to_pylist()
+    return np.where(np.array(unit) == "deg", np.radians(value), value)
