@@ -134,7 +134,7 @@ class ChainModel:
         p0 = self._p0(x)[self.point]
         return np.einsum("kij,kj->ki", F[:, :3, :3], p0) + F[:, :3, 3]
 
-    def _derivatives(self, x: Array) -> tuple[Array, Array]:
+    def _derivatives(self, x: Array, orientation: bool = False) -> tuple[Array, Array]:
         """``∂p/∂x`` (K, 3, P) and the tool's ``ω`` per parameter (K, 3, P)."""
         S, Sinv, M, F = self._prefix(x)
         K, n = self.theta.shape
@@ -152,6 +152,8 @@ class ChainModel:
                 C = G[i] @ M[:, k] - M[:, k] @ G[i]  # [G_i, M_k]
                 dp = np.einsum("kij,kjl,kl->ki", L, C, u)[:, :3]
                 J[:, :, s.start + i] = np.where(on[:, None], dp, 0.0)
+                if not orientation:
+                    continue
                 D = L @ C @ Sinv[k] @ Fk_inv  # dF_n F_n⁻¹
                 w = np.stack([D[:, 2, 1], D[:, 0, 2], D[:, 1, 0]], axis=1)
                 W[:, :, s.start + i] = np.where((self.link == n)[:, None], w, 0.0)
@@ -167,7 +169,7 @@ class ChainModel:
 
     def tool_orientation_jacobian(self, x: Array) -> Array:
         """``ω`` with ``δR = [ω]× R`` per parameter (K, 3, n_params); zero off link n."""
-        return self._derivatives(x)[1]
+        return self._derivatives(x, orientation=True)[1]
 
 
 def model_for_keys(
