@@ -17,13 +17,13 @@ from pipeline.rig.digitizer import DigitizerModel, digitize
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.sensor.geometry import MICROPHONES, DigitizerGeometry, default_geometry
 from pipeline.sensor.noise import range_sigma_cm
+from pipeline.sensor.range_calibration import sensor_calibration
 from pipeline.sensor.range_model import (
     RangeBlock,
     RangeModelOptions,
     phi,
     range_block,
 )
-from pipeline.sensor.range_calibration import sensor_calibration
 from pipeline.stages import ranges as ranges_stage
 from pipeline.stages import session as session_stage
 from pipeline.stages.base import RECORDING, NoParams
@@ -145,7 +145,9 @@ def test_linear_speed_model_against_the_exact_integral() -> None:
 
 def test_phi_and_its_derivative() -> None:
     """φ(d) = log1p(d)/d and φ' across the series/closed-form switch."""
-    d = np.array([-0.3, -0.0100001, -0.0099999, -1e-3, -1e-9, 0.0, 1e-9, 1e-3, 0.0099999, 0.02, 0.5])
+    d = np.array(
+        [-0.3, -0.0100001, -0.0099999, -1e-3, -1e-9, 0.0, 1e-9, 1e-3, 0.0099999, 0.02, 0.5]
+    )
     f, df = phi(d)
     exact = np.where(d == 0, 1.0, np.log1p(d) / np.where(d == 0, 1.0, d))
     np.testing.assert_allclose(f, exact, rtol=1e-15)
@@ -251,7 +253,9 @@ def test_no_rod_ranges(noiseless_tables: tuple[pa.Table, pa.Table]) -> None:
 
 def test_microphone_never_heard(noiseless_tables: tuple[pa.Table, pa.Table]) -> None:
     ranges, session = noiseless_tables
-    mic_c = pc.and_(pc.equal(ranges.column("microphone"), "C"), pc.equal(ranges.column("sparker"), 5))
+    mic_c = pc.and_(
+        pc.equal(ranges.column("microphone"), "C"), pc.equal(ranges.column("sparker"), 5)
+    )
     _one_line_error(_drop(ranges, mic_c), session, "microphone C never heard")
 
 

@@ -61,7 +61,9 @@ class SensorCalibration:
         return pa.table(cols)
 
 
-def sensor_calibration(block: RangeBlock, x: npt.ArrayLike, cov: npt.ArrayLike) -> SensorCalibration:
+def sensor_calibration(
+    block: RangeBlock, x: npt.ArrayLike, cov: npt.ArrayLike
+) -> SensorCalibration:
     """Summary of the fitted sensor from parameters ``x`` (n,) and covariance ``cov`` (n, n).
 
     Raises
