@@ -9,6 +9,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
 from pipeline.errors import ArmsigError
@@ -24,6 +26,8 @@ from pipeline.sensor.range_model import (
     phi,
     range_block,
 )
+from pipeline.sensor.range_rows import unique_rows
+from pipeline.sensor.speed_spline import TimeSpline
 from pipeline.stages import ranges as ranges_stage
 from pipeline.stages import session as session_stage
 from pipeline.stages.base import RECORDING, NoParams
@@ -262,3 +266,28 @@ def test_microphone_never_heard(noiseless_tables: tuple[pa.Table, pa.Table]) -> 
 def test_bad_options() -> None:
     with pytest.raises(ArmsigError, match="positive"):
         RangeModelOptions(knot_spacing_s=0.0)
+
+
+@given(
+    st.lists(
+        st.tuples(st.integers(-1, 7), st.integers(0, 300), st.integers(0, 12)),
+        min_size=1,
+        max_size=200,
+    )
+)
+def testunique_rows_is_numpy_unique(rows: list[tuple[int, int, int]]) -> None:
+    a = np.array(rows, np.int64)
+    keys, inverse = unique_rows(a)
+    ref_keys, ref_inverse = np.unique(a, axis=0, return_inverse=True)
+    np.testing.assert_array_equal(keys, ref_keys)
+    np.testing.assert_array_equal(inverse, ref_inverse.reshape(-1))
+
+
+def test_spline_basis_is_the_design_matrix() -> None:
+    spline = TimeSpline.over(10.0, 2345.0, 120.0)
+    t = np.concatenate([[10.0, 2345.0], np.random.default_rng(1).uniform(10.0, 2345.0, 500)])
+    idx, val = spline.basis(t)
+    dense = np.zeros((len(t), spline.n_coef))
+    np.put_along_axis(dense, idx, val, axis=1)
+    np.testing.assert_array_equal(dense, spline.design(t))
+    np.testing.assert_allclose(dense.sum(axis=1), 1.0, rtol=1e-14)  # partition of unity

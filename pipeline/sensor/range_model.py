@@ -55,13 +55,14 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
 from pipeline.errors import ArmsigError
-from pipeline.refine.block import Linearization
+from pipeline.refine.block import Linearization, MeasurementBlock
 from pipeline.sensor.geometry import MICROPHONES, DigitizerGeometry
 from pipeline.sensor.noise import range_sigma_cm
 from pipeline.sensor.range_rows import RangeRows, range_rows
@@ -136,7 +137,7 @@ def phi(d: Array) -> tuple[Array, Array]:
     return f, np.where(small, series, df)
 
 
-@dataclass(frozen=True)
+@dataclass(eq=False)  # not frozen: MeasurementBlock declares settable attributes
 class RangeBlock:
     """Residuals of every raw slant range of a sonic session (see the module docstring).
 
@@ -173,8 +174,10 @@ class RangeBlock:
     gauge_origin: Array = field(repr=False)
     gauge_axes: Array = field(repr=False)
     d_mic_d_geo: Array = field(repr=False)  # (4, 3, N_GEO) ∂mic/∂x_geo, sensor frame
-    t_design: Array = field(repr=False)  # (Rt, n_coef)
-    r_design: Array = field(repr=False)  # (Rr, n_coef)
+    up: Array = field(repr=False)  # (3,) the recorded vertical
+    t_spline: tuple[npt.NDArray[np.int64], Array] = field(repr=False)  # basis of target rows
+    r_spline: tuple[npt.NDArray[np.int64], Array] = field(repr=False)  # basis of rod rows
+    t_d_mic: Array = field(repr=False)  # (Rt, 3, N_GEO) ∂mic/∂x_geo of each target row
     t_w: Array = field(repr=False)  # 1/σ of target rows
     r_w: Array = field(repr=False)  # 1/σ of rod rows
     rod_d_cm: Array = field(repr=False)  # (Rr,) recorded d_k
@@ -215,7 +218,8 @@ class RangeBlock:
                 got=f"p {p.shape}, x {x.shape}",
                 fix="pass one position per key and the block's parameter vector",
             )
-        sl, rows, up = self.slices, self.rows, self.geometry.up
+        sl, rows, up = self.slices, self.rows, self.up
+        coef, c0 = x[sl["speed"]], sl["speed"].start
         g = float(x[sl["gradient"]][0])
         mics = self.microphones(x)
         dh_mic = mics @ up - self.h_ref_cm  # (4,)
@@ -225,7 +229,8 @@ class RangeBlock:
 
         # Target rows, Eqs. (E.2)-(E.4).
         pt, mi, w = p[rows.t_pos], rows.t_mic, self.t_w
-        a = self.t_design @ x[sl["speed"]]
+        t_idx, t_val = self.t_spline
+        a = np.einsum("ij,ij->i", t_val, coef[t_idx])
         dh_t = pt @ up - self.h_ref_cm
         f_t = a + g * dh_t
         d = g * (dh_mic[mi] - dh_t) / f_t  # (f_m − f_t) / f_t
@@ -239,21 +244,24 @@ class RangeBlock:
         r_t = w * (length * psi + bias[mi] - rows.t_s_cm)
         d_p = w[:, None] * (psi[:, None] * u + (length * psi_t * g)[:, None] * up)
         d_mic = w[:, None] * (-psi[:, None] * u + (length * psi_m * g)[:, None] * up)
-        d_x[:nt, sl["mic"]] = np.einsum("ij,ijk->ik", d_mic, self.d_mic_d_geo[mi])
-        d_x[np.arange(nt), N_GEO + mi] = w
+        d_x[:nt, sl["mic"]] = np.einsum("ij,ijk->ik", d_mic, self.t_d_mic)
+        it = np.arange(nt)
+        d_x[it, N_GEO + mi] = w
         d_f = w * length  # times ∂ψ/∂f, ∂f/∂a_j = B_j(t)
-        d_x[:nt, sl["speed"]] = (d_f * (psi_m + psi_t))[:, None] * self.t_design
+        d_x[it[:, None], c0 + t_idx] = (d_f * (psi_m + psi_t))[:, None] * t_val
         d_x[:nt, sl["gradient"]] = (d_f * (psi_m * dh_mic[mi] + psi_t * dh_t))[:, None]
 
         # Rod rows, Eq. (E.1).
         mr, wr = rows.r_mic, self.r_w
-        f_r = self.r_design @ x[sl["speed"]] + g * dh_mic[mr]
+        r_idx, r_val = self.r_spline
+        f_r = np.einsum("ij,ij->i", r_val, coef[r_idx]) + g * dh_mic[mr]
         r_r = wr * (self.rod_d_cm / f_r + bias[mr] - rows.r_s_cm)
         ds_df = -wr * self.rod_d_cm / f_r**2
         rr = slice(nt, nt + nr)
-        d_x[rr, sl["mic"]] = (ds_df * g)[:, None] * (up @ self.d_mic_d_geo[mr])
-        d_x[np.arange(nt, nt + nr), N_GEO + mr] = wr
-        d_x[rr, sl["speed"]] = ds_df[:, None] * self.r_design
+        d_x[rr, sl["mic"]] = (ds_df * g)[:, None] * (up @ self.d_mic_d_geo)[mr]
+        ir = np.arange(nt, nt + nr)
+        d_x[ir, N_GEO + mr] = wr
+        d_x[ir[:, None], c0 + r_idx] = ds_df[:, None] * r_val
         d_x[rr, sl["gradient"]] = (ds_df * dh_mic[mr])[:, None]
 
         # Priors.
@@ -265,6 +273,12 @@ class RangeBlock:
         d_p_all = np.zeros((len(r), 3))
         d_p_all[:nt] = d_p
         return Linearization(r=r, pos=pos, d_p=d_p_all, d_x=d_x)
+
+
+if TYPE_CHECKING:  # mypy proves that a RangeBlock is a MeasurementBlock
+
+    def _is_measurement_block(block: RangeBlock) -> MeasurementBlock:
+        return block
 
 
 def _gauge(mics: Array) -> tuple[Array, Array, Array]:
@@ -369,8 +383,10 @@ def range_block(
         gauge_origin=origin_all,
         gauge_axes=axes,
         d_mic_d_geo=d_mic,
-        t_design=spline.design(rows.t_time_s),
-        r_design=spline.design(rows.r_time_s),
+        up=geometry.up,
+        t_spline=spline.basis(rows.t_time_s),
+        r_spline=spline.basis(rows.r_time_s),
+        t_d_mic=d_mic[rows.t_mic],
         t_w=1.0 / range_sigma_cm(rows.t_s_cm, res),
         r_w=1.0 / range_sigma_cm(rows.r_s_cm, res),
         rod_d_cm=rod_d,

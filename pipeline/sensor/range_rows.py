@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from pipeline.errors import ArmsigError
 from pipeline.sensor.compensation import rod_ratios
@@ -73,6 +74,18 @@ def _column(table: pa.Table, name: str) -> np.ndarray:
     return np.asarray(table.column(name).to_numpy(zero_copy_only=False))
 
 
+def unique_rows(a: npt.NDArray[np.int64]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Sorted unique rows of small-integer keys (M, k) and each row's index into them:
+    ``np.unique(a, axis=0, return_inverse=True)`` through one int64 key per row."""
+    lo = a.min(axis=0) if len(a) else np.zeros(a.shape[1], np.int64)
+    span = (a.max(axis=0) - lo + 1) if len(a) else np.ones(a.shape[1], np.int64)
+    code = np.zeros(len(a), np.int64)
+    for k in range(a.shape[1]):  # mixed radix; keys are sweep/step/repeat counts, far below 2**63
+        code = code * span[k] + (a[:, k] - lo[k])
+    _, first, inverse = np.unique(code, return_index=True, return_inverse=True)
+    return a[first], inverse.reshape(-1).astype(np.int64)
+
+
 def range_rows(ranges: pa.Table, geometry: DigitizerGeometry) -> RangeRows:
     """Split the ``ranges`` stage table into target and rod rows, joined by key.
 
@@ -92,19 +105,20 @@ def range_rows(ranges: pa.Table, geometry: DigitizerGeometry) -> RangeRows:
         )
     sweep, step, repeat = (_column(ranges, c).astype(np.int64) for c in ("sweep", "step", "repeat"))
     sparker = _column(ranges, "sparker").astype(np.int64)
-    names = _column(ranges, "microphone").astype(str)
     s = _column(ranges, "range_cm").astype(float)
     t = _column(ranges, "t_s").astype(float)
-    mic = np.full(len(names), -1, np.int64)
-    for k, m in enumerate(MICROPHONES):
-        mic[names == m] = k
-    if (mic < 0).any():
+    names = ranges.column("microphone")
+    mic_arr = pc.index_in(names, value_set=pa.array(MICROPHONES))
+    mic = np.asarray(mic_arr.to_numpy(zero_copy_only=False), float)
+    if np.isnan(mic).any():
+        bad = names.filter(pc.is_null(mic_arr)).to_pylist()[0]
         raise ArmsigError(
             "the ranges table names an unknown microphone",
             expected="microphone A, B, C or D",
-            got=repr(str(names[mic < 0][0])),
+            got=repr(bad),
             fix=_FIX,
         )
+    mic = mic.astype(np.int64)
     heard = np.isfinite(s)
     tgt = heard & (sparker == TARGET_SPARKER)
     rod_mic = np.array([ROD_MICROPHONE.get(int(k), -1) for k in range(6)])[np.clip(sparker, 0, 5)]
@@ -125,10 +139,9 @@ def range_rows(ranges: pa.Table, geometry: DigitizerGeometry) -> RangeRows:
                 got=f"none at {m} among {int(tgt.sum())} target echoes",
                 fix=f"check microphone {m} and its cable, then re-record",
             )
-    keys, t_pos = np.unique(np.stack([sweep[tgt], step[tgt]], axis=1), axis=0, return_inverse=True)
+    keys, t_pos = unique_rows(np.stack([sweep[tgt], step[tgt]], axis=1))
     # Per-cycle rod ratios (E.1), joined by the (sweep, step, repeat) cycle key.
-    cyc, c_idx = np.unique(np.stack([sweep, step, repeat], axis=1), axis=0, return_inverse=True)
-    c_idx = c_idx.reshape(-1)
+    cyc, c_idx = unique_rows(np.stack([sweep, step, repeat], axis=1))
     rod_s = np.full((len(cyc), 4), np.nan)
     rod_s[c_idx[rod], sparker[rod] - 1] = s[rod]
     cycle_t = np.zeros(len(cyc))
@@ -137,7 +150,7 @@ def range_rows(ranges: pa.Table, geometry: DigitizerGeometry) -> RangeRows:
     return RangeRows(
         key_sweep=keys[:, 0],
         key_step=keys[:, 1],
-        t_pos=np.asarray(t_pos, np.int64).reshape(-1),
+        t_pos=t_pos,
         t_mic=mic[tgt],
         t_s_cm=s[tgt],
         t_time_s=t[tgt],

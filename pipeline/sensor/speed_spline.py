@@ -48,11 +48,21 @@ class TimeSpline:
         """The time at which each coefficient's basis function peaks, shape (n_coef,)."""
         return np.asarray(self.knots[2 : 2 + self.n_coef], float)
 
+    def _matrix(self, t_s: npt.ArrayLike):  # -> scipy.sparse.csr_array
+        lo, hi = self.knots[DEGREE], self.knots[-DEGREE - 1]
+        t = np.clip(np.atleast_1d(np.asarray(t_s, float)), lo, hi)
+        return BSpline.design_matrix(t, self.knots, DEGREE)
+
     def design(self, t_s: npt.ArrayLike) -> Array:
         """Basis values at times ``t_s`` (M,), clipped to the span, dense shape (M, n_coef)."""
-        lo, hi = self.knots[DEGREE], self.knots[-DEGREE - 1]
-        t = np.clip(np.asarray(t_s, float), lo, hi)
-        return np.asarray(BSpline.design_matrix(t, self.knots, DEGREE).toarray(), float)
+        return np.asarray(self._matrix(t_s).toarray(), float)
+
+    def basis(self, t_s: npt.ArrayLike) -> tuple[npt.NDArray[np.int64], Array]:
+        """The ``DEGREE + 1`` basis functions not zero at each time: their indices and
+        values, each shape (M, DEGREE + 1); ``design(t)[i, idx[i]] == val[i]``."""
+        m = self._matrix(t_s)
+        k = DEGREE + 1
+        return m.indices.astype(np.int64).reshape(-1, k), np.asarray(m.data, float).reshape(-1, k)
 
     def fit(self, t_s: npt.ArrayLike, values: npt.ArrayLike) -> Array:
         """Least-squares coefficients (n_coef,) through ``values`` at ``t_s``.
