@@ -20,7 +20,8 @@ NOISE_FLOOR_CM = 0.003  # Eq. (7.9)
 
 
 def range_noise_sigma_cm(s_cm: npt.ArrayLike) -> Array:
-    """Standard deviation (cm) of the noise of slant ranges ``s_cm`` (cm), Eq. (7.9), shape (...)."""
+    """Standard deviation (cm) of the noise of slant ranges ``s_cm`` (cm), Eq. (7.9); shape (...)
+    of ``s_cm``."""
     return np.asarray(NOISE_SLOPE * np.asarray(s_cm, float) + NOISE_FLOOR_CM, float)  # Eq. (7.9)
 
 
