@@ -21,6 +21,7 @@ from pipeline.refine.block import Array, MeasurementBlock
 from pipeline.refine.kinematics import ChainModel, model_for_keys, start_points
 from pipeline.refine.points import point_block
 from pipeline.refine.solve import Problem
+from pipeline.stages.positions import positions
 from pipeline.stages.recording import sweep_name
 from pipeline.stages.session import session_robot, session_sensor
 
@@ -74,21 +75,47 @@ def _check_coverage(block_keys: pa.Table, n: int, prismatic: np.ndarray, source:
             )
 
 
+def measured_at(keys: pa.Table, table: pa.Table) -> Array:
+    """Positions (K, 3) of a ``positions`` table at ``keys`` (sweep, step, target), joined
+    by key; NaN where the table has none."""
+    cols = ("sweep", "step", "target")
+    at = {k: i for i, k in enumerate(zip(*(table.column(c).to_pylist() for c in cols)))}
+    p = np.vstack([positions(table), np.full((1, 3), np.nan)])
+    rows = [at.get(k, -1) for k in zip(*(keys.column(c).to_pylist() for c in cols))]
+    return p[np.array(rows, np.int64)]
+
+
 def session_problem(
-    inputs: Mapping[str, Any], loss: str = "soft_l1", f_scale: float = 3.0
+    inputs: Mapping[str, Any],
+    loss: str = "soft_l1",
+    f_scale: float = 3.0,
+    level: str = "points",
+    speed_knot_s: float = 120.0,
 ) -> SessionProblem:
-    """The points-level problem of a session (``inputs``: session, joints, positions, frames)."""
+    """The problem of a session at ``level`` (``inputs``: session, joints, positions, frames;
+    level ``ranges``: and ranges). The start: the thesis frames and the target points they
+    imply from the measured positions."""
     from pipeline.sensor.geometry import DigitizerGeometry
 
     session = inputs["session"]
     robot = session_robot(session)
-    geometry = None
-    if session_sensor(session) == "sonic":
-        geometry = DigitizerGeometry.from_dict(json.loads(session.column("rig_json")[0].as_py()))
-    block = point_block(inputs["positions"], geometry)
-    _check_coverage(block.keys, robot.n_joints, robot.prismatic, "positions")
+    block: MeasurementBlock
+    if level == "ranges":
+        from pipeline.sensor.range_model import RangeModelOptions, range_block
+
+        block = range_block(inputs["ranges"], session, RangeModelOptions(speed_knot_s))
+        measured = measured_at(block.keys, inputs["positions"])
+        usable = block.keys.filter(pa.array(np.isfinite(measured).all(axis=1)))
+    else:
+        geometry = None
+        if session_sensor(session) == "sonic":
+            rig = json.loads(session.column("rig_json")[0].as_py())
+            geometry = DigitizerGeometry.from_dict(rig)
+        block = points = point_block(inputs["positions"], geometry)
+        measured, usable = points.measured, points.keys
+    _check_coverage(usable, robot.n_joints, robot.prismatic, "positions")
     model, ids = model_for_keys(block.keys, session, inputs["joints"], inputs["frames"])
-    p0 = start_points(model, block.measured)
+    p0 = start_points(model, measured)
     n_axis = model.axis_params.stop - (model.axis_params.start or 0)
     x0 = np.concatenate([np.zeros(n_axis), p0.ravel(), block.x0])
     names, units, groups = parameter_labels(model, tuple(ids), block)

@@ -64,10 +64,11 @@ def refine_summary(table: pa.Table) -> dict[str, Any]:
 
 
 def resolved_level(params: Params, sensor: str) -> str:
-    """The measurement level a session is refined at."""
+    """The measurement level a session is refined at: ``auto`` is ``ranges`` for sonic
+    sessions, ``points`` for point sensors."""
     if params.level != "auto":
         return params.level
-    return "points"  # sonic: "ranges" once pipeline.sensor.range_model is wired
+    return "ranges" if sensor == "sonic" else "points"
 
 
 def _boundary(units: tuple[str, ...]) -> tuple[list[str], np.ndarray]:
@@ -102,16 +103,18 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.refine.problem import session_problem
     from pipeline.refine.solve import recorded_chi2, solve
 
-    level = resolved_level(params, session_sensor(inputs["session"]))
+    sensor = session_sensor(inputs["session"])
+    level = resolved_level(params, sensor)
     if not params.enabled:
         return _disabled(level)
-    if level != "points":
+    if level == "ranges" and sensor != "sonic":
         raise StageError(
-            f"refine.level {level!r} is not available yet",
-            expected="points (the range-level sonic block is not wired in this version)",
-            fix="--param refine.level=points",
+            "refine.level 'ranges' needs the raw ranges of a sonic session",
+            expected="level points (or auto) for a point-sensor session",
+            got=f"sensor {sensor!r}",
+            fix="--param refine.level=auto",
         )
-    sp = session_problem(inputs, params.loss, params.f_scale)
+    sp = session_problem(inputs, params.loss, params.f_scale, level, params.speed_knot_s)
     sol = solve(sp.problem, sp.x0)
     chi2_recorded = recorded_chi2(sp.problem, sol)
     units, factor = _boundary(sp.units)

@@ -50,7 +50,7 @@ STAGE_MODULES = (
     "features",
     "residuals",
     "frames",
-    "refine",
+    "refine_sonic",
     "chain",
     "smodel",
     "dh",
