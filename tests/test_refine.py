@@ -41,7 +41,9 @@ def _summary(d: Path) -> dict:
 
 @pytest.mark.parametrize("robot", ["puma560", "stanford", "scara"])
 def test_noiseless_tracker_sessions_refine_exactly(tmp_path_factory, robot: str) -> None:
-    d = _identified(tmp_path_factory, sensor="tracker", seed=1, noiseless=True, points=5, robot=robot)
+    d = _identified(
+        tmp_path_factory, sensor="tracker", seed=1, noiseless=True, points=5, robot=robot
+    )
     assert _summary(d)["status"] == "converged"
     assert json.loads((d / "signature.json").read_text())["model"] == "refined"
     assert audit(d, configurations=200).signature.max_position_cm <= 1e-6
@@ -140,8 +142,9 @@ def _toy(rng: np.random.Generator, sigma: float) -> tuple[Problem, np.ndarray, n
     )  # fmt: skip
     x_true = np.array([0.001, -0.002, 0.05, -0.03, 20.0, 1.0, 5.0])
     p = model.positions(x_true) + rng.normal(0.0, sigma, (12, 3))
-    keys = pa.table({"sweep": pa.array([1] * 12, pa.int32()), "step": pa.array(range(12), pa.int32()),
-                     "target": ["T"] * 12})  # fmt: skip
+    keys = pa.table(
+        {"sweep": pa.array([1] * 12, pa.int32()), "step": pa.array(range(12), pa.int32())}
+    ).append_column("target", pa.array(["T"] * 12))
     from pipeline.refine.points import PointBlock
 
     # stated σ twice the true one: the reported σ holds only through the χ²/dof scaling

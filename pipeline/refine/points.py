@@ -33,7 +33,7 @@ import pyarrow as pa
 from pipeline.refine.block import Array, Linearization
 from pipeline.sensor.geometry import DigitizerGeometry
 from pipeline.sensor.noise import range_sigma_cm
-from pipeline.stages.positions import COV_ENTRIES, _COV_INDEX, positions
+from pipeline.stages.positions import _COV_INDEX, COV_ENTRIES, positions
 from pipeline.stages.recording import CHECK_SWEEP
 
 #: Variance of a uniform rounding to the sonic digitizer's 0.01 cm resolution (cm²).
@@ -82,7 +82,7 @@ def position_covariances(rows: pa.Table, geometry: DigitizerGeometry | None = No
     return cov
 
 
-@dataclass(frozen=True)
+@dataclass(eq=False)  # not frozen: MeasurementBlock declares settable attributes
 class PointBlock:
     """A :class:`~pipeline.refine.block.MeasurementBlock` of measured target positions."""
 

@@ -79,9 +79,11 @@ def measured_at(keys: pa.Table, table: pa.Table) -> Array:
     """Positions (K, 3) of a ``positions`` table at ``keys`` (sweep, step, target), joined
     by key; NaN where the table has none."""
     cols = ("sweep", "step", "target")
-    at = {k: i for i, k in enumerate(zip(*(table.column(c).to_pylist() for c in cols)))}
+    at = {
+        k: i for i, k in enumerate(zip(*(table.column(c).to_pylist() for c in cols), strict=True))
+    }
     p = np.vstack([positions(table), np.full((1, 3), np.nan)])
-    rows = [at.get(k, -1) for k in zip(*(keys.column(c).to_pylist() for c in cols))]
+    rows = [at.get(k, -1) for k in zip(*(keys.column(c).to_pylist() for c in cols), strict=True)]
     return p[np.array(rows, np.int64)]
 
 
