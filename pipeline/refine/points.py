@@ -5,8 +5,8 @@ measured position, ``p`` the chain's prediction; ``∂r/∂p = L⁻¹``. Σ per 
 ``positions`` table:
 
 - point sensors: the recorded ``cov_*_cm2`` (full 3×3), else ``sigma_cm``² · I;
-- sonic positions (triangulated from microphones A, B, C; used until the range-level
-  block is wired): the mean of ``n_used`` cycles of a trilateration, so
+- sonic positions (triangulated from microphones A, B, C; ``refine.level=points``, the
+  range level being the sonic default): the mean of ``n_used`` cycles of a trilateration, so
   ``Σ = U⁻¹ diag(σ_A², σ_B², σ_C²) U⁻ᵀ / n_used`` with ``U`` the unit vectors from the
   microphones to the position (``∂range/∂p``) and ``σ`` the range noise (7.9) with its
   0.01 cm rounding (:func:`pipeline.sensor.noise.range_sigma_cm`). Anisotropic: depth

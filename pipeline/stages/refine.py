@@ -6,8 +6,10 @@ to the session's measurement block by :func:`pipeline.refine.solve.solve`:
 
 - level ``points``: the usable fit positions of the ``positions`` table, three whitened
   residuals each (:mod:`pipeline.refine.points`); the check sweep stays held out;
-- level ``ranges`` (sonic, the raw slant ranges with the sensor's own parameters): not
-  wired yet, refused with one line.
+- level ``ranges`` (the sonic default): every raw slant range, the sensor's own parameters
+  (microphones, biases, speed of sound) in the fit (:mod:`pipeline.sensor.range_model`;
+  the sonic stage list runs this stage from :mod:`pipeline.stages.refine_sonic`, which
+  adds the ``ranges`` input). A point-sensor session asked for it is refused with one line.
 
 One row per parameter: group (``axis``, ``point``; the sensor's ``mic``, ``bias``,
 ``speed``), name, unit (boundary units: deg, cm), start, value, sigma and its row of the
@@ -37,8 +39,8 @@ LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")  # scipy.optimize.le
 
 @dataclass(frozen=True)
 class Params:
-    """``level``: auto (the sensor's default: points until the sonic range block is
-    wired), points, ranges; ``loss``/``f_scale``: the robust loss and its scale in σ of
+    """``level``: auto (ranges for sonic sessions, points for point sensors), points,
+    ranges; ``loss``/``f_scale``: the robust loss and its scale in σ of
     the whitened residuals (3: a residual beyond 3σ starts to be down-weighted);
     ``speed_knot_s``: knot spacing of the speed-of-sound spline (level ranges)."""
 
