@@ -7,9 +7,9 @@ to the session's measurement block by :func:`pipeline.refine.solve.solve`:
 - level ``points``: the usable fit positions of the ``positions`` table, three whitened
   residuals each (:mod:`pipeline.refine.points`); the check sweep stays held out;
 - level ``ranges`` (the sonic default): every raw slant range, the sensor's own parameters
-  (microphones, biases, speed of sound) in the fit (:mod:`pipeline.sensor.range_model`;
-  the sonic stage list runs this stage from :mod:`pipeline.stages.refine_sonic`, which
-  adds the ``ranges`` input). A point-sensor session asked for it is refused with one line.
+  (microphones, biases, speed of sound) in the fit (:mod:`pipeline.sensor.range_model`).
+  A point-sensor session asked for it is refused with one line; its stage list runs this
+  stage from :mod:`pipeline.stages.refine_points`, without the ``ranges`` input.
 
 One row per parameter: group (``axis``, ``point``; the sensor's ``mic``, ``bias``,
 ``speed``), name, unit (boundary units: deg, cm), start, value, sigma and its row of the
@@ -152,7 +152,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 STAGE = Stage(
     "refine",
     1,
-    ("session", "joints", "positions", "frames"),
+    ("session", "joints", "positions", "frames", "ranges"),
     Params(),
     compute,
     "joint refinement of the chain (axis lines, target points) from all measurements",
