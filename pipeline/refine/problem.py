@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -19,11 +19,12 @@ import pyarrow as pa
 from pipeline.errors import StageError
 from pipeline.refine.block import Array, MeasurementBlock
 from pipeline.refine.kinematics import ChainModel, model_for_keys, start_points
-from pipeline.refine.points import point_block
+from pipeline.refine.points import PointBlock, point_block, with_reading_noise
 from pipeline.refine.solve import Problem
 from pipeline.stages.positions import positions
 from pipeline.stages.recording import sweep_name
 from pipeline.stages.session import session_robot, session_sensor
+from pipeline.units import joints_to_internal
 
 BLOCK_GROUPS = ("mic", "bias", "speed")
 
@@ -75,6 +76,24 @@ def _check_coverage(block_keys: pa.Table, n: int, prismatic: np.ndarray, source:
             )
 
 
+def _n_axis(model: ChainModel) -> int:
+    return int(model.axis_params.stop - (model.axis_params.start or 0))
+
+
+def reading_tangents(model: ChainModel, x: Array) -> Array:
+    """``∂p/∂q_k`` (K, n, 3) of every key's position, by central differences of the model
+    in its joint values (step 1e-6 rad / cm: the positions are smooth; only a weight)."""
+    h = 1e-6
+    out = np.zeros((model.theta.shape[0], model.theta.shape[1], 3))
+    for k in range(model.theta.shape[1]):
+        step = np.zeros_like(model.theta)
+        step[:, k] = h
+        up = replace(model, theta=model.theta + step).positions(x)
+        down = replace(model, theta=model.theta - step).positions(x)
+        out[:, k] = (up - down) / (2.0 * h)
+    return out
+
+
 def measured_at(keys: pa.Table, table: pa.Table) -> Array:
     """Positions (K, 3) of a ``positions`` table at ``keys`` (sweep, step, target), joined
     by key; NaN where the table has none."""
@@ -118,8 +137,11 @@ def session_problem(
     _check_coverage(usable, robot.n_joints, robot.prismatic, "positions")
     model, ids = model_for_keys(block.keys, session, inputs["joints"], inputs["frames"])
     p0 = start_points(model, measured)
-    n_axis = model.axis_params.stop - (model.axis_params.start or 0)
-    x0 = np.concatenate([np.zeros(n_axis), p0.ravel(), block.x0])
+    if isinstance(block, PointBlock):
+        x = np.concatenate([np.zeros(_n_axis(model)), p0.ravel()])
+        res = joints_to_internal(robot.encoder_resolution, robot.prismatic)
+        block = with_reading_noise(block, reading_tangents(model, x), res**2 / 12.0)
+    x0 = np.concatenate([np.zeros(_n_axis(model)), p0.ravel(), block.x0])
     names, units, groups = parameter_labels(model, tuple(ids), block)
     return SessionProblem(
         Problem(model, block, loss, f_scale), x0, tuple(ids), names, units, groups
