@@ -6,10 +6,11 @@ to the session's measurement block by :func:`pipeline.refine.solve.solve`:
 
 - level ``points``: the usable fit positions of the ``positions`` table, three whitened
   residuals each (:mod:`pipeline.refine.points`); the check sweep stays held out;
-- level ``ranges`` (the sonic default): every raw slant range, the sensor's own parameters
-  (microphones, biases, speed of sound) in the fit (:mod:`pipeline.sensor.range_model`).
-  A point-sensor session asked for it is refused with one line; its stage list runs this
-  stage from :mod:`pipeline.stages.refine_points`, without the ``ranges`` input.
+- level ``ranges`` (sonic, ``--param refine.level=ranges``): every raw slant range, the
+  sensor's own parameters (microphones, biases, speed of sound) in the fit
+  (:mod:`pipeline.sensor.range_model`). A point-sensor session asked for it is refused
+  with one line; its stage list runs this stage from :mod:`pipeline.stages.refine_points`,
+  without the ``ranges`` input.
 
 One row per parameter: group (``axis``, ``point``; the sensor's ``mic``, ``bias``,
 ``speed``), name, unit (boundary units: deg, cm), start, value, sigma and its row of the
@@ -39,10 +40,10 @@ LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")  # scipy.optimize.le
 
 @dataclass(frozen=True)
 class Params:
-    """``level``: auto (ranges for sonic sessions, points for point sensors), points,
-    ranges; ``loss``/``f_scale``: the robust loss and its scale in σ of
-    the whitened residuals (3: a residual beyond 3σ starts to be down-weighted);
-    ``speed_knot_s``: knot spacing of the speed-of-sound spline (level ranges)."""
+    """``level``: auto (points: see :func:`resolved_level`), points, ranges (sonic);
+    ``loss``/``f_scale``: the robust loss and its scale in σ of the whitened residuals
+    (3: a residual beyond 3σ starts to be down-weighted); ``speed_knot_s``: knot spacing
+    of the speed-of-sound spline (level ranges)."""
 
     enabled: bool = True
     level: str = "auto"
@@ -66,11 +67,15 @@ def refine_summary(table: pa.Table) -> dict[str, Any]:
 
 
 def resolved_level(params: Params, sensor: str) -> str:
-    """The measurement level a session is refined at: ``auto`` is ``ranges`` for sonic
-    sessions, ``points`` for point sensors."""
+    """The measurement level a session is refined at: ``auto`` is ``points`` for every
+    session. Not ``ranges`` for sonic sessions yet: the range model's speed of sound is a
+    function of the cycles' times, which are message log times, so permuting
+    ``/sonic/ranges`` log times moved robot-scale signatures by 0.1 cm
+    (tests/test_recording_keys.py: issue 13 wants log times never to change the
+    signature). ``--param refine.level=ranges`` runs it."""
     if params.level != "auto":
         return params.level
-    return "ranges" if sensor == "sonic" else "points"
+    return "points"
 
 
 def _boundary(units: tuple[str, ...]) -> tuple[list[str], np.ndarray]:
