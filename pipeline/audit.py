@@ -143,7 +143,7 @@ def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) ->
             expected="a simulated session (the audit needs the simulator's ground truth)",
             fix="audit only sessions made by `pipeline simulate`",
         )
-    frames_path = stage_path(sdir, "frames")
+    frames_path = stage_path(sdir, "chain")
     if not frames_path.is_file():
         raise ArmsigError(
             f"{sdir}: not identified yet", fix=f"run `pipeline identify {sdir}` first"

@@ -115,6 +115,10 @@ def _check_numbers(doc: dict[str, Any], source: str) -> None:
         },
         **{f"smodel.links[{i}]": B for i, B in enumerate(doc["smodel"]["links"])},
     }
+    if "thesis_smodel" in doc:  # files of the refinement (issue 15)
+        th = doc["thesis_smodel"]
+        matrices["thesis_smodel.base"], matrices["thesis_smodel.tool"] = th["base"], th["tool"]
+        matrices.update({f"thesis_smodel.links[{i}]": B for i, B in enumerate(th["links"])})
     for key, value in matrices.items():
         _check_rigid(np.array(value, float), f"{source}: {key}")
     _check_robot(doc, source)

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 
 from pipeline import __version__
 from pipeline.atomic import write_text_atomic
@@ -21,6 +22,7 @@ from pipeline.errors import ArmsigError
 from pipeline.kinematics.alignment import fit_alignment
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.signature import pseudo_dh_from_chain
+from pipeline.kinematics.smodel import smodel_from_matrix
 from pipeline.kinematics.transforms import pose_error
 from pipeline.robots.description import (
     RobotDescription,
@@ -82,16 +84,59 @@ def matrix_rows(T: np.ndarray) -> list[list[float]]:
     return [[float(v) for v in row] for row in T]
 
 
+def smodel_section(chain: SerialChain) -> dict[str, Any]:
+    """The S-Model matrices (4.51) and parameters (4.52)-(4.57) of a signature chain."""
+    sm = smodel_from_matrix(chain.links)
+    return {
+        "base": matrix_rows(chain.base),
+        "links": [matrix_rows(B) for B in chain.links],
+        "tool": matrix_rows(chain.tool),
+        "parameters": [
+            {
+                "beta_deg": float(np.degrees(sm.beta[i])),
+                "d_bar_cm": float(sm.d_bar[i]),
+                "a_bar_cm": float(sm.a_bar[i]),
+                "alpha_bar_deg": float(np.degrees(sm.alpha_bar[i])),
+                "gamma_deg": float(np.degrees(sm.gamma[i])),
+                "b_cm": float(sm.b[i]),
+            }
+            for i in range(chain.n_joints)
+        ],
+    }
+
+
+def refinement_section(refine: pa.Table) -> dict[str, Any]:
+    """The refinement's summary (stage ``refine``): whether it ran, its status and χ², and
+    the sensor's fitted parameters (self-calibration) with their σ. ``verdict`` is null
+    until the verdict stage fills it."""
+    from pipeline.stages.refine import refine_summary
+
+    summary = refine_summary(refine)
+    enabled = bool(summary.get("enabled", False))
+    keys = ("level", "status", "iterations", "chi2", "dof", "noise_scale", "chi2_recorded_sensor")
+    out: dict[str, Any] = {"enabled": enabled}
+    out.update({k: summary[k] for k in keys if enabled and k in summary})
+    rows = refine.select(["group", "name", "unit", "value", "sigma"]).to_pylist()
+    out["sensor_calibration"] = [
+        {k: r[k] for k in ("name", "unit", "value", "sigma")}
+        for r in rows
+        if r["group"] not in ("axis", "point")
+    ]
+    out["verdict"] = None
+    return out
+
+
 def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict[str, Any]:
     """The signature as a JSON-ready dict (without its digest), built from the session's
     stage tables, whose content hashes are ``hashes``."""
     session = read_table(stage_path(session_dir, "session"))
     robot = session_robot(session)
     pris = robot.prismatic
-    chain = chain_from_frames(read_table(stage_path(session_dir, "frames")), pris)
+    chain = chain_from_frames(read_table(stage_path(session_dir, "chain")), pris)
+    thesis = chain_from_frames(read_table(stage_path(session_dir, "frames")), pris)
+    refinement = refinement_section(read_table(stage_path(session_dir, "refine")))
     pdh = pseudo_dh_from_chain(chain)
     X, Y, misfit = design_alignment(chain, robot)
-    sm = pdh.smodel
     qs = joints_to_boundary(chain.joint_offsets, pris)
     off = joints_to_boundary(pdh.q_offset, pris)
     features = read_table(stage_path(session_dir, "features")).to_pylist()
@@ -130,22 +175,10 @@ def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict
         "joint_limits": robot.limits.tolist(),
         "encoder_resolution": robot.encoder_resolution.tolist(),
         "signature_configuration": [float(v) for v in qs],
-        "smodel": {
-            "base": matrix_rows(chain.base),
-            "links": [matrix_rows(B) for B in chain.links],
-            "tool": matrix_rows(chain.tool),
-            "parameters": [
-                {
-                    "beta_deg": float(np.degrees(sm.beta[i])),
-                    "d_bar_cm": float(sm.d_bar[i]),
-                    "a_bar_cm": float(sm.a_bar[i]),
-                    "alpha_bar_deg": float(np.degrees(sm.alpha_bar[i])),
-                    "gamma_deg": float(np.degrees(sm.gamma[i])),
-                    "b_cm": float(sm.b[i]),
-                }
-                for i in range(robot.n_joints)
-            ],
-        },
+        "smodel": smodel_section(chain),
+        "model": "refined" if refinement["enabled"] else "smodel",
+        "thesis_smodel": smodel_section(thesis),
+        "refinement": refinement,
         "pseudo_dh": pseudo,
         "design_alignment": {
             "sensor_from_design_base": matrix_rows(X),

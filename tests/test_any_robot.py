@@ -99,9 +99,10 @@ def test_design_alignment_takes_no_share_of_a_symmetry(sessions, robot: str) -> 
 
 
 def _dh_models(d: Path):
-    """Signature chain of a session and its true and modified pseudo D-H models."""
+    """Signature chain of a session (stage chain: what dh reads) and its true and
+    modified pseudo D-H models."""
     robot = session_robot(read_table(stage_path(d, "session")))
-    chain = chain_from_frames(read_table(stage_path(d, "frames")), robot.prismatic)
+    chain = chain_from_frames(read_table(stage_path(d, "chain")), robot.prismatic)
     return robot, chain, true_dh_from_chain(chain), pseudo_dh_from_chain(chain)
 
 

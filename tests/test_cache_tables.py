@@ -78,6 +78,8 @@ def test_corrupt_stage_is_stale_and_recomputed(
     assert st["smodel"].state == "stale" and st["signature"].state == "missing"
     assert {s.name for s in status(d) if s.state != "fresh"} == {
         "frames",
+        "refine",
+        "chain",
         "smodel",
         "dh",
         "signature",

@@ -104,5 +104,5 @@ def test_zero_moves_give_the_start_frames_exactly() -> None:
     m = _model(np.random.default_rng(4), [False, True, False])
     np.testing.assert_array_equal(m.frames(np.zeros(m.n_params)), m.frames0)
     assert m.n_axis_params == 4 + 2 + 4
-    assert m.param_names[4:6] == ("joint2_rx", "joint2_ry")
+    assert m.param_names[4:6] == ("joint2.rx", "joint2.ry")
     assert len(m.param_names) == len(m.param_units) == m.n_params

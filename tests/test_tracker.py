@@ -29,7 +29,8 @@ def test_point_session_runs_its_own_stage_list(tmp_path_factory) -> None:
     d = _identified(tmp_path_factory, seed=1, noiseless=True, points=5)
     names = [s.name for s in status(d)]
     assert names == [
-        "session", "joints", "positions", "features", "residuals", "frames", "smodel", "dh",
+        "session", "joints", "positions", "features", "residuals", "frames", "refine", "chain",
+        "smodel", "dh",
         "signature", "validation",
     ]  # fmt: skip
     assert not stage_path(d, "triangulate").exists()
@@ -124,7 +125,7 @@ def test_check_configurations_are_recorded_not_used(tmp_path_factory, tmp_path: 
     assert sum(r["sweep"] == -1 for r in pos) == 4 and {
         r["target"] for r in pos if r["sweep"] == -1
     } == {"T1"}
-    for name in ("frames", "smodel"):  # the check sweep changes no identification number
+    for name in ("frames", "refine", "chain", "smodel"):  # the check sweep changes none of them
         assert read_table(stage_path(c, name)).equals(read_table(stage_path(d, name)))
 
 

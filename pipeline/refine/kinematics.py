@@ -121,11 +121,11 @@ class ChainModel:
     @cached_property
     def param_names(self) -> tuple[str, ...]:
         names = [
-            f"joint{k + 1}_{AXIS_PARAMS[m]}"
+            f"joint{k + 1}.{AXIS_PARAMS[m]}"
             for k in range(self.n_joints)
             for m in range(2 if self.prismatic[k] else 4)
         ]
-        names += [f"{p}_{c}_cm" for p in self.point_names for c in "xyz"]
+        names += [f"{p}.{c}" for p in self.point_names for c in "xyz"]
         return tuple(names)
 
     @cached_property

@@ -4,7 +4,7 @@ One digitize cycle sparks sparkers 1-5 and reports a 5 × 4 array of slant
 ranges (sparker × microphone A-D). A reported range is the internal nominal
 speed of sound times the true time of flight (integrated through the
 :class:`~pipeline.rig.atmosphere.Atmosphere`), plus noise (7.9)
-``σ = 9.6432e-5·X + 0.003`` cm times a noise factor, quantized to the 0.01 cm
+(:mod:`pipeline.sensor.noise`) times a noise factor, quantized to the 0.01 cm
 resolution. There is no echo (NaN) outside 30-250 cm or from behind the wall, and
 no reported range outside that window (the digitizer gates its reports).
 
@@ -22,9 +22,7 @@ import numpy as np
 
 from pipeline.rig.atmosphere import Atmosphere
 from pipeline.sensor.geometry import DigitizerGeometry
-
-NOISE_SLOPE = 9.6432e-5  # Eq. (7.9): σ = 9.6432e-5 · X + 0.003 (cm)
-NOISE_FLOOR_CM = 0.003
+from pipeline.sensor.noise import range_noise_sigma_cm
 
 
 @dataclass(frozen=True)
@@ -102,7 +100,7 @@ def digitize(
         [np.broadcast_to(tof_rods, (m, 4, 4)), tof_target[:, None, :]], axis=1
     )  # (M, 5, 4)
     raw = g.nominal_speed_cm_s * tof + np.asarray(model.mic_bias_cm)
-    sigma = model.noise_factor * (NOISE_SLOPE * raw + NOISE_FLOOR_CM)  # Eq. (7.9)
+    sigma = model.noise_factor * range_noise_sigma_cm(raw)  # Eq. (7.9)
     z = rng.standard_normal(raw.shape) if standard_normal is None else standard_normal
     raw = raw + sigma * z
     if model.outlier_prob > 0:

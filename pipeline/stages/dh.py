@@ -44,7 +44,7 @@ def _columns(p: PseudoDH, pris: np.ndarray, prefix: str = "") -> dict[str, pa.Ar
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     robot = session_robot(inputs["session"])
     pris = robot.prismatic
-    chain = chain_from_frames(inputs["frames"], pris)
+    chain = chain_from_frames(inputs["chain"], pris)
     design_d = np.array([np.nan if j.prismatic else j.dh.d_cm for j in robot.joints])
     return pa.table(
         {
@@ -61,8 +61,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 STAGE = Stage(
     "dh",
-    3,
-    ("frames", "session"),
+    4,  # 4: from the signature chain (stage chain)
+    ("chain", "session"),
     NoParams(),
     compute,
     "encoder offsets and true (and modified) pseudo D-H parameters",

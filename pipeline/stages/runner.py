@@ -50,6 +50,8 @@ STAGE_MODULES = (
     "features",
     "residuals",
     "frames",
+    "refine",
+    "chain",
     "smodel",
     "dh",
 )
@@ -62,6 +64,8 @@ POINT_STAGE_MODULES = (
     "features",
     "residuals",
     "frames",
+    "refine_points",
+    "chain",
     "smodel",
     "dh",
     "validation",
@@ -535,7 +539,10 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
         table = stage.compute(inputs, params)
     except ArmsigError as exc:  # name the session and the stage, keep the cause's advice
         raise StageError(f"{sdir}: stage '{stage.name}': {exc}") from exc
+    own = table.schema.metadata  # a stage's summary (e.g. refine's): kept through the cast
     table = validate_table(table, stage.name, source=f"{sdir}: stage '{stage.name}'")
+    if own:
+        table = table.replace_schema_metadata({**(table.schema.metadata or {}), **own})
     digest = content_hash(table)
     provenance = {
         "stage": stage.name,

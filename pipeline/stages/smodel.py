@@ -16,7 +16,7 @@ from pipeline.stages.session import session_robot
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     robot = session_robot(inputs["session"])
-    chain = chain_from_frames(inputs["frames"], robot.prismatic)
+    chain = chain_from_frames(inputs["chain"], robot.prismatic)
     B = chain.links  # Eq. (4.51)
     p = smodel_from_matrix(B)  # Eq. (4.52)-(4.57), ERRATA sign of b and atan2
     return pa.table(
@@ -36,8 +36,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 STAGE = Stage(
     "smodel",
-    1,
-    ("frames", "session"),
+    2,  # 2: from the signature chain (stage chain), refined by default
+    ("chain", "session"),
     NoParams(),
     compute,
     "S-Model link transforms and parameters",

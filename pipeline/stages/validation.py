@@ -42,7 +42,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     robot = session_robot(inputs["session"])
     plan = session_plan(inputs["session"])
     n, pris = robot.n_joints, robot.prismatic
-    chain = chain_from_frames(inputs["frames"], pris)
+    chain = chain_from_frames(inputs["chain"], pris)
     pos = inputs["positions"]
     import pyarrow.compute as pc  # lazy: ~70 ms of import, which a warm run never needs
 
@@ -89,8 +89,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 STAGE = Stage(
     "validation",
-    1,
-    ("positions", "joints", "frames", "session"),
+    2,  # 2: from the signature chain (stage chain)
+    ("positions", "joints", "chain", "session"),
     NoParams(),
     compute,
     "model position error on validation (check) and fit points",

@@ -1,0 +1,164 @@
+"""Stage ``refine``: one fit of the whole kinematic chain to every measurement (issue 15).
+
+Started from the thesis's S-Model frames (stage ``frames``), the joint axis lines and the
+target points (:mod:`pipeline.refine.kinematics`, its gauge in docs/refine.md) are fitted
+to the session's measurement block by :func:`pipeline.refine.solve.solve`:
+
+- level ``points``: the usable fit positions of the ``positions`` table, three whitened
+  residuals each (:mod:`pipeline.refine.points`); the check sweep stays held out;
+- level ``ranges`` (sonic, ``--param refine.level=ranges``): every raw slant range, the
+  sensor's own parameters (microphones, biases, speed of sound) in the fit
+  (:mod:`pipeline.sensor.range_model`). A point-sensor session asked for it is refused
+  with one line; its stage list runs this stage from :mod:`pipeline.stages.refine_points`,
+  without the ``ranges`` input.
+
+One row per parameter: group (``axis``, ``point``; the sensor's ``mic``, ``bias``,
+``speed``), name, unit (boundary units: deg, cm), start, value, sigma and its row of the
+covariance (same order as the rows). The solver's summary is in the schema metadata
+(key ``armsig.refine``, :data:`META_KEY`). Disabled (``--param refine.enabled=false``):
+zero rows and ``enabled: false``; stage ``chain`` then copies the thesis's frames.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from pipeline.errors import StageError
+from pipeline.stages.base import Stage, check_param
+from pipeline.stages.session import session_sensor
+
+META_KEY = b"armsig.refine"
+LEVELS = ("auto", "points", "ranges")
+LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")  # scipy.optimize.least_squares'
+
+
+@dataclass(frozen=True)
+class Params:
+    """``level``: auto (points: see :func:`resolved_level`), points, ranges (sonic);
+    ``loss``/``f_scale``: the robust loss and its scale in σ of the whitened residuals
+    (3: a residual beyond 3σ starts to be down-weighted); ``speed_knot_s``: knot spacing
+    of the speed-of-sound spline (level ranges)."""
+
+    enabled: bool = True
+    level: str = "auto"
+    loss: str = "soft_l1"
+    f_scale: float = 3.0
+    speed_knot_s: float = 120.0
+
+    def __post_init__(self) -> None:
+        check_param(self, "refine", "level", self.level in LEVELS, " or ".join(LEVELS))
+        check_param(self, "refine", "loss", self.loss in LOSSES, " or ".join(LOSSES))
+        ok = bool(np.isfinite(self.f_scale) and self.f_scale > 0)
+        check_param(self, "refine", "f_scale", ok, "> 0 and finite")
+        ok = bool(np.isfinite(self.speed_knot_s) and self.speed_knot_s > 0)
+        check_param(self, "refine", "speed_knot_s", ok, "> 0 and finite")
+
+
+def refine_summary(table: pa.Table) -> dict[str, Any]:
+    """The solver's summary recorded with a ``refine`` table (``{}`` when absent)."""
+    raw = (table.schema.metadata or {}).get(META_KEY)
+    return json.loads(raw) if raw else {}
+
+
+def resolved_level(params: Params, sensor: str) -> str:
+    """The measurement level a session is refined at: ``auto`` is ``points`` for every
+    session. Not ``ranges`` for sonic sessions yet: the range model's speed of sound is a
+    function of the cycles' times, which are message log times, so permuting
+    ``/sonic/ranges`` log times moved robot-scale signatures by 0.1 cm
+    (tests/test_recording_keys.py: issue 13 wants log times never to change the
+    signature). ``--param refine.level=ranges`` runs it."""
+    if params.level != "auto":
+        return params.level
+    return "points"
+
+
+def _boundary(units: tuple[str, ...]) -> tuple[list[str], np.ndarray]:
+    """Boundary units (rad -> deg) and the factor of each parameter."""
+    out = ["deg" if u == "rad" else u for u in units]
+    return out, np.array([np.degrees(1.0) if u == "rad" else 1.0 for u in units])
+
+
+def _table(rows: dict[str, Any], summary: dict[str, Any]) -> pa.Table:
+    table = pa.table(
+        {
+            "group": pa.array(rows["group"], pa.string()),
+            "name": pa.array(rows["name"], pa.string()),
+            "unit": pa.array(rows["unit"], pa.string()),
+            "start": pa.array(rows["start"], pa.float64()),
+            "value": pa.array(rows["value"], pa.float64()),
+            "sigma": pa.array(rows["sigma"], pa.float64()),
+            "covariance": pa.array(rows["covariance"], pa.list_(pa.float64())),
+        }
+    )
+    return table.replace_schema_metadata({META_KEY: json.dumps(summary, sort_keys=True)})
+
+
+def _disabled(level: str) -> pa.Table:
+    empty: dict[str, list[Any]] = {
+        k: [] for k in ("group", "name", "unit", "start", "value", "sigma", "covariance")
+    }
+    return _table(empty, {"enabled": False, "level": level, "status": "disabled"})
+
+
+def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
+    from pipeline.refine.problem import session_problem
+    from pipeline.refine.solve import recorded_chi2, solve
+
+    sensor = session_sensor(inputs["session"])
+    level = resolved_level(params, sensor)
+    if not params.enabled:
+        return _disabled(level)
+    if level == "ranges" and sensor != "sonic":
+        raise StageError(
+            "refine.level 'ranges' needs the raw ranges of a sonic session",
+            expected="level points (or auto) for a point-sensor session",
+            got=f"sensor {sensor!r}",
+            fix="--param refine.level=auto",
+        )
+    sp = session_problem(inputs, params.loss, params.f_scale, level, params.speed_knot_s)
+    sol = solve(sp.problem, sp.x0)
+    chi2_recorded = recorded_chi2(sp.problem, sol)
+    units, factor = _boundary(sp.units)
+    cov = sol.covariance * np.outer(factor, factor)
+    summary = {
+        "enabled": True,
+        "level": level,
+        "status": sol.status,
+        "message": sol.message,
+        "iterations": sol.iterations,
+        "n_residuals": sol.n_residuals,
+        "n_params": len(sol.x),
+        "chi2": sol.chi2,
+        "dof": sol.dof,
+        "noise_scale": sol.noise_scale,
+        "chi2_recorded_sensor": chi2_recorded,
+        "loss": params.loss,
+        "f_scale": params.f_scale,
+        "rows_down_weighted": sol.down_weighted,
+    }
+    rows = {
+        "group": list(sp.groups),
+        "name": list(sp.names),
+        "unit": units,
+        "start": sp.x0 * factor,
+        "value": sol.x * factor,
+        "sigma": sol.sigma * factor,
+        "covariance": [row for row in cov],
+    }
+    return _table(rows, summary)
+
+
+STAGE = Stage(
+    "refine",
+    1,
+    ("session", "joints", "positions", "frames", "ranges"),
+    Params(),
+    compute,
+    "joint refinement of the chain (axis lines, target points) from all measurements",
+)
