@@ -115,7 +115,13 @@ def _atmosphere_tables(
             "t_s": np.repeat(t, 20),
         }
     )
-    session = pa.table({"rig_json": [json.dumps(g.to_dict())]})
+    plan = {"order": list(range(1, n + 1))}  # the sweeps in the order of their times
+    session = pa.table(
+        {
+            "rig_json": [json.dumps(g.to_dict())],
+            "robot_json": [json.dumps({"plan": plan, "signature_q": []})],
+        }
+    )
     return ranges, session, p, g
 
 

@@ -74,7 +74,7 @@ def test_refined_beats_the_thesis_on_a_noisy_tracker_session(tmp_path_factory, t
 
 def test_refined_beats_the_thesis_on_a_robot3_like_sonic_session(tmp_path) -> None:
     """robot3's recording (seed 3, default plan and noise), both levels: 0.0093 cm
-    (thesis) -> 0.0085 cm (points), 0.0051 cm (ranges)."""
+    (thesis) -> 0.0083 cm (points), 0.0051 cm (ranges, the sonic default)."""
     src = Path(__file__).parents[1] / "sessions" / "robot3"
     if not (src / "recording.mcap").is_file():
         pytest.skip("sessions/robot3 is not checked out")
@@ -83,10 +83,11 @@ def test_refined_beats_the_thesis_on_a_robot3_like_sonic_session(tmp_path) -> No
     for name in ("recording.mcap", "rig-truth.json"):
         shutil.copy(src / name, d / name)
     thesis, refined = _thesis_and_refined(d)
-    assert refined < thesis
-    run(d, overrides={"refine": {"level": "ranges"}})
-    assert audit(d, configurations=500).signature.rms_position_cm < refined
+    assert _summary(d)["level"] == "ranges"
     assert 0.5 < _summary(d)["noise_scale"] ** 2 < 2.0  # chi2/dof: the range noise (7.9) holds
+    assert refined < 0.6 * thesis
+    run(d, overrides={"refine": {"level": "points"}})
+    assert refined < audit(d, configurations=500).signature.rms_position_cm < thesis
 
 
 def test_disabled_gives_the_thesis_tables_byte_for_byte(tmp_path_factory, tmp_path) -> None:

@@ -6,16 +6,15 @@ positions, and the Jacobian chains the two (:mod:`pipeline.refine.block`)::
 
     J = [ d_p[rows] · ∂p/∂θ[pos[rows]],  d_x ]
 
-solved by :func:`scipy.optimize.least_squares` (trust-region reflective, a robust loss in
-whitened units). The covariance is Gauss-Newton at the solution, ``(JᵀJ)⁻¹ · χ²/dof``, with
-``J`` scipy's final Jacobian (robust weights applied as scipy applies them) and
-``χ² = 2 · cost`` (the robust χ²; the plain Σr² for rows within ``f_scale``).
+solved by Levenberg-Marquardt on the normal equations (:mod:`pipeline.refine.lm`: a robust
+loss in whitened units by reweighting). The covariance is Gauss-Newton at the solution,
+``(JᵀWJ)⁻¹ · χ²/dof`` with ``W`` the robust weights and ``χ² = 2 · cost`` (the robust χ²;
+the plain Σr² for rows within ``f_scale``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -23,6 +22,7 @@ import numpy.typing as npt
 from pipeline.errors import ArmsigError
 from pipeline.refine.block import Array, Linearization, MeasurementBlock
 from pipeline.refine.kinematics import ChainModel
+from pipeline.refine.lm import LOSSES, levenberg_marquardt
 
 #: Solver tolerances: at 1e-15 (relative cost, step and gradient) a noiseless session
 #: converges to its rounding floor (audit ~1e-12 cm, well inside the 1e-6 cm acceptance);
@@ -33,7 +33,6 @@ MAX_EVALUATIONS = 200
 #: The recorded-sensor χ² re-solves the kinematics only, warm-started at the solution:
 #: ~3 iterations; capped so that a poorly recorded sensor cannot double the stage's time.
 RECORDED_EVALUATIONS = 10
-LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
 
 
 @dataclass(frozen=True)
@@ -98,20 +97,27 @@ def residuals(problem: Problem, x: Array) -> Array:
     return lin.r[rows]
 
 
-def jacobian(problem: Problem, x: Array) -> Array:
-    """``∂r/∂x`` (R, n_params), per the module docstring."""
+def residuals_and_jacobian(problem: Problem, x: Array) -> tuple[Array, Array]:
+    """The whitened residuals (R,) and ``∂r/∂x`` (R, n_params) at ``x`` from one
+    linearization of the block, per the module docstring."""
     lin, rows = _linearize(problem, x)
     dpdx = problem.model.position_jacobian(x[: problem.n_kin])  # (K, 3, n_kin)
+    J = np.zeros((len(lin.r), problem.n_params))
     on = lin.pos >= 0
-    J_kin = np.zeros((len(lin.r), problem.n_kin))
-    J_kin[on] = np.einsum("ri,rij->rj", lin.d_p[on], dpdx[lin.pos[on]])
-    return np.hstack([J_kin, lin.d_x])[rows]
+    J[on, : problem.n_kin] = np.einsum("ri,rij->rj", lin.d_p[on], dpdx[lin.pos[on]])
+    J[:, problem.n_kin :] = lin.d_x
+    if rows.all():
+        return lin.r, J
+    return lin.r[rows], J[rows]
+
+
+def jacobian(problem: Problem, x: Array) -> Array:
+    """``∂r/∂x`` (R, n_params), per the module docstring."""
+    return residuals_and_jacobian(problem, x)[1]
 
 
 def solve(problem: Problem, x_start: Array, max_evaluations: int = MAX_EVALUATIONS) -> Solution:
     """Fit ``problem`` from ``x_start`` (module docstring)."""
-    from scipy.optimize import least_squares  # lazy: a disabled refinement never imports it
-
     if problem.loss not in LOSSES:
         raise ArmsigError(
             f"unknown loss {problem.loss!r}", expected=", ".join(LOSSES), fix="soft_l1"
@@ -134,37 +140,32 @@ def solve(problem: Problem, x_start: Array, max_evaluations: int = MAX_EVALUATIO
             got=f"{int((~np.isfinite(r0)).sum())} of {len(r0)} residuals NaN or inf",
             fix="check the positions table; --param refine.enabled=false skips the refinement",
         )
-    result: Any = least_squares(
-        lambda z: residuals(problem, full(z)),
-        x_fixed[free],
-        jac=lambda z: jacobian(problem, full(z))[:, free],
-        method="trf",
-        loss=problem.loss,
-        f_scale=problem.f_scale,
-        x_scale="jac",
-        ftol=TOLERANCE,
-        xtol=TOLERANCE,
-        gtol=TOLERANCE,
-        max_nfev=max_evaluations,
+
+    def fun(z: Array) -> tuple[Array, Array]:
+        r, J = residuals_and_jacobian(problem, full(z))
+        return r, (J if free.all() else J[:, free])
+
+    result = levenberg_marquardt(
+        fun, x_fixed[free], problem.loss, problem.f_scale, TOLERANCE, max_evaluations
     )
     x = full(result.x)
-    n_res = len(result.fun)
+    n_res = len(result.r)
     dof = n_res - int(free.sum())
     chi2 = 2.0 * float(result.cost)
     cov = np.zeros((problem.n_params, problem.n_params))
-    J = result.jac
+    J = result.J
     scale = chi2 / dof if dof > 0 else np.nan
-    cov[np.ix_(free, free)] = np.linalg.pinv(J.T @ J) * scale
+    cov[np.ix_(free, free)] = np.linalg.pinv(J.T @ (J * result.weights[:, None])) * scale
     return Solution(
         x=x,
         covariance=cov,
         chi2=chi2,
         dof=dof,
         n_residuals=n_res,
-        iterations=int(result.njev if result.njev is not None else result.nfev),
-        status="converged" if result.status > 0 else "not converged",
-        message=str(result.message),
-        down_weighted=int((np.abs(result.fun) > problem.f_scale).sum()),
+        iterations=result.iterations,
+        status="converged" if result.converged else "not converged",
+        message=result.message,
+        down_weighted=int((np.abs(result.r) > problem.f_scale).sum()),
     )
 
 

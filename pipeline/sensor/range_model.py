@@ -65,7 +65,7 @@ from pipeline.errors import ArmsigError
 from pipeline.refine.block import Linearization, MeasurementBlock
 from pipeline.sensor.geometry import MICROPHONES, DigitizerGeometry
 from pipeline.sensor.noise import range_sigma_cm
-from pipeline.sensor.range_rows import RangeRows, range_rows
+from pipeline.sensor.range_rows import RangeRows, check_cycle_order, range_rows
 from pipeline.sensor.speed_spline import TimeSpline
 from pipeline.sensor.triangulation import Trilateration
 
@@ -300,8 +300,9 @@ def range_block(
     Raises
     ------
     ArmsigError
-        A point-sensor session, a bad geometry or ranges table, no rod ranges at B or
-        D, or a microphone that never heard the target.
+        A point-sensor session, a bad geometry or ranges table, cycle times out of the
+        measurement order, no rod ranges at B or D, or a microphone that never heard the
+        target.
     """
     opts = options or RangeModelOptions()
     rig = json.loads(session.column("rig_json")[0].as_py())
@@ -312,7 +313,10 @@ def range_block(
             got=repr(rig.get("sensor")),
             fix="use the point-sensor block for this session",
         )
+    from pipeline.stages.session import session_plan
+
     geometry = DigitizerGeometry.from_dict(rig)
+    check_cycle_order(ranges, session_plan(session)["order"])
     rows = range_rows(ranges, geometry)
     origin, axes, geo0 = _gauge(geometry.microphones)
     d_mic = np.zeros((4, 3, N_GEO))

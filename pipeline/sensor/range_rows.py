@@ -162,3 +162,42 @@ def range_rows(ranges: pa.Table, geometry: DigitizerGeometry) -> RangeRows:
         f_d=f_d,
         cycle_t_s=cycle_t,
     )
+
+
+def check_cycle_order(ranges: pa.Table, order: list[int | str]) -> None:
+    """Refuse cycle times that do not follow the recorded measurement order.
+
+    The range model's speed of sound is a function of the cycles' times (the
+    ``/sonic/ranges`` log times). The rig measures the sweeps in ``plan.order`` and,
+    within a sweep, by step and repeat, so those times must increase along that order;
+    reversed or permuted log times would move the fitted speed of sound, and with it the
+    signature, without a word (issue 13: log times never change a signature silently).
+
+    Raises
+    ------
+    ArmsigError
+        One line naming the first cycle recorded before its predecessor.
+    """
+    from pipeline.stages.recording_keys import sweep_id, sweep_name
+
+    rank = {sweep_id(s): k for k, s in enumerate(order)}
+    sweep = _column(ranges, "sweep").astype(np.int64)
+    step = _column(ranges, "step").astype(np.int64)
+    repeat = _column(ranges, "repeat").astype(np.int64)
+    t = _column(ranges, "t_s").astype(float)
+    where = np.array([rank.get(int(s), len(rank)) for s in sweep], np.int64)
+    key = np.stack([where, step, repeat], axis=1)
+    cycles, first = np.unique(key, axis=0, return_index=True)  # sorted along the order
+    dt = np.diff(t[first])
+    if (dt > 0.0).all():
+        return
+    k = int(np.argmax(~(dt > 0.0))) + 1
+    s = int(sweep[first[k]])
+    raise ArmsigError(
+        "the /sonic/ranges log times do not follow the measurement order: cycle "
+        f"(sweep {sweep_name(s)}, step {cycles[k, 1]}, repeat {cycles[k, 2]}) is logged "
+        f"at {t[first[k]]:.3f} s, not after the cycle before it ({t[first[k - 1]]:.3f} s)",
+        expected="cycle times increasing along plan.order, then step, then repeat "
+        "(the range-level refinement models the speed of sound in time)",
+        fix="re-record the session with its true log times, or --param refine.level=points",
+    )

@@ -30,12 +30,12 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.errors import StageError
+from pipeline.refine.lm import LOSSES
 from pipeline.stages.base import Stage, check_param
 from pipeline.stages.session import session_sensor
 
 META_KEY = b"armsig.refine"
 LEVELS = ("auto", "points", "ranges")
-LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")  # scipy.optimize.least_squares'
 
 
 @dataclass(frozen=True)
@@ -67,15 +67,15 @@ def refine_summary(table: pa.Table) -> dict[str, Any]:
 
 
 def resolved_level(params: Params, sensor: str) -> str:
-    """The measurement level a session is refined at: ``auto`` is ``points`` for every
-    session. Not ``ranges`` for sonic sessions yet: the range model's speed of sound is a
-    function of the cycles' times, which are message log times, so permuting
-    ``/sonic/ranges`` log times moved robot-scale signatures by 0.1 cm
-    (tests/test_recording_keys.py: issue 13 wants log times never to change the
-    signature). ``--param refine.level=ranges`` runs it."""
+    """The measurement level a session is refined at: ``auto`` is ``ranges`` for sonic
+    sessions (every raw range, the sensor calibrated in the fit), ``points`` for point
+    sensors. The range model's speed of sound is a function of the cycles' log times, so
+    a recording whose log times do not follow its measurement order is refused with one
+    line at that level (:func:`pipeline.sensor.range_rows.check_cycle_order`; issue 13:
+    log times never change a signature silently)."""
     if params.level != "auto":
         return params.level
-    return "points"
+    return "ranges" if sensor == "sonic" else "points"
 
 
 def _boundary(units: tuple[str, ...]) -> tuple[list[str], np.ndarray]:
