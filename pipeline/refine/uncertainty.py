@@ -113,38 +113,32 @@ def _sqrt_psd(Sigma: Array) -> Array:
     return out
 
 
-def predict(
-    J_pos: Array, J_rot: Array, Sigma: Array, p: Array, R: Array, seed: int = 0
-) -> Prediction:
-    """Predicted errors from the tool Jacobians and the parameter covariance.
+def error_maps(J_pos: Array, J_rot: Array, p: Array, R: Array) -> tuple[Array, Array]:
+    """Tool error per unit of each parameter, raw ``A`` and aligned ``B = P A`` (m, 6, P).
 
-    Parameters
-    ----------
-    J_pos, J_rot : ndarray, shape (m, 3, P)
-        ``∂p/∂θ`` (cm per unit) and ``ω`` per unit of each parameter (rad), tool frame
-        origin at m configurations.
-    Sigma : ndarray, shape (P, P)
-        Covariance of θ.
-    p, R : ndarray, shapes (m, 3) and (m, 3, 3)
-        Tool position and orientation at those configurations.
-    seed : int
-        Seed of the draws of :attr:`Prediction.max95_cm`.
+    Rows ``[δp; √2 L ω]`` (module docstring) from ``J_pos, J_rot`` (m, 3, P): ``∂p/∂θ``
+    (cm per unit) and ``ω`` per unit (rad); ``p, R`` (m, 3), (m, 3, 3): the tool poses.
     """
+    A = np.concatenate([J_pos, _ROT_WEIGHT * J_rot], axis=1)
+    return A, project_out_alignment(A, alignment_directions(p, R))
+
+
+def predict(A: Array, B: Array, Sigma: Array, seed: int = 0) -> Prediction:
+    """Predicted errors from the :func:`error_maps` and the covariance ``Sigma`` (P, P) of
+    θ; ``seed``: of the draws of :attr:`Prediction.max95_cm`."""
     F = _sqrt_psd(np.asarray(Sigma, float))
-    A = np.concatenate([J_pos, _ROT_WEIGHT * J_rot], axis=1)  # (m, 6, P)
-    B = project_out_alignment(A, alignment_directions(p, R)) @ F  # (m, 6, P)
-    JF, WF = J_pos @ F, J_rot @ F
+    AF, BF = A @ F, B @ F
 
     def rms(M: Array) -> Array:  # sqrt(trace(M Mᵀ)) per configuration
         return np.sqrt(np.einsum("mij,mij->m", M, M))
 
     z = np.random.default_rng(seed).standard_normal((F.shape[1], MAX_DRAWS))
-    worst = np.linalg.norm(B[:, :3] @ z, axis=1).max(axis=0)  # (draws,)
+    worst = np.linalg.norm(BF[:, :3] @ z, axis=1).max(axis=0)  # (draws,)
     return Prediction(
-        position_cm=rms(JF),
-        position_aligned_cm=rms(B[:, :3]),
-        orientation_deg=np.degrees(rms(WF)),
-        orientation_aligned_deg=np.degrees(rms(B[:, 3:]) / _ROT_WEIGHT),
+        position_cm=rms(AF[:, :3]),
+        position_aligned_cm=rms(BF[:, :3]),
+        orientation_deg=np.degrees(rms(AF[:, 3:]) / _ROT_WEIGHT),
+        orientation_aligned_deg=np.degrees(rms(BF[:, 3:]) / _ROT_WEIGHT),
         max95_cm=float(np.percentile(worst, 95)),
     )
 
@@ -173,9 +167,12 @@ def tool_poses(model: ChainModel, x: Array) -> tuple[Array, Array]:
     return T[:, :3, 3], T[:, :3, :3]
 
 
+def model_error_maps(model: ChainModel, x: Array) -> tuple[Array, Array]:
+    """:func:`error_maps` of a :func:`tool_model` at ``x``."""
+    p, R = tool_poses(model, x)
+    return error_maps(model.position_jacobian(x), model.tool_orientation_jacobian(x), p, R)
+
+
 def predict_model(model: ChainModel, x: Array, Sigma: Array, seed: int = 0) -> Prediction:
     """:func:`predict` for a :func:`tool_model` at ``x`` with covariance ``Sigma`` of ``x``."""
-    p, R = tool_poses(model, x)
-    return predict(
-        model.position_jacobian(x), model.tool_orientation_jacobian(x), Sigma, p, R, seed
-    )
+    return predict(*model_error_maps(model, x), Sigma, seed)
