@@ -1,0 +1,363 @@
+"""The refinement's kinematic model: every measured point from the joint axes as lines.
+
+The signature chain ``T(q) = S̄_0 Π M_i(q_i − q̄_i^s) B_i · tool`` with
+``B_i = S̄_{i−1}⁻¹ S̄_i`` (:mod:`pipeline.kinematics.signature`) is, written at the
+signature configuration ``q̄^s`` (product of exponentials), a point fixed on link ``ℓ``
+at
+
+    ``p(q) = A_1(θ_1) ⋯ A_ℓ(θ_ℓ) · p0``,  ``A_k(θ) = S_k M_k(θ) S_k⁻¹``,  ``θ = q − q̄^s``,
+
+with ``S_k = S̄_{k−1}`` and ``p0`` the point at ``q̄^s`` (sensor frame). Only the
+*axis lines* of the ``S_k`` and the points ``p0`` enter, so these are the parameters:
+
+- joint ``k``'s axis line as a move of its start frame (the thesis's ``S̄_{k−1}``):
+  ``S_k(δ) = S_k⁰ · Trans(t_x, t_y, 0) · Rot_x(r_x) · Rot_y(r_y)``, ``δ = (r_x, r_y, t_x, t_y)``
+  for a revolute joint, ``(r_x, r_y)`` for a prismatic one (its origin does not matter).
+  It has no singularity near the start, unlike D-H's ``α`` on nearly parallel axes
+  (Hayati's problem): it is the thesis frame moved;
+- each target point's ``p0`` (cm): one per (sweep, target) of the joint sweeps, and one
+  ``tool`` point shared by every measurement of the tool (tool sweep, check sweep and an
+  import's ``plan.tool_target`` rows).
+
+Gauge freedoms and how they are fixed:
+
+1. the sensor frame is the world: ``S̄_0`` is joint 1's axis in the sensor frame, no
+   separate base;
+2. the origin of ``S_k`` along its axis and its rotation about it do not change ``T(q)``
+   (``M_k`` commutes with both), so they are not parameters: the refined frame is
+   ``S_k(δ)``, whose origin is where the refined axis meets the thesis frame's X-Y plane
+   and whose X is the thesis X made normal to the refined axis;
+3. encoder offsets are absorbed by ``q̄^s``, the zero of ``θ`` (the signature
+   configuration defines the readings' reference, Section 4.3.3);
+4. the tool's orientation is not observable from points: it is ``S_n``'s (thesis
+   convention, ``S̄_n = S̄_{n−1}``), the tool a translation.
+
+Parameter vector: ``x = [δ_1 … δ_n, p0_0 … p0_{m−1}]``. ``x`` with every ``δ = 0`` and
+the points from :func:`start_points` reproduces the thesis chain.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import numpy.typing as npt
+import pyarrow as pa
+
+from pipeline.errors import StageError
+from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans, trans_z
+
+Array = npt.NDArray[np.float64]
+
+#: Names of a revolute joint's axis parameters (a prismatic joint has the first two).
+AXIS_PARAMS = ("rx", "ry", "tx", "ty")
+_AXIS_UNITS = ("rad", "rad", "cm", "cm")
+TOOL_POINT = "tool"
+
+# Generators: d/da Rot_x(a) = Rot_x(a) · _GX, d/da Rot_y(a) = Rot_y(a) · _GY.
+_GX = np.zeros((4, 4))
+_GX[1, 2], _GX[2, 1] = -1.0, 1.0
+_GY = np.zeros((4, 4))
+_GY[0, 2], _GY[2, 0] = 1.0, -1.0
+
+
+def _vee(W: Array) -> Array:
+    """Axial vectors (..., 3) of the skew parts of (..., 3, 3) matrices."""
+    return 0.5 * np.stack(
+        [W[..., 2, 1] - W[..., 1, 2], W[..., 0, 2] - W[..., 2, 0], W[..., 1, 0] - W[..., 0, 1]],
+        axis=-1,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class ChainModel:
+    """Positions of measured points as functions of the axis lines and the points.
+
+    Attributes
+    ----------
+    frames0 : ndarray, shape (n, 4, 4)
+        Start frames ``S̄_0 … S̄_{n−1}`` at ``q̄^s`` (sensor frame, cm).
+    prismatic : ndarray of bool, shape (n,)
+    link : ndarray of int, shape (K,)
+        Link 1..n that each observation's point is fixed on.
+    theta : ndarray, shape (K, n)
+        Joint readings minus ``q̄^s`` (rad / cm) of each observation.
+    point : ndarray of int, shape (K,)
+        Index of the point ``p0`` each observation sees.
+    point_names : tuple of str
+        One name per point (``tool`` or ``sweep<j>/<target>``).
+    """
+
+    frames0: Array
+    prismatic: npt.NDArray[np.bool_]
+    link: npt.NDArray[np.int64]
+    theta: Array
+    point: npt.NDArray[np.int64]
+    point_names: tuple[str, ...]
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.prismatic)
+
+    @property
+    def n_points(self) -> int:
+        return len(self.point_names)
+
+    @cached_property
+    def axis_offsets(self) -> Array:
+        """Start of each joint's ``δ`` in ``x``, shape (n + 1,) (last = axis parameters)."""
+        sizes = np.where(self.prismatic, 2, 4)
+        return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+
+    @property
+    def n_axis_params(self) -> int:
+        return int(self.axis_offsets[-1])
+
+    @property
+    def n_params(self) -> int:
+        return self.n_axis_params + 3 * self.n_points
+
+    @cached_property
+    def param_names(self) -> tuple[str, ...]:
+        names = [
+            f"joint{k + 1}_{AXIS_PARAMS[m]}"
+            for k in range(self.n_joints)
+            for m in range(2 if self.prismatic[k] else 4)
+        ]
+        names += [f"{p}_{c}_cm" for p in self.point_names for c in "xyz"]
+        return tuple(names)
+
+    @cached_property
+    def param_units(self) -> tuple[str, ...]:
+        sizes = [2 if p else 4 for p in self.prismatic]
+        units = [_AXIS_UNITS[m] for size in sizes for m in range(size)]
+        return tuple(units + ["cm"] * (3 * self.n_points))
+
+    def point_slice(self, j: int) -> slice:
+        """Where point ``j``'s ``p0`` sits in ``x``."""
+        start = self.n_axis_params + 3 * j
+        return slice(start, start + 3)
+
+    def _deltas(self, x: Array) -> Array:
+        """``δ`` of every joint as (n, 4): zeros for a prismatic joint's translations."""
+        d = np.zeros((self.n_joints, 4))
+        for k in range(self.n_joints):
+            a, b = self.axis_offsets[k], self.axis_offsets[k + 1]
+            d[k, : b - a] = x[a:b]
+        return d
+
+    def frames(self, x: npt.ArrayLike) -> Array:
+        """Refined ``S_1 … S_n`` (= ``S̄_0 … S̄_{n−1}``), shape (n, 4, 4)."""
+        d = self._deltas(np.asarray(x, float))
+        move = trans(d[:, 2], d[:, 3], 0.0) @ rot_x(d[:, 0]) @ rot_y(d[:, 1])
+        return np.asarray(self.frames0 @ move, float)
+
+    def _frame_generators(self, x: Array) -> tuple[Array, Array]:
+        """Frames ``S`` (n, 4, 4) and ``G_m = ∂S/∂δ_m · S⁻¹`` (n, 4, 4, 4) (m = rx, ry, tx, ty)."""
+        d = self._deltas(x)
+        T, Rx, Ry = trans(d[:, 2], d[:, 3], 0.0), rot_x(d[:, 0]), rot_y(d[:, 1])
+        S = self.frames0 @ T @ Rx @ Ry
+        E = np.zeros((2, 4, 4))
+        E[0, 0, 3] = E[1, 1, 3] = 1.0  # d Trans(tx, ty, 0) / d(tx, ty)
+        dS = np.stack(
+            [
+                self.frames0 @ T @ Rx @ _GX @ Ry,
+                self.frames0 @ T @ Rx @ Ry @ _GY,
+                self.frames0 @ E[0] @ Rx @ Ry,
+                self.frames0 @ E[1] @ Rx @ Ry,
+            ],
+            axis=1,
+        )
+        return S, dS @ invert_transform(S)[:, None]
+
+    def _motions(self, S: Array) -> Array:
+        """``A_k(θ_k)`` of every observation (K, n, 4, 4); exactly I on joints past its link."""
+        n, K = self.n_joints, len(self.link)
+        M = np.where(
+            self.prismatic[None, :, None, None], trans_z(self.theta), rot_z(self.theta)
+        )  # (K, n, 4, 4)
+        A = S @ M @ invert_transform(S)
+        moving = np.arange(1, n + 1)[None, :] <= self.link[:, None]
+        A[~moving] = np.eye(4)
+        return A.reshape(K, n, 4, 4)
+
+    def _points_h(self, x: Array) -> Array:
+        """Homogeneous ``p0`` of every observation, shape (K, 4)."""
+        p0 = x[self.n_axis_params :].reshape(self.n_points, 3)[self.point]
+        return np.concatenate([p0, np.ones((len(p0), 1))], axis=1)
+
+    def positions(self, x: npt.ArrayLike) -> Array:
+        """Sensor-frame position of every observation, shape (K, 3)."""
+        x = np.asarray(x, float)
+        A = self._motions(self.frames(x))
+        v = self._points_h(x)
+        for k in range(self.n_joints - 1, -1, -1):
+            v = (A[:, k] @ v[..., None])[..., 0]
+        return v[:, :3]
+
+    def _prefix_suffix(self, A: Array, v0: Array) -> tuple[Array, Array]:
+        """``Π_{i<k} A_i`` (K, n+1, 4, 4) and ``Π_{i>k} A_i · p0`` (K, n, 4) for k = 1..n."""
+        K, n = A.shape[:2]
+        pre = np.empty((K, n + 1, 4, 4))
+        pre[:, 0] = np.eye(4)
+        for k in range(n):
+            pre[:, k + 1] = pre[:, k] @ A[:, k]
+        suf = np.empty((K, n, 4))
+        v = v0
+        for k in range(n - 1, -1, -1):
+            suf[:, k] = v
+            v = (A[:, k] @ v[..., None])[..., 0]
+        return pre, suf
+
+    def position_jacobian(self, x: npt.ArrayLike) -> Array:
+        """``∂p/∂x`` of every observation, shape (K, 3, n_params) (exact, analytic).
+
+        ``∂A_k/∂δ_m = G_m A_k − A_k G_m`` with ``G_m = ∂S_k/∂δ_m · S_k⁻¹``, so
+        ``∂p/∂δ_m = (Π_{i<k} A_i)(G_m A_k − A_k G_m)(Π_{i>k} A_i p0)``; ``∂p/∂p0`` is the
+        rotation of the whole product.
+        """
+        x = np.asarray(x, float)
+        S, G = self._frame_generators(x)
+        A = self._motions(S)
+        pre, suf = self._prefix_suffix(A, self._points_h(x))
+        K = len(self.link)
+        J = np.zeros((K, 3, self.n_params))
+        for k in range(self.n_joints):
+            a, b = self.axis_offsets[k], self.axis_offsets[k + 1]
+            Gk = G[k, : b - a]  # (m, 4, 4)
+            dA = Gk[None] @ A[:, k, None] - A[:, k, None] @ Gk[None]  # (K, m, 4, 4)
+            dp = pre[:, k, None] @ dA @ suf[:, k, None, :, None]  # (K, m, 4, 1)
+            J[:, :, a:b] = np.swapaxes(dp[..., :3, 0], 1, 2)
+        R = pre[:, -1, :3, :3]
+        for j in range(self.n_points):
+            sel = self.point == j
+            J[sel, :, self.point_slice(j)] = R[sel]
+        return J
+
+    def tool_orientation_jacobian(self, x: npt.ArrayLike) -> Array:
+        """``ω`` with ``δR = [ω]× R`` of the tool frame per parameter, shape (K, 3, n_params).
+
+        The tool frame is ``(Π_k A_k) · S_n`` (thesis convention: ``S̄_n = S̄_{n−1}``);
+        rows of observations not on link n are zero. A joint's ``δ`` enters through
+        ``Ξ = ∂A_k A_k⁻¹ = G − A_k G A_k⁻¹`` carried by the prefix's rotation, and
+        ``δ_n`` also through ``S_n`` itself (``R_Π · vee(G)``).
+        """
+        x = np.asarray(x, float)
+        S, G = self._frame_generators(x)
+        A = self._motions(S)
+        pre, _ = self._prefix_suffix(A, self._points_h(x))
+        K, n = len(self.link), self.n_joints
+        W = np.zeros((K, 3, self.n_params))
+        A_inv = invert_transform(A)
+        for k in range(n):
+            a, b = self.axis_offsets[k], self.axis_offsets[k + 1]
+            Gk = G[k, : b - a]
+            Xi = Gk[None] - A[:, k, None] @ Gk[None] @ A_inv[:, k, None]  # (K, m, 4, 4)
+            w = (pre[:, k, None, :3, :3] @ _vee(Xi[..., :3, :3])[..., None])[..., 0]  # (K, m, 3)
+            W[:, :, a:b] = np.swapaxes(w, 1, 2)
+        a, b = self.axis_offsets[n - 1], self.axis_offsets[n]
+        w_n = (pre[:, -1, None, :3, :3] @ _vee(G[n - 1, : b - a, :3, :3])[None, ..., None])[..., 0]
+        W[:, :, a:b] += np.swapaxes(w_n, 1, 2)
+        W[self.link != n] = 0.0
+        return W
+
+    def signature_frames(self, x: npt.ArrayLike, tool_point: int) -> Array:
+        """``S̄_0 … S̄_n`` and the tool (n + 2, 4, 4), the rows of the ``frames`` table.
+
+        ``S̄_n = S̄_{n−1}``; the tool is the translation of point ``tool_point`` at
+        ``q̄^s`` in ``S̄_n``, with ``S̄_n``'s orientation (gauge 4 of the module docstring).
+        """
+        x = np.asarray(x, float)
+        F = self.frames(x)
+        tool = np.eye(4)
+        R, o = F[-1, :3, :3], F[-1, :3, 3]
+        tool[:3, 3] = R.T @ (x[self.point_slice(tool_point)] - o)
+        return np.concatenate([F, F[-1:], tool[None]], axis=0)
+
+
+def point_name(sweep: int, target: str, tool_target: str | None) -> str:
+    """The point a measurement of ``target`` in ``sweep`` sees (module docstring).
+
+    ``tool_target``: the tool's target id when the joint sweeps measured the tool too
+    (``plan.sweeps_measure_tool``, imports), else None: a tracker's joint sweeps may
+    reuse the tool's id for their own nests.
+    """
+    from pipeline.stages.recording_keys import CHECK_SWEEP, TOOL_SWEEP
+
+    if sweep in (TOOL_SWEEP, CHECK_SWEEP) or (tool_target is not None and target == tool_target):
+        return TOOL_POINT
+    return f"sweep{sweep}/{target}"
+
+
+def model_for_keys(
+    keys: pa.Table, session: pa.Table, joints: pa.Table, frames: pa.Table
+) -> ChainModel:
+    """The model of the observations ``keys`` (columns sweep, step, target), started at
+    the thesis ``frames`` table, with each key's readings joined from ``joints`` by
+    (sweep, step)."""
+    from pipeline.stages.frames import chain_from_frames, matrices_from_columns, readings_at
+    from pipeline.stages.session import session_plan, session_robot
+    from pipeline.units import joints_to_internal
+
+    robot = session_robot(session)
+    n, pris = robot.n_joints, robot.prismatic
+    plan = session_plan(session)
+    shared = plan.get("sweeps_measure_tool", False) and plan.get("tool_target") is not None
+    tool_target = str(plan["tool_target"]) if shared else None
+    q_sig = chain_from_frames(frames, pris).joint_offsets
+    sweep = keys.column("sweep").to_numpy().astype(np.int64)
+    step = keys.column("step").to_numpy().astype(np.int64)
+    target = keys.column("target").to_pylist()
+    theta = np.zeros((len(sweep), n))
+    for s in np.unique(sweep):
+        sel = np.flatnonzero(sweep == s)
+        q = readings_at(joints, int(s), step[sel], n, pris)
+        theta[sel] = joints_to_internal(q, pris) - q_sig
+    names = [point_name(int(s), str(t), tool_target) for s, t in zip(sweep, target, strict=True)]
+    point_names = tuple(dict.fromkeys(names))
+    index = {p: j for j, p in enumerate(point_names)}
+    link = np.array([n if p == TOOL_POINT else int(s) for p, s in zip(names, sweep, strict=True)])
+    if ((link < 1) | (link > n)).any():
+        bad = int(sweep[(link < 1) | (link > n)][0])
+        raise StageError(
+            f"refine: sweep {bad} is not a joint of the {n}-joint robot",
+            expected=f"joint sweeps 1..{n}, the tool and check sweeps",
+            fix="re-record the session",
+        )
+    return ChainModel(
+        frames0=matrices_from_columns(frames)[:n],
+        prismatic=pris,
+        link=link.astype(np.int64),
+        theta=theta,
+        point=np.array([index[p] for p in names], np.int64),
+        point_names=point_names,
+    )
+
+
+def start_points(model: ChainModel, p_measured: npt.ArrayLike) -> Array:
+    """Start ``p0`` of every point (n_points, 3): the mean over its observations of the
+    measured position carried back to ``q̄^s`` by the start chain (``δ = 0``).
+
+    Rows of ``p_measured`` (K, 3) with a NaN are skipped; a point with no usable
+    observation is a one-line :class:`StageError`.
+    """
+    p = np.asarray(p_measured, float)
+    x0 = np.zeros(model.n_params)
+    A = model._motions(model.frames(x0))
+    P = np.broadcast_to(np.eye(4), (len(p), 4, 4)).copy()
+    for k in range(model.n_joints):
+        P = P @ A[:, k]
+    back = (np.swapaxes(P[:, :3, :3], 1, 2) @ (p - P[:, :3, 3])[..., None])[..., 0]
+    ok = np.isfinite(back).all(axis=1)
+    out = np.zeros((model.n_points, 3))
+    for j, name in enumerate(model.point_names):
+        sel = ok & (model.point == j)
+        if not sel.any():
+            raise StageError(
+                f"refine: point {name} has no usable measurement",
+                expected="at least one finite position of every target point",
+                fix="re-record that sweep, or run with --param refine.enabled=false",
+            )
+        out[j] = back[sel].mean(axis=0)
+    return out
