@@ -64,7 +64,14 @@ def test_kfold_errors_match_their_expectation() -> None:
         cov_m = np.broadcast_to(SIGMA_CM**2 * np.eye(3), (len(sweep), 3, 3))
         all_rows = np.ones(len(sweep), bool)
         x_hat, _ = _fit(model, x_true + 1e-4, measured, all_rows)
-        held = kfold(model, sweep, step, measured, cov_m, lambda k: _fit(model, x_hat, measured, k))
+        held = kfold(
+            model,
+            sweep,
+            step,
+            measured,
+            cov_m,
+            lambda k, m=model, x=x_hat, y=measured: _fit(m, x, y, k),
+        )
         assert set(held.fold.tolist()) == set(range(5))
         assert (sweep[held.index] >= 1).all() and len(held.index) == (sweep >= 1).sum()
         assert (held.expected_cm > held.measurement_cm).all()

@@ -7,9 +7,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pipeline.audit import _aligned_errors
-from pipeline.kinematics.alignment import fit_alignment
+from pipeline.kinematics.alignment import LEVER_CM, fit_alignment
 from pipeline.refine.kinematics import TOOL_POINT, ChainModel
-from pipeline.kinematics.alignment import LEVER_CM
 from pipeline.refine.uncertainty import model_error_maps, predict_model, tool_model, tool_poses
 
 

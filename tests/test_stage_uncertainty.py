@@ -25,7 +25,9 @@ def _refine(frames: pa.Table, n_axis: int, Sigma: np.ndarray, deg: bool) -> pa.T
     T = matrices_from_columns(frames)
     tool = (T[n] @ T[n + 1])[:3, 3]
     names = [f"joint{k // 4 + 1}.{'rx ry tx ty'.split()[k % 4]}" for k in range(n_axis)]
-    units = ["deg" if (k % 4) < 2 and deg else ("rad" if k % 4 < 2 else "cm") for k in range(n_axis)]
+    units = [
+        "deg" if (k % 4) < 2 and deg else ("rad" if k % 4 < 2 else "cm") for k in range(n_axis)
+    ]
     f = np.array([np.degrees(1.0) if u == "deg" else 1.0 for u in units] + [1.0] * 6)
     # a sweep point between the axis rows and the tool: picked by name, not position
     values = np.concatenate([np.zeros(n_axis), [1.0, 2.0, 3.0], tool])
@@ -65,7 +67,9 @@ def test_uncertainty_stage(identified_session: Path) -> None:
     np.testing.assert_allclose(xyz, T[:, :3, 3], atol=1e-9)
     # units: the same covariance given in degrees gives the same σ; Σ × 4 doubles σ
     t_deg = uncertainty.compute({**inputs, "refine": _refine(frames, n_axis, Sigma, True)}, params)
-    t4 = uncertainty.compute({**inputs, "refine": _refine(frames, n_axis, 4 * Sigma, False)}, params)
+    t4 = uncertainty.compute(
+        {**inputs, "refine": _refine(frames, n_axis, 4 * Sigma, False)}, params
+    )
     s = t.column("sigma_position_aligned_cm").to_numpy()
     np.testing.assert_allclose(t_deg.column("sigma_position_aligned_cm").to_numpy(), s, rtol=1e-9)
     np.testing.assert_allclose(t4.column("sigma_position_aligned_cm").to_numpy(), 2 * s, rtol=1e-9)

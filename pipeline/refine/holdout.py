@@ -85,7 +85,7 @@ def kfold(
     """
     fold = fold_of_steps(step, k)
     joint = np.asarray(sweep) >= 1
-    out: list[tuple[Array, ...]] = []
+    out: list[tuple[np.ndarray, ...]] = []
     for f in range(k):
         held = joint & (fold == f)
         if not held.any():
@@ -111,7 +111,7 @@ def check_configurations(
     return _held_out([(np.arange(m), np.full(m, -1), *_score(tool, x, cov, sel, measured, cov_m))])
 
 
-def _held_out(parts: list[tuple[Array, ...]]) -> HeldOut:
+def _held_out(parts: list[tuple[np.ndarray, ...]]) -> HeldOut:
     if not parts:
         e = np.zeros(0)
         return HeldOut(np.zeros(0, np.int64), np.zeros(0, np.int64), e, e, e)

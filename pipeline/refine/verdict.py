@@ -117,8 +117,7 @@ def judge(e: Evidence, t: Thresholds = Thresholds()) -> Verdict:
         fail.append(f"the refinement did not converge (status {e.status or 'unknown'})")
     if e.predicted_rms_cm is not None and e.predicted_rms_cm > t.max_predicted_rms_cm:
         fail.append(
-            f"predicted RMS tool error {_g(e.predicted_rms_cm)} cm "
-            f"> {t.max_predicted_rms_cm:g} cm"
+            f"predicted RMS tool error {_g(e.predicted_rms_cm)} cm > {t.max_predicted_rms_cm:g} cm"
         )
     c, c0 = e.chi2_per_dof, e.chi2_recorded_per_dof
     if c is not None and c > t.chi2_fail and (c0 is None or c0 > t.chi2_fail):
@@ -127,7 +126,9 @@ def judge(e: Evidence, t: Thresholds = Thresholds()) -> Verdict:
             f"> {t.chi2_fail:g}: the self-calibration cannot explain the measurements"
         )
     elif c is not None and c > t.chi2_check:
-        check.append(f"χ²/dof {c:.2f} > {t.chi2_check:g}: the noise model underestimates the scatter")
+        check.append(
+            f"χ²/dof {c:.2f} > {t.chi2_check:g}: the noise model underestimates the scatter"
+        )
     check += _sensor_reasons(e, t)
     h, hx = e.holdout_rms_cm, e.holdout_expected_rms_cm
     if h is not None and hx is not None and h > t.holdout_ratio * hx:
@@ -161,9 +162,7 @@ def _line(level: str, e: Evidence, reasons: tuple[str, ...], t: Thresholds) -> s
         worst = max(b.sigmas for b in e.biases)
         within = worst <= t.bias_sigmas
         parts.append(
-            f"mic biases within {t.bias_sigmas:g}σ"
-            if within
-            else f"mic bias at {worst:.1f}σ"
+            f"mic biases within {t.bias_sigmas:g}σ" if within else f"mic bias at {worst:.1f}σ"
         )
     text = f"{level}  " + ", ".join(parts)
     if reasons and level != PASS:
