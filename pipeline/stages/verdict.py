@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -111,6 +112,18 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             **{k: pa.array([numbers[k]], pa.float64()) for k in NUMBERS},
         }
     )
+
+
+def verdict_line(session_dir: Path) -> str | None:
+    """``NAME: PASS  predicted …``: identify's last line, from the committed ``verdict``
+    stage (None when the session has none)."""
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.tables import read_table
+
+    path = stage_path(session_dir, "verdict")
+    if not path.is_file():
+        return None
+    return f"{session_dir.resolve().name}: {read_table(path).column('line')[0].as_py()}"
 
 
 STAGE = Stage(
