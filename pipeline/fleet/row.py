@@ -2,7 +2,8 @@
 
 Nothing here computes a result anew: every number is read from the session's
 signature.json (checked on read: schema, digest, numbers), its ``validation`` stage
-(point sessions), its ``verdict`` stage (predicted accuracy, PASS/CHECK/FAIL), or the summary of the evaluation that the fleet task just ran.
+(point sessions), its ``verdict`` stage (predicted accuracy, PASS/CHECK/FAIL), or the
+summary of the evaluation that the fleet task just ran.
 """
 
 from __future__ import annotations

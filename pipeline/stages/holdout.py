@@ -20,7 +20,6 @@ import pyarrow as pa
 
 from pipeline.stages.base import Stage, check_param
 
-
 REFITS = ("step", "full")
 
 
