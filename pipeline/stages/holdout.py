@@ -78,7 +78,6 @@ def _rows_by_key(positions: pa.Table, keys: pa.Table) -> np.ndarray:
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.refine.holdout import check_configurations, kfold
-    from pipeline.refine.points import position_covariances
     from pipeline.refine.problem import refined_x, session_problem
     from pipeline.refine.solve import refit
     from pipeline.stages.positions import positions as xyz_of
@@ -97,7 +96,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     check = _check_rows(inputs, pos)
     if check is not None:
         rows, theta = check
-        cov_m = scale * position_covariances(rows)
+        cov_m = scale * _covariances(inputs, rows)
         cov = np.array(refine.column("covariance").to_pylist(), float)[:n_kin, :n_kin]
         cov = _internal(refine, n_kin) * cov
         held = check_configurations(model, theta, xyz_of(rows), cov_m, x_hat[:n_kin], cov)
@@ -105,7 +104,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
                       rows.column("target").to_pylist(), held)  # fmt: skip
     keys = sp.problem.block.keys
     rows = pos.take(pa.array(_rows_by_key(pos, keys)))
-    cov_m = scale * position_covariances(rows)
+    cov_m = scale * _covariances(inputs, rows)
 
     def fold_fit(keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if params.refit == "step":
@@ -125,6 +124,22 @@ def _internal(refine: pa.Table, n: int) -> np.ndarray:
     """Factors (n, n) turning the first n rows' covariance from deg to rad."""
     f = np.where(np.array(refine.column("unit").to_pylist()[:n]) == "deg", np.radians(1.0), 1.0)
     return np.outer(f, f)
+
+
+def _covariances(inputs: Mapping[str, Any], rows: pa.Table) -> np.ndarray:
+    """The positions' covariances (m, 3, 3) as the refinement weighs them (sonic: the
+    trilateration covariance of the digitizer's geometry)."""
+    import json
+
+    from pipeline.refine.points import position_covariances
+    from pipeline.sensor.geometry import DigitizerGeometry
+    from pipeline.stages.session import session_sensor
+
+    session = inputs["session"]
+    geometry = None
+    if session_sensor(session) == "sonic":
+        geometry = DigitizerGeometry.from_dict(json.loads(session.column("rig_json")[0].as_py()))
+    return position_covariances(rows, geometry)  # type: ignore[no-any-return]
 
 
 def _check_rows(inputs: Mapping[str, Any], pos: pa.Table) -> tuple[pa.Table, np.ndarray] | None:
