@@ -80,11 +80,12 @@ def kfold(
 ) -> HeldOut:  # fmt: skip
     """Held-out errors of the joint sweeps' positions (``sweep`` ≥ 1), k-fold.
 
-    ``model`` observes the block's K positions (``measured`` (K, 3), their covariances
-    ``cov_m`` (K, 3, 3)); ``refit(keep)`` fits without the positions ``~keep``.
+    ``model`` observes the block's K positions (``measured`` (K, 3), NaN rows not
+    scored; their covariances ``cov_m`` (K, 3, 3)); ``refit(keep)`` fits without the
+    positions ``~keep``.
     """
     fold = fold_of_steps(step, k)
-    joint = np.asarray(sweep) >= 1
+    joint = (np.asarray(sweep) >= 1) & np.isfinite(measured).all(axis=1)
     out: list[tuple[np.ndarray, ...]] = []
     for f in range(k):
         held = joint & (fold == f)

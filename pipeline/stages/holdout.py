@@ -4,13 +4,16 @@ With validation (``check``) configurations of the tool target (point-sensor sess
 those are the held-out set: the refinement never used them, so the fitted chain predicts
 them as it is. Otherwise k-fold over each joint sweep's steps (fold ``f``: steps ≡ f mod
 k), each fold refit without its positions, warm-started at the full fit
-(:mod:`pipeline.refine.holdout`). Each held-out position's expected error combines its
-measurement covariance and the (refit's) parameter covariance, both scaled by the fit's
-χ²/dof as the refinement scales its covariance. Zero rows when the refinement is disabled.
+(:mod:`pipeline.refine.holdout`); positions without a usable measurement (null) are not
+scored. The measured position of a sonic session is the triangulated one (recorded
+calibration) also when the refinement fits the raw ranges. Each held-out position's
+expected error combines its measurement covariance and the (refit's) parameter
+covariance, both scaled by the fit's χ²/dof as the refinement scales its covariance. Zero rows when the refinement is disabled.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -87,7 +90,13 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     if refine.num_rows == 0:
         return _table([], [], [], None)
     summ = refine_summary(refine)
-    sp = session_problem(inputs, summ.get("loss", "soft_l1"), summ.get("f_scale", 3.0))
+    sp = session_problem(
+        inputs,
+        summ.get("loss", "soft_l1"),
+        summ.get("f_scale", 3.0),
+        summ.get("level", "points"),
+        summ.get("speed_knot_s", 120.0),
+    )
     scale = float(summ.get("noise_scale", 1.0)) ** 2
     model = sp.problem.model
     n_kin = model.n_params
@@ -183,6 +192,8 @@ def _table(sweep: list[Any], step: list[Any], target: list[Any], held: Any) -> p
     )
 
 
+#: Stage ``holdout`` of a point-sensor session; a sonic session's (the refinement's raw
+#: ranges as an input too, as its ``refine`` stage): :data:`SONIC_STAGE`.
 STAGE = Stage(
     "holdout",
     1,
@@ -191,3 +202,5 @@ STAGE = Stage(
     compute,
     "held-out position errors of the refined chain (k-fold or check configurations)",
 )
+
+SONIC_STAGE = dataclasses.replace(STAGE, inputs=(*STAGE.inputs, "ranges"))
