@@ -8,7 +8,8 @@ k), each fold refit without its positions, warm-started at the full fit
 scored. The measured position of a sonic session is the triangulated one (recorded
 calibration) also when the refinement fits the raw ranges. Each held-out position's
 expected error combines its measurement covariance and the (refit's) parameter
-covariance, both scaled by the fit's χ²/dof as the refinement scales its covariance. Zero rows when the refinement is disabled.
+covariance, both scaled by the fit's χ²/dof as the refinement scales its covariance.
+Zero rows when the refinement is disabled.
 """
 
 from __future__ import annotations
