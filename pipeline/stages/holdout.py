@@ -53,22 +53,38 @@ _LOSS_WEIGHT = {
 }
 
 
-def step_refit(problem: Any, x_hat: np.ndarray, keep: np.ndarray, noise_var: float) -> Any:
-    """One Gauss-Newton step from ``x_hat`` on the rows of the positions ``keep``, robust
-    weights at ``x_hat``; the kinematic part of the step and its covariance
-    ``(Jᵀ W J)⁺ · noise_var`` (as the solver scales its covariance)."""
-    from dataclasses import replace
+@dataclass(frozen=True)
+class StepRefit:
+    """One Gauss-Newton step from ``x_hat`` on the rows of the positions kept, robust
+    weights at ``x_hat``: the kinematic part of the step and its covariance
+    ``(Jᵀ W J)⁺ · noise_var`` (as the solver scales its covariance). The residuals and
+    the Jacobian are evaluated once, at ``x_hat``, for every fold."""
 
-    from pipeline.refine.solve import jacobian, residuals
+    problem: Any
+    x_hat: np.ndarray
+    noise_var: float
 
-    sub = replace(problem, keep=keep)
-    r, J = residuals(sub, x_hat), jacobian(sub, x_hat)
-    w = np.sqrt(_LOSS_WEIGHT[problem.loss]((r / problem.f_scale) ** 2))
-    Jw, rw = J * w[:, None], r * w
-    N = np.linalg.pinv(Jw.T @ Jw)
-    x = x_hat - N @ (Jw.T @ rw)
-    n = problem.model.n_params
-    return x[:n], (N * noise_var)[:n, :n]
+    def __post_init__(self) -> None:
+        from pipeline.refine.solve import jacobian, residuals
+
+        p, x = self.problem, self.x_hat
+        n = p.model.n_params
+        full = dataclasses.replace(p, keep=None)
+        r, J = residuals(full, x), jacobian(full, x)
+        w = np.sqrt(_LOSS_WEIGHT[p.loss]((r / p.f_scale) ** 2))
+        pos = p.block.linearize(p.model.positions(x[:n]), x[n:]).pos  # row -> position
+        Jw, rw = J * w[:, None], r * w
+        # the fold's normal equations: all rows' minus the held-out rows' (a fifth of them)
+        object.__setattr__(self, "_rows", (Jw, rw, pos, Jw.T @ Jw, Jw.T @ rw))
+
+    def __call__(self, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        Jw, rw, pos, JtJ, Jtr = self._rows  # type: ignore[attr-defined]
+        out = (pos >= 0) & ~keep[np.maximum(pos, 0)]
+        Jo = Jw[out]
+        N = np.linalg.pinv(JtJ - Jo.T @ Jo)
+        x = self.x_hat - N @ (Jtr - Jo.T @ rw[out])
+        n = self.problem.model.n_params
+        return x[:n], (N * self.noise_var)[:n, :n]
 
 
 def _rows_by_key(positions: pa.Table, keys: pa.Table) -> np.ndarray:
@@ -116,11 +132,11 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     rows = pos.take(pa.array(_rows_by_key(pos, keys)))
     cov_m = scale * _covariances(inputs, rows)
 
-    def fold_fit(keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        if params.refit == "step":
-            return step_refit(sp.problem, x_hat, keep, scale)  # type: ignore[no-any-return]
+    def full_refit(keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         sol = refit(sp.problem, keep, x_hat)
         return sol.x[:n_kin], sol.covariance[:n_kin, :n_kin]
+
+    fold_fit = StepRefit(sp.problem, x_hat, scale) if params.refit == "step" else full_refit
 
     sweep = keys.column("sweep").to_numpy()
     held = kfold(model, sweep, keys.column("step").to_numpy(), xyz_of(rows), cov_m, fold_fit,
