@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import pytest
 
@@ -63,3 +64,31 @@ def test_each_rule_fires(change: dict[str, object], level: str, words: str) -> N
 def test_fail_outranks_check_and_lists_every_reason() -> None:
     v = judge(dataclasses.replace(GOOD, predicted_rms_cm=0.71, improvement=0.5))
     assert v.level == FAIL and len(v.reasons) == 2 and "(+1 more)" in v.line
+
+
+def test_fleet_row_reads_the_verdict_stage(identified_session: Path, tmp_path: Path) -> None:
+    """A session with a verdict table: its row carries the predicted accuracy and verdict;
+    without one, null (the columns exist either way)."""
+    import shutil
+
+    import pyarrow as pa
+
+    from pipeline.fleet.row import session_row
+    from pipeline.schemas import validate_table
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.tables import write_table
+    from pipeline.stages.verdict import NUMBERS
+
+    d = shutil.copytree(identified_session, tmp_path / "s")
+    row = session_row(d, "identify")
+    assert row["verdict"] is None and row["predicted_rms_cm"] is None
+    v = judge(dataclasses.replace(GOOD, improvement=0.5))
+    numbers = dict.fromkeys(NUMBERS, None) | {"predicted_rms_cm": 0.006, "predicted_p95_cm": 0.011}
+    table = pa.table({
+        "verdict": [v.level], "reasons": [list(v.reasons)], "line": [v.line],
+        **{k: pa.array([numbers[k]], pa.float64()) for k in NUMBERS},
+    })  # fmt: skip
+    write_table(stage_path(d, "verdict"), validate_table(table, "verdict"), {})
+    row = session_row(d, "identify")
+    assert row["verdict"] == CHECK and row["verdict_reasons"] == list(v.reasons)
+    assert row["predicted_rms_cm"] == 0.006 and row["predicted_p95_cm"] == 0.011
