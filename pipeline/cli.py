@@ -422,6 +422,7 @@ def identify(
                 "signature": None if result.signature is None else str(result.signature),
                 "report": None if result.report is None else str(result.report),
                 "warnings": result.warnings,
+                "verdict": result.verdict,
             }
         )
     else:
@@ -436,6 +437,8 @@ def identify(
         typer.echo(f"signature: {result.signature or 'not written'}")
         if result.report:
             typer.echo(f"report:    {result.report}")
+        if result.verdict:
+            typer.echo(result.verdict)  # the last line (issue 15)
 
 
 def _run_dict(r: Any) -> dict[str, Any]:

@@ -10,16 +10,19 @@ from typing import Any, TextIO
 from pipeline.signature_file import FILE_NAME, read_signature_document
 from pipeline.stages.lock import session_lock
 from pipeline.stages.runner import PRODUCT, StageRun, run, session_folder
+from pipeline.stages.verdict import verdict_line
 
 
 @dataclass(frozen=True)
 class IdentifyResult:
-    """``signature`` and ``report`` are None when not written (``warnings`` says why)."""
+    """``signature`` and ``report`` are None when not written (``warnings`` says why);
+    ``verdict``: the verdict line (``NAME: PASS  predicted …``), None without one."""
 
     runs: list[StageRun]
     signature: Path | None
     report: Path | None
     warnings: list[str]
+    verdict: str | None = None
 
 
 def identify(
@@ -53,7 +56,8 @@ def identify(
         sig = sdir / FILE_NAME
         doc = read_signature_document(sig)
         rep = _report_if_stale(sdir, doc["provenance"]["stages"]) if report else None
-    return IdentifyResult(runs, sig, rep, doc["warnings"])
+        line = verdict_line(sdir)
+    return IdentifyResult(runs, sig, rep, doc["warnings"], line)
 
 
 def _report_if_stale(sdir: Path, hashes: dict[str, str | None]) -> Path:

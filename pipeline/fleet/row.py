@@ -2,7 +2,8 @@
 
 Nothing here computes a result anew: every number is read from the session's
 signature.json (checked on read: schema, digest, numbers), its ``validation`` stage
-(point sessions), or the summary of the evaluation that the fleet task just ran.
+(point sessions), its ``verdict`` stage (predicted accuracy, PASS/CHECK/FAIL), or the
+summary of the evaluation that the fleet task just ran.
 """
 
 from __future__ import annotations
@@ -61,6 +62,11 @@ COLUMNS = (
     _c("gain_evaluation", pa.float64(), "",
        "median over tasks of the median |design| / |signature| index of the measured "
        "evaluation (pipeline fleet evaluate only)"),
+    _c("predicted_rms_cm", pa.float64(), "cm",
+       "predicted RMS tool position error after alignment (stage verdict; null: no refinement)"),
+    _c("predicted_p95_cm", pa.float64(), "cm", "95th percentile of that error over the workspace"),
+    _c("verdict", pa.string(), "", "PASS, CHECK or FAIL (stage verdict; null: none)"),
+    _c("verdict_reasons", pa.list_(pa.string()), "", "the verdict's reasons, one line each"),
     *(
         _c(f"smodel_{p}", pa.list_(pa.float64()), p.rsplit("_", 1)[1], f"S-Model {p} per joint")
         for p in SMODEL_PARAMETERS
@@ -118,6 +124,15 @@ def session_row(
     params = doc["smodel"]["parameters"]
     for p in SMODEL_PARAMETERS:
         row[f"smodel_{p}"] = [float(j[p]) for j in params]
+    verdict = stage_path(sdir, "verdict")
+    if verdict.is_file():
+        v = read_table(verdict).to_pylist()[0]
+        row.update(
+            predicted_rms_cm=v["predicted_rms_cm"],
+            predicted_p95_cm=v["predicted_p95_cm"],
+            verdict=v["verdict"],
+            verdict_reasons=list(v["reasons"]),
+        )
     rows = validation_rows(stage_path(sdir, "validation"))
     check = [r for r in rows or [] if r["role"] == "check"]
     if check:

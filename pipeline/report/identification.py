@@ -335,6 +335,17 @@ def _provenance_section(prov: dict[str, dict[str, Any]]) -> str:
     return "## Stage provenance\n\n" + _table(head, body)
 
 
+def _verdict_parts(sdir: Path, prov: dict[str, dict[str, Any]], out: Path) -> list[str]:
+    """The verdict section when the session's stages have one (refinement, issue 15)."""
+    if "verdict" not in prov:
+        return []
+    from pipeline.report.verdict import error_map, verdict_section
+
+    unc = read_table(stage_path(sdir, "uncertainty"))
+    fig = error_map(unc, out / "uncertainty.png") if unc.num_rows else None
+    return [verdict_section(read_table(stage_path(sdir, "verdict")).to_pylist()[0], fig)]
+
+
 def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -> Path:
     """Write ``report/report.md`` and its PNG figures for an identified session.
 
@@ -358,6 +369,7 @@ def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -
     name, mode = sdir.resolve().name, t["session"][0]["mode"]
     parts = [
         f"# Arm signature identification: {name}\n\nRobot **{robot.name}**, mode **{mode}**.",
+        *_verdict_parts(sdir, prov, out),
         _summary(name, t, robot, mode),
         _dh_section(t["dh"], robot),
         _smodel_section(t["smodel"], t["frames"], robot),

@@ -1,0 +1,171 @@
+"""The verdict: can this signature be shipped? PASS, CHECK or FAIL, with the reasons.
+
+Each rule compares one number of the identification with a threshold a user can set
+(:class:`Thresholds`, stage parameters ``verdict.*``; defaults and their reasons in
+docs/verdict.md). A rule that fires gives one line with its numbers; the verdict is the
+worst level among them, PASS when none fires.
+
+FAIL (do not ship):
+- the refinement did not converge;
+- the predicted RMS tool error exceeds ``max_predicted_rms_cm``;
+- χ²/dof exceeds ``chi2_fail`` both with the sensor as recorded and after the sensor's
+  self-calibration: the measurements disagree with any chain the model can express.
+
+CHECK (look before shipping):
+- the refinement is disabled: no predicted accuracy;
+- a microphone's range bias is significant, ``|b|/σ > bias_sigmas``, or a microphone moved
+  more than ``mic_sigmas`` σ from its recorded position: the digitizer's calibration is off;
+- χ²/dof exceeds ``chi2_check``;
+- the held-out error exceeds its prediction by more than ``holdout_ratio``;
+- the improvement over the design model is below ``min_improvement``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+PASS, CHECK, FAIL = "PASS", "CHECK", "FAIL"
+LEVELS = (PASS, CHECK, FAIL)
+CALIBRATION_DOC = "docs/verdict.md#sensor-calibration"
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """Defaults (docs/verdict.md): ``max_predicted_rms_cm`` 0.1 cm, 7× the 0.014 cm a
+    default Puma session predicts and 1/7 of the 0.71 cm of a corrupted run; ``chi2_check``
+    2.0 (clean sessions ~1.0, a biased digitizer at point level 1.8-3.8); ``chi2_fail`` 10;
+    ``bias_sigmas`` and ``mic_sigmas`` 3 (a 0.3 % false alarm per parameter under the
+    noise model); ``holdout_ratio`` 2; ``min_improvement`` 1 (no better than the design)."""
+
+    max_predicted_rms_cm: float = 0.1
+    chi2_check: float = 2.0
+    chi2_fail: float = 10.0
+    bias_sigmas: float = 3.0
+    mic_sigmas: float = 3.0
+    holdout_ratio: float = 2.0
+    min_improvement: float = 1.0
+
+
+@dataclass(frozen=True)
+class SensorParameter:
+    """A self-calibrated sensor parameter: its move from the recorded value and its σ."""
+
+    name: str
+    unit: str
+    offset: float
+    sigma: float
+
+    @property
+    def sigmas(self) -> float:
+        return abs(self.offset) / self.sigma if self.sigma > 0 else float("inf")
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """What the verdict is judged on; None where the session has no such number."""
+
+    refined: bool
+    status: str = ""
+    chi2_per_dof: float | None = None
+    chi2_recorded_per_dof: float | None = None
+    predicted_rms_cm: float | None = None
+    predicted_p95_cm: float | None = None
+    holdout_rms_cm: float | None = None
+    holdout_expected_rms_cm: float | None = None
+    improvement: float | None = None
+    biases: tuple[SensorParameter, ...] = field(default_factory=tuple)
+    mic_moves: tuple[SensorParameter, ...] = field(default_factory=tuple)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    level: str
+    reasons: tuple[str, ...]
+    line: str
+
+
+def _g(v: float) -> str:
+    return f"{v:.2g}"
+
+
+def _sensor_reasons(e: Evidence, t: Thresholds) -> list[str]:
+    out = []
+    for kind, params, limit in (
+        ("range bias", e.biases, t.bias_sigmas),
+        ("position", e.mic_moves, t.mic_sigmas),
+    ):
+        for p in params:
+            if p.sigmas > limit:
+                out.append(
+                    f"{p.name}: {kind} {p.offset:+.3g} ± {p.sigma:.2g} {p.unit} "
+                    f"({p.sigmas:.1f}σ > {limit:g}σ): the digitizer's calibration is off, "
+                    f"see {CALIBRATION_DOC}"
+                )
+    return out
+
+
+def judge(e: Evidence, t: Thresholds = Thresholds()) -> Verdict:
+    """The verdict on evidence ``e`` under thresholds ``t`` (module docstring)."""
+    fail: list[str] = []
+    check: list[str] = []
+    if not e.refined:
+        check.append(
+            "refinement disabled (refine.enabled=false): no predicted accuracy, held-out "
+            "check or χ² test"
+        )
+    if e.refined and e.status != "converged":
+        fail.append(f"the refinement did not converge (status {e.status or 'unknown'})")
+    if e.predicted_rms_cm is not None and e.predicted_rms_cm > t.max_predicted_rms_cm:
+        fail.append(
+            f"predicted RMS tool error {_g(e.predicted_rms_cm)} cm > {t.max_predicted_rms_cm:g} cm"
+        )
+    c, c0 = e.chi2_per_dof, e.chi2_recorded_per_dof
+    if c is not None and c > t.chi2_fail and (c0 is None or c0 > t.chi2_fail):
+        fail.append(
+            f"χ²/dof {c:.2f} (sensor as recorded {c0 if c0 is None else f'{c0:.2f}'}) "
+            f"> {t.chi2_fail:g}: the self-calibration cannot explain the measurements"
+        )
+    elif c is not None and c > t.chi2_check:
+        check.append(
+            f"χ²/dof {c:.2f} > {t.chi2_check:g}: the noise model underestimates the scatter"
+        )
+    check += _sensor_reasons(e, t)
+    h, hx = e.holdout_rms_cm, e.holdout_expected_rms_cm
+    if h is not None and hx is not None and h > t.holdout_ratio * hx:
+        check.append(
+            f"held-out RMS error {_g(h)} cm > {t.holdout_ratio:g} × its prediction {_g(hx)} cm"
+        )
+    if e.improvement is not None and e.improvement < t.min_improvement:
+        check.append(
+            f"improvement over the design model {e.improvement:.2g}× < {t.min_improvement:g}×"
+        )
+    level = FAIL if fail else CHECK if check else PASS
+    reasons = tuple(fail + check)
+    return Verdict(level, reasons, _line(level, e, reasons, t))
+
+
+def _line(level: str, e: Evidence, reasons: tuple[str, ...], t: Thresholds) -> str:
+    """``PASS  predicted 0.006 cm RMS (95 % 0.011), held-out 0.009 cm, 38× the design
+    model, χ²/dof 1.02, mic biases within 3σ`` (parts without a number left out); the
+    first reason follows a non-PASS verdict."""
+    parts = []
+    if e.predicted_rms_cm is not None:
+        p95 = "" if e.predicted_p95_cm is None else f" (95 % {_g(e.predicted_p95_cm)})"
+        parts.append(f"predicted {_g(e.predicted_rms_cm)} cm RMS{p95}")
+    if e.holdout_rms_cm is not None:
+        parts.append(f"held-out {_g(e.holdout_rms_cm)} cm")
+    if e.improvement is not None:
+        parts.append(f"{e.improvement:.2g}× the design model")
+    if e.chi2_per_dof is not None:
+        parts.append(f"χ²/dof {e.chi2_per_dof:.2f}")
+    if e.biases:
+        worst = max(b.sigmas for b in e.biases)
+        within = worst <= t.bias_sigmas
+        parts.append(
+            f"mic biases within {t.bias_sigmas:g}σ" if within else f"mic bias at {worst:.1f}σ"
+        )
+    text = f"{level}  " + ", ".join(parts)
+    if reasons and level != PASS:
+        more = f" (+{len(reasons) - 1} more)" if len(reasons) > 1 else ""
+        text += f" — {reasons[0]}{more}"
+    return text

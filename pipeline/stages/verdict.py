@@ -1,0 +1,136 @@
+"""Stage ``verdict``: PASS / CHECK / FAIL of the session's signature, with the reasons.
+
+One row. The evidence (:class:`pipeline.refine.verdict.Evidence`) is read from the
+refinement (its solver summary, χ² with the sensor as recorded and self-calibrated, the
+sensor's parameters against their recorded values), the predicted tool error
+(``uncertainty``), the held-out errors (``holdout``) and the chain's distance from the
+design model; the rules and the default thresholds: :mod:`pipeline.refine.verdict`,
+docs/verdict.md. Every threshold is a parameter: ``--param verdict.chi2_check=3``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from pipeline.refine.verdict import Evidence, SensorParameter, Thresholds, judge
+from pipeline.stages.base import Stage, check_param
+
+#: The verdict table's number columns (nullable: a session may lack one).
+NUMBERS = (
+    "predicted_rms_cm", "predicted_p95_cm", "predicted_max95_cm", "holdout_rms_cm",
+    "holdout_expected_rms_cm", "design_misfit_rms_cm", "improvement", "chi2_per_dof",
+    "chi2_recorded_per_dof", "max_bias_sigmas", "max_mic_sigmas",
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Params(Thresholds):
+    """The thresholds of :class:`~pipeline.refine.verdict.Thresholds` (defaults there)."""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            check_param(self, "verdict", f.name, bool(np.isfinite(v) and v > 0), "> 0 and finite")
+
+
+def _sensor(refine: pa.Table, group: str) -> tuple[SensorParameter, ...]:
+    """The rows of ``group`` with a σ: their move from the recorded value (start)."""
+    out = []
+    for r in refine.to_pylist():
+        if r["group"] == group and r["sigma"] is not None and r["sigma"] > 0:
+            out.append(SensorParameter(r["name"], r["unit"], r["value"] - r["start"], r["sigma"]))
+    return tuple(out)
+
+
+def _rms(v: np.ndarray) -> float | None:
+    return float(np.sqrt(np.mean(v**2))) if len(v) else None
+
+
+def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, float | None]]:
+    """The evidence of a session's stage tables, and the numbers of the verdict row."""
+    from pipeline.signature_file import design_alignment
+    from pipeline.stages.frames import chain_from_frames
+    from pipeline.stages.refine import refine_summary
+    from pipeline.stages.session import session_robot
+    from pipeline.stages.uncertainty import summary
+
+    refine = inputs["refine"]
+    summ = refine_summary(refine)
+    refined = refine.num_rows > 0
+    dof = summ.get("dof") or 0
+    chi2 = summ.get("chi2") if refined and dof > 0 else None
+    chi2_rec = summ.get("chi2_recorded_sensor") if refined and dof > 0 else None
+    unc = summary(inputs["uncertainty"])
+    hold = inputs["holdout"]
+    robot = session_robot(inputs["session"])
+    misfit = design_alignment(chain_from_frames(inputs["chain"], robot.prismatic), robot)[2]
+    predicted = None if unc is None else unc["sigma_position_aligned_rms_cm"]
+    e = Evidence(
+        refined=refined,
+        status=str(summ.get("status", "")),
+        chi2_per_dof=None if chi2 is None else chi2 / dof,
+        chi2_recorded_per_dof=None if chi2_rec is None else chi2_rec / dof,
+        predicted_rms_cm=predicted,
+        predicted_p95_cm=None if unc is None else unc["sigma_position_aligned_p95_cm"],
+        holdout_rms_cm=_rms(hold.column("error_cm").to_numpy()),
+        holdout_expected_rms_cm=_rms(hold.column("expected_cm").to_numpy()),
+        improvement=None if not predicted else misfit / predicted,
+        biases=_sensor(refine, "bias"),
+        mic_moves=_sensor(refine, "mic"),
+    )
+    numbers = {
+        "predicted_rms_cm": e.predicted_rms_cm,
+        "predicted_p95_cm": e.predicted_p95_cm,
+        "predicted_max95_cm": None if unc is None else unc["max95_cm"],
+        "holdout_rms_cm": e.holdout_rms_cm,
+        "holdout_expected_rms_cm": e.holdout_expected_rms_cm,
+        "design_misfit_rms_cm": misfit,
+        "improvement": e.improvement,
+        "chi2_per_dof": e.chi2_per_dof,
+        "chi2_recorded_per_dof": e.chi2_recorded_per_dof,
+        "max_bias_sigmas": max((b.sigmas for b in e.biases), default=None),
+        "max_mic_sigmas": max((b.sigmas for b in e.mic_moves), default=None),
+    }
+    return e, numbers
+
+
+def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
+    e, numbers = evidence(inputs)
+    v = judge(e, params)
+    return pa.table(
+        {
+            "verdict": pa.array([v.level], pa.string()),
+            "reasons": pa.array([list(v.reasons)], pa.list_(pa.string())),
+            "line": pa.array([v.line], pa.string()),
+            **{k: pa.array([numbers[k]], pa.float64()) for k in NUMBERS},
+        }
+    )
+
+
+def verdict_line(session_dir: Path) -> str | None:
+    """``NAME: PASS  predicted …``: identify's last line, from the committed ``verdict``
+    stage (None when the session has none)."""
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.tables import read_table
+
+    path = stage_path(session_dir, "verdict")
+    if not path.is_file():
+        return None
+    return f"{session_dir.resolve().name}: {read_table(path).column('line')[0].as_py()}"
+
+
+STAGE = Stage(
+    "verdict",
+    1,
+    ("session", "refine", "uncertainty", "holdout", "chain"),
+    Params(),
+    compute,
+    "PASS / CHECK / FAIL of the signature, with the reasons",
+)

@@ -1,0 +1,106 @@
+"""Held-out validation (pipeline.refine.holdout) on a simulated chain with a small refit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from pipeline.refine.holdout import check_configurations, fold_of_steps, kfold
+from pipeline.refine.kinematics import TOOL_POINT, ChainModel
+from pipeline.refine.uncertainty import tool_model, tool_poses
+
+SIGMA_CM = 0.01
+
+
+def _sweeps(seed: int, steps: int = 25) -> tuple[ChainModel, np.ndarray, np.ndarray, np.ndarray]:
+    """3 revolute joints; sweep j moves joint j over 120°, its target on link j; the tool
+    point (sweep 0) at a few configurations. Returns the model, x_true, sweep, step."""
+    rng = np.random.default_rng(seed)
+    n = 3
+    F = np.tile(np.eye(4), (n, 1, 1))
+    F[:, :3, :3] = Rotation.random(n, random_state=seed).as_matrix()
+    F[:, :3, 3] = np.cumsum(rng.normal(0, 20, (n, 3)), axis=0)
+    sweep = np.repeat(np.arange(1, n + 1), steps)
+    step = np.tile(np.arange(steps), n)
+    theta = np.zeros((len(sweep), n))
+    for j in range(1, n + 1):
+        theta[sweep == j, j - 1] = np.linspace(-1.0, 1.0, steps)
+    # the tool seen at 12 configurations of all joints
+    sweep = np.concatenate([sweep, np.zeros(12, int)])
+    step = np.concatenate([step, np.arange(12)])
+    theta = np.vstack([theta, rng.uniform(-1, 1, (12, n))])
+    names = ("sweep1/a", "sweep2/a", "sweep3/a", TOOL_POINT)
+    point = np.where(sweep == 0, 3, sweep - 1)
+    link = np.where(sweep == 0, n, sweep)
+    model = ChainModel(F, np.zeros(n, bool), link, theta, point, names)
+    x = np.concatenate([rng.normal(0, 1e-3, model.n_axis_params), F[:, :3, 3].ravel() + 5,
+                        F[-1, :3, 3] + 8])  # fmt: skip
+    return model, x, sweep, step
+
+
+def _fit(model: ChainModel, x0: np.ndarray, measured: np.ndarray, keep: np.ndarray):
+    """Gauss-Newton on the kept positions; covariance σ² (JᵀJ)⁺ (min-norm: the axes of
+    joints that no kept position moves are not determined)."""
+    x = x0.copy()
+    for _ in range(8):
+        J = model.position_jacobian(x)[keep].reshape(-1, model.n_params)
+        r = (measured[keep] - model.positions(x)[keep]).ravel()
+        x = x + np.linalg.lstsq(J, r, rcond=None)[0]
+    J = model.position_jacobian(x)[keep].reshape(-1, model.n_params)
+    return x, SIGMA_CM**2 * np.linalg.pinv(J.T @ J)
+
+
+def test_fold_of_steps() -> None:
+    assert fold_of_steps([0, 1, 5, 7, 10], 5).tolist() == [0, 1, 0, 2, 0]
+
+
+def test_kfold_errors_match_their_expectation() -> None:
+    ratios = []
+    for seed in range(4):
+        model, x_true, sweep, step = _sweeps(seed)
+        rng = np.random.default_rng(seed + 50)
+        measured = model.positions(x_true) + rng.normal(0, SIGMA_CM, (len(sweep), 3))
+        cov_m = np.broadcast_to(SIGMA_CM**2 * np.eye(3), (len(sweep), 3, 3))
+        all_rows = np.ones(len(sweep), bool)
+        x_hat, _ = _fit(model, x_true + 1e-4, measured, all_rows)
+        held = kfold(
+            model,
+            sweep,
+            step,
+            measured,
+            cov_m,
+            lambda k, m=model, x=x_hat, y=measured: _fit(m, x, y, k),
+        )
+        assert set(held.fold.tolist()) == set(range(5))
+        assert (sweep[held.index] >= 1).all() and len(held.index) == (sweep >= 1).sum()
+        assert (held.expected_cm > held.measurement_cm).all()
+        ratios.append(held.ratio)
+    # ~240 held-out 3-D errors over 4 seeds: the RMS ratio to ~5 %
+    assert np.mean(ratios) == pytest.approx(1.0, abs=0.12), ratios
+
+
+def test_kfold_flags_a_model_that_cannot_predict() -> None:
+    """A refit that returns a wrong chain: held-out errors far above their expectation."""
+    model, x_true, sweep, step = _sweeps(1)
+    measured = model.positions(x_true)
+    cov_m = np.broadcast_to(SIGMA_CM**2 * np.eye(3), (len(sweep), 3, 3))
+    wrong = x_true.copy()
+    wrong[model.point_slice(0)] += 0.1
+    held = kfold(model, sweep, step, measured, cov_m,
+                 lambda k: (wrong, np.zeros((model.n_params,) * 2)))  # fmt: skip
+    assert held.ratio > 2.0
+
+
+def test_check_configurations_predict_the_tool() -> None:
+    """Check configurations: the tool point at their readings, against the tool pose of
+    the signature chain built from the same parameters (forward kinematics)."""
+    model, x_true, _, _ = _sweeps(2)
+    theta = np.random.default_rng(9).uniform(-1, 1, (30, 3))
+    truth = tool_poses(tool_model(model, theta), x_true)[0]
+    zero = np.zeros((model.n_params,) * 2)
+    held = check_configurations(model, theta, truth, np.zeros((30, 3, 3)), x_true, zero)
+    assert (held.fold == -1).all() and held.error_cm.max() < 1e-10
+    moved = check_configurations(model, theta, truth + [0.0, 0.0, 0.02],
+                                 np.full((30, 3, 3), 0.0), x_true, zero)  # fmt: skip
+    np.testing.assert_allclose(moved.error_cm, 0.02, rtol=1e-8)

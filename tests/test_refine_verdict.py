@@ -1,0 +1,94 @@
+"""Verdict rules (pipeline.refine.verdict) on synthetic evidence: each rule fires alone."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from pipeline.refine.verdict import CHECK, FAIL, PASS, Evidence, SensorParameter, judge
+
+GOOD = Evidence(
+    refined=True,
+    status="converged",
+    chi2_per_dof=1.02,
+    chi2_recorded_per_dof=1.05,
+    predicted_rms_cm=0.006,
+    predicted_p95_cm=0.011,
+    holdout_rms_cm=0.009,
+    holdout_expected_rms_cm=0.008,
+    improvement=38.0,
+    biases=(SensorParameter("bias_A", "cm", 0.001, 0.002),),
+    mic_moves=(SensorParameter("mic_B.x", "cm", 0.01, 0.02),),
+)
+
+
+def test_pass_when_no_rule_fires() -> None:
+    v = judge(GOOD)
+    assert v.level == PASS and v.reasons == ()
+    assert v.line == (
+        "PASS  predicted 0.006 cm RMS (95 % 0.011), held-out 0.009 cm, 38× the design "
+        "model, χ²/dof 1.02, mic biases within 3σ"
+    )
+
+
+@pytest.mark.parametrize(
+    ("change", "level", "words"),
+    [
+        ({"status": "not converged"}, FAIL, "did not converge"),
+        ({"predicted_rms_cm": 0.71}, FAIL, "predicted RMS tool error 0.71 cm > 0.1 cm"),
+        ({"chi2_per_dof": 12.0, "chi2_recorded_per_dof": 40.0}, FAIL, "cannot explain"),
+        ({"chi2_per_dof": 3.8, "chi2_recorded_per_dof": 3.9}, CHECK, "χ²/dof 3.80 > 2"),
+        # a high recorded χ² the self-calibration explains: no χ² reason at all
+        ({"chi2_recorded_per_dof": 40.0}, PASS, ""),
+        ({"biases": (SensorParameter("bias_B", "cm", 0.05, 0.004),)}, CHECK,
+         "bias_B: range bias +0.05 ± 0.004 cm (12.5σ > 3σ): the digitizer's calibration is off"),
+        ({"mic_moves": (SensorParameter("mic_A.y", "cm", -0.5, 0.05),)}, CHECK,
+         "mic_A.y: position -0.5 ± 0.05 cm (10.0σ > 3σ)"),
+        ({"holdout_rms_cm": 0.02}, CHECK, "held-out RMS error 0.02 cm > 2 × its prediction"),
+        ({"improvement": 0.8}, CHECK, "improvement over the design model 0.8× < 1×"),
+        ({"refined": False, "status": "disabled"}, CHECK, "refinement disabled"),
+    ],
+)  # fmt: skip
+def test_each_rule_fires(change: dict[str, object], level: str, words: str) -> None:
+    v = judge(dataclasses.replace(GOOD, **change))
+    assert v.level == level
+    if level == PASS:
+        assert v.reasons == ()
+    else:
+        assert len(v.reasons) == 1 and words in v.reasons[0], v.reasons
+        assert v.line.startswith(level) and words in v.line
+
+
+def test_fail_outranks_check_and_lists_every_reason() -> None:
+    v = judge(dataclasses.replace(GOOD, predicted_rms_cm=0.71, improvement=0.5))
+    assert v.level == FAIL and len(v.reasons) == 2 and "(+1 more)" in v.line
+
+
+def test_fleet_row_reads_the_verdict_stage(identified_session: Path, tmp_path: Path) -> None:
+    """A session with a verdict table: its row carries the predicted accuracy and verdict;
+    without one, null (the columns exist either way)."""
+    import shutil
+
+    import pyarrow as pa
+
+    from pipeline.fleet.row import session_row
+    from pipeline.schemas import validate_table
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.tables import write_table
+    from pipeline.stages.verdict import NUMBERS
+
+    d = shutil.copytree(identified_session, tmp_path / "s")
+    row = session_row(d, "identify")
+    assert row["verdict"] is None and row["predicted_rms_cm"] is None
+    v = judge(dataclasses.replace(GOOD, improvement=0.5))
+    numbers = dict.fromkeys(NUMBERS, None) | {"predicted_rms_cm": 0.006, "predicted_p95_cm": 0.011}
+    table = pa.table({
+        "verdict": [v.level], "reasons": [list(v.reasons)], "line": [v.line],
+        **{k: pa.array([numbers[k]], pa.float64()) for k in NUMBERS},
+    })  # fmt: skip
+    write_table(stage_path(d, "verdict"), validate_table(table, "verdict"), {})
+    row = session_row(d, "identify")
+    assert row["verdict"] == CHECK and row["verdict_reasons"] == list(v.reasons)
+    assert row["predicted_rms_cm"] == 0.006 and row["predicted_p95_cm"] == 0.011
