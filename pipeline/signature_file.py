@@ -107,8 +107,9 @@ def smodel_section(chain: SerialChain) -> dict[str, Any]:
 
 def refinement_section(refine: pa.Table) -> dict[str, Any]:
     """The refinement's summary (stage ``refine``): whether it ran, its status and χ², and
-    the sensor's fitted parameters (self-calibration) with their σ. ``verdict`` is null
-    until the verdict stage fills it."""
+    the sensor's fitted parameters (self-calibration) with their σ. ``verdict``: the
+    verdict stage's row where the stage list has one (:func:`signature_document`), else
+    null."""
     from pipeline.stages.refine import refine_summary
 
     summary = refine_summary(refine)
@@ -135,6 +136,8 @@ def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict
     chain = chain_from_frames(read_table(stage_path(session_dir, "chain")), pris)
     thesis = chain_from_frames(read_table(stage_path(session_dir, "frames")), pris)
     refinement = refinement_section(read_table(stage_path(session_dir, "refine")))
+    if hashes.get("verdict") is not None:  # the stage list holds the verdict
+        refinement["verdict"] = read_table(stage_path(session_dir, "verdict")).to_pylist()[0]
     pdh = pseudo_dh_from_chain(chain)
     X, Y, misfit = design_alignment(chain, robot)
     qs = joints_to_boundary(chain.joint_offsets, pris)

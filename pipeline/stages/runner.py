@@ -54,6 +54,9 @@ STAGE_MODULES = (
     "chain",
     "smodel",
     "dh",
+    "uncertainty",
+    "holdout_sonic",
+    "verdict",
 )
 #: Identification stage modules of a point-sensor session: module ``points`` is the one
 #: stage that turns ``/points`` into the ``positions`` table (its stage name).
@@ -69,6 +72,9 @@ POINT_STAGE_MODULES = (
     "smodel",
     "dh",
     "validation",
+    "uncertainty",
+    "holdout",
+    "verdict",
 )
 #: recorded sensor kind (``/rig/description`` sensor) -> its identification stage modules
 SENSOR_STAGE_MODULES = {"sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES}
