@@ -82,6 +82,9 @@ def test_corrupt_stage_is_stale_and_recomputed(
         "chain",
         "smodel",
         "dh",
+        "uncertainty",
+        "holdout",
+        "verdict",
         "signature",
     }
     runs = {r.name: r.action for r in identify(d, report=False).runs}

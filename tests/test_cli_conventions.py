@@ -109,11 +109,11 @@ def test_identify_progress_line(identified_session: Path, tmp_path: Path) -> Non
     assert r.exit_code == 0, r.output
     lines = [ln for ln in r.stderr.split("\n") if not ln.startswith("warning:")]
     assert len(lines) == 2 and lines[1] == ""  # not a terminal: one summary line, no \r
-    assert lines[0].startswith("identify ") and "13/13 stages" in lines[0]
+    assert lines[0].startswith("identify ") and "16/16 stages" in lines[0]
     term = _Terminal()
     identify(d, force=True, report=False, progress=term)
     text = term.getvalue()
-    assert text.count("\r") == 13 and "13/13 stages" in text  # redrawn after each stage
+    assert text.count("\r") == 16 and "16/16 stages" in text  # redrawn after each stage
     assert text.count("\n") == 1 and text.endswith("\n")
 
 

@@ -209,15 +209,14 @@ def _table(sweep: list[Any], step: list[Any], target: list[Any], held: Any) -> p
     )
 
 
-#: Stage ``holdout`` of a point-sensor session; a sonic session's (the refinement's raw
-#: ranges as an input too, as its ``refine`` stage): :data:`SONIC_STAGE`.
+#: The sonic session's stage: the raw ranges too (level ``ranges`` rebuilds its problem).
 STAGE = Stage(
     "holdout",
     1,
-    ("session", "refine", "positions", "joints", "frames"),
+    ("session", "refine", "positions", "joints", "frames", "ranges"),
     Params(),
     compute,
     "held-out position errors of the refined chain (k-fold or check configurations)",
 )
-
-SONIC_STAGE = dataclasses.replace(STAGE, inputs=(*STAGE.inputs, "ranges"))
+#: A point-sensor session's (module ``holdout_points``): no ranges recorded.
+POINTS_STAGE = dataclasses.replace(STAGE, inputs=STAGE.inputs[:-1])

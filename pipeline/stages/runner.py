@@ -55,7 +55,7 @@ STAGE_MODULES = (
     "smodel",
     "dh",
     "uncertainty",
-    "holdout_sonic",
+    "holdout",
     "verdict",
 )
 #: Identification stage modules of a point-sensor session: module ``points`` is the one
@@ -73,13 +73,13 @@ POINT_STAGE_MODULES = (
     "dh",
     "validation",
     "uncertainty",
-    "holdout",
+    "holdout_points",
     "verdict",
 )
 #: recorded sensor kind (``/rig/description`` sensor) -> its identification stage modules
 SENSOR_STAGE_MODULES = {"sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES}
 #: The last identification stage: a stage list holding it (and ``session``) has a product.
-LAST_STAGE = "dh"
+LAST_STAGE = "verdict"
 #: Stage modules of ``pipeline evaluate`` (run after the identification, same runner).
 EVALUATE_STAGE_MODULES = (
     "evaluate_teach",
