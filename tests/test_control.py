@@ -319,7 +319,11 @@ def test_jacobi_compiled_agrees_with_numpy(robot3: Controller, monkeypatch) -> N
     np.testing.assert_array_equal(fast.converged, slow.converged)
     ok = fast.converged
     assert ok.mean() >= 0.99
-    np.testing.assert_allclose(wrap_angle(fast.q[ok] - slow.q[ok]), 0.0, rtol=0, atol=1e-7)
+    # Joint values agree where the wrist is conditioned: near θ5 = 0 the pose fixes only
+    # θ4 + θ6, and two accurate solutions may split it differently (4.6e-7 rad seen on a
+    # refined signature); the pose errors below hold for every target.
+    wrist = ok & (np.abs(np.sin(slow.q[:, 4])) > 0.05)
+    np.testing.assert_allclose(wrap_angle(fast.q[wrist] - slow.q[wrist]), 0.0, rtol=0, atol=1e-7)
     assert fast.position_error_cm[ok].max() <= 1e-7
     assert fast.orientation_error_rad[ok].max() <= 1e-10
     for k in range(0, len(T), 17):
