@@ -287,8 +287,12 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
         geometry=geometry_true,
         noise_factor=0.0 if opts.noiseless else opts.noise_factor,
         quantize=not opts.noiseless,
+        # Drawn from a child stream: switching the fault on leaves the range noise of the
+        # seed unchanged, so a session with and without it differ by the biases alone.
         mic_bias_cm=(
-            tuple(rng_sensor.normal(0, BIAS_SIGMA_CM, 4)) if "bias" in opts.faults else (0.0,) * 4
+            tuple(rng_sensor.spawn(1)[0].normal(0, BIAS_SIGMA_CM, 4))
+            if "bias" in opts.faults
+            else (0.0,) * 4
         ),  # type: ignore[arg-type]
         dropout_prob=DROPOUT_PROB if "dropouts" in opts.faults else 0.0,
         outlier_prob=OUTLIER_PROB if "outliers" in opts.faults else 0.0,
