@@ -79,6 +79,13 @@ def measure(folder: str, name: str, seed: int | None, opts: dict[str, Any]) -> d
         for m, b in zip("ABCD", true_bias, strict=True)
         if f"bias_{m}_cm" in fitted
     ]
+    mics = {r["name"]: (r["value"], r["sigma"]) for r in refine if r["group"] == "mic"}
+    a_true = truth_doc.get("sensor", {}).get("geometry_true", {}).get("microphones_cm", {})
+    z_mic_a = [
+        abs(mics[f"mic_A_{c}_cm"][0] - a_true["A"][k]) / mics[f"mic_A_{c}_cm"][1]
+        for k, c in enumerate("xy")
+        if f"mic_A_{c}_cm" in mics and "A" in a_true
+    ]  # the gauge frame is the recorded one: C at 0, B on +Y, A in the X-Y plane
     scale = float(summary.get("noise_scale", float("nan")))
     return {
         "session": name,
@@ -91,6 +98,7 @@ def measure(folder: str, name: str, seed: int | None, opts: dict[str, Any]) -> d
         "verdict": verdict["verdict"],
         "reasons": verdict["reasons"],
         "max_bias_z": max(z_bias) if z_bias else None,
+        "max_mic_a_z": max(z_mic_a) if z_mic_a else None,
     }
 
 
@@ -152,6 +160,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             for kind in ("bias", "wac")
         }
         out["faults"]["bias"]["max_bias_z"] = [rows[f"bias{s}"]["max_bias_z"] for s in faults]
+        out["faults"]["wac"]["max_mic_a_z"] = [rows[f"wac{s}"]["max_mic_a_z"] for s in faults]
     print(json.dumps({k: v for k, v in out.items() if k != "rows"}, indent=1))
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))

@@ -49,10 +49,15 @@ def test_noiseless_tracker_sessions_refine_exactly(tmp_path_factory, robot: str)
     assert audit(d, configurations=200).signature.max_position_cm <= 1e-6
 
 
-@pytest.mark.parametrize("level", ["ranges", "points"])
-def test_noiseless_sonic_session_refines_exactly(tmp_path_factory, tmp_path, level) -> None:
+@pytest.mark.parametrize(
+    ("robot", "level"),
+    [("puma560", "ranges"), ("puma560", "points"), ("stanford", "ranges"), ("scara", "ranges")],
+)
+def test_noiseless_sonic_session_refines_exactly(
+    tmp_path_factory, tmp_path, robot: str, level: str
+) -> None:
     d = tmp_path / "s"
-    shutil.copytree(small_session(tmp_path_factory, seed=3, noiseless=True), d)
+    shutil.copytree(small_session(tmp_path_factory, seed=3, noiseless=True, robot=robot), d)
     run(d, overrides={"refine": {"level": level}})
     assert _summary(d)["level"] == level and _summary(d)["status"] == "converged"
     assert audit(d, configurations=200).signature.max_position_cm <= 1e-6
