@@ -105,7 +105,8 @@ def test_cache_reruns_exactly_what_changed(
     over = {"features": {"plane_method": "eigen"}}
     st = {s.name: s for s in status(d, over)}
     assert st["features"].state == "stale" and st["features"].reason == "parameters changed"
-    after = {"features", "residuals", "frames", "refine", "chain", "smodel", "dh"}
+    judged = {"uncertainty", "holdout", "verdict"}
+    after = {"features", "residuals", "frames", "refine", "chain", "smodel", "dh", *judged}
     assert _ran(run(d, overrides=over)) == after
     assert _ran(run(d, overrides=over)) == set()
     # A version bump reruns that stage; identical output keeps its dependants cached.
@@ -122,7 +123,7 @@ def test_cache_reruns_exactly_what_changed(
     assert st["session"].reason == "input recording changed"
     assert _ran(run(d, overrides=over)) == set(names)
     # --from and --only.
-    later = {"frames", "refine", "chain", "smodel", "dh"}
+    later = {"frames", "refine", "chain", "smodel", "dh", *judged}
     assert _ran(run(d, overrides=over, from_stage="frames")) == later
     assert _ran(run(d, overrides=over, only="triangulate")) == {"triangulate"}
 

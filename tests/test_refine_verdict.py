@@ -80,6 +80,7 @@ def test_fleet_row_reads_the_verdict_stage(identified_session: Path, tmp_path: P
     from pipeline.stages.verdict import NUMBERS
 
     d = shutil.copytree(identified_session, tmp_path / "s")
+    stage_path(d, "verdict").unlink()  # a session identified before the verdict stage
     row = session_row(d, "identify")
     assert row["verdict"] is None and row["predicted_rms_cm"] is None
     v = judge(dataclasses.replace(GOOD, improvement=0.5))

@@ -30,8 +30,7 @@ def test_point_session_runs_its_own_stage_list(tmp_path_factory) -> None:
     names = [s.name for s in status(d)]
     assert names == [
         "session", "joints", "positions", "features", "residuals", "frames", "refine", "chain",
-        "smodel", "dh",
-        "signature", "validation",
+        "smodel", "dh", "validation", "uncertainty", "holdout", "verdict", "signature",
     ]  # fmt: skip
     assert not stage_path(d, "triangulate").exists()
     with pytest.raises(ArmsigError, match="unknown stage 'triangulate'"):
