@@ -102,5 +102,5 @@ def test_cli_status_lists_the_signature(identified_session: Path) -> None:
     assert r.exit_code == 0
     lines = [line.split(None, 2) for line in r.output.splitlines()]
     names = [line[0] for line in lines]
-    assert names.index("signature") == names.index("dh") + 1
+    assert names.index("signature") == names.index("verdict") + 1  # the last stage judged
     assert lines[names.index("signature")][1:] == ["fresh", "matches the committed stages"]
