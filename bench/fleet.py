@@ -58,7 +58,7 @@ def fleet() -> None:
         fl = Path(tmp) / "fleet"
         _sessions(fl)
         t0 = time.perf_counter()
-        with dask_client(None, WORKERS, preload=FLEET_PRELOAD) as client:
+        with dask_client(None, WORKERS, preload=FLEET_PRELOAD, share_cores=True) as client:
             t_start = time.perf_counter() - t0
             c0s, c0 = client.run(time.process_time), time.process_time()
             r = run_fleet("identify", [str(fl)], client, fl, progress=None)

@@ -792,7 +792,7 @@ def _fleet(
 
     sessions = find_sessions(dirs)  # refused before a cluster starts
     folder = check_writable(out or dirs[0], "--out", folder=True)
-    with dask_client(scheduler, workers, preload=FLEET_PRELOAD) as client:
+    with dask_client(scheduler, workers, preload=FLEET_PRELOAD, share_cores=True) as client:
         r = run_fleet(command, sessions, client, folder, progress=sys.stderr)
     for row in r.rows:
         if row["error"] is not None:
