@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pyarrow as pa
 
 from pipeline.errors import StageError
@@ -86,16 +87,22 @@ def reading_tangents(model: ChainModel, x: Array) -> Array:
     return out
 
 
-def measured_at(keys: pa.Table, table: pa.Table) -> Array:
-    """Positions (K, 3) of a ``positions`` table at ``keys`` (sweep, step, target), joined
-    by key; NaN where the table has none."""
+def rows_at(keys: pa.Table, table: pa.Table) -> npt.NDArray[np.int64]:
+    """Row of ``table`` at each (sweep, step, target) of ``keys``, joined by key; −1 where
+    the table has none."""
     cols = ("sweep", "step", "target")
     at = {
         k: i for i, k in enumerate(zip(*(table.column(c).to_pylist() for c in cols), strict=True))
     }
-    p = np.vstack([positions(table), np.full((1, 3), np.nan)])
     rows = [at.get(k, -1) for k in zip(*(keys.column(c).to_pylist() for c in cols), strict=True)]
-    return p[np.array(rows, np.int64)]
+    return np.array(rows, np.int64)
+
+
+def measured_at(keys: pa.Table, table: pa.Table) -> Array:
+    """Positions (K, 3) of a ``positions`` table at ``keys`` (sweep, step, target), joined
+    by key; NaN where the table has none."""
+    p = np.vstack([positions(table), np.full((1, 3), np.nan)])
+    return p[rows_at(keys, table)]
 
 
 def session_problem(
@@ -141,8 +148,14 @@ def session_problem(
     )
 
 
+def internal_factors(refine: pa.Table) -> Array:
+    """Per row of a ``refine`` table, the factor from its boundary unit to the internal
+    one (deg -> rad; cm and ratios unchanged): values scale by it, covariances by its
+    outer product."""
+    unit = np.array(refine.column("unit").to_pylist())
+    return np.where(unit == "deg", np.radians(1.0), 1.0)
+
+
 def refined_x(refine: pa.Table) -> Array:
     """The fitted ``x`` (internal units) of a ``refine`` table."""
-    value = refine.column("value").to_numpy()
-    unit = refine.column("unit").to_pylist()
-    return np.where(np.array(unit) == "deg", np.radians(value), value)
+    return np.asarray(refine.column("value").to_numpy() * internal_factors(refine), float)

@@ -87,18 +87,9 @@ class StepRefit:
         return x[:n], (N * self.noise_var)[:n, :n]
 
 
-def _rows_by_key(positions: pa.Table, keys: pa.Table) -> np.ndarray:
-    """Row of ``positions`` of each (sweep, step, target) of ``keys``, joined by key."""
-    cols = ("sweep", "step", "target")
-    have = zip(*(positions.column(c).to_pylist() for c in cols), strict=True)
-    index = {k: i for i, k in enumerate(have)}
-    want = zip(*(keys.column(c).to_pylist() for c in cols), strict=True)
-    return np.array([index[k] for k in want], int)
-
-
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.refine.holdout import check_configurations, kfold
-    from pipeline.refine.problem import refined_x, session_problem
+    from pipeline.refine.problem import internal_factors, refined_x, rows_at, session_problem
     from pipeline.refine.solve import refit
     from pipeline.stages.positions import positions as xyz_of
     from pipeline.stages.refine import refine_summary
@@ -124,12 +115,14 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         rows, theta = check
         cov_m = scale * _covariances(inputs, rows)
         cov = np.array(refine.column("covariance").to_pylist(), float)[:n_kin, :n_kin]
-        cov = _internal(refine, n_kin) * cov
+        f = internal_factors(refine)[:n_kin]
+        cov = np.outer(f, f) * cov
         held = check_configurations(model, theta, xyz_of(rows), cov_m, x_hat[:n_kin], cov)
         return _table(rows.column("sweep").to_pylist(), rows.column("step").to_pylist(),
                       rows.column("target").to_pylist(), held)  # fmt: skip
     keys = sp.problem.block.keys
-    rows = pos.take(pa.array(_rows_by_key(pos, keys)))
+    at = rows_at(keys, pos)
+    rows = pos.take(pa.array(at, mask=at < 0))  # a key without a position: a null row
     cov_m = scale * _covariances(inputs, rows)
 
     def full_refit(keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -144,12 +137,6 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     k = held.index
     return _table(sweep[k].tolist(), keys.column("step").to_numpy()[k].tolist(),
                   [keys.column("target")[int(i)].as_py() for i in k], held)  # fmt: skip
-
-
-def _internal(refine: pa.Table, n: int) -> np.ndarray:
-    """Factors (n, n) turning the first n rows' covariance from deg to rad."""
-    f = np.where(np.array(refine.column("unit").to_pylist()[:n]) == "deg", np.radians(1.0), 1.0)
-    return np.outer(f, f)
 
 
 def _covariances(inputs: Mapping[str, Any], rows: pa.Table) -> np.ndarray:

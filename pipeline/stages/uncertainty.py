@@ -58,8 +58,10 @@ def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.
             fix="`pipeline identify SESSION --force` recomputes the refinement",
         )
     idx = np.array(axis + tool)
-    scale = np.where(np.array(refine.column("unit").to_pylist()) == "deg", np.radians(1.0), 1.0)
-    x = refine.column("value").to_numpy() * scale
+    from pipeline.refine.problem import internal_factors, refined_x
+
+    scale = internal_factors(refine)
+    x = refined_x(refine)
     C = np.array(refine.column("covariance").to_pylist(), float) * np.outer(scale, scale)
     return x[idx], C[np.ix_(idx, idx)]
 
