@@ -15,8 +15,8 @@ import numpy as np
 
 from pipeline.errors import ArmsigError
 from pipeline.fleet.run import TABLE_NAME
-from pipeline.report.figures import _figure, save_png
-from pipeline.report.identification import _table, sig
+from pipeline.report.figures import panel_figure, save_png
+from pipeline.report.identification import markdown_table, sig
 from pipeline.signature_checks import DIGEST_KEY
 from pipeline.signature_file import FILE_NAME, chain_alignment
 
@@ -72,7 +72,7 @@ def _signature(row: dict[str, Any]) -> Any:
 
 def _gain_figure(rows: list[dict[str, Any]], path: Path) -> Path:
     robots = sorted({r["robot"] for r in rows if r["error"] is None})
-    fig, (ax_g, ax_m) = _figure(2)
+    fig, (ax_g, ax_m) = panel_figure(2)
     for k, robot in enumerate(robots):
         rs = [r for r in rows if r["error"] is None and r["robot"] == robot]
         g = [r["gain_evaluation"] for r in rs if r["gain_evaluation"] is not None]
@@ -90,7 +90,7 @@ def _gain_figure(rows: list[dict[str, Any]], path: Path) -> Path:
 
 
 def _accuracy_figure(rows: list[dict[str, Any]], path: Path) -> Path:
-    fig, axes = _figure(2)
+    fig, axes = panel_figure(2)
     for ax, col, label in (
         (axes[0], "check_rms_cm", "validation RMS error (cm)"),
         (axes[1], "sigma_normal_max_cm", "largest feature normal σ (cm)"),
@@ -107,7 +107,7 @@ def _accuracy_figure(rows: list[dict[str, Any]], path: Path) -> Path:
 
 
 def _drift_figure(steps: dict[str, list[tuple[str, float | None]]], path: Path) -> Path:
-    fig, (ax,) = _figure(1)
+    fig, (ax,) = panel_figure(1)
     for robot, s in steps.items():
         ax.plot(range(1, len(s) + 1), [np.nan if v is None else v for _, v in s], "o-",
                 label=robot)  # fmt: skip
@@ -135,7 +135,7 @@ def write_fleet_report(folder: str | Path) -> Path:
         "drift.png": _drift_figure(steps, out / "drift.png"),
     }
     failed = [r for r in rows if r["error"] is not None]
-    table = _table(
+    table = markdown_table(
         ["session", "robot", "sensor", "points", "σ normal max (cm)", "check RMS (cm)",
          "gain", "warnings", "error"],
         [
@@ -165,7 +165,7 @@ def write_fleet_report(folder: str | Path) -> Path:
         "Each session against the robot's session before it: RMS tool position difference "
         "of the two signatures over 500 random configurations after aligning their bases "
         "and tools (sensor frames differ between sessions).\n",
-        _table(["robot", "session", "RMS difference (cm)"], drift_rows)
+        markdown_table(["robot", "session", "RMS difference (cm)"], drift_rows)
         if drift_rows else "No robot has two identified sessions.",
         f"\n![drift]({figs['drift.png'].name})\n",
     ]  # fmt: skip

@@ -17,7 +17,7 @@ from pipeline.evaluation.indices import GRID3D_INDICES
 from pipeline.evaluation.summary import summarize
 from pipeline.evaluation.tasks import CATHETOMETER_CM, GRID2D_SHAPE
 from pipeline.report import evaluation_figures as figs
-from pipeline.report.identification import _table
+from pipeline.report.identification import markdown_table
 from pipeline.stages.runner import stage_path
 from pipeline.stages.tables import read_table
 
@@ -60,7 +60,7 @@ def _index_table(task: str, items: list[dict[str, Any]]) -> str:
         if task == "lines1d":
             row.append(" / ".join(f"{v:g}" for v in THESIS_6_6[k]) if k < len(THESIS_6_6) else "")
         rows.append(row)
-    return _table(headers, rows)
+    return markdown_table(headers, rows)
 
 
 def _restricted_note(s: dict[str, Any]) -> str:
@@ -115,7 +115,7 @@ def write_evaluation_report(session_dir: str | Path) -> Path:
         "a resolution step of zero (the factor is then at least |design| / resolution). "
         "Thesis columns: design / signature / factor as printed.",
         "",
-        _table(
+        markdown_table(
             ["task", "indices", "median improvement"],
             [
                 [

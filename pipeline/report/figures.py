@@ -55,7 +55,8 @@ def _grid(n: int) -> tuple[int, int]:
     return math.ceil(n / cols), cols
 
 
-def _figure(n: int) -> tuple[Any, list[Any]]:
+def panel_figure(n: int) -> tuple[Any, list[Any]]:
+    """A new figure of ``n`` panels in a grid (object-oriented API, no pyplot), its axes."""
     from matplotlib.figure import Figure
 
     rows, cols = _grid(n)
@@ -78,11 +79,11 @@ class Panels:
 
     def __init__(self, n: int) -> None:
         self.n = n
-        self.fig, self.axes = _figure(n)
+        self.fig, self.axes = panel_figure(n)
         self._used = False
 
     def clear(self) -> tuple[Any, list[Any]]:
-        """The figure and its axes, as a new :func:`_figure` would give them."""
+        """The figure and its axes, as a new :func:`panel_figure` would give them."""
         if self._used:
             for legend in list(self.fig.legends):
                 legend.remove()
@@ -103,7 +104,7 @@ class Panels:
 
 def _panels(n: int, panels: Panels | None) -> tuple[Any, list[Any]]:
     if panels is None:
-        return _figure(n)
+        return panel_figure(n)
     if panels.n != n:
         raise ValueError(f"panels of {panels.n} joints given for {n} joints")
     return panels.clear()

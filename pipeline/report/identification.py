@@ -45,7 +45,9 @@ def _fmt(spec: str) -> Callable[[Any], str]:
 cm, deg, sig, var = _fmt(".4f"), _fmt(".3f"), _fmt(".4g"), _fmt(".6f")
 
 
-def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    """A Markdown table (``|`` in cells escaped)."""
+
     def cell(v: Any) -> str:
         return str(v).replace("|", "\\|")
 
@@ -126,7 +128,7 @@ def _expected_section(rows: list[Row], robot: Any) -> str:
     head += ["Axis σ (deg)", "Centre σ (cm)", "From"]
     return (
         "## Expected feature accuracy (6.12)/(6.13)\n\n"
-        + _table(head, body)
+        + markdown_table(head, body)
         + "\n\n(6.12) (axis) and (6.13) (centre) hold for revolute sweeps of at least 180° "
         "(B-3). Below 180°, and for prismatic sweeps, the table states the fitted noise "
         "(N − 3, resp. 2N − 4, degrees of freedom) propagated through the fits instead "
@@ -155,7 +157,7 @@ def _dh_section(rows: list[Row], robot: Any) -> str:
     head += ["a (cm)", "design a", "α (deg)", "design α"]
     return (
         "## Identified pseudo Denavit-Hartenberg parameters (cf. Table 6-3)\n\n"
-        + _table(head, body)
+        + markdown_table(head, body)
         + "\n\nFor the variable of each joint (θ revolute, d prismatic) the table gives its "
         "encoder offset: θ = q + offset (d = q + offset). Nearly parallel consecutive axes put "
         "their common normal far from the arm, so huge d values of opposite sign on such axes "
@@ -179,7 +181,7 @@ def _smodel_section(rows: list[Row], frames: list[Row], robot: Any) -> str:
     head = ["Link", "Name", "Type", "q̄ˢ", "β (deg)", "d̄ (cm)", "ā (cm)", "ᾱ (deg)"]
     return (
         "## S-Model link parameters (4.52)-(4.57)\n\n"
-        + _table(head + ["γ (deg)", "b (cm)"], body)
+        + markdown_table(head + ["γ (deg)", "b (cm)"], body)
         + "\n\nβ and d̄ hold at the signature reading q̄ˢ of the joint."
     )
 
@@ -196,7 +198,7 @@ def _features_section(rows: list[Row], robot: Any) -> str:
     warned = [f"- Joint {r['joint']}: {w}" for r in rows for w in r["warnings"]]
     return (
         "## Feature accuracies (cf. Table 6-5)\n\n"
-        + _table(head, body)
+        + markdown_table(head, body)
         + "\n\nσ_δ = max(σ_E, σ_F) from (6.9)-(6.10); σ_δ (6.12) and σ_c (6.13) use the "
         'thesis\' empirical constants and need enough sweep. "plane methods Δ" is the angle '
         "between the eigenvalue and repeated least-squares plane normals.\n\n"
@@ -217,7 +219,7 @@ def _targets_section(rows: list[Row]) -> str:
     ]
     return (
         "### Targets\n\n"
-        + _table(["Joint", "Used (best-conditioned first)", "Not used, and why"], body)
+        + markdown_table(["Joint", "Used (best-conditioned first)", "Not used, and why"], body)
         + "\n\nThe used targets' planes and centres give one axis (pipeline/features/"
         "targets.py); radius, σ and points above are those of the first used target.\n\n"
     )
@@ -234,7 +236,7 @@ def _variance_section(res: list[figures.JointResiduals]) -> str:
     head = ["Joint", "Name", "n", "normal variance (cm²)", "normal stdev (cm)"]
     return (
         "## Residual variances (cf. Table 6-4)\n\n"
-        + _table(head + ["radial variance (cm²)", "radial stdev (cm)"], body)
+        + markdown_table(head + ["radial variance (cm²)", "radial stdev (cm)"], body)
         + "\n\nSample variances (n − 1) of the residuals table; prismatic joints have distances "
         "from the line of translation as normal residuals and no radial residuals."
     )
@@ -268,7 +270,7 @@ def _point_quality_section(pos: list[Row]) -> str:
         )  # fmt: skip
     head = ["Sweep", "Configurations", "Points", "Targets", "Unusable"]
     head += ["Median σ (cm)", "Points with covariance"]
-    return "## Data quality\n\n" + _table(head, body)
+    return "## Data quality\n\n" + markdown_table(head, body)
 
 
 def _sweep_label(s: int) -> str:
@@ -293,7 +295,7 @@ def _quality_section(tri: list[Row], comp: list[Row]) -> str:
         )  # fmt: skip
     head = ["Sweep", "Configurations", "Cycles", "Dropped", "Compensation status"]
     head += ["Rejected outliers", "Unusable configurations", "Median scatter (cm)", "Max scatter"]
-    return "## Data quality\n\n" + _table(head, body)
+    return "## Data quality\n\n" + markdown_table(head, body)
 
 
 def _audit_section(audit: dict[str, Any]) -> str:
@@ -302,7 +304,7 @@ def _audit_section(audit: dict[str, Any]) -> str:
     head = ["Model", "max position (cm)", "RMS position (cm)", "max orientation (deg)"]
     return (
         "## Audit against the simulator's truth\n\n"
-        + _table(head + ["RMS orientation (deg)"], body)
+        + markdown_table(head + ["RMS orientation (deg)"], body)
         + f"\n\nOver {audit['configurations']} random configurations after the best-fit base "
         f"and tool alignment, the design model's RMS position error is "
         f"{audit['improvement_rms_position']:.1f}× the signature's."
@@ -332,7 +334,7 @@ def _provenance_section(prov: dict[str, dict[str, Any]]) -> str:
         for name, p in prov.items()
     ]  # fmt: skip
     head = ["Stage", "Version", "Parameters", "Created", "Content hash"]
-    return "## Stage provenance\n\n" + _table(head, body)
+    return "## Stage provenance\n\n" + markdown_table(head, body)
 
 
 def _verdict_parts(sdir: Path, prov: dict[str, dict[str, Any]], out: Path) -> list[str]:
