@@ -307,10 +307,10 @@ def solve_one_target(
 
     The stopping rule (Appendix C.1 step 8) is tested before the trial pose: an
     iterate already within the (finite) pose tolerances whose Newton increment
-    is below one encoder count is the solution. Without pose tolerances the
-    increment is taken (the encoder rule alone tests the step, not the pose). Taking that increment would change the
-    joints by less than one count and cost one more pose and Jacobian (a quarter
-    of a typical solve); the iteration count is the one the numpy iteration
+    is below one encoder count is the solution; taking the increment would move
+    the joints by less than one count and cost one more pose and Jacobian.
+    Without pose tolerances the increment is taken (the encoder rule alone
+    tests the step, not the pose). The iteration count is the one the numpy iteration
     reports (it counts the increment it takes there).
     """
     n = q.shape[0]
