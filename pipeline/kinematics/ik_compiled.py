@@ -305,13 +305,11 @@ def solve_one_target(
     Returns (outcome, iterations); ``delta`` (6,) receives the final δ; ``ws``:
     :func:`workspace`.
 
-    The stopping rule (Appendix C.1 step 8) is tested before the trial pose: an
-    iterate already within the (finite) pose tolerances whose Newton increment
-    is below one encoder count is the solution; taking the increment would move
-    the joints by less than one count and cost one more pose and Jacobian.
-    Without pose tolerances the increment is taken (the encoder rule alone
-    tests the step, not the pose). The iteration count is the one the numpy iteration
-    reports (it counts the increment it takes there).
+    The stopping rule is tested on the trial iterate, as the numpy iteration
+    does. Testing it before the trial pose (stop at an iterate within the pose
+    tolerances whose increment is below one count) was measured on robot3:
+    it ends 106 of 100,000 solves one pose earlier (the pose tolerances, not
+    the encoder rule, decide when the others stop), so it is not done.
     """
     n = q.shape[0]
     max_iter, length = int(settings[0]), settings[1]
@@ -322,7 +320,6 @@ def solve_one_target(
     ep, eo = _errors(delta)
     e = ep * (1.0 / length) + eo
     accurate_q = ep <= tol_p and eo <= tol_o  # the pose error at q
-    checked = tol_p < np.inf and tol_o < np.inf  # pose tolerances given
     for it in range(1, max_iter + 1):
         if not _lu_solve(J, delta, dq, M):  # Eq. (5.4): dq = J⁻¹ δ
             return _levenberg_marquardt(
@@ -336,8 +333,6 @@ def solve_one_target(
         for j in range(n):
             q_new[j] = q[j] + (dq[j] / worst if worst > 1.0 else dq[j])
             small = small and abs(dq[j]) < res[j]
-        if small and accurate_q and checked:  # the stopping rule at q (docstring)
-            return FAST_CONVERGED, it
         _pose_jacobian(base, links, tool, offsets, prismatic, q_new, T, J)
         _delta(T, target, d_new)
         ep, eo = _errors(d_new)
