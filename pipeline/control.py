@@ -24,12 +24,13 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import ArmsigError
-from pipeline.kinematics.chain import SerialChain, in_frame, is_single_robot
+from pipeline.kinematics.chain import SerialChain, in_frame
 from pipeline.kinematics.ik import (
     ALL_AXES,
     DesignInverse,
     IKResult,
     controllable_axes,
+    ik_compilable,
     jacobi_iterative,
     newton_raphson,
 )
@@ -202,14 +203,14 @@ class Controller:
             if method != "nr":
                 raise ArmsigError("task axes need Newton-Raphson", fix="use --method nr")
             return self._solve_task_axes(T, branch, tuple(task_axes), record_history, q_near)
-        T_sensor = self.sensor_from_base @ T
         if self.robot.name == "puma560" and branch is None and q_near is None:
             branch = self.default_branch()
         if not record_history and self._compiled(branch):
             near, solver = self._starts(T.shape[0], q_near), self.realtime(branch)
             if method == "nr":
-                return self._into_limits(solver.solve(T, near))
+                return solver.solve(T, near)  # shifted into the limits by the solver
             return self._into_limits(solver.solve_jacobi(T, near))
+        T_sensor = self.sensor_from_base @ T
         q0 = self.initial_estimate(T_sensor, branch, q_near)
         if method == "nr":
             res = newton_raphson(
@@ -238,8 +239,8 @@ class Controller:
         (start and solve compiled): a Puma signature of six revolute joints, one branch."""
         c = self.signature.chain
         return (
-            self.robot.name == "puma560" and branch is not None and is_single_robot(c)
-            and c.n_joints == 6 and not c.prismatic.any()
+            self.robot.name == "puma560" and branch is not None and ik_compilable(c)
+            and not c.prismatic.any()
         )  # fmt: skip
 
     @cached_property

@@ -18,9 +18,8 @@ def _kernel_pose_jacobian(chain: SerialChain, q: np.ndarray) -> tuple[np.ndarray
     n = chain.n_joints
     T, J = np.empty((4, 4)), np.empty((6, n))
     ik_compiled._pose_jacobian(
-        chain.base, chain.links, chain.tool, chain.joint_offsets, chain.prismatic, q, T, J,
-        np.empty((3, 4)), np.empty((3, 4)), np.empty((n, 6)),
-    )  # fmt: skip
+        chain.base, chain.links, chain.tool, chain.joint_offsets, chain.prismatic, q, T, J
+    )
     return T, J
 
 

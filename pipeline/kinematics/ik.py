@@ -661,7 +661,7 @@ def newton_raphson(
     """
     T, q, res = _prepare(chain, T_target, q0, resolution)
     axes, mask = _task_mask(task_axes)
-    if compiled and mask is None and not record_history and _compilable(chain):
+    if compiled and mask is None and not record_history and ik_compilable(chain):
         return _newton_compiled(
             chain, T, q, res, max_iter, damping, position_tol_cm, orientation_tol_rad, max_step
         )
@@ -724,10 +724,16 @@ def newton_raphson(
     )
 
 
-def _compilable(chain: SerialChain) -> bool:
+def ik_compilable(chain: SerialChain) -> bool:
     """Whether :mod:`pipeline.kinematics.ik_compiled` can solve for ``chain``: one
-    robot (no batch axis) and a square Jacobian (six joints)."""
-    return is_single_robot(chain) and chain.n_joints == 6
+    robot (no batch axis), a square Jacobian (six joints) and homogeneous
+    transforms (:func:`~pipeline.kinematics.ik_compiled.homogeneous`)."""
+    from pipeline.kinematics.ik_compiled import homogeneous
+
+    return (
+        is_single_robot(chain) and chain.n_joints == 6
+        and homogeneous(chain.base, chain.links, chain.tool)
+    )  # fmt: skip
 
 
 def _newton_compiled(

@@ -27,7 +27,6 @@ numpy iteration from the kernel's start (:func:`pipeline.kinematics.ik.finish_de
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 
@@ -38,12 +37,15 @@ from pipeline.kinematics.ik_compiled import (
     FAST_DEFERRED,
     Buf,
     IntArray,
+    Work,
     _delta,
     _errors,
+    homogeneous,
     jit,
     pose,
     run_in_shares,
     solve_one_target,
+    workspace,
 )
 from pipeline.kinematics.ik_stall import STALL_RATIO
 from pipeline.kinematics.transforms import Array, differential_motion, invert_transform
@@ -125,24 +127,24 @@ def _design_start(
     v = _D4 * C3 - _A3 * S3
     t2 = math.atan2(v * reach - u * pz, u * reach + v * pz)
     c1, s1, c23, s23 = math.cos(t1), math.sin(t1), math.cos(t2 + t3), math.sin(t2 + t3)
-    R36 = np.empty((3, 3))  # _wrist_rotation: R03ᵀ R06
-    for c in range(3):
-        a = c1 * Tw[0, c] + s1 * Tw[1, c]
-        R36[0, c] = c23 * a - s23 * Tw[2, c]
-        R36[1, c] = c1 * Tw[1, c] - s1 * Tw[0, c]
-        R36[2, c] = s23 * a + c23 * Tw[2, c]
+    # _wrist_rotation: R36 = R03ᵀ R06, the entries used, as scalars r_ij
+    a0, a2 = c1 * Tw[0, 0] + s1 * Tw[1, 0], c1 * Tw[0, 2] + s1 * Tw[1, 2]
+    r00, r02 = c23 * a0 - s23 * Tw[2, 0], c23 * a2 - s23 * Tw[2, 2]
+    r10, r12 = c1 * Tw[1, 0] - s1 * Tw[0, 0], c1 * Tw[1, 2] - s1 * Tw[0, 2]
+    r20, r22 = s23 * a0 + c23 * Tw[2, 0], s23 * a2 + c23 * Tw[2, 2]
+    r21 = s23 * (c1 * Tw[0, 1] + s1 * Tw[1, 1]) + c23 * Tw[2, 1]
     w = branch[2]
-    s5 = math.hypot(R36[0, 2], R36[1, 2])
+    s5 = math.hypot(r02, r12)
     q[0], q[1], q[2] = t1, t2, t3
-    q[4] = math.atan2(s5 if w > 0 else -s5, R36[2, 2])
-    q[3] = math.atan2(w * R36[1, 2], w * R36[0, 2])
-    q[5] = math.atan2(w * R36[2, 1], -(w * R36[2, 0]))
+    q[4] = math.atan2(s5 if w > 0 else -s5, r22)
+    q[3] = math.atan2(w * r12, w * r02)
+    q[5] = math.atan2(w * r21, -(w * r20))
     if s5 < _SINGULAR:
         q[3] = 0.0
-        if R36[2, 2] > 0:
-            q[5] = math.atan2(R36[1, 0], R36[0, 0])
+        if r22 > 0:
+            q[5] = math.atan2(r10, r00)
         else:
-            q[5] = math.atan2(R36[1, 0], -R36[0, 0])
+            q[5] = math.atan2(r10, -r00)
     for j in range(6):
         q[j] = _wrap(q[j])
     # puma_design_inverse: θ4 from q_near at a wrist singularity, 2π class of q_near
@@ -212,13 +214,14 @@ def _solve_target(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
     X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf, Tw: Buf,
-    spare: Buf,
+    spare: Buf, ws: Work,
 ) -> tuple[int, int]:  # fmt: skip
     """One target ``T_base`` (4, 4) in the design base frame: ``target = X · T_base``
     (sensor frame), the start ``q0`` from ``q_near`` and the solution ``q`` (6,),
     by the fallback order of :class:`PumaSolver` (steps 1-4). Returns the outcome
     (converged, :data:`OFF_BRANCH`, deferred or :data:`NO_START`) and the
-    iterations of all solves; ``Tw`` (4, 4), ``spare`` (2, 6): scratch."""
+    iterations of all solves; ``Tw`` (4, 4), ``spare`` (2, 6), ``ws``
+    (:func:`~pipeline.kinematics.ik_compiled.workspace`): scratch."""
     _to_sensor(X, T_base, target)
     if not _design_start(pre, post, branch, margins, target, q_near, q0, Tw):
         return NO_START, 0
@@ -231,7 +234,7 @@ def _solve_target(
             q[3] += WRIST_TURNS[attempt - 1]
             q[5] -= WRIST_TURNS[attempt - 1]
         outcome, it = solve_one_target(
-            base, links, tool, offsets, prismatic, target, q, res, limit, settings, delta
+            base, links, tool, offsets, prismatic, target, q, res, limit, settings, delta, ws
         )
         total += it
         if outcome == FAST_CONVERGED:
@@ -253,15 +256,19 @@ def _solve_targets(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
     X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf,
-    outcome: Buf, iterations: Buf,
+    outcome: Buf, iterations: Buf, errors: Buf, lower: Buf, upper: Buf, turn: Buf,
 ) -> None:  # fmt: skip
-    """:func:`_solve_target` for each of ``T_base`` (m, 4, 4); outputs by row."""
-    Tw, spare = np.empty((4, 4)), np.empty((2, 6))
+    """:func:`_solve_realtime` for each of ``T_base`` (m, 4, 4); outputs by row
+    (``errors`` (m, 2): position cm, rotation rad)."""
+    Tw, spare, ws = np.empty((4, 4)), np.empty((2, 6)), workspace(q.shape[1])
+    info = np.empty(2, np.int64)
     for k in range(T_base.shape[0]):
-        outcome[k], iterations[k] = _solve_target(
+        _solve_realtime(
             base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
             settings, X, T_base[k], q_near[k], q0[k], q[k], delta[k], target[k], Tw, spare,
+            ws, info, errors[k], lower, upper, turn,
         )  # fmt: skip
+        outcome[k], iterations[k] = info[0], info[1]
 
 
 @jit
@@ -269,14 +276,16 @@ def _solve_realtime(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
     X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf, Tw: Buf,
-    spare: Buf, info: Buf, lower: Buf, upper: Buf, turn: Buf,
+    spare: Buf, ws: Work, info: Buf, errors: Buf, lower: Buf, upper: Buf, turn: Buf,
 ) -> None:  # fmt: skip
     """:func:`_solve_target` of one target, then the joint-limit shift of a converged
-    solution; ``info`` (2,) receives the outcome and the iteration count."""
+    solution; ``info`` (2,) receives the outcome and the iteration count, ``errors``
+    (2,) the position (cm) and rotation (rad) error of δ."""
     info[0], info[1] = _solve_target(
         base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
-        settings, X, T_base, q_near, q0, q, delta, target, Tw, spare,
+        settings, X, T_base, q_near, q0, q, delta, target, Tw, spare, ws,
     )  # fmt: skip
+    errors[0], errors[1] = _errors(delta)
     if info[0] == FAST_CONVERGED or info[0] == OFF_BRANCH:
         _into_limits(q, lower, upper, turn)
 
@@ -289,20 +298,23 @@ _JACOBI_SLOW = ik.JACOBI_SLOW_RATIO
 _JACOBI_PATIENCE = ik.JACOBI_STALL_PATIENCE
 _ANDERSON_RCOND = ik.ANDERSON_RCOND
 _STALL = STALL_RATIO
+#: :func:`_jacobi_work`: scratch of one Jacobi solve (4 history, 6 pose, 5 vector buffers).
+JacobiWork = tuple[Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf]
 
 
 @jit
-def _anderson(Qh: Buf, Gh: Buf, count: int, out: Buf) -> None:
+def _anderson(Qh: Buf, Gh: Buf, count: int, out: Buf, dF: Buf, dG: Buf, f: Buf) -> None:
     """:func:`pipeline.kinematics.ik._anderson` of one target: ``Qh``, ``Gh`` (h, n)
-    oldest first, the last ``count`` rows valid; the accelerated iterate into ``out``."""
+    oldest first, the last ``count`` rows valid; the accelerated iterate into ``out``.
+    ``dF`` (n, h - 1), ``dG`` (h - 1, n), ``f`` (n,): scratch."""
     h, n = Qh.shape
-    dF, dG = np.zeros((n, h - 1)), np.zeros((h - 1, n))
+    dF[:] = 0.0
+    dG[:] = 0.0
     first = h - min(count, h)
     for j in range(first, h - 1):
         for i in range(n):
             dF[i, j] = (Gh[j + 1, i] - Qh[j + 1, i]) - (Gh[j, i] - Qh[j, i])
             dG[j, i] = Gh[j + 1, i] - Gh[j, i]
-    f = np.empty(n)
     for i in range(n):
         f[i] = Gh[h - 1, i] - Qh[h - 1, i]
     gamma = np.linalg.pinv(dF, _ANDERSON_RCOND) @ f
@@ -318,15 +330,11 @@ def _jacobi_map(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
     pre: Buf, post: Buf, branch: Buf, margins: Buf,
-    target: Buf, q: Buf, Ts: Buf, q_next: Buf, Tw: Buf,
+    target: Buf, q: Buf, Ts: Buf, q_next: Buf, Tw: Buf, Td: Buf, Delta: Buf, Tk: Buf,
 ) -> bool:  # fmt: skip
     """(5.8): ``q_next = F_d⁻¹[F_d(q) · F_s(q)⁻¹ · T*]`` (``Ts``: F_s(q)); False when
-    the design inverse has none."""
-    n = q.shape[0]
-    Td = np.empty((4, 4))
-    F, G, axes = np.empty((3, 4)), np.empty((3, 4)), np.empty((n, 6))
-    Delta, Tk = np.empty((4, 4)), np.empty((4, 4))
-    pose(d_base, d_links, d_tool, d_offsets, prismatic, q, Td, F, G, axes)
+    the design inverse has none. ``Tw``, ``Td``, ``Delta``, ``Tk`` (4, 4): scratch."""
+    pose(d_base, d_links, d_tool, d_offsets, prismatic, q, Td)
     for r in range(3):  # Eq. (5.9): Δ = F_s(q)⁻¹ T*, C.2 step 4
         for c in range(4):
             acc = Ts[0, r] * target[0, c] + Ts[1, r] * target[1, c] + Ts[2, r] * target[2, c]
@@ -348,12 +356,24 @@ def _error_at(
 ) -> tuple[float, float, float]:  # fmt: skip
     """F_s(q) into ``Ts``, its δ into ``d``; the position and rotation errors and the
     scaled error."""
-    n = q.shape[0]
-    F, G, axes = np.empty((3, 4)), np.empty((3, 4)), np.empty((n, 6))
-    pose(base, links, tool, offsets, prismatic, q, Ts, F, G, axes)
+    pose(base, links, tool, offsets, prismatic, q, Ts)
     _delta(Ts, target, d)
     ep, eo = _errors(d)
     return ep, eo, ep * (1.0 / length) + eo
+
+
+@jit
+def _jacobi_work(n: int) -> JacobiWork:
+    """Scratch of :func:`_jacobi_one` for ``n`` joints, made once per batch: the
+    Anderson history Qh, Gh (n + 1, n) and its differences dF (n, n), dG (n, n);
+    six (4, 4) poses; q_next, q_acc (n,), δ_new, δ_acc (6,), f (n,)."""
+    h = n + 1
+    return (
+        np.zeros((h, n)), np.zeros((h, n)), np.zeros((n, h - 1)), np.zeros((h - 1, n)),
+        np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)),
+        np.empty((4, 4)), np.empty((4, 4)), np.empty(n), np.empty(n), np.empty(6),
+        np.empty(6), np.empty(n),
+    )  # fmt: skip
 
 
 @jit
@@ -361,7 +381,7 @@ def _jacobi_one(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
     pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, settings: Buf,
-    target: Buf, q: Buf, delta: Buf, Tw: Buf,
+    target: Buf, q: Buf, delta: Buf, Tw: Buf, work: JacobiWork,
 ) -> tuple[int, int]:  # fmt: skip
     """:func:`pipeline.kinematics.ik.jacobi_iterative` (``accelerate=True``) of one
     target from ``q`` (6,) (in: the start, out: the last iterate): (5.8) with the
@@ -370,20 +390,21 @@ def _jacobi_one(
     acceleration of the same map whenever it gives the smaller error; the
     encoder rule and the pose tolerances to stop; no progress in
     :data:`~pipeline.kinematics.ik.JACOBI_STALL_PATIENCE` iterations of
-    accelerated steps, a stall. Returns the outcome and the iteration count."""
+    accelerated steps, a stall. Returns the outcome and the iteration count; ``Tw``,
+    ``work`` (:func:`_jacobi_work`): scratch."""
     n = q.shape[0]
     max_iter, length = int(settings[0]), settings[1]
     tol_p, tol_o = settings[2], settings[3]
     h = n + 1
-    Qh, Gh = np.zeros((h, n)), np.zeros((h, n))
-    Ts, T_plain, T_acc = np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4))
-    q_next, q_acc, d_new, d_acc = np.empty(n), np.empty(n), np.empty(6), np.empty(6)
+    Qh, Gh, dF, dG, Ts, T_plain, T_acc, Td, Delta, Tk, q_next, q_acc, d_new, d_acc, f = work
+    Qh[:] = 0.0
+    Gh[:] = 0.0
     ep, eo, e = _error_at(base, links, tool, offsets, prismatic, target, q, Ts, delta, length)
     count, slow, idle = 0, False, 0
     for it in range(1, max_iter + 1):
         found = _jacobi_map(
             base, links, tool, offsets, prismatic, d_base, d_links, d_tool, d_offsets,
-            pre, post, branch, margins, target, q, Ts, q_next, Tw,
+            pre, post, branch, margins, target, q, Ts, q_next, Tw, Td, Delta, Tk,
         )  # fmt: skip
         if not found:
             return J_NO_INVERSE, it - 1
@@ -400,7 +421,7 @@ def _jacobi_one(
         e_new = e_plain
         was_slow = slow
         if was_slow:
-            _anderson(Qh, Gh, count, q_acc)
+            _anderson(Qh, Gh, count, q_acc, dF, dG, f)
             ap, ao, e_acc = _error_at(
                 base, links, tool, offsets, prismatic, target, q_acc, T_acc, d_acc, length
             )
@@ -443,7 +464,7 @@ def _jacobi_targets(
 ) -> None:  # fmt: skip
     """Start (``margins``) and Jacobi iteration (``j_margins``) of each of ``T_base``
     (m, 4, 4) (design base frame); outputs by row as :func:`_solve_targets`."""
-    Tw = np.empty((4, 4))
+    Tw, work = np.empty((4, 4)), _jacobi_work(q.shape[1])
     for k in range(T_base.shape[0]):
         _to_sensor(X, T_base[k], target[k])
         if not _design_start(pre, post, branch, margins, target[k], q_near[k], q0[k], Tw):
@@ -453,7 +474,7 @@ def _jacobi_targets(
             q[k, j] = q0[k, j]
         outcome[k], iterations[k] = _jacobi_one(
             base, links, tool, offsets, prismatic, d_base, d_links, d_tool, d_offsets,
-            pre, post, branch, j_margins, res, settings, target[k], q[k], delta[k], Tw,
+            pre, post, branch, j_margins, res, settings, target[k], q[k], delta[k], Tw, work,
         )  # fmt: skip
 
 
@@ -519,7 +540,7 @@ class PumaSolver:
         max_step: float = 0.5,
     ) -> None:
         n = chain.n_joints
-        if not ik._compilable(chain) or chain.prismatic.any():
+        if not ik.ik_compilable(chain) or chain.prismatic.any():
             raise ValueError("PumaSolver needs an unbatched six-revolute-joint chain")
         c = np.ascontiguousarray
         self.chain = chain
@@ -536,6 +557,8 @@ class PumaSolver:
                 [max_iter, chain.length_scale, position_tol_cm, orientation_tol_rad], float
             ),
         )  # fmt: skip
+        if design is not None and not homogeneous(design.base, design.links, design.tool):
+            raise ValueError("PumaSolver needs a design chain of homogeneous transforms")
         self.design = design
         self._design = None if design is None else (
             c(design.base, float), c(design.links, float), c(design.tool, float),
@@ -556,7 +579,10 @@ class PumaSolver:
         self.info = np.zeros(2, np.int64)
         #: Whether the last solution of :meth:`solve_one` lies on another branch (step 3).
         self.branch_changed = False
+        #: The last position (cm) and rotation (rad) error of :meth:`solve_one`.
+        self.errors = np.empty(2)
         self._target, self._Tw, self._spare = np.empty((4, 4)), np.empty((4, 4)), np.empty((2, 6))
+        self._ws = workspace(n)
 
     def solve_one(self, T_base: Array, q_near: Array | None = None) -> bool:
         """Solve one pose (4, 4) given in the design base frame; True when converged.
@@ -573,13 +599,14 @@ class PumaSolver:
         """
         near = self._q_ref if q_near is None else q_near
         _solve_realtime(*self._model, self._X, T_base, near, self.q0, self.q, self.delta,
-                        self._target, self._Tw, self._spare, self.info, *self._limits)  # fmt: skip
+                        self._target, self._Tw, self._spare, self._ws, self.info, self.errors,
+                        *self._limits)  # fmt: skip
         if self.info[0] == FAST_CONVERGED or self.info[0] == OFF_BRANCH:
             self.branch_changed = self.info[0] == OFF_BRANCH
             return True
-        res = self.finish(self._target[None], near[None], self.q0[None], self.q[None],
-                          self.info[:1].copy(), self.info[1:].copy(), self.delta[None])  # fmt: skip
-        _shift(res.q, self._limits)
+        res = self.finish(self._target[None], near[None], self.q0[None], self.q[None].copy(),
+                          self.info[:1].copy(), self.info[1:].copy(), self.delta[None],
+                          self.errors[None].copy())  # fmt: skip
         self.q[:] = res.q[0]
         self.info[1] = res.iterations[0]
         self.branch_changed = bool(res.branch_changed is not None and res.branch_changed[0])
@@ -592,32 +619,33 @@ class PumaSolver:
         Batched: one kernel call (threads for large batches:
         :func:`~pipeline.kinematics.ik_compiled.run_in_shares`); every target
         is solved alone by the arithmetic of :meth:`solve_one`, so a batch
-        equals a loop bit for bit. Joints are not shifted into the limits
-        (the controller does that, as :meth:`solve_one` does).
+        equals a loop bit for bit. Joints are shifted into the limits by ±2π
+        where that helps, as :meth:`solve_one` and
+        :meth:`pipeline.control.Controller.solve` do.
         """
         Tb = np.ascontiguousarray(T_base, float)
         m, n = len(Tb), self.chain.n_joints
         near = np.ascontiguousarray(np.broadcast_to(q_near, (m, n)), float)
         solved = m == 1 and self.solve_one(Tb[0], near[0])
         if solved and self.info[0] in (FAST_CONVERGED, OFF_BRANCH):
-            # One target the kernel solved: the real-time call's buffers (its q is
-            # already shifted into the limits, which the controller's shift keeps).
+            # One target the kernel solved: the real-time call's buffers.
             return ik.IKResult(
                 q=self.q[None].copy(), converged=np.ones(1, bool),
-                iterations=self.info[1:].copy(), position_error_cm=(e := ik._errors(
-                    self.delta[None]))[:, 0], orientation_error_rad=e[:, 1],
-                status=np.zeros(1, np.int64),
+                iterations=self.info[1:].copy(), position_error_cm=self.errors[:1].copy(),
+                orientation_error_rad=self.errors[1:].copy(), status=np.zeros(1, np.int64),
                 branch_changed=np.array([self.info[0] == OFF_BRANCH]),
             )  # fmt: skip
         q0, q, delta, T = np.empty((m, n)), np.empty((m, n)), np.empty((m, 6)), np.empty_like(Tb)
         outcome, iterations = np.empty(m, np.int64), np.empty(m, np.int64)
+        errors = np.empty((m, 2))
 
         def run(rows: slice) -> None:
             _solve_targets(*self._model, self._X, Tb[rows], near[rows], q0[rows], q[rows],
-                           delta[rows], T[rows], outcome[rows], iterations[rows])  # fmt: skip
+                           delta[rows], T[rows], outcome[rows], iterations[rows],
+                           errors[rows], *self._limits)  # fmt: skip
 
         run_in_shares(run, m)
-        return self.finish(T, near, q0, q, outcome, iterations, delta)
+        return self.finish(T, near, q0, q, outcome, iterations, delta, errors)
 
     def solve_jacobi(self, T_base: Array, q_near: Array) -> ik.IKResult:
         """The Jacobi iteration (5.8) of targets (m, 4, 4) in the design base frame from
@@ -670,25 +698,37 @@ class PumaSolver:
 
     def finish(
         self, T: Array, near: Array, q0: Array, q: Array, outcome: IntArray,
-        iterations: IntArray, delta: Array,
+        iterations: IntArray, delta: Array, errors: Array,
     ) -> ik.IKResult:  # fmt: skip
-        """The result of kernel outputs: deferred targets by the numpy iteration from
-        their start; targets without a start from ``near`` (the numpy design inverse's
-        fallback), so the numpy iteration reports them. Converged solutions off the
+        """The result of kernel outputs (``errors`` (m, 2): the kernel's position and
+        rotation errors): deferred targets by the numpy iteration from their start,
+        targets without a start from ``near`` (the numpy design inverse's fallback),
+        so the numpy iteration reports them; those rows shifted into the limits
+        (the kernel shifts the rows it solves). Converged solutions off the
         requested branch are flagged (:attr:`~pipeline.kinematics.ik.IKResult.branch_changed`)."""
-        lost = outcome == NO_START
-        q0[lost] = near[lost]
-        outcome[lost] = FAST_DEFERRED
-        outcome[outcome == OFF_BRANCH] = FAST_CONVERGED
-        max_iter, tol_p, tol_o, max_step = self.settings
-        res = ik.finish_deferred(
-            self.chain, T, q0, self.resolution, q, outcome, iterations, delta,
-            max_iter=max_iter, position_tol_cm=tol_p, orientation_tol_rad=tol_o,
-            max_step=max_step,
+        status = np.zeros(len(q), np.int64)
+        changed = outcome == OFF_BRANCH
+        rows = np.flatnonzero((outcome != FAST_CONVERGED) & ~changed)
+        if rows.size:
+            start = np.where((outcome[rows] == NO_START)[:, None], near[rows], q0[rows])
+            max_iter, tol_p, tol_o, max_step = self.settings
+            res = ik.finish_deferred(
+                self.chain, T[rows], start, self.resolution, q[rows],
+                np.full(rows.size, FAST_DEFERRED), iterations[rows], delta[rows],
+                max_iter=max_iter, position_tol_cm=tol_p, orientation_tol_rad=tol_o,
+                max_step=max_step,
+            )  # fmt: skip
+            b = self.branch
+            off = np.any(puma560.branch_of(res.q) != [b.shoulder, b.elbow, b.wrist], axis=-1)
+            _shift(res.q, self._limits)
+            q[rows], iterations[rows], status[rows] = res.q, res.iterations, res.status
+            errors[rows, 0], errors[rows, 1] = res.position_error_cm, res.orientation_error_rad
+            changed[rows] = res.converged & off
+        return ik.IKResult(
+            q=q, converged=status == ik.STATUS_CONVERGED, iterations=iterations,
+            position_error_cm=errors[:, 0], orientation_error_rad=errors[:, 1], status=status,
+            branch_changed=changed,
         )  # fmt: skip
-        b = self.branch
-        off = np.any(puma560.branch_of(res.q) != [b.shoulder, b.elbow, b.wrist], axis=-1)
-        return replace(res, branch_changed=res.converged & off)
 
 
 def _shift(q: Array, limits: tuple[Array, ...]) -> None:
