@@ -48,6 +48,9 @@ def test_indices_are_those_of_the_sessions(in_process: StudyResult) -> None:
     # The S-Model error grows with the range noise (same deviates, k = 1 -> 10).
     assert np.all(col["smodel_rms_cm"][-1] > 3.0 * col["smodel_rms_cm"][0])
     assert set(np.unique(col["verdict"])) <= {0.0, 1.0, 2.0}
+    # The bound at k: k times the bound of the robot's k = 1 session (the documented law).
+    k = np.array(in_process.study.values)[:, None]
+    np.testing.assert_array_equal(col["crb_cm"], k * col["crb_cm"][0])
 
 
 def test_same_bits_in_process_in_worker_processes_and_on_dask(in_process: StudyResult) -> None:

@@ -95,7 +95,8 @@ def _per_robot(path: Path, parameter: str) -> tuple[Array, Array]:
     for s, r, name, cm, unitless in zip(
         t["setting"], t["robot"], t["index"], t["value_cm"], t["value"], strict=True
     ):
-        v[s, r, INDEX_NAMES.index(name)] = cm if cm is not None else unitless
+        value = cm if cm is not None else unitless
+        v[s, r, INDEX_NAMES.index(name)] = np.nan if value is None else value
     return x, v
 
 
@@ -117,7 +118,8 @@ def section(out: Path, wall_s: float) -> list[str]:
         "the slant-range noise (7.9) × k, the same robots and deviates at every k. Audited",
         "against the simulator's truth over 1,000 random configurations (base and tool",
         "aligned). CRB: the Cramér-Rao bound of the refinement's measurement model at the",
-        "simulated noise; predicted: the `uncertainty` stage (scaled by the fitted noise).",
+        "simulated noise (k × the bound of the robot's k = 1 session); predicted: the",
+        "`uncertainty` stage (scaled by the fitted noise).",
         "",
         *figures,
         "",
