@@ -23,8 +23,6 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -43,33 +41,16 @@ def _session(folder: Path, name: str, seed: int | None, **opts: Any) -> Path:
 
 def measure(folder: str, name: str, seed: int | None, opts: dict[str, Any]) -> dict[str, Any]:
     """Simulate (or copy), identify and audit one session; the numbers of one row."""
-    from pipeline.audit import _aligned_errors, read_truth, true_chain
+    from pipeline.audit import read_truth
     from pipeline.identify import identify
-    from pipeline.kinematics.chain import forward_kinematics
-    from pipeline.stages.frames import chain_from_frames
-    from pipeline.stages.refine import refine_summary
+    from pipeline.montecarlo.refine_study import session_accuracy
     from pipeline.stages.runner import stage_path
-    from pipeline.stages.session import session_robot
     from pipeline.stages.tables import read_table
-    from pipeline.units import joints_to_internal
 
     d = _session(Path(folder), name, seed, **opts)
     identify(d, report=False)
-    robot = session_robot(read_table(stage_path(d, "session")))
+    acc = session_accuracy(d)  # the audit of `frames` and `chain`, as the refine study
     truth_doc = read_truth(d / "rig-truth.json")
-    truth = true_chain(truth_doc)
-    rng = np.random.default_rng(0)  # the audit's configurations
-    q = joints_to_internal(
-        rng.uniform(robot.limits[:, 0], robot.limits[:, 1], (1000, robot.n_joints)),
-        robot.prismatic,
-    )
-    T = forward_kinematics(truth, q)
-
-    def rms(table: str) -> float:
-        chain = chain_from_frames(read_table(stage_path(d, table)), robot.prismatic)
-        return _aligned_errors(T, forward_kinematics(chain, q)).rms_position_cm
-
-    summary = refine_summary(read_table(stage_path(d, "refine")))
     verdict = read_table(stage_path(d, "verdict")).to_pylist()[0]
     refine = read_table(stage_path(d, "refine")).to_pylist()
     fitted = {r["name"]: (r["value"], r["sigma"]) for r in refine if r["group"] == "bias"}
@@ -86,16 +67,15 @@ def measure(folder: str, name: str, seed: int | None, opts: dict[str, Any]) -> d
         for k, c in enumerate("xy")
         if f"mic_A_{c}_cm" in mics and "A" in a_true
     ]  # the gauge frame is the recorded one: C at 0, B on +Y, A in the X-Y plane
-    scale = float(summary.get("noise_scale", float("nan")))
     return {
         "session": name,
-        "thesis_cm": rms("frames"),
-        "refined_cm": rms("chain"),
+        "thesis_cm": acc.smodel.rms_position_cm,
+        "refined_cm": acc.refined.rms_position_cm,
         "predicted_cm": verdict["predicted_rms_cm"],
-        "crb_cm": verdict["predicted_rms_cm"] / scale if verdict["predicted_rms_cm"] else None,
-        "chi2_dof": scale**2,
+        "crb_cm": acc.crb_cm if verdict["predicted_rms_cm"] else None,
+        "chi2_dof": acc.chi2_per_dof,
         "chi2_recorded_dof": verdict["chi2_recorded_per_dof"],
-        "verdict": verdict["verdict"],
+        "verdict": acc.verdict,
         "reasons": verdict["reasons"],
         "max_bias_z": max(z_bias) if z_bias else None,
         "max_mic_a_z": max(z_mic_a) if z_mic_a else None,

@@ -125,9 +125,8 @@ def _aligned_errors(T_true: np.ndarray, T_model: np.ndarray) -> ModelError:
     )
 
 
-def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) -> AuditResult:
-    """Compare the identified signature and the design model with the truth over
-    ``configurations`` (1 to :data:`MAX_CONFIGURATIONS`) random configurations."""
+def _truth_and_robot(sdir: Path, configurations: int) -> tuple[SerialChain, Any]:
+    """The true chain and the session's robot, after the audit's checks."""
     if not 1 <= configurations <= MAX_CONFIGURATIONS:
         raise ArmsigError(
             "--configurations out of range",
@@ -135,7 +134,6 @@ def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) ->
             got=str(configurations),
             fix="--configurations 1000",
         )
-    sdir = Path(session_dir)
     truth_path = sdir / "rig-truth.json"
     if not truth_path.is_file():
         raise ArmsigError(
@@ -143,8 +141,7 @@ def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) ->
             expected="a simulated session (the audit needs the simulator's ground truth)",
             fix="audit only sessions made by `pipeline simulate`",
         )
-    frames_path = stage_path(sdir, "chain")
-    if not frames_path.is_file():
+    if not stage_path(sdir, "chain").is_file():
         raise ArmsigError(
             f"{sdir}: not identified yet", fix=f"run `pipeline identify {sdir}` first"
         )
@@ -156,14 +153,51 @@ def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) ->
             expected=f"the {robot.n_joints} joints of the session's robot {robot.name}",
             fix=_RESIMULATE,
         )
-    pris = robot.prismatic
-    sig = chain_from_frames(read_table(frames_path), pris)
+    return truth, robot
+
+
+def _configurations(robot: Any, configurations: int, seed: int) -> np.ndarray:
+    """The audit's random configurations (configurations, n), internal units."""
     rng = np.random.default_rng(seed)
     lim = robot.limits
-    q = joints_to_internal(
-        rng.uniform(lim[:, 0], lim[:, 1], (configurations, robot.n_joints)), pris
+    return joints_to_internal(
+        rng.uniform(lim[:, 0], lim[:, 1], (configurations, robot.n_joints)), robot.prismatic
     )
+
+
+def table_errors(
+    session_dir: str | Path,
+    tables: tuple[str, ...] = ("frames", "chain"),
+    configurations: int = 1000,
+    seed: int = 0,
+) -> dict[str, ModelError]:
+    """Errors against the truth of the chains held by stage tables ``tables`` (``frames``:
+    the thesis S-Model; ``chain``: the signature, refined unless refinement is off), over
+    the same configurations as :func:`audit`. For studies and benchmarks that compare the
+    two."""
+    sdir = Path(session_dir)
+    truth, robot = _truth_and_robot(sdir, configurations)
+    q = _configurations(robot, configurations, seed)
     T_true = forward_kinematics(truth, q)
+    return {
+        t: _aligned_errors(
+            T_true,
+            forward_kinematics(
+                chain_from_frames(read_table(stage_path(sdir, t)), robot.prismatic), q
+            ),
+        )
+        for t in tables
+    }
+
+
+def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) -> AuditResult:
+    """Compare the identified signature and the design model with the truth over
+    ``configurations`` (1 to :data:`MAX_CONFIGURATIONS`) random configurations."""
+    sdir = Path(session_dir)
+    truth, robot = _truth_and_robot(sdir, configurations)
+    q = _configurations(robot, configurations, seed)
+    T_true = forward_kinematics(truth, q)
+    sig = chain_from_frames(read_table(stage_path(sdir, "chain")), robot.prismatic)
     return AuditResult(
         session=str(sdir),
         configurations=configurations,

@@ -863,7 +863,9 @@ def montecarlo(
     study: Annotated[
         str,
         typer.Option(
-            help="encoder, machining, noise, points, radius, misalignment, features or all."
+            help="encoder, machining, noise, points, radius, misalignment, features, refine "
+            "(S-Model against refined signature; whole simulate + identify sessions, ~4 s of "
+            "CPU per robot and setting) or all (refine last)."
         ),
     ],
     robots: Annotated[

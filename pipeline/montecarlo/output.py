@@ -6,6 +6,7 @@
 ``OUT/<study>/std_grid.png``, ``mean_grid.png``  Appendix G (all indices)
 ``OUT/misalignment/lines.png`` Figure 7-3 (mean and 3σ band of the three lines)
 ``OUT/features/features.arrow``, ``features.png``  Section 6.6
+``OUT/refine/rms.png``, ``gain.png``, ``calibration.png``  issue 15 (:mod:`.refine_report`)
 
 Each table carries ``schema_name`` and ``schema_version`` in its schema metadata and
 ``armsig.package_version`` beside its other provenance, as the stage tables do.
@@ -79,6 +80,11 @@ def write_study(out_dir: Path, res: StudyResult) -> Path:
         "montecarlo_summary",
         prov,
     )
+    if st.name == "refine":  # not the 12-vertex grid's indices: its own figures
+        from pipeline.montecarlo import refine_report
+
+        refine_report.write_figures(res, d)
+        return d
     if st.name == "misalignment":
         _lines_figure(res, d / "lines.png")
     else:

@@ -75,9 +75,12 @@ def load_summary(path: Path) -> SummaryArrays:
     par = prov["parameter"]
 
     def grid(stat: str) -> Array:
-        cm = t.column(f"{stat}_cm").to_numpy(zero_copy_only=False).astype(float)
-        deg = t.column(f"{stat}_deg").to_numpy(zero_copy_only=False).astype(float)
-        return np.where(np.isnan(cm), deg, cm).reshape(s, k)
+        cols = [f"{stat}_cm", f"{stat}_deg", stat]  # the unitless column: refine study only
+        out = np.full(t.num_rows, np.nan)
+        for c in (c for c in cols if c in t.column_names):
+            v = t.column(c).to_numpy(zero_copy_only=False).astype(float)
+            out = np.where(np.isnan(out), v, out)
+        return out.reshape(s, k)
 
     return SummaryArrays(
         name=prov["study"],
@@ -329,6 +332,10 @@ def write_report(out_dir: Path) -> Path:
     feat = out / "features" / "features.arrow"
     if feat.is_file():
         lines.append(f"| features | – | 36 | {read_provenance(feat)['wall_s']:.1f} |")
+    refine = out / "refine" / "summary.arrow"
+    ref = read_provenance(refine) if refine.is_file() else None
+    if ref is not None:
+        lines.append(f"| refine | {ref['robots']} | {len(ref['settings'])} | {ref['wall_s']:.2f} |")
     lines.append("")
     design = [s for s in found if s.name in ("encoder", "machining")]
     signature = [s for s in found if s.name not in ("encoder", "machining")]
@@ -342,6 +349,11 @@ def write_report(out_dir: Path) -> Path:
                 lines += _section(s, out)
     if feat.is_file():
         lines += ["## Feature accuracy (6.6)", ""] + _features_section(feat)
+    if ref is not None:
+        from pipeline.montecarlo import refine_report
+
+        lines += ["## Refinement against the S-Model (issue 15)", ""]
+        lines += refine_report.section(out, float(ref["wall_s"]))
     path = out / "montecarlo.md"
     write_text_atomic(path, "\n".join(lines) + "\n")
     return path

@@ -66,9 +66,16 @@ def _field(name: str, typ: pa.DataType, unit: str, description: str) -> pa.Field
 
 
 def _by_unit(values: Array, units: list[str]) -> dict[str, Array]:
-    """Split values (..., K) into ``cm`` and ``deg`` columns (NaN where the unit differs)."""
+    """Split values (..., K) into ``cm`` and ``deg`` columns, and a unitless ``""`` one when
+    an index has no unit (a ratio, a count; the refine study), NaN where the unit differs."""
     u = np.asarray(units)
-    return {k: np.where(u == k, values, np.nan) for k in ("cm", "deg")}
+    kinds = ("cm", "deg", "") if "" in units else ("cm", "deg")
+    return {k: np.where(u == k, values, np.nan) for k in kinds}
+
+
+def _suffixed(name: str, unit: str) -> str:
+    """``value_cm``, ``value_deg``, or ``value`` for a unitless index."""
+    return f"{name}_{unit}" if unit else name
 
 
 def _masked(a: Array) -> pa.Array:
@@ -97,6 +104,7 @@ def indices_table(
     """
     s, r, k = values.shape
     cols = _by_unit(values, units)
+    what = {"cm": "a length", "deg": "an angle", "": "without unit"}
     schema = pa.schema(
         [
             _field("study", pa.string(), "", "study name"),
@@ -104,8 +112,10 @@ def indices_table(
             _field(parameter, pa.float64(), parameter_unit, "swept parameter"),
             _field("robot", pa.int32(), "", "robot number within the setting, 0-based"),
             _field("index", pa.string(), "", "performance index (Section 7.2.1), unit suffixed"),
-            _field("value_cm", pa.float64(), "cm", "index value when it is a length"),
-            _field("value_deg", pa.float64(), "deg", "index value when it is an angle"),
+            *(
+                _field(_suffixed("value", u), pa.float64(), u, f"index value when {what[u]}")
+                for u in cols
+            ),
         ]
     )
     return pa.table(
@@ -115,8 +125,7 @@ def indices_table(
             pa.array(np.repeat(np.asarray(settings, float), r * k)),
             pa.array(np.tile(np.repeat(np.arange(r), k), s).astype(np.int32)),
             pa.array(np.tile(np.asarray(names), s * r)),
-            _masked(cols["cm"]),
-            _masked(cols["deg"]),
+            *(_masked(c) for c in cols.values()),
         ],
         schema=schema,
     )
@@ -157,6 +166,6 @@ def summary_table(
         ("se_std", "standard error of the std, std / sqrt(2 (R - 1))"),
     ):
         for unit, col in _by_unit(getattr(summary, stat), units).items():
-            fields.append(_field(f"{stat}_{unit}", pa.float64(), unit, desc))
+            fields.append(_field(_suffixed(stat, unit), pa.float64(), unit, desc))
             arrays.append(_masked(col))
     return pa.table(arrays, schema=pa.schema(fields))

@@ -10,7 +10,11 @@ points         N_i = 20, 40, 60, 80, 100                    signature (7.4.4)
 radius         R_nom = 30, 35, 40, 45, 50 cm                signature (7.4.5)
 misalignment   W_AC error −1 … +1 cm (11 values)            signature (7.3)
 features       sweep X, N, noise (Section 6.6)              feature fits only
+refine         k = 1, 4.6, 10 times (7.9)                   audit: S-Model, refined
 =============  ==========================================  ======================
+
+``refine`` (issue 15) runs whole ``pipeline simulate`` + ``identify`` sessions, ~4 s of
+CPU per robot and setting (the thesis studies: ~0.02 s); ``--study all`` runs it last.
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ def _grid_study(
 
 
 def _registry() -> dict[str, Study]:
-    from pipeline.montecarlo import control
+    from pipeline.montecarlo import control, refine_study
 
     return {
         "encoder": _grid_study(
@@ -102,12 +106,27 @@ def _registry() -> dict[str, Study]:
             batch=control.BATCH,
             evaluate_all=control.misalignment_all,
         ),
+        "refine": Study(
+            "refine",
+            "slant-range noise factor k (times (7.9))",
+            "noise_factor",
+            "",
+            refine_study.NOISE_FACTORS,
+            refine_study.refine_setting,
+            index_names=refine_study.INDEX_NAMES,
+            index_units=refine_study.INDEX_UNITS,
+            index_signed=refine_study.INDEX_SIGNED,
+            batch=refine_study.BATCH,
+            evaluate_all=refine_study.refine_all,
+        ),
     }
 
 
-#: Swept studies in the order ``--study all`` runs them (``features`` runs last).
+#: The thesis's swept studies in the order ``--study all`` runs them (then ``features``).
 SWEPT = ("encoder", "machining", "noise", "points", "radius", "misalignment")
-STUDY_NAMES = (*SWEPT, "features", "all")
+#: Studies of issues after the thesis, run by ``--study all`` after the thesis's.
+LATER = ("refine",)
+STUDY_NAMES = (*SWEPT, "features", *LATER, "all")
 
 
 def get_study(name: str) -> Study:
@@ -138,7 +157,7 @@ def run_montecarlo(
         raise ArmsigError(f"unknown study {study!r}", expected=", ".join(STUDY_NAMES))
     if robots < 2:
         raise ArmsigError("too few robots", expected="--robots >= 2", got=str(robots))
-    names = [*SWEPT, "features"] if study == "all" else [study]
+    names = [*SWEPT, "features", *LATER] if study == "all" else [study]
     out_dir = check_writable(out, "--out", folder=True)  # before hours of computing
     lines = []
     for name in names:
