@@ -20,6 +20,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
+from scipy import sparse
 
 Array = npt.NDArray[np.float64]
 
@@ -38,14 +39,20 @@ class Linearization:
         depends on; −1 where it depends on none (rods, priors).
     d_p : ndarray, shape (R, 3)
         ``∂r/∂p`` for that position (sensor frame, per cm); zero where ``pos`` is −1.
-    d_x : ndarray, shape (R, n_params)
-        ``∂r/∂x`` for the block's own parameters.
+    d_x : ndarray or scipy.sparse array, shape (R, n_params)
+        ``∂r/∂x`` for the block's own parameters (sparse where few of them touch a
+        row: the solver never densifies it, :func:`dense` does).
     """
 
     r: Array
     pos: npt.NDArray[np.int64]
     d_p: Array
-    d_x: Array
+    d_x: Array | sparse.csr_array
+
+
+def dense(m: Array | sparse.sparray) -> Array:
+    """``m`` (ndarray or scipy.sparse array) as a dense float ndarray."""
+    return np.asarray(m.toarray() if sparse.issparse(m) else m, float)
 
 
 class MeasurementBlock(Protocol):
