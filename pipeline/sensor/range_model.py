@@ -231,16 +231,18 @@ class RangeBlock:
         n, nt, nr = self.n_params, len(rows.t_pos), len(rows.r_mic)
 
         # Target rows, Eqs. (E.2)-(E.4).
-        pt, mi, w = p[rows.t_pos], rows.t_mic, self.t_w
+        mi, w = rows.t_mic, self.t_w
         t_idx, t_val = self.t_spline
         a = np.einsum("ij,ij->i", t_val, coef[t_idx])
-        dh_t = pt @ up - self.h_ref_cm
+        dh_t = (p @ up - self.h_ref_cm)[rows.t_pos]
         f_t = a + g * dh_t
         d = g * (dh_mic[mi] - dh_t) / f_t  # (f_m − f_t) / f_t
         ph, dph = phi(d)
-        diff = pt - mics[mi]
-        length = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-        u = diff / length[:, None]
+        # Lines of sight once per (position, microphone), not per echo (~20 repeats each).
+        diff = (p[:, None, :] - mics[None]).reshape(-1, 3)
+        line = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+        pair = rows.t_pos * len(mics) + mi
+        length, u = line[pair], (diff / line[:, None])[pair]
         psi = ph / f_t  # s = L ψ(f_m, f_t) + b
         psi_m = dph / f_t**2  # ∂ψ/∂f_m
         psi_t = -(ph + (1.0 + d) * dph) / f_t**2  # ∂ψ/∂f_t
