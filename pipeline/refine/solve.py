@@ -119,6 +119,22 @@ def jacobian(problem: Problem, x: Array) -> Array:
     return residuals_and_jacobian(problem, x)[1]
 
 
+def _block_information(lin: Linearization, X: Array, w: Array) -> Array:
+    """``XᵀWX`` of the block's ``d_x`` (dense ``X``): group by group when the block names
+    its rows' column patterns (:class:`~pipeline.refine.block.Linearization`), else one
+    product of ``X``."""
+    sw = np.sqrt(w)
+    if lin.d_x_groups is None or isinstance(lin.d_x, np.ndarray):
+        Xs = X * sw[:, None]
+        return np.asarray(Xs.T @ Xs)
+    data = lin.d_x.data
+    out = np.zeros((X.shape[1], X.shape[1]))
+    for rows, entries, cols in lin.d_x_groups:
+        V = data[entries] * sw[rows, None]
+        out[np.ix_(cols, cols)] += V.T @ V
+    return out
+
+
 def normal_equations(problem: Problem, x: Array, lin: Linearization) -> Normal:
     """``w -> (JᵀWJ, JᵀWr)`` of ``lin`` (at ``x``) without forming ``J`` (R, P); over the
     kinematic parameters only when ``problem.fixed_block``.
@@ -159,11 +175,10 @@ def normal_equations(problem: Problem, x: Array, lin: Linearization) -> Normal:
         g = np.empty(n)
         g[:n_kin] = P.T @ (DtW @ lin.r)
         if n > n_kin:
-            Xs = X * np.sqrt(w)[:, None]
             A[:n_kin, n_kin:] = P.T @ (DtW @ X)
             A[n_kin:, :n_kin] = A[:n_kin, n_kin:].T
-            A[n_kin:, n_kin:] = Xs.T @ Xs
-            g[n_kin:] = X.T @ (w * lin.r)
+            A[n_kin:, n_kin:] = _block_information(lin, X, w)
+            g[n_kin:] = lin.d_x.T @ (w * lin.r)  # sparse where the block's is
         return A, g
 
     return normal

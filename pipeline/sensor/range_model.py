@@ -64,10 +64,10 @@ import pyarrow as pa
 from scipy import sparse
 
 from pipeline.errors import ArmsigError
-from pipeline.refine.block import Linearization, MeasurementBlock
+from pipeline.refine.block import Group, Linearization, MeasurementBlock
 from pipeline.sensor.geometry import MICROPHONES, DigitizerGeometry
 from pipeline.sensor.noise import range_sigma_cm
-from pipeline.sensor.range_rows import RangeRows, check_cycle_order, range_rows
+from pipeline.sensor.range_rows import RangeRows, check_cycle_order, range_rows, unique_rows
 from pipeline.sensor.speed_spline import TimeSpline
 from pipeline.sensor.triangulation import Trilateration
 
@@ -223,7 +223,7 @@ class RangeBlock:
                 fix="pass one position per key and the block's parameter vector",
             )
         sl, rows, up = self.slices, self.rows, self.up
-        coef, c0 = x[sl["speed"]], sl["speed"].start
+        coef = x[sl["speed"]]
         g = float(x[sl["gradient"]][0])
         mics = self.microphones(x)
         dh_mic = mics @ up - self.h_ref_cm  # (4,)
@@ -286,7 +286,7 @@ class RangeBlock:
         pos = np.concatenate([rows.t_pos, np.full(nr + n, -1, np.int64)])
         d_p_all = np.zeros((len(r), 3))
         d_p_all[:nt] = d_p
-        return Linearization(r=r, pos=pos, d_p=d_p_all, d_x=d_x)
+        return Linearization(r=r, pos=pos, d_p=d_p_all, d_x=d_x, d_x_groups=self.d_x_groups)
 
     @cached_property
     def d_x_pattern(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
@@ -316,6 +316,25 @@ class RangeBlock:
             [np.full(len(t) + len(r), t.shape[1]), np.ones(self.n_params, np.int64)]
         )
         return cols, np.concatenate([[0], np.cumsum(per_row)]).astype(np.int64)
+
+    @cached_property
+    def d_x_groups(self) -> tuple[Group, ...]:
+        """``d_x``'s rows grouped by their columns (:class:`~pipeline.refine.block.
+        Linearization`): ~6 per speed coefficient (a microphone's target rows, a rod's
+        microphone), one per prior."""
+        cols, indptr = self.d_x_pattern
+        nnz = np.diff(indptr)
+        out: list[Group] = []
+        for m in np.unique(nnz):
+            rows = np.flatnonzero(nnz == m)
+            entries = indptr[rows][:, None] + np.arange(m)
+            patterns, inverse = unique_rows(cols[entries])
+            order = np.argsort(inverse, kind="stable")
+            bounds = np.searchsorted(inverse[order], np.arange(len(patterns) + 1))
+            for k, pattern in enumerate(patterns):
+                sel = order[bounds[k] : bounds[k + 1]]
+                out.append((rows[sel], entries[sel], pattern))
+        return tuple(out)
 
 
 if TYPE_CHECKING:  # mypy proves that a RangeBlock is a MeasurementBlock
