@@ -20,8 +20,12 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
+from scipy import sparse
 
 Array = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+#: Rows of a CSR ``d_x`` that hold the same columns: (rows, entries, columns).
+Group = tuple[IntArray, IntArray, IntArray]
 
 
 @dataclass(frozen=True)
@@ -38,14 +42,27 @@ class Linearization:
         depends on; −1 where it depends on none (rods, priors).
     d_p : ndarray, shape (R, 3)
         ``∂r/∂p`` for that position (sensor frame, per cm); zero where ``pos`` is −1.
-    d_x : ndarray, shape (R, n_params)
-        ``∂r/∂x`` for the block's own parameters.
+    d_x : ndarray or scipy.sparse array, shape (R, n_params)
+        ``∂r/∂x`` for the block's own parameters (sparse where few of them touch a
+        row: the solver never densifies it, :func:`dense` does).
+    d_x_groups : tuple of (rows, entries, columns), optional
+        For a CSR ``d_x``: rows that hold the same columns in the same order; ``rows``
+        (n_g,), ``entries`` (n_g, m) their entries' positions in ``d_x.data``, ``columns``
+        (m,). With it the solver forms ``XᵀWX`` group by group (m² per row, not P²).
     """
 
     r: Array
     pos: npt.NDArray[np.int64]
     d_p: Array
-    d_x: Array
+    d_x: Array | sparse.csr_array
+    d_x_groups: tuple[Group, ...] | None = None
+
+
+def dense(m: Array | sparse.sparray) -> Array:
+    """``m`` (ndarray or scipy.sparse array) as a dense float ndarray."""
+    if isinstance(m, np.ndarray):
+        return np.asarray(m, float)
+    return np.asarray(m.toarray(), float)
 
 
 class MeasurementBlock(Protocol):

@@ -214,8 +214,9 @@ class ChainModel:
         """``∂p/∂x`` of every observation, shape (K, 3, n_params) (exact, analytic).
 
         ``∂A_k/∂δ_m = G_m A_k − A_k G_m`` with ``G_m = ∂S_k/∂δ_m · S_k⁻¹``, so
-        ``∂p/∂δ_m = (Π_{i<k} A_i)(G_m A_k − A_k G_m)(Π_{i>k} A_i p0)``; ``∂p/∂p0`` is the
-        rotation of the whole product.
+        ``∂p/∂δ_m = (Π_{i<k} A_i)(G_m A_k − A_k G_m)(Π_{i>k} A_i p0)``
+        ``= (Π_{i<k} A_i) G_m (Π_{i≥k} A_i p0) − (Π_{i≤k} A_i) G_m (Π_{i>k} A_i p0)``
+        (matrix-vector products only); ``∂p/∂p0`` is the rotation of the whole product.
         """
         x = np.asarray(x, float)
         S, G = self._frame_generators(x)
@@ -225,10 +226,12 @@ class ChainModel:
         J = np.zeros((K, 3, self.n_params))
         for k in range(self.n_joints):
             a, b = self.axis_offsets[k], self.axis_offsets[k + 1]
-            Gk = G[k, : b - a]  # (m, 4, 4)
-            dA = Gk[None] @ A[:, k, None] - A[:, k, None] @ Gk[None]  # (K, m, 4, 4)
-            dp = pre[:, k, None] @ dA @ suf[:, k, None, :, None]  # (K, m, 4, 1)
-            J[:, :, a:b] = np.swapaxes(dp[..., :3, 0], 1, 2)
+            Gk = G[k, : b - a, :3]  # (m, 3, 4): only the rows that reach p's 3 coordinates
+            moved = np.einsum("kij,kj->ki", A[:, k], suf[:, k])  # Π_{i≥k} A_i p0
+            dp = np.einsum("kij,mjl,kl->kim", pre[:, k, :3, :3], Gk, moved) - np.einsum(
+                "kij,mjl,kl->kim", pre[:, k + 1, :3, :3], Gk, suf[:, k]
+            )  # (K, 3, m); G's last row is 0, so the prefixes' rotations suffice
+            J[:, :, a:b] = dp
         R = pre[:, -1, :3, :3]
         for j in range(self.n_points):
             sel = self.point == j

@@ -4,8 +4,10 @@ The refinement's problems are tall and thin: ~50,000 whitened slant ranges and ~
 parameters (a sonic session at the range level). scipy's ``least_squares`` takes an SVD
 (trust-region reflective) or a QR (MINPACK) of the whole ``R × P`` Jacobian at every
 iteration: measured 1.15 s per SVD on robot3, ~10 s a session. The Gauss-Newton step needs
-only ``JᵀWJ`` (P × P) and ``JᵀWr``, one BLAS product of ~0.3 GFLOP (~20 ms), so the solve
-forms them and damps them (Marquardt's scaled diagonal, Nielsen's update of μ).
+only ``JᵀWJ`` (P × P) and ``JᵀWr``, so the solve asks the problem for them and damps them
+(Marquardt's scaled diagonal, Nielsen's update of μ). The problem forms them from its
+structure (:func:`pipeline.refine.solve.normal_equations`) and only at accepted points: a
+rejected step costs one residual evaluation.
 
 Robust loss (scipy's ``soft_l1``, ``huber``, ``cauchy``, ``arctan`` in units of ``f_scale``
 whitened σ; ``linear`` = none): iteratively reweighted least squares, the weight of a
@@ -23,6 +25,8 @@ import numpy as np
 import numpy.typing as npt
 
 Array = npt.NDArray[np.float64]
+#: ``normal(w) -> (JᵀWJ, JᵀWr)`` at one point, ``w`` (R,) the residuals' weights.
+Normal = Callable[[Array], tuple[Array, Array]]
 
 #: The robust losses, scipy.optimize.least_squares' names and definitions.
 LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
@@ -50,7 +54,7 @@ def _rho(loss: str, z: Array) -> tuple[Array, Array]:
 class LMResult:
     x: Array
     r: Array  # (R,) residuals at x
-    J: Array  # (R, P) Jacobian at x
+    information: Array  # (P, P) JᵀWJ at x
     weights: Array  # (R,) robust weights at x
     cost: float  # ½ Σ f² ρ
     iterations: int  # accepted steps
@@ -60,30 +64,31 @@ class LMResult:
 
 
 def levenberg_marquardt(
-    fun: Callable[[Array], tuple[Array, Array]],
+    fun: Callable[[Array], tuple[Array, Normal]],
     x0: Array,
     loss: str = "linear",
     f_scale: float = 1.0,
     tol: float = 1e-15,
     max_evaluations: int = 200,
+    start: tuple[Array, Normal] | None = None,
 ) -> LMResult:
-    """Minimise ``½ Σ f² ρ((r/f)²)`` over ``x`` from ``x0``; ``fun(x) -> (r, J)``."""
+    """Minimise ``½ Σ f² ρ((r/f)²)`` over ``x`` from ``x0``; ``fun(x) -> (r, normal)``
+    (:data:`Normal`; it is called only at accepted points). ``start``: ``fun(x0)`` when
+    the caller has it already."""
     f2 = f_scale * f_scale
 
-    def state(x: Array) -> tuple[Array, Array, Array, float]:
-        r, J = fun(x)
+    def state(r: Array, normal: Normal) -> tuple[Array, Normal, Array, float]:
         rho, w = _rho(loss, r * r / f2)
-        return r, J, w, 0.5 * f2 * float(rho.sum())
+        return r, normal, w, 0.5 * f2 * float(rho.sum())
 
     x = np.asarray(x0, float).copy()
-    r, J, w, cost = state(x)
+    r, normal, w, cost = state(*(fun(x) if start is None else start))
+    A: Array | None = None  # JᵀWJ at x, once formed
     evaluations, iterations, mu, nu = 1, 0, -1.0, 2.0
     message = "the evaluation limit was reached"
     converged = False
     while evaluations < max_evaluations:
-        Jw = J * w[:, None]
-        A = J.T @ Jw
-        g = Jw.T @ r
+        A, g = normal(w)
         d = np.sqrt(np.diag(A))
         d[d == 0.0] = 1.0
         As = A / np.outer(d, d)
@@ -102,14 +107,14 @@ def levenberg_marquardt(
             predicted = -(hs @ gs + 0.5 * hs @ (As @ hs))
             h = hs / d
             x_new = x + h
-            r_new, J_new, w_new, cost_new = state(x_new)
+            r_new, normal_new, w_new, cost_new = state(*fun(x_new))
             evaluations += 1
             if predicted <= tol * cost and np.isfinite(cost_new):
                 # The cost can no longer tell: take this last Gauss-Newton step, which
                 # still halves the parameters' distance to the minimum (quadratic rate),
                 # so the result does not depend on the cost's rounding (~1e-8 cm before).
-                x, r, J, w, cost = x_new, r_new, J_new, w_new, cost_new
-                iterations += 1
+                x, r, normal, w, cost = x_new, r_new, normal_new, w_new, cost_new
+                A, iterations = None, iterations + 1
                 converged, message = True, "the predicted decrease is below rounding"
                 break
             if np.isfinite(cost_new) and cost_new < cost:
@@ -118,8 +123,8 @@ def levenberg_marquardt(
                 nu = 2.0
                 small_step = np.linalg.norm(hs) <= tol * (np.linalg.norm(x * d) + tol)
                 small_drop = cost - cost_new <= tol * cost
-                x, r, J, w, cost = x_new, r_new, J_new, w_new, cost_new
-                iterations += 1
+                x, r, normal, w, cost = x_new, r_new, normal_new, w_new, cost_new
+                A, iterations = None, iterations + 1
                 if small_step or small_drop:
                     converged = True
                     message = "the step" if small_step else "the cost"
@@ -131,4 +136,5 @@ def levenberg_marquardt(
                 break
         if converged:
             break
-    return LMResult(x, r, J, w, cost, iterations, evaluations, converged, message)
+    information = normal(w)[0] if A is None else A
+    return LMResult(x, r, information, w, cost, iterations, evaluations, converged, message)

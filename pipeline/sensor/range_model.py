@@ -55,17 +55,19 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
+from scipy import sparse
 
 from pipeline.errors import ArmsigError
-from pipeline.refine.block import Linearization, MeasurementBlock
+from pipeline.refine.block import Group, Linearization, MeasurementBlock
 from pipeline.sensor.geometry import MICROPHONES, DigitizerGeometry
 from pipeline.sensor.noise import range_sigma_cm
-from pipeline.sensor.range_rows import RangeRows, check_cycle_order, range_rows
+from pipeline.sensor.range_rows import RangeRows, check_cycle_order, range_rows, unique_rows
 from pipeline.sensor.speed_spline import TimeSpline
 from pipeline.sensor.triangulation import Trilateration
 
@@ -221,37 +223,42 @@ class RangeBlock:
                 fix="pass one position per key and the block's parameter vector",
             )
         sl, rows, up = self.slices, self.rows, self.up
-        coef, c0 = x[sl["speed"]], sl["speed"].start
+        coef = x[sl["speed"]]
         g = float(x[sl["gradient"]][0])
         mics = self.microphones(x)
         dh_mic = mics @ up - self.h_ref_cm  # (4,)
         bias = x[sl["bias"]]
         n, nt, nr = self.n_params, len(rows.t_pos), len(rows.r_mic)
-        d_x = np.zeros((nt + nr + n, n))
 
         # Target rows, Eqs. (E.2)-(E.4).
-        pt, mi, w = p[rows.t_pos], rows.t_mic, self.t_w
+        mi, w = rows.t_mic, self.t_w
         t_idx, t_val = self.t_spline
         a = np.einsum("ij,ij->i", t_val, coef[t_idx])
-        dh_t = pt @ up - self.h_ref_cm
+        dh_t = (p @ up - self.h_ref_cm)[rows.t_pos]
         f_t = a + g * dh_t
         d = g * (dh_mic[mi] - dh_t) / f_t  # (f_m − f_t) / f_t
         ph, dph = phi(d)
-        diff = pt - mics[mi]
-        length = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-        u = diff / length[:, None]
+        # Lines of sight once per (position, microphone), not per echo (~20 repeats each).
+        diff = (p[:, None, :] - mics[None]).reshape(-1, 3)
+        line = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+        pair = rows.t_pos * len(mics) + mi
+        length, u = line[pair], (diff / line[:, None])[pair]
         psi = ph / f_t  # s = L ψ(f_m, f_t) + b
         psi_m = dph / f_t**2  # ∂ψ/∂f_m
         psi_t = -(ph + (1.0 + d) * dph) / f_t**2  # ∂ψ/∂f_t
         r_t = w * (length * psi + bias[mi] - rows.t_s_cm)
         d_p = w[:, None] * (psi[:, None] * u + (length * psi_t * g)[:, None] * up)
         d_mic = w[:, None] * (-psi[:, None] * u + (length * psi_m * g)[:, None] * up)
-        d_x[:nt, sl["mic"]] = np.einsum("ij,ijk->ik", d_mic, self.t_d_mic)
-        it = np.arange(nt)
-        d_x[it, N_GEO + mi] = w
         d_f = w * length  # times ∂ψ/∂f, ∂f/∂a_j = B_j(t)
-        d_x[it[:, None], c0 + t_idx] = (d_f * (psi_m + psi_t))[:, None] * t_val
-        d_x[:nt, sl["gradient"]] = (d_f * (psi_m * dh_mic[mi] + psi_t * dh_t))[:, None]
+        t_vals = np.concatenate(  # columns of _row_columns: mic, bias, speed, gradient
+            [
+                np.einsum("ij,ijk->ik", d_mic, self.t_d_mic),
+                w[:, None],
+                (d_f * (psi_m + psi_t))[:, None] * t_val,
+                (d_f * (psi_m * dh_mic[mi] + psi_t * dh_t))[:, None],
+            ],
+            axis=1,
+        )
 
         # Rod rows, Eq. (E.1).
         mr, wr = rows.r_mic, self.r_w
@@ -259,22 +266,75 @@ class RangeBlock:
         f_r = np.einsum("ij,ij->i", r_val, coef[r_idx]) + g * dh_mic[mr]
         r_r = wr * (self.rod_d_cm / f_r + bias[mr] - rows.r_s_cm)
         ds_df = -wr * self.rod_d_cm / f_r**2
-        rr = slice(nt, nt + nr)
-        d_x[rr, sl["mic"]] = (ds_df * g)[:, None] * (up @ self.d_mic_d_geo)[mr]
-        ir = np.arange(nt, nt + nr)
-        d_x[ir, N_GEO + mr] = wr
-        d_x[ir[:, None], c0 + r_idx] = ds_df[:, None] * r_val
-        d_x[rr, sl["gradient"]] = (ds_df * dh_mic[mr])[:, None]
+        r_vals = np.concatenate(
+            [
+                (ds_df * g)[:, None] * (up @ self.d_mic_d_geo)[mr],
+                wr[:, None],
+                ds_df[:, None] * r_val,
+                (ds_df * dh_mic[mr])[:, None],
+            ],
+            axis=1,
+        )
 
         # Priors.
         r_p = (x - self.x_prior) / self.sigma_prior
-        d_x[nt + nr :] = np.diag(1.0 / self.sigma_prior)
+        data = np.concatenate([t_vals.ravel(), r_vals.ravel(), 1.0 / self.sigma_prior])
+        cols, indptr = self.d_x_pattern
+        d_x = sparse.csr_array((data, cols, indptr), shape=(nt + nr + n, n))
 
         r = np.concatenate([r_t, r_r, r_p])
         pos = np.concatenate([rows.t_pos, np.full(nr + n, -1, np.int64)])
         d_p_all = np.zeros((len(r), 3))
         d_p_all[:nt] = d_p
-        return Linearization(r=r, pos=pos, d_p=d_p_all, d_x=d_x)
+        return Linearization(r=r, pos=pos, d_p=d_p_all, d_x=d_x, d_x_groups=self.d_x_groups)
+
+    @cached_property
+    def d_x_pattern(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """CSR column indices and row pointers of ``d_x`` (:meth:`linearize`): a target or
+        rod row touches the six microphone coordinates, its microphone's bias, the
+        ``DEGREE + 1`` speed coefficients not zero at its time and the gradient; a prior
+        row its own parameter. Sorted, no repeats."""
+        sl = self.slices
+        mic = np.arange(N_GEO)
+
+        def columns(m: npt.NDArray[np.int64], idx: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+            k = len(m)
+            return np.concatenate(
+                [
+                    np.broadcast_to(mic, (k, N_GEO)),
+                    (N_GEO + m)[:, None],
+                    sl["speed"].start + idx,
+                    np.full((k, 1), sl["gradient"].start),
+                ],
+                axis=1,
+            )
+
+        t = columns(self.rows.t_mic, self.t_spline[0])
+        r = columns(self.rows.r_mic, self.r_spline[0])
+        cols = np.concatenate([t.ravel(), r.ravel(), np.arange(self.n_params)]).astype(np.int64)
+        per_row = np.concatenate(
+            [np.full(len(t) + len(r), t.shape[1]), np.ones(self.n_params, np.int64)]
+        )
+        return cols, np.concatenate([[0], np.cumsum(per_row)]).astype(np.int64)
+
+    @cached_property
+    def d_x_groups(self) -> tuple[Group, ...]:
+        """``d_x``'s rows grouped by their columns (:class:`~pipeline.refine.block.
+        Linearization`): ~6 per speed coefficient (a microphone's target rows, a rod's
+        microphone), one per prior."""
+        cols, indptr = self.d_x_pattern
+        nnz = np.diff(indptr)
+        out: list[Group] = []
+        for m in np.unique(nnz):
+            rows = np.flatnonzero(nnz == m)
+            entries = indptr[rows][:, None] + np.arange(m)
+            patterns, inverse = unique_rows(cols[entries])
+            order = np.argsort(inverse, kind="stable")
+            bounds = np.searchsorted(inverse[order], np.arange(len(patterns) + 1))
+            for k, pattern in enumerate(patterns):
+                sel = order[bounds[k] : bounds[k + 1]]
+                out.append((rows[sel], entries[sel], pattern))
+        return tuple(out)
 
 
 if TYPE_CHECKING:  # mypy proves that a RangeBlock is a MeasurementBlock

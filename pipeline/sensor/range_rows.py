@@ -185,7 +185,8 @@ def check_cycle_order(ranges: pa.Table, order: list[int | str]) -> None:
     step = _column(ranges, "step").astype(np.int64)
     repeat = _column(ranges, "repeat").astype(np.int64)
     t = _column(ranges, "t_s").astype(float)
-    where = np.array([rank.get(int(s), len(rank)) for s in sweep], np.int64)
+    ids, at = np.unique(sweep, return_inverse=True)  # one lookup per sweep, not per echo
+    where = np.array([rank.get(int(s), len(rank)) for s in ids], np.int64)[at.reshape(-1)]
     key = np.stack([where, step, repeat], axis=1)
     cycles, first = np.unique(key, axis=0, return_index=True)  # sorted along the order
     dt = np.diff(t[first])

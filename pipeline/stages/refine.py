@@ -156,7 +156,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "refine",
-    1,
+    2,  # 2: normal equations from the problem's structure (values move at rounding level)
     ("session", "joints", "positions", "frames", "ranges"),
     Params(),
     compute,
