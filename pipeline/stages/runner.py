@@ -12,6 +12,9 @@ run leaves the files of the last good run untouched; its own outputs move to
 ``stages/failed/`` for inspection (removed by the next good run). Then, still
 under the session lock, the run writes its product ``signature.json`` from the
 committed identification stages unless the file there already matches them.
+
+Stages compute with one BLAS thread (:func:`one_blas_thread`), so a stage's output is
+the same bits on any machine, in any fleet worker and in a Monte-Carlo study.
 """
 
 from __future__ import annotations
@@ -26,6 +29,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
+
+from threadpoolctl import threadpool_limits
 
 from pipeline import __version__
 from pipeline.atomic import remove_debris
@@ -478,7 +483,8 @@ def _write_product(
     if any(st.state != "fresh" for st in _statuses(sdir, all_stages, overrides, hashes, False)):
         return StageRun(name, "not written", 0.0, 0)
     ident = {n: hashes.get(n) for n in hashes.identification()}
-    _, _, written = _function(writer)(sdir, ident, force)
+    with one_blas_thread():
+        _, _, written = _function(writer)(sdir, ident, force)
     return StageRun(name, "written" if written else "cached", time.perf_counter() - t0, -1)
 
 
@@ -521,6 +527,15 @@ def _run_all(
     bar.step()
 
 
+def one_blas_thread() -> threadpool_limits:
+    """A context in which BLAS (OpenBLAS, MKL) runs on one thread. OpenBLAS's sums depend
+    on its thread count: robot3's ``refine`` table differed in its last bits between 1 and
+    2 threads, so a fleet worker or another machine would have written other content
+    hashes. One thread was also faster: the refine stage took 0.69 s of CPU on robot3
+    against 1.87 s with the default two (docs/refine.md)."""
+    return threadpool_limits(1, user_api="blas")
+
+
 def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
     inputs: dict[str, Any] = {}
     for inp in stage.inputs:
@@ -542,7 +557,8 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
                 )
             inputs[inp] = checked.table
     try:
-        table = stage.compute(inputs, params)
+        with one_blas_thread():
+            table = stage.compute(inputs, params)
     except ArmsigError as exc:  # name the session and the stage, keep the cause's advice
         raise StageError(f"{sdir}: stage '{stage.name}': {exc}") from exc
     own = table.schema.metadata  # a stage's summary (e.g. refine's): kept through the cast
