@@ -87,3 +87,16 @@ def test_tables_figures_and_report(in_process: StudyResult, tmp_path: Path) -> N
 
 def test_refine_runs_last_in_all() -> None:
     assert LATER == ("refine",) and STUDY_NAMES[-2:] == ("refine", "all")
+
+
+def test_a_failed_session_names_the_simulate_command_that_re_records_it() -> None:
+    from pipeline.errors import ArmsigError
+    from pipeline.montecarlo.stats import robot_seeds
+
+    seeds = robot_seeds(3, "refine", 0, 1)
+    # 2 cycles per position at 10× the noise: the features stage refuses a sweep.
+    with pytest.raises(ArmsigError) as err:
+        refine_study.refine_all((10.0,), seeds, points=12, repeats=2)
+    seed = refine_study.simulate_seed(seeds[0])
+    assert f"--seed {seed} --noise-factor 10 --points 12 --repeats 2" in str(err.value)
+    assert "\n" not in str(err.value)

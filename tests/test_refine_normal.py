@@ -47,7 +47,7 @@ def test_normal_equations_equal_the_dense_products(sonic_problem, variant: str) 
     if variant == "fixed_block":
         J = J[:, : problem.n_kin]
     w = rng.uniform(0.2, 1.0, len(r))
-    lin = solve_module._linearize(problem, x)
+    lin = solve_module.linearize(problem, x)
     A, g = normal_equations(problem, x, lin)(w)
     A_ref, g_ref = J.T @ (J * w[:, None]), J.T @ (w * r)
     d = np.sqrt(np.diag(A_ref))
@@ -63,10 +63,8 @@ def test_recorded_chi2_is_warm_started(sonic_problem, monkeypatch) -> None:
     problem = sonic_problem.problem
     sol = solve(problem, sonic_problem.x0)
     calls: list[int] = []
-    linearize = solve_module._linearize
-    monkeypatch.setattr(
-        solve_module, "_linearize", lambda p, z: calls.append(1) or linearize(p, z)
-    )
+    linearize = solve_module.linearize
+    monkeypatch.setattr(solve_module, "linearize", lambda p, z: calls.append(1) or linearize(p, z))
     x = sol.x.copy()
     x[problem.n_kin :] = problem.block.x0
     cold = solve(dataclasses.replace(problem, fixed_block=True), x).chi2

@@ -29,6 +29,7 @@ import scipy.linalg  # noqa: F401  (its OpenBLAS loaded before the thread limit 
 from threadpoolctl import threadpool_limits
 
 from pipeline.audit import ModelError, table_errors
+from pipeline.errors import ArmsigError
 from pipeline.kinematics.transforms import Array
 from pipeline.rig.simulate import SimulationOptions
 
@@ -114,7 +115,8 @@ def indices(acc: SessionAccuracy, sim_seed: int) -> Array:
 
 
 def _session(folder: Path, opts: SimulationOptions) -> Array:
-    """Simulate, identify and audit one session in ``folder`` (deleted after)."""
+    """Simulate, identify and audit one session in ``folder`` (deleted after); a failure
+    names the ``pipeline simulate`` options that re-record the session."""
     from pipeline.identify import identify
     from pipeline.rig.simulate import simulate_session
 
@@ -122,6 +124,13 @@ def _session(folder: Path, opts: SimulationOptions) -> Array:
         simulate_session(folder, opts)
         identify(folder, report=False)
         return indices(session_accuracy(folder), opts.seed)
+    except ArmsigError as exc:
+        raise ArmsigError(
+            f"refine study: a robot's session failed: {exc}",
+            fix=f"re-record it with `pipeline simulate NAME --seed {opts.seed} --noise-factor "
+            f"{opts.noise_factor:g} --points {opts.points} --repeats {opts.repeats}` and "
+            "run `pipeline identify NAME`",
+        ) from exc
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 

@@ -32,7 +32,7 @@ Normal = Callable[[Array], tuple[Array, Array]]
 LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
 
 
-def _rho(loss: str, z: Array) -> tuple[Array, Array]:
+def rho(loss: str, z: Array) -> tuple[Array, Array]:
     """``ρ(z)`` and ``ρ'(z)`` of scipy's losses (``z`` = squared scaled residual)."""
     if loss == "linear":
         return z, np.ones_like(z)
@@ -78,8 +78,8 @@ def levenberg_marquardt(
     f2 = f_scale * f_scale
 
     def state(r: Array, normal: Normal) -> tuple[Array, Normal, Array, float]:
-        rho, w = _rho(loss, r * r / f2)
-        return r, normal, w, 0.5 * f2 * float(rho.sum())
+        rho_z, w = rho(loss, r * r / f2)
+        return r, normal, w, 0.5 * f2 * float(rho_z.sum())
 
     x = np.asarray(x0, float).copy()
     r, normal, w, cost = state(*(fun(x) if start is None else start))

@@ -85,7 +85,7 @@ class Solution:
         return float(np.sqrt(self.chi2 / self.dof)) if self.dof > 0 else float("nan")
 
 
-def _linearize(problem: Problem, x: Array) -> Linearization:
+def linearize(problem: Problem, x: Array) -> Linearization:
     """The block's linearization at ``x``, on the rows ``problem.keep`` leaves in the fit."""
     lin = problem.block.linearize(problem.model.positions(x[: problem.n_kin]), x[problem.n_kin :])
     if problem.keep is None:
@@ -99,24 +99,19 @@ def _linearize(problem: Problem, x: Array) -> Linearization:
 
 def residuals(problem: Problem, x: Array) -> Array:
     """The whitened residuals at ``x`` (R,)."""
-    return _linearize(problem, x).r
+    return linearize(problem, x).r
 
 
 def residuals_and_jacobian(problem: Problem, x: Array) -> tuple[Array, Array]:
     """The whitened residuals (R,) and the dense ``∂r/∂x`` (R, n_params) at ``x`` from one
     linearization of the block, per the module docstring."""
-    lin = _linearize(problem, x)
+    lin = linearize(problem, x)
     dpdx = problem.model.position_jacobian(x[: problem.n_kin])  # (K, 3, n_kin)
     J = np.zeros((len(lin.r), problem.n_params))
     on = lin.pos >= 0
     J[on, : problem.n_kin] = np.einsum("ri,rij->rj", lin.d_p[on], dpdx[lin.pos[on]])
     J[:, problem.n_kin :] = dense(lin.d_x)
     return lin.r, J
-
-
-def jacobian(problem: Problem, x: Array) -> Array:
-    """``∂r/∂x`` (R, n_params), per the module docstring."""
-    return residuals_and_jacobian(problem, x)[1]
 
 
 def _block_information(lin: Linearization, X: Array, w: Array) -> Array:
@@ -202,7 +197,7 @@ def solve(problem: Problem, x_start: Array, max_evaluations: int = MAX_EVALUATIO
 
     def fun(z: Array) -> tuple[Array, Normal]:
         x = full(z)
-        lin = _linearize(problem, x)
+        lin = linearize(problem, x)
         return lin.r, normal_equations(problem, x, lin)  # over the free parameters
 
     start = fun(x_fixed[free])

@@ -43,16 +43,6 @@ class Params:
         check_param(self, "holdout", "refit", self.refit in REFITS, " or ".join(REFITS))
 
 
-#: ρ'(z) of scipy's robust losses (z = (r / f_scale)²): the weight of a row at the fit.
-_LOSS_WEIGHT = {
-    "linear": lambda z: np.ones_like(z),
-    "soft_l1": lambda z: 1.0 / np.sqrt(1.0 + z),
-    "huber": lambda z: np.where(z <= 1.0, 1.0, 1.0 / np.sqrt(np.maximum(z, 1.0))),
-    "cauchy": lambda z: 1.0 / (1.0 + z),
-    "arctan": lambda z: 1.0 / (1.0 + z**2),
-}
-
-
 @dataclass(frozen=True)
 class StepRefit:
     """One Gauss-Newton step from ``x_hat`` on the rows of the positions kept, robust
@@ -65,13 +55,14 @@ class StepRefit:
     noise_var: float
 
     def __post_init__(self) -> None:
-        from pipeline.refine.solve import jacobian, residuals
+        from pipeline.refine.lm import rho
+        from pipeline.refine.solve import residuals_and_jacobian
 
         p, x = self.problem, self.x_hat
         n = p.model.n_params
         full = dataclasses.replace(p, keep=None)
-        r, J = residuals(full, x), jacobian(full, x)
-        w = np.sqrt(_LOSS_WEIGHT[p.loss]((r / p.f_scale) ** 2))
+        r, J = residuals_and_jacobian(full, x)
+        w = np.sqrt(rho(p.loss, (r / p.f_scale) ** 2)[1])  # the solver's robust weights
         pos = p.block.linearize(p.model.positions(x[:n]), x[n:]).pos  # row -> position
         Jw, rw = J * w[:, None], r * w
         # the fold's normal equations: all rows' minus the held-out rows' (a fifth of them)
