@@ -12,6 +12,7 @@ refined RMS over the Cramér-Rao bound and over the predicted RMS, and the PASS 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -33,57 +34,68 @@ def _col(values: Array, name: str) -> Array:
     return values[..., INDEX_NAMES.index(name)]
 
 
-def write_figures(res: StudyResult, folder: Path) -> None:
-    """The three figures of the study under ``folder``."""
+def _axes(width: float, height: float, left: float, bottom: float) -> tuple[Any, Any]:
+    """A one-panel figure (object-oriented matplotlib, no pyplot) and its axes."""
     from matplotlib.figure import Figure
 
+    fig = Figure(figsize=(width, height))
+    fig.subplots_adjust(left=left, right=0.97, bottom=bottom, top=0.9)
+    return fig, fig.subplots()
+
+
+def _save(fig: Any, ax: Any, labels: tuple[str, str, str], path: Path, grid: str = "major") -> None:
+    """Axis labels and title (``labels``), grid and legend, then the PNG at ``path``."""
+    ax.set_xlabel(labels[0])
+    ax.set_ylabel(labels[1])
+    ax.set_title(labels[2])
+    ax.grid(alpha=0.3, which=grid)
+    ax.legend(fontsize=8)
+    save_png(fig, path)
+
+
+def write_figures(res: StudyResult, folder: Path) -> None:
+    """The three figures of the study under ``folder``."""
     k = np.asarray(res.study.values, float)
     v, robots = res.values, res.values.shape[1]
-    fig = Figure(figsize=(6.0, 4.2))
-    fig.subplots_adjust(left=0.13, right=0.97, bottom=0.13, top=0.9)
-    ax = fig.subplots()
+    fig, ax = _axes(6.0, 4.2, 0.13, 0.13)
     for name, label in (("smodel_rms_cm", "S-Model (thesis)"), ("refined_rms_cm", "refined")):
         y = _col(v, name)
         m, s = y.mean(axis=1), y.std(axis=1, ddof=1)
         ax.plot(k, m, marker="o", label=label)
         ax.fill_between(k, m - s, m + s, alpha=0.25)
     ax.plot(k, _col(v, "crb_cm").mean(axis=1), ls="--", color="0.4", label="Cramér-Rao bound")
-    ax.set_xlabel(res.study.title)
-    ax.set_ylabel("RMS tool position error (cm)")
-    ax.set_title(f"refine: audited RMS error, {robots} robots")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    save_png(fig, folder / "rms.png")
+    labels = (
+        res.study.title,
+        "RMS tool position error (cm)",
+        f"refine: audited RMS error, {robots} robots",
+    )
+    _save(fig, ax, labels, folder / "rms.png")
 
-    fig = Figure(figsize=(6.0, 4.2))
-    fig.subplots_adjust(left=0.13, right=0.97, bottom=0.13, top=0.9)
-    ax = fig.subplots()
+    fig, ax = _axes(6.0, 4.2, 0.13, 0.13)
     gain = _col(v, "gain")
     for i, kk in enumerate(k):
         g = np.sort(gain[i])
         ax.step(g, np.arange(1, robots + 1) / robots, where="post", label=f"k = {kk:g}")
     ax.axvline(1.0, color="0.5", lw=0.8)
-    ax.set_xlabel("gain: S-Model RMS / refined RMS")
-    ax.set_ylabel("fraction of robots")
-    ax.set_title(f"refine: gain distribution (CDF), {robots} robots")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    save_png(fig, folder / "gain.png")
+    labels = (
+        "gain: S-Model RMS / refined RMS",
+        "fraction of robots",
+        f"refine: gain distribution (CDF), {robots} robots",
+    )
+    _save(fig, ax, labels, folder / "gain.png")
 
-    fig = Figure(figsize=(5.2, 5.0))
-    fig.subplots_adjust(left=0.15, right=0.97, bottom=0.12, top=0.9)
-    ax = fig.subplots()
+    fig, ax = _axes(5.2, 5.0, 0.15, 0.12)
     pred, aud = _col(v, "predicted_rms_cm"), _col(v, "refined_rms_cm")
     for i, kk in enumerate(k):
         ax.loglog(pred[i], aud[i], "o", ms=3, alpha=0.7, label=f"k = {kk:g}")
     lo, hi = np.nanmin([pred, aud]), np.nanmax([pred, aud])
     ax.loglog([lo, hi], [lo, hi], color="0.3", lw=0.8, label="y = x")
-    ax.set_xlabel("predicted RMS (cm)")
-    ax.set_ylabel("audited RMS (cm)")
-    ax.set_title(f"refine: uncertainty calibration, {robots} robots")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
-    save_png(fig, folder / "calibration.png")
+    labels = (
+        "predicted RMS (cm)",
+        "audited RMS (cm)",
+        f"refine: uncertainty calibration, {robots} robots",
+    )
+    _save(fig, ax, labels, folder / "calibration.png", grid="both")
 
 
 def _per_robot(path: Path, parameter: str) -> tuple[Array, Array]:
