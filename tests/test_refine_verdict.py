@@ -29,7 +29,7 @@ def test_pass_when_no_rule_fires() -> None:
     assert v.level == PASS and v.reasons == ()
     assert v.line == (
         "PASS  predicted 0.006 cm RMS (95 % 0.011), held-out 0.009 cm, 38× the design "
-        "model, χ²/dof 1.02, mic biases within 3σ"
+        "model, χ²/dof 1.02, mic biases within 3.6σ"
     )
 
 
@@ -43,9 +43,9 @@ def test_pass_when_no_rule_fires() -> None:
         # a high recorded χ² the self-calibration explains: no χ² reason at all
         ({"chi2_recorded_per_dof": 40.0}, PASS, ""),
         ({"biases": (SensorParameter("bias_B", "cm", 0.05, 0.004),)}, CHECK,
-         "bias_B: range bias +0.05 ± 0.004 cm (12.5σ > 3σ): the digitizer's calibration is off"),
+         "bias_B: range bias +0.05 ± 0.004 cm (12.5σ > 3.6σ): the digitizer's calibration is off"),
         ({"mic_moves": (SensorParameter("mic_A.y", "cm", -0.5, 0.05),)}, CHECK,
-         "mic_A.y: position -0.5 ± 0.05 cm (10.0σ > 3σ)"),
+         "mic_A.y: position -0.5 ± 0.05 cm (10.0σ > 3.6σ)"),
         ({"holdout_rms_cm": 0.02}, CHECK, "held-out RMS error 0.02 cm > 2 × its prediction"),
         ({"improvement": 0.8}, CHECK, "improvement over the design model 0.8× < 1×"),
         ({"refined": False, "status": "disabled"}, CHECK, "refinement disabled"),
