@@ -864,7 +864,7 @@ def montecarlo(
         str,
         typer.Option(
             help="encoder, machining, noise, points, radius, misalignment, features, refine "
-            "(S-Model against refined signature; whole simulate + identify sessions, ~4 s of "
+            "(S-Model against refined signature; whole simulate + identify sessions, ~1.8 s of "
             "CPU per robot and setting) or all (refine last)."
         ),
     ],

@@ -8,8 +8,8 @@ the simulate seed of robot r is drawn from its seed sequence and recorded as the
 The pipeline never reads the truth; only the audit (:func:`pipeline.audit.table_errors`,
 1,000 configurations) does. The session folder is temporary.
 
-Cost: ~4 s of CPU per robot and setting (40 robots × 3 settings, 2 workers: 493 s of CPU;
-without the per-process plan cache of ``pipeline simulate`` ~2.3 s more); docs/montecarlo.md.
+Cost: ~1.8 s of CPU per robot and setting on a quiet machine (planning the session, ~2.3 s,
+is cached per process by ``pipeline simulate``); docs/montecarlo.md.
 
 BLAS: OpenBLAS's sums depend on its thread count, so each robot runs with one BLAS thread
 (threadpoolctl): in this process, in a process pool and on Dask workers alike the numbers

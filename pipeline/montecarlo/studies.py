@@ -13,7 +13,7 @@ features       sweep X, N, noise (Section 6.6)              feature fits only
 refine         k = 1, 4.6, 10 times (7.9)                   audit: S-Model, refined
 =============  ==========================================  ======================
 
-``refine`` (issue 15) runs whole ``pipeline simulate`` + ``identify`` sessions, ~4 s of
+``refine`` (issue 15) runs whole ``pipeline simulate`` + ``identify`` sessions, ~1.8 s of
 CPU per robot and setting (the thesis studies: ~0.02 s); ``--study all`` runs it last.
 """
 
