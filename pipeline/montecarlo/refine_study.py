@@ -11,8 +11,9 @@ The pipeline never reads the truth; only the audit (:func:`pipeline.audit.table_
 Cost: ~1.8 s of CPU per robot and setting on a quiet machine (planning the session, ~2.3 s,
 is cached per process by ``pipeline simulate``); docs/montecarlo.md.
 
-BLAS: OpenBLAS's sums depend on its thread count, so each robot runs with one BLAS thread
-(threadpoolctl): in this process, in a process pool and on Dask workers alike the numbers
+BLAS: OpenBLAS's sums depend on its thread count, so each robot, its simulation included,
+runs with one BLAS thread (:func:`pipeline.stages.runner.one_blas_thread`, as every stage
+does): in this process, in a process pool and on Dask workers alike the numbers
 are the same bits, and two workers on two cores do not oversubscribe them.
 """
 
@@ -26,7 +27,6 @@ from pathlib import Path
 
 import numpy as np
 import scipy.linalg  # noqa: F401  (its OpenBLAS loaded before the thread limit is set)
-from threadpoolctl import threadpool_limits
 
 from pipeline.audit import ModelError, table_errors
 from pipeline.errors import ArmsigError
@@ -151,9 +151,11 @@ def refine_all(
     scaled, is small beside (7.9)).
     ``points`` and ``repeats``: the plan's N_i and N_avg (the defaults of ``pipeline
     simulate``; tests bind smaller ones with :func:`functools.partial`)."""
+    from pipeline.stages.runner import one_blas_thread
+
     out = np.empty((len(values), len(seeds), len(INDEX_NAMES)))
     with (
-        threadpool_limits(1, user_api="blas"),
+        one_blas_thread(),
         tempfile.TemporaryDirectory(prefix="armsig-refine-") as tmp,
     ):
         for r, seq in enumerate(seeds):
