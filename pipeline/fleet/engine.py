@@ -38,10 +38,11 @@ BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THR
 
 def shared_cores_environ(workers: int) -> dict[str, str]:
     """The environment that gives each of ``workers`` local workers its share of the
-    cores for BLAS: the refinement's normal equations (a 48,000 × 80 product per
-    iteration) run in OpenBLAS, whose default of one thread per core in every worker
-    oversubscribed 2 cores with 4 spinning threads: fleet identify of 20 sessions took
-    202 s of worker CPU against 109 s sequentially (0.69× "speed-up")."""
+    cores for BLAS. OpenBLAS's default of one thread per core in every worker once
+    oversubscribed 2 cores with 4 spinning threads (fleet identify of 20 sessions: 202 s
+    of worker CPU against 109 s sequentially, 0.69×). The stages now compute with one BLAS
+    thread themselves (:func:`pipeline.stages.runner.one_blas_thread`); this caps the rest
+    of a worker's work (reports, audits)."""
     share = str(max(1, (os.cpu_count() or 1) // max(workers, 1)))
     return dict.fromkeys(BLAS_THREAD_VARIABLES, share)
 
