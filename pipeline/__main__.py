@@ -1,5 +1,5 @@
 """``python -m pipeline``: the same command line as ``pipeline`` (same exit codes)."""
 
-from pipeline.cli import app
+from pipeline.console import main
 
-app(prog_name="pipeline")
+main()
