@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -103,17 +102,35 @@ def read_table(path: Path) -> pa.Table:
         ) from exc
 
 
-@dataclass(frozen=True)
 class CheckedTable:
     """A stage file read back and checked. ``problem`` is empty when the file is the one
     that was written: readable, provenance JSON, columns of its schema, data hashing to
-    its recorded ``content_hash``; otherwise it says why not (and ``table`` is None)."""
+    its recorded ``content_hash``; otherwise it says why not (and ``table`` is None).
 
-    table: pa.Table | None
-    provenance: dict[str, Any] = field(default_factory=dict)
-    problem: str = ""
-    #: SHA-256 of the file's bytes ("" when unknown or when the file fails its check)
-    file_sha256: str = ""
+    ``file_sha256``: SHA-256 of the file's bytes ("" when unknown or failing). A file
+    known by those bytes keeps them (``data``) and decodes its table when first asked."""
+
+    def __init__(
+        self,
+        table: pa.Table | None,
+        provenance: dict[str, Any] | None = None,
+        problem: str = "",
+        file_sha256: str = "",
+        data: bytes | None = None,
+    ) -> None:
+        self._table = table
+        self.provenance = {} if provenance is None else provenance
+        self.problem = problem
+        self.file_sha256 = file_sha256
+        self._data = data
+
+    @property
+    def table(self) -> pa.Table | None:
+        if self._table is None and self._data is not None:
+            with ipc.open_file(pa.py_buffer(self._data)) as reader:
+                self._table = reader.read_all()
+            self._data = None
+        return self._table
 
 
 def _columns(schema: pa.Schema) -> list[tuple[str, pa.DataType, bool, bytes | None]]:
@@ -130,23 +147,25 @@ def check_table(path: Path, name: str, verified_sha256: str | None = None) -> Ch
     try:
         data = path.read_bytes()
         digest = hashlib.sha256(data).hexdigest()
+        known = digest == verified_sha256
         with ipc.open_file(pa.py_buffer(data)) as reader:
-            table = reader.read_all()
-        if digest != verified_sha256:
+            table = None if known else reader.read_all()  # known: decoded when asked
+            schema = reader.schema
+        if table is not None:
             table.validate(full=True)  # before hashing: corrupt buffers must not be touched
     except (OSError, pa.ArrowInvalid):
         return CheckedTable(None, {}, "not a readable Arrow file (truncated, corrupt or foreign)")
     try:
-        prov = _provenance(table.schema, path)
+        prov = _provenance(schema, path)
     except StageError:
         return CheckedTable(None, {}, "its provenance metadata is not JSON (corrupt)")
-    if _columns(table.schema) != _columns(arrow_schema(name)):
+    if _columns(schema) != _columns(arrow_schema(name)):
         return CheckedTable(None, prov, f"columns differ from schemas/arrow/{name}.json")
     if "content_hash" not in prov:
         return CheckedTable(None, prov, "no content hash recorded (not written by armsig)")
-    if digest != verified_sha256 and content_hash(table) != prov["content_hash"]:
+    if table is not None and content_hash(table) != prov["content_hash"]:
         return CheckedTable(None, prov, EDITED)
-    return CheckedTable(table, prov, "", digest)
+    return CheckedTable(table, prov, "", digest, data if known else None)
 
 
 def read_verified(stages_dir: Path) -> dict[str, str]:
