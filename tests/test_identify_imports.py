@@ -24,6 +24,9 @@ COMPUTE = (
     "pipeline.kinematics.signature",
     "pipeline.kinematics.true_dh",
     "pipeline.kinematics.alignment",
+    "pipeline.kinematics.chain",
+    "pipeline.contract.mcap_read",
+    "pipeline.stages.recording_points",
 )
 _PROBE = """
 import json, sys
