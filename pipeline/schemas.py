@@ -26,6 +26,7 @@ _TYPES: dict[str, pa.DataType] = {
 UNITS = ("", "cm", "cm2", "deg", "s", "degF")
 
 
+@cache
 def schema_dir() -> Path:
     """The schemas folder: ``pipeline/_schemas`` in a wheel, ``schemas/`` in a checkout."""
     packaged = resources.files("pipeline") / "_schemas"

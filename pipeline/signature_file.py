@@ -11,7 +11,7 @@ import datetime as dt
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyarrow as pa
@@ -19,11 +19,6 @@ import pyarrow as pa
 from pipeline import __version__
 from pipeline.atomic import write_text_atomic
 from pipeline.errors import ArmsigError
-from pipeline.kinematics.alignment import fit_alignment
-from pipeline.kinematics.chain import SerialChain, forward_kinematics
-from pipeline.kinematics.signature import pseudo_dh_from_chain
-from pipeline.kinematics.smodel import smodel_from_matrix
-from pipeline.kinematics.transforms import pose_error
 from pipeline.robots.description import (
     RobotDescription,
     description_from_dict,
@@ -37,11 +32,12 @@ from pipeline.signature_checks import (
     document_digest,
     parse_json,
 )
-from pipeline.stages.frames import chain_from_frames
 from pipeline.stages.runner import committed_hashes, stage_path
 from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_table
-from pipeline.units import joints_to_boundary, joints_to_internal
+
+if TYPE_CHECKING:  # the kinematics are imported where a signature is built or loaded
+    from pipeline.kinematics.chain import SerialChain
 
 ALIGNMENT_SAMPLES = 500
 FILE_NAME = "signature.json"
@@ -67,6 +63,11 @@ def chain_alignment(
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Base ``X`` and tool ``Y`` with ``F_a(q) ≈ X · F_b(q) · Y`` over random configurations
     of ``robot`` (fixed seed), and the RMS position misfit (cm) that remains."""
+    from pipeline.kinematics.alignment import fit_alignment
+    from pipeline.kinematics.chain import forward_kinematics
+    from pipeline.kinematics.transforms import pose_error
+    from pipeline.units import joints_to_internal
+
     rng = np.random.default_rng(0)  # fixed: the same signature gives the same file
     lim = robot.limits
     q = joints_to_internal(
@@ -86,6 +87,8 @@ def matrix_rows(T: np.ndarray) -> list[list[float]]:
 
 def smodel_section(chain: SerialChain) -> dict[str, Any]:
     """The S-Model matrices (4.51) and parameters (4.52)-(4.57) of a signature chain."""
+    from pipeline.kinematics.smodel import smodel_from_matrix
+
     sm = smodel_from_matrix(chain.links)
     return {
         "base": matrix_rows(chain.base),
@@ -130,6 +133,10 @@ def refinement_section(refine: pa.Table) -> dict[str, Any]:
 def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict[str, Any]:
     """The signature as a JSON-ready dict (without its digest), built from the session's
     stage tables, whose content hashes are ``hashes``."""
+    from pipeline.kinematics.signature import pseudo_dh_from_chain
+    from pipeline.stages.frames import chain_from_frames
+    from pipeline.units import joints_to_boundary
+
     session = read_table(stage_path(session_dir, "session"))
     robot = session_robot(session)
     pris = robot.prismatic
@@ -336,6 +343,9 @@ def load_session_signature(
 
 def signature_from_document(doc: dict[str, Any], source: str) -> Signature:
     """The :class:`Signature` of a checked document."""
+    from pipeline.kinematics.chain import SerialChain
+    from pipeline.units import joints_to_internal
+
     robot = description_from_dict(doc["robot_description"], source=source)
     sm = doc["smodel"]
     al = doc["design_alignment"]

@@ -14,6 +14,20 @@ from scipy.stats import chi2
 from pipeline.features.expected import NOISE_CONFIDENCE, noise_bound
 
 HEAVY = ("scipy.stats", "scipy.optimize", "scipy.spatial", "matplotlib", "pyarrow.compute")
+#: armsig's own compute modules: a cached run imports the stage modules (their versions,
+#: parameters and inputs), not what their ``compute`` needs (issue 18).
+COMPUTE = (
+    "pipeline.features.plane",
+    "pipeline.features.targets",
+    "pipeline.sensor.compensation",
+    "pipeline.sensor.geometry",
+    "pipeline.kinematics.signature",
+    "pipeline.kinematics.true_dh",
+    "pipeline.kinematics.alignment",
+    "pipeline.kinematics.chain",
+    "pipeline.contract.mcap_read",
+    "pipeline.stages.recording_points",
+)
 _PROBE = """
 import json, sys
 from pipeline.identify import identify
@@ -22,9 +36,9 @@ print(json.dumps(sorted(m for m in json.loads(sys.argv[2]) if m in sys.modules))
 """
 
 
-def _imported(session: Path) -> list[str]:
+def _imported(session: Path, modules: tuple[str, ...] = (*HEAVY, "matplotlib.pyplot")) -> list[str]:
     out = subprocess.run(
-        [sys.executable, "-c", _PROBE, str(session), json.dumps([*HEAVY, "matplotlib.pyplot"])],
+        [sys.executable, "-c", _PROBE, str(session), json.dumps(modules)],
         check=True,
         capture_output=True,
         text=True,
@@ -42,14 +56,20 @@ def session(identified_session: Path, tmp_path: Path) -> Path:
 def test_cold_run_imports_no_pyplot_and_no_scipy_stats(session: Path) -> None:
     shutil.rmtree(session / "stages")
     (session / "signature.json").unlink()
-    imported = _imported(session)
+    imported = _imported(session, (*HEAVY, "matplotlib.pyplot", "scipy.interpolate"))
     assert "matplotlib.pyplot" not in imported and "scipy.stats" not in imported
+    assert "scipy.interpolate" not in imported  # the speed-of-sound spline: numpy
     assert (session / "report" / "report.md").is_file()
 
 
 def test_warm_run_imports_none_of_the_heavy_libraries(session: Path) -> None:
     _imported(session)  # writes the report
     assert _imported(session) == []
+
+
+def test_warm_run_imports_no_compute_module(session: Path) -> None:
+    _imported(session)  # writes the report
+    assert _imported(session, COMPUTE) == []
 
 
 def test_noise_bound_is_the_chi2_quantile_bit_for_bit() -> None:

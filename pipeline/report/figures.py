@@ -55,6 +55,22 @@ def _grid(n: int) -> tuple[int, int]:
     return math.ceil(n / cols), cols
 
 
+#: Labelled ticks per axis (at most, plus one): drawing tick labels is most of a figure's
+#: cost (605 texts over the report's 21 axes with matplotlib's default of up to 9 per axis).
+TICKS = 4
+#: PNG compression (zlib level): 1 writes the report's PNGs ~6 % larger than matplotlib's
+#: default 6 in about half of the encoding time.
+PNG_COMPRESSION = 1
+
+
+def few_ticks(ax: Any) -> None:
+    """At most :data:`TICKS` + 1 labelled ticks on each axis of ``ax``, at nice numbers."""
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(TICKS))
+    ax.yaxis.set_major_locator(MaxNLocator(TICKS))
+
+
 def panel_figure(n: int) -> tuple[Any, list[Any]]:
     """A new figure of ``n`` panels in a grid (object-oriented API, no pyplot), its axes."""
     from matplotlib.figure import Figure
@@ -66,6 +82,8 @@ def panel_figure(n: int) -> tuple[Any, list[Any]]:
     axes = fig.subplots(rows, cols, squeeze=False).ravel()
     for ax in axes[n:]:
         ax.set_visible(False)
+    for ax in axes[:n]:
+        few_ticks(ax)
     return fig, list(axes[:n])
 
 
@@ -115,7 +133,7 @@ def save_png(fig: Any, path: Path) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
-        fig.savefig(tmp, format="png", dpi=90)
+        fig.savefig(tmp, format="png", dpi=90, pil_kwargs={"compress_level": PNG_COMPRESSION})
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.report.figures import save_png
+from pipeline.report.figures import few_ticks, save_png
 
 #: Rows of the verdict's numbers table: column, label, format.
 _NUMBERS = (
@@ -43,6 +43,7 @@ def error_map(uncertainty: pa.Table, path: Path) -> Path:
         ax.set_xlabel(f"{'xyz'[i]} (cm, sensor frame)")
         ax.set_ylabel(f"{'xyz'[j]} (cm)")
         ax.set_aspect("equal", adjustable="datalim")
+        few_ticks(ax)
     fig.suptitle("Predicted tool position error (1σ RMS, after base/tool alignment)")
     cax = fig.add_axes((0.9, 0.14, 0.02, 0.74))
     fig.colorbar(sc, cax=cax, label="cm")

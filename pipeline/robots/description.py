@@ -10,13 +10,14 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from pipeline.errors import RobotDescriptionError
-from pipeline.kinematics.chain import SerialChain, chain_from_dh
-from pipeline.kinematics.transforms import transform_from_xyz_rpy
+
+if TYPE_CHECKING:  # the kinematics are imported where a chain or pose is built
+    from pipeline.kinematics.chain import SerialChain
 
 JOINT_TYPES = ("revolute", "prismatic")
 
@@ -68,6 +69,8 @@ class Pose:
 
     def matrix(self) -> np.ndarray:
         """Homogeneous matrix, shape (4, 4), translation in cm."""
+        from pipeline.kinematics.transforms import transform_from_xyz_rpy
+
         return transform_from_xyz_rpy(self.xyz_cm, np.deg2rad(self.rpy_deg))
 
 
@@ -150,6 +153,8 @@ class RobotDescription:
 
     def design_chain(self) -> SerialChain:
         """The design model as a :class:`SerialChain` (radians, cm)."""
+        from pipeline.kinematics.chain import chain_from_dh
+
         rows = [j.dh for j in self.joints]
         return chain_from_dh(
             theta=np.deg2rad([r.theta_deg for r in rows]),

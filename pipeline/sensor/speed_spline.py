@@ -4,6 +4,12 @@ The range model (:mod:`pipeline.sensor.range_model`) carries the speed ratio
 ``f(h, t) = a(t) + g·(h − h_ref)``. ``a`` drifts with time constants of minutes
 (Appendix E, (B-2)); a cubic B-spline with uniform knots a couple of minutes apart
 follows such a drift and stays linear in its coefficients.
+
+The basis is evaluated here with FITPACK's recurrence (``fpbspl``, the one behind
+``scipy.interpolate.BSpline.design_matrix``), vectorised in numpy: the same bits as
+scipy's (``tests/test_speed_spline.py``) without importing ``scipy.interpolate`` (~0.03 s
+of a cold ``pipeline identify`` beyond the scipy.optimize that the design alignment
+imports anyway; ~0.17 s with it, issue 18).
 """
 
 from __future__ import annotations
@@ -12,7 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.interpolate import BSpline
 
 Array = npt.NDArray[np.float64]
 
@@ -48,21 +53,35 @@ class TimeSpline:
         """The time at which each coefficient's basis function peaks, shape (n_coef,)."""
         return np.asarray(self.knots[2 : 2 + self.n_coef], float)
 
-    def _matrix(self, t_s: npt.ArrayLike):  # -> scipy.sparse.csr_array
-        lo, hi = self.knots[DEGREE], self.knots[-DEGREE - 1]
-        t = np.clip(np.atleast_1d(np.asarray(t_s, float)), lo, hi)
-        return BSpline.design_matrix(t, self.knots, DEGREE)
+    def basis(self, t_s: npt.ArrayLike) -> tuple[npt.NDArray[np.int64], Array]:
+        """The ``DEGREE + 1`` basis functions not zero at each time (clipped to the span):
+        their indices and values, each shape (M, DEGREE + 1);
+        ``design(t)[i, idx[i]] == val[i]``."""
+        t_knots, k = self.knots, DEGREE
+        n = len(t_knots) - k - 1
+        lo, hi = t_knots[k], t_knots[n]
+        x = np.clip(np.atleast_1d(np.asarray(t_s, float)), lo, hi)
+        # knot interval l: t[l] <= x < t[l + 1], k <= l < n (x = t[n]: the last interval)
+        ell = np.clip(np.searchsorted(t_knots, x, side="right") - 1, k, n - 1)
+        h = np.zeros((len(x), k + 1))
+        h[:, 0] = 1.0
+        for j in range(1, k + 1):  # Cox-de Boor, in fpbspl's order of operations
+            hh = h[:, :j].copy()
+            h[:, 0] = 0.0
+            for i in range(1, j + 1):
+                right, left = t_knots[ell + i], t_knots[ell + i - j]  # distinct: uniform knots
+                f = hh[:, i - 1] / (right - left)
+                h[:, i - 1] += f * (right - x)
+                h[:, i] = f * (x - left)
+        idx = (ell - k)[:, None] + np.arange(k + 1)
+        return idx.astype(np.int64), h
 
     def design(self, t_s: npt.ArrayLike) -> Array:
         """Basis values at times ``t_s`` (M,), clipped to the span, dense shape (M, n_coef)."""
-        return np.asarray(self._matrix(t_s).toarray(), float)
-
-    def basis(self, t_s: npt.ArrayLike) -> tuple[npt.NDArray[np.int64], Array]:
-        """The ``DEGREE + 1`` basis functions not zero at each time: their indices and
-        values, each shape (M, DEGREE + 1); ``design(t)[i, idx[i]] == val[i]``."""
-        m = self._matrix(t_s)
-        k = DEGREE + 1
-        return m.indices.astype(np.int64).reshape(-1, k), np.asarray(m.data, float).reshape(-1, k)
+        idx, val = self.basis(t_s)
+        out = np.zeros((len(idx), self.n_coef))
+        np.put_along_axis(out, idx, val, axis=1)
+        return out
 
     def fit(self, t_s: npt.ArrayLike, values: npt.ArrayLike) -> Array:
         """Least-squares coefficients (n_coef,) through ``values`` at ``t_s``.

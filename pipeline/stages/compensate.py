@@ -11,8 +11,6 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.errors import StageError
-from pipeline.sensor.compensation import compensate
-from pipeline.sensor.geometry import DigitizerGeometry
 from pipeline.stages.base import Stage, check_param
 
 
@@ -53,6 +51,9 @@ def cycles_from_ranges(ranges: pa.Table) -> tuple[np.ndarray, np.ndarray]:
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
+    from pipeline.sensor.compensation import compensate
+    from pipeline.sensor.geometry import DigitizerGeometry
+
     raw, keys = cycles_from_ranges(inputs["ranges"])
     rig = json.loads(inputs["session"].column("rig_json")[0].as_py())
     geometry = DigitizerGeometry.from_dict(rig)

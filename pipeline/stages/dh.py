@@ -12,16 +12,17 @@ signature exactly; without prismatic joints they are equal.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyarrow as pa
 
-from pipeline.kinematics.signature import PseudoDH, pseudo_dh_from_chain
-from pipeline.kinematics.true_dh import true_dh_from_chain
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.frames import chain_from_frames
 from pipeline.stages.session import session_robot
+
+if TYPE_CHECKING:
+    from pipeline.kinematics.signature import PseudoDH
 
 
 def _masked(v: np.ndarray) -> pa.Array:
@@ -42,6 +43,9 @@ def _columns(p: PseudoDH, pris: np.ndarray, prefix: str = "") -> dict[str, pa.Ar
 
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
+    from pipeline.kinematics.signature import pseudo_dh_from_chain
+    from pipeline.kinematics.true_dh import true_dh_from_chain
+
     robot = session_robot(inputs["session"])
     pris = robot.prismatic
     chain = chain_from_frames(inputs["chain"], pris)

@@ -10,30 +10,20 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyarrow as pa
 
 from pipeline.errors import ArmsigError, StageError
-from pipeline.features.accuracy import revolute_accuracy
-from pipeline.features.circle import fit_circle
-from pipeline.features.expected import SIGMA_COLUMNS, prismatic_expected, revolute_expected
-from pipeline.features.line import fit_line
-from pipeline.features.plane import fit_plane_eigen, fit_plane_lsq, frame_about, orient_normal
-from pipeline.features.targets import (
-    MIN_RADIUS_CM,
-    RADIUS_SIGMAS,
-    TargetFit,
-    combine,
-    why_ill_conditioned,
-    why_not_usable,
-)
 from pipeline.schemas import arrow_schema
 from pipeline.stages.base import Stage, check_param
 from pipeline.stages.frames import readings_at
 from pipeline.stages.positions import positions, recorded_sigma_cm, sweep_rows, sweep_targets
 from pipeline.stages.session import session_robot
+
+if TYPE_CHECKING:
+    from pipeline.features.targets import TargetFit
 
 PLANE_METHODS = ("lsq", "eigen")
 LIST_COLUMNS = ("warnings", "targets_used", "targets_not_used")
@@ -90,6 +80,12 @@ def _nan(v: Any) -> float | None:
 
 def _fit_row(p: np.ndarray, prismatic: bool, plane_method: str) -> dict[str, Any]:
     """The feature of one target's positions ``p`` (N, 3), by increasing reading."""
+    from pipeline.features.accuracy import revolute_accuracy
+    from pipeline.features.circle import fit_circle
+    from pipeline.features.expected import prismatic_expected, revolute_expected
+    from pipeline.features.line import fit_line
+    from pipeline.features.plane import fit_plane_eigen, fit_plane_lsq, frame_about, orient_normal
+
     if prismatic:
         line = fit_line(p)
         expected = prismatic_expected(p, line)
@@ -163,6 +159,8 @@ def _fit_target(
     floor_cm: float,
 ) -> TargetFit | str:
     """One target's fit in sweep ``i``, or why it cannot be fitted."""
+    from pipeline.features.targets import TargetFit, why_not_usable
+
     n, pris = robot.n_joints, robot.prismatic
     p, _, _ = sweep_points(pos, joints, i, n, pris, target)
     if len(p) < 3:
@@ -186,6 +184,8 @@ def _sweep_feature(
     pos: pa.Table, joints: pa.Table, i: int, robot: Any, plane_method: str
 ) -> dict[str, Any]:
     """Joint ``i``'s features row from the usable targets of its sweep."""
+    from pipeline.features.targets import MIN_RADIUS_CM, RADIUS_SIGMAS, combine, why_ill_conditioned
+
     pris = bool(robot.prismatic[i - 1])
     targets = sweep_targets(pos, i)
     fits: list[TargetFit] = []
@@ -227,6 +227,8 @@ def _sweep_feature(
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
+    from pipeline.features.expected import SIGMA_COLUMNS
+
     if params.plane_method not in PLANE_METHODS:
         raise StageError(
             f"unknown plane_method {params.plane_method!r}", expected=" or ".join(PLANE_METHODS)

@@ -27,23 +27,20 @@ data. When the readings equal q̄^s (no re-settling) the frames are unchanged.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyarrow as pa
 
 from pipeline.errors import StageError
-from pipeline.kinematics.chain import SerialChain, forward_kinematics
-from pipeline.kinematics.signature import (
-    frame_from_features,
-    frames_at_signature,
-    signature_chain,
-)
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.positions import positions, sweep_rows
 from pipeline.stages.recording import TOOL_SWEEP, sweep_name
 from pipeline.stages.session import session_plan, session_robot
 from pipeline.units import joints_to_internal
+
+if TYPE_CHECKING:
+    from pipeline.kinematics.chain import SerialChain
 
 MATRIX_COLUMNS = ("nx", "ny", "nz", "ox", "oy", "oz", "ax", "ay", "az", "px_cm", "py_cm", "pz_cm")
 
@@ -159,6 +156,8 @@ def tool_from_probe(chain: SerialChain, q_tool: np.ndarray, p_tool: np.ndarray) 
     tool : ndarray, shape (..., 4, 4)
         Translation only: the probe in the last S-Model frame, its orientation.
     """
+    from pipeline.kinematics.chain import forward_kinematics
+
     flange = forward_kinematics(chain, q_tool)
     d = np.asarray(p_tool, float) - flange[..., :3, 3]
     tool = np.zeros((*d.shape[:-1], 4, 4))
@@ -190,6 +189,12 @@ def tool_points_of_sweeps(
 
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
+    from pipeline.kinematics.signature import (
+        frame_from_features,
+        frames_at_signature,
+        signature_chain,
+    )
+
     robot = session_robot(inputs["session"])
     n, pris = robot.n_joints, robot.prismatic
     feat = inputs["features"]
@@ -253,6 +258,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 def chain_from_frames(frames: pa.Table, prismatic: np.ndarray):  # -> SerialChain
     """The signature chain (with tool) rebuilt from the ``frames`` table."""
+    from pipeline.kinematics.signature import signature_chain
+
     T = matrices_from_columns(frames)
     n = len(prismatic)
     deg = frames.column("q_signature_deg").to_numpy(zero_copy_only=False)[1 : n + 1]

@@ -8,11 +8,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.sensor.geometry import MICROPHONES
 from pipeline.stages.base import RECORDING, NoParams, Stage
 
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
+    from pipeline.sensor.geometry import MICROPHONES
+
     rec = inputs[RECORDING]
     m = len(rec.cycle_sweep)
     rep = 20  # 5 sparkers x 4 microphones per cycle

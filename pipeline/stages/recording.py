@@ -23,9 +23,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.contract.channels import SENSOR_CHANNELS
-from pipeline.contract.mcap_read import read_mcap
 from pipeline.errors import ArmsigError, RecordingError
-from pipeline.stages import recording_points
 from pipeline.stages.recording_keys import (
     CHECK_SWEEP,
     KEY_FIX,
@@ -118,6 +116,9 @@ def read_recording(path: str | Path, sha256: str | None = None) -> Recording:
 
 @lru_cache(maxsize=4)
 def _read_cached(p: Path, sha: str) -> Recording:
+    from pipeline.contract.mcap_read import read_mcap  # parsing: only when not cached
+    from pipeline.stages import recording_points
+
     msgs = read_mcap(p, _KNOWN, _FIX).messages
     rigs = msgs["/rig/description"]
     sensor = str(rigs[0][1].get("sensor", "sonic")) if len(rigs) == 1 else "sonic"

@@ -41,7 +41,14 @@ from pipeline.stages.base import RECORDING, Stage
 from pipeline.stages.lock import session_lock
 from pipeline.stages.recording import file_sha256, read_recording
 from pipeline.stages.session import session_sensor
-from pipeline.stages.tables import CheckedTable, check_table, content_hash, write_table
+from pipeline.stages.tables import (
+    CheckedTable,
+    check_table,
+    content_hash,
+    read_verified,
+    write_checked,
+    write_verified,
+)
 
 #: Identification stage modules of a sonic session in pipeline order (each defines
 #: ``STAGE``): ranges -> compensate -> triangulate -> the sensor-neutral ``positions``.
@@ -237,6 +244,8 @@ class _Hashes:
         self._product: tuple[str, str] | None = None
         self._sensor: str | None = None
         self.pending: set[str] = set()  # stages written in this run, not committed yet
+        #: committed stage files' bytes that passed their check (tables.VERIFIED)
+        self.verified = read_verified(session_dir / "stages")
 
     def sensor(self) -> str:
         """The recorded sensor kind: from the committed ``session`` table when it was made
@@ -272,7 +281,8 @@ class _Hashes:
         """The checked stage file, or None when there is none."""
         if name not in self._tables:
             path = self.path(name)
-            self._tables[name] = check_table(path, name) if path.is_file() else None
+            known = None if name in self.pending else self.verified.get(name)
+            self._tables[name] = check_table(path, name, known) if path.is_file() else None
         return self._tables[name]
 
     def get(self, name: str) -> str | None:
@@ -298,9 +308,22 @@ class _Hashes:
             self._product = check(self.session_dir, {n: self.get(n) for n in self.identification()})
         return self._product
 
-    def put(self, name: str, table: Any, provenance: dict[str, Any]) -> None:
+    def put(self, name: str, checked: CheckedTable) -> None:
         """Record a stage output written in this run."""
-        self._tables[name] = CheckedTable(table, provenance)
+        self._tables[name] = checked
+
+    def save_verified(self) -> None:
+        """Record the file hashes of the committed stage files checked or written in this
+        run (:data:`pipeline.stages.tables.VERIFIED`); the others keep their entry only
+        while their file still exists."""
+        stages_dir = self.session_dir / "stages"
+        out = {n: h for n, h in self.verified.items() if stage_path(self.session_dir, n).is_file()}
+        for name, checked in self._tables.items():
+            out.pop(name, None)
+            if checked is not None and not checked.problem and checked.file_sha256:
+                out[name] = checked.file_sha256
+        self.verified = out
+        write_verified(stages_dir, out)
 
 
 def committed_hashes(session_dir: str | Path) -> dict[str, str | None]:
@@ -437,6 +460,7 @@ def run(
                 if name in hashes.pending:
                     os.replace(pending / f"{name}.arrow", stage_path(sdir, name))
             hashes.pending.clear()
+            hashes.save_verified()
             shutil.rmtree(failed_dir(sdir), ignore_errors=True)
         finally:
             bar.close()
@@ -576,5 +600,5 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
         "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
     }
     hashes.pending.add(stage.name)
-    hashes.put(stage.name, write_table(hashes.path(stage.name), table, provenance), provenance)
+    hashes.put(stage.name, write_checked(hashes.path(stage.name), table, provenance))
     return table

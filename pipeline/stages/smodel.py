@@ -8,13 +8,14 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.kinematics.smodel import smodel_from_matrix
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.frames import chain_from_frames, matrices_to_columns
 from pipeline.stages.session import session_robot
 
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
+    from pipeline.kinematics.smodel import smodel_from_matrix
+
     robot = session_robot(inputs["session"])
     chain = chain_from_frames(inputs["chain"], robot.prismatic)
     B = chain.links  # Eq. (4.51)
