@@ -1,5 +1,6 @@
 """What a cold and a warm `identify` import (issue 18): a cached run needs none of the
-heavy libraries, a cold one no pyplot and no scipy.stats. Each run in a fresh interpreter."""
+heavy libraries, a cold one no pyplot, no scipy.stats and no scipy.optimize. Each run in a
+fresh interpreter."""
 
 import json
 import shutil
@@ -53,12 +54,13 @@ def session(identified_session: Path, tmp_path: Path) -> Path:
     return d
 
 
-def test_cold_run_imports_no_pyplot_and_no_scipy_stats(session: Path) -> None:
+def test_cold_run_imports_no_pyplot_no_scipy_stats_no_scipy_optimize(session: Path) -> None:
     shutil.rmtree(session / "stages")
     (session / "signature.json").unlink()
     imported = _imported(session, (*HEAVY, "matplotlib.pyplot", "scipy.interpolate"))
     assert "matplotlib.pyplot" not in imported and "scipy.stats" not in imported
     assert "scipy.interpolate" not in imported  # the speed-of-sound spline: numpy
+    assert "scipy.optimize" not in imported  # the design alignment: refine.lm
     assert (session / "report" / "report.md").is_file()
 
 

@@ -70,14 +70,24 @@ def fit_alignment(T_ref: ArrayLike, T_model: ArrayLike) -> tuple[Array, Array]:
         r: Array = ((T - Tr)[:, :3, :] @ lever).ravel()
         return r
 
-    from scipy.optimize import least_squares  # lazy: 0.4 s of import, needed only here
+    # The refinement's Levenberg-Marquardt (numpy only): scipy.optimize's import cost
+    # ~0.1-0.4 s of CPU in every identify for a fit of 12 parameters.
+    from pipeline.refine.lm import levenberg_marquardt
 
     V = _observable_directions(residual)  # (12, k)
-    # Tolerances at 1e-15: the noiseless audit must see 1e-13 cm agreement.
-    fit = least_squares(
-        lambda z: residual(V @ z), np.zeros(V.shape[1]), method="lm",
-        xtol=1e-15, ftol=1e-15, gtol=1e-15,
-    )  # fmt: skip
+
+    def fun(z: Array) -> tuple[Array, Callable[[Array], tuple[Array, Array]]]:
+        r = residual(V @ z)
+
+        def normal(w: Array) -> tuple[Array, Array]:
+            J = _jacobian(residual, V @ z) @ V
+            Jw = J * w[:, None]
+            return Jw.T @ J, Jw.T @ r
+
+        return r, normal
+
+    # Tolerance at 1e-15: the noiseless audit must see 1e-13 cm agreement.
+    fit = levenberg_marquardt(fun, np.zeros(V.shape[1]), tol=1e-15)
     x = V @ fit.x
     return X0 @ _pose(x[:6]), _pose(x[6:])
 
@@ -85,13 +95,17 @@ def fit_alignment(T_ref: ArrayLike, T_model: ArrayLike) -> tuple[Array, Array]:
 def _observable_directions(residual: Callable[[Array], Array]) -> Array:
     """Orthonormal basis (12, k) of the parameter directions the residual determines
     at the start x = 0: right singular vectors above :data:`GAUGE_RCOND`."""
-    h = JACOBIAN_STEP
-    J = np.stack(
-        [(residual(h * e) - residual(-h * e)) / (2.0 * h) for e in np.eye(12)], axis=1
-    )
-    _, s, Vt = np.linalg.svd(J, full_matrices=False)
+    _, s, Vt = np.linalg.svd(_jacobian(residual, np.zeros(12)), full_matrices=False)
     keep = s > GAUGE_RCOND * s[0]
     if keep.all():  # no symmetry: the parameters as they are (same iterates as before)
         return np.eye(12)
     out: Array = Vt[keep].T
     return out
+
+
+def _jacobian(residual: Callable[[Array], Array], x: Array) -> Array:
+    """``∂residual/∂x`` (R, 12) at ``x`` by central differences (:data:`JACOBIAN_STEP`)."""
+    h = JACOBIAN_STEP
+    return np.stack(
+        [(residual(x + h * e) - residual(x - h * e)) / (2.0 * h) for e in np.eye(12)], axis=1
+    )
