@@ -41,6 +41,7 @@ from pipeline.kinematics.ik_compiled import (
     _delta,
     _errors,
     homogeneous,
+    inline_jit,
     jit,
     pose,
     run_in_shares,
@@ -64,13 +65,15 @@ _TWO_PI = 2.0 * math.pi
 _SINGULAR = puma560.WRIST_SINGULAR_TOL
 
 
-@jit
+@inline_jit
 def _wrap(t: float) -> float:
     """:func:`pipeline.kinematics.transforms.wrap_angle` of one angle: (-π, π]."""
-    return math.pi - np.mod(math.pi - t, _TWO_PI)
+    a = math.pi - t
+    # np.mod(a, 2π) is a itself for 0 <= a < 2π (fmod is exact): skip its call there
+    return math.pi - (a if 0.0 <= a < _TWO_PI else np.mod(a, _TWO_PI))
 
 
-@jit
+@inline_jit
 def _design_start(
     pre: Buf, post: Buf, branch: Buf, margins: Buf, target: Buf, q_near: Buf, q: Buf, Tw: Buf
 ) -> bool:
@@ -160,7 +163,7 @@ def _design_start(
     return True
 
 
-@jit
+@inline_jit
 def _into_limits(q: Buf, lower: Buf, upper: Buf, turn: Buf) -> None:
     """``pipeline.control._shift_into`` of one configuration (6,), in place."""
     for j in range(q.shape[0]):
@@ -186,7 +189,7 @@ OFF_BRANCH = 3
 WRIST_TURNS = np.array([1.0, -1.0, 2.0, -2.0, 3.0, -3.0, 4.0]) * (np.pi / 4.0)
 
 
-@jit
+@inline_jit
 def _to_sensor(X: Buf, T_base: Buf, target: Buf) -> None:
     """``target = X · T_base`` (4, 4): a pose in the design base frame in the sensor frame."""
     for r in range(4):
@@ -195,7 +198,7 @@ def _to_sensor(X: Buf, T_base: Buf, target: Buf) -> None:
                             + X[r, 2] * T_base[2, c] + X[r, 3] * T_base[3, c])  # fmt: skip
 
 
-@jit
+@inline_jit
 def _on_branch(q: Buf, branch: Buf) -> bool:
     """:func:`pipeline.robots.puma560.branch_of` of ``q`` (6,) equals ``branch`` (3,)."""
     s23, c23 = math.sin(q[1] + q[2]), math.cos(q[1] + q[2])
@@ -325,7 +328,7 @@ def _anderson(Qh: Buf, Gh: Buf, count: int, out: Buf, dF: Buf, dG: Buf, f: Buf) 
         out[i] = acc
 
 
-@jit
+@inline_jit
 def _jacobi_map(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
@@ -349,7 +352,7 @@ def _jacobi_map(
     return _design_start(pre, post, branch, margins, Tk, q, q_next, Tw)  # C.2 step 6
 
 
-@jit
+@inline_jit
 def _error_at(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     target: Buf, q: Buf, Ts: Buf, d: Buf, length: float,
@@ -376,7 +379,7 @@ def _jacobi_work(n: int) -> JacobiWork:
     )  # fmt: skip
 
 
-@jit
+@inline_jit
 def _jacobi_one(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
