@@ -688,16 +688,16 @@ class PumaSolver:
             one = self._q_ref if q_near is None else np.ascontiguousarray(q_near, float)
             S, info = self._one
             _solve_packed(self._packed, self._prismatic, S, info, Tb[0], one.reshape(n))
-            outcome, iterations = info.tolist()
-            if outcome == FAST_CONVERGED or outcome == OFF_BRANCH:
+            kind, count = info.tolist()
+            if kind == FAST_CONVERGED or kind == OFF_BRANCH:
                 # The result's arrays copied from small templates: ~0.2 µs each, where
                 # np.ones(1, bool) or a comparison ufunc take ~1 µs.
                 errors = S[_S_ERRORS:_S_TARGET].copy()
                 return ik.IKResult(
                     q=S[_S_Q:_S_DELTA].reshape(1, n).copy(), converged=_ONE_TRUE.copy(),
-                    iterations=np.array([iterations]), position_error_cm=errors[:1],
+                    iterations=np.array([count]), position_error_cm=errors[:1],
                     orientation_error_rad=errors[1:], status=_ONE_ZERO.copy(),
-                    branch_changed=(_ONE_FALSE if outcome == FAST_CONVERGED else _ONE_TRUE).copy(),
+                    branch_changed=(_ONE_FALSE if kind == FAST_CONVERGED else _ONE_TRUE).copy(),
                 )  # fmt: skip
         near = np.ascontiguousarray(
             np.broadcast_to(self._q_ref if q_near is None else q_near, (m, n)), float
@@ -707,9 +707,10 @@ class PumaSolver:
         errors = np.empty((m, 2))
 
         def run(rows: slice) -> None:
-            _solve_targets(*_own(self._model), *_own((self._X,)), Tb[rows], near[rows],
-                           q0[rows], q[rows], delta[rows], T[rows], outcome[rows],
-                           iterations[rows], errors[rows], *_own(self._limits))  # fmt: skip
+            *model, X, lower, upper, turn = _own((*self._model, self._X, *self._limits))
+            _solve_targets(*model, X, Tb[rows], near[rows], q0[rows], q[rows], delta[rows],
+                           T[rows], outcome[rows], iterations[rows], errors[rows], lower,
+                           upper, turn)  # type: ignore[call-arg]  # fmt: skip
 
         run_in_shares(run, m)
         return self.finish(T, near, q0, q, outcome, iterations, delta, errors)
@@ -735,9 +736,9 @@ class PumaSolver:
         outcome, iterations = np.empty(m, np.int64), np.empty(m, np.int64)
 
         def run(rows: slice) -> None:
-            _jacobi_targets(*_own(self._model), *_own(design), *_own((self._X,)), Tb[rows],
-                            near[rows], q0[rows], q[rows], delta[rows], T[rows],
-                            outcome[rows], iterations[rows])  # fmt: skip
+            *model, X = _own((*self._model, *design, self._X))
+            _jacobi_targets(*model, X, Tb[rows], near[rows], q0[rows], q[rows], delta[rows],
+                            T[rows], outcome[rows], iterations[rows])  # type: ignore[call-arg]  # fmt: skip
 
         run_in_shares(run, m)
         lost = np.flatnonzero(outcome == NO_START)
