@@ -412,6 +412,7 @@ def test_one_target_equals_a_threaded_batch(robot3: Controller, monkeypatch, nea
         for k in range(len(T))
     ]
     np.testing.assert_array_equal(solver.q, 7.0)
+    assert all(vars(one).keys() == vars(batch).keys() for one in ones)  # every field set
     fields = ("q", "converged", "iterations", "position_error_cm", "orientation_error_rad",
               "status", "branch_changed")  # fmt: skip
     for name in fields:

@@ -641,7 +641,9 @@ class PumaSolver:
         self._target = S[_S_TARGET:_S_TW].reshape(4, 4)
         #: :meth:`solve`'s scratch and outcome for one target (the real-time buffers
         #: above are :meth:`solve_one`'s alone).
-        self._one = (np.empty(_S_END), np.zeros(2, np.int64))
+        one = np.empty(_S_END)
+        self._one = (one, np.zeros(2, np.int64), one[_S_Q:_S_DELTA].reshape(1, n),
+                     one[_S_ERRORS:_S_TARGET])  # fmt: skip
 
     def solve_one(self, T_base: Array, q_near: Array | None = None) -> bool:
         """Solve one pose (4, 4) given in the design base frame; True when converged.
@@ -683,18 +685,19 @@ class PumaSolver:
         and :meth:`pipeline.control.Controller.solve` do.
         """
         Tb = np.ascontiguousarray(T_base, float)
-        m, n = len(Tb), self.chain.n_joints
+        m, n = len(Tb), 6  # six joints (checked at construction)
         if m == 1:
             one = self._q_ref if q_near is None else np.ascontiguousarray(q_near, float)
-            S, info = self._one
-            _solve_packed(self._packed, self._prismatic, S, info, Tb[0], one.reshape(n))
+            S, info, q_one, errors_one = self._one
+            _solve_packed(self._packed, self._prismatic, S, info, Tb[0],
+                          one if q_near is None else one.reshape(n))  # fmt: skip
             kind, count = info.tolist()
             if kind == FAST_CONVERGED or kind == OFF_BRANCH:
                 # The result's arrays copied from small templates: ~0.2 µs each, where
                 # np.ones(1, bool) or a comparison ufunc take ~1 µs.
-                errors = S[_S_ERRORS:_S_TARGET].copy()
-                return ik.IKResult(
-                    q=S[_S_Q:_S_DELTA].reshape(1, n).copy(), converged=_ONE_TRUE.copy(),
+                errors = errors_one.copy()
+                return ik.IKResult.of_one_target(
+                    q=q_one.copy(), converged=_ONE_TRUE.copy(),
                     iterations=np.array([count]), position_error_cm=errors[:1],
                     orientation_error_rad=errors[1:], status=_ONE_ZERO.copy(),
                     branch_changed=(_ONE_FALSE if kind == FAST_CONVERGED else _ONE_TRUE).copy(),
