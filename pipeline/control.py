@@ -203,13 +203,18 @@ class Controller:
             if method != "nr":
                 raise ArmsigError("task axes need Newton-Raphson", fix="use --method nr")
             return self._solve_task_axes(T, branch, tuple(task_axes), record_history, q_near)
-        if self.robot.name == "puma560" and branch is None and q_near is None:
-            branch = self.default_branch()
-        if not record_history and self._compiled(branch):
-            near, solver = self._starts(T.shape[0], q_near), self.realtime(branch)
+        if branch is None and q_near is None and self._compilable:
+            branch = self._default_branch
+        if not record_history and branch is not None and self._compilable:
+            # The compiled path: one target takes the real-time kernel call, so this is
+            # thin (cached solver and checks; q_near checked only when given).
+            solver = self._solvers.get(branch) or self.realtime(branch)
+            near = None if q_near is None else self._starts(T.shape[0], q_near)
             if method == "nr":
                 return solver.solve(T, near)  # shifted into the limits by the solver
             return self._into_limits(solver.solve_jacobi(T, near))
+        if self.robot.name == "puma560" and branch is None and q_near is None:
+            branch = self.default_branch()
         T_sensor = self.sensor_from_base @ T
         q0 = self.initial_estimate(T_sensor, branch, q_near)
         if method == "nr":
@@ -234,14 +239,16 @@ class Controller:
         )
         return self._into_limits(res)
 
-    def _compiled(self, branch) -> bool:  # branch: Branch | None
-        """Whether Newton-Raphson on ``branch`` runs in :mod:`pipeline.robots.puma560_solver`
-        (start and solve compiled): a Puma signature of six revolute joints, one branch."""
+    @cached_property
+    def _compilable(self) -> bool:
+        """Whether a solve on one branch runs in :mod:`pipeline.robots.puma560_solver`
+        (start and solve compiled): a Puma signature of six revolute joints."""
         c = self.signature.chain
-        return (
-            self.robot.name == "puma560" and branch is not None and ik_compilable(c)
-            and not c.prismatic.any()
-        )  # fmt: skip
+        return self.robot.name == "puma560" and ik_compilable(c) and not c.prismatic.any()
+
+    @cached_property
+    def _default_branch(self):  # -> Branch
+        return self.default_branch()
 
     @cached_property
     def _solvers(self) -> dict[Any, Any]:
@@ -264,26 +271,27 @@ class Controller:
         and a batch give the same bits. Made once per branch and kept.
         """
         if branch is None:
-            branch = self.default_branch()
-        if not self._compiled(branch):
+            branch = self._default_branch
+        solver = self._solvers.get(branch)
+        if solver is not None:
+            return solver
+        if not self._compilable:
             raise ArmsigError(
                 f"{self.robot.name}: no compiled real-time solver",
                 expected="a Puma 560 signature of six revolute joints and a branch",
                 fix="use Controller.solve",
             )
-        solver = self._solvers.get(branch)
-        if solver is None:
-            from pipeline.robots import puma560_control as pc
-            from pipeline.robots.puma560_solver import PumaSolver
+        from pipeline.robots import puma560_control as pc
+        from pipeline.robots.puma560_solver import PumaSolver
 
-            solver = PumaSolver(
-                self.signature.chain, self.sensor_from_base, self.flange_to_tool,
-                self.sensor_from_base, branch, self.resolution, self._limits,
-                (pc.PUMA_ELBOW_MARGIN_RAD, pc.PUMA_SHOULDER_MARGIN_CM),
-                design=self._design_model(self.sensor_from_base),
-                jacobi_margins=(pc.JACOBI_ELBOW_MARGIN_RAD, pc.JACOBI_SHOULDER_MARGIN_CM),
-            )  # fmt: skip
-            self._solvers[branch] = solver
+        solver = PumaSolver(
+            self.signature.chain, self.sensor_from_base, self.flange_to_tool,
+            self.sensor_from_base, branch, self.resolution, self._limits,
+            (pc.PUMA_ELBOW_MARGIN_RAD, pc.PUMA_SHOULDER_MARGIN_CM),
+            design=self._design_model(self.sensor_from_base),
+            jacobi_margins=(pc.JACOBI_ELBOW_MARGIN_RAD, pc.JACOBI_SHOULDER_MARGIN_CM),
+        )  # fmt: skip
+        self._solvers[branch] = solver
         return solver
 
     def _into_limits(self, res: IKResult) -> IKResult:

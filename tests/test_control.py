@@ -385,3 +385,56 @@ def test_compiled_kernels_allocate_nothing_per_target(robot3: Controller) -> Non
     shifted = res.q.copy()
     _shift_into(shifted, *robot3._limits)
     np.testing.assert_array_equal(shifted, res.q)
+
+
+@pytest.mark.parametrize("near", [False, True])
+def test_one_target_equals_a_threaded_batch(robot3: Controller, monkeypatch, near: bool) -> None:
+    """Controller.solve of one target (the real-time kernel with its own buffers) against
+    the same targets in a threaded batch: every field bit for bit, including the targets
+    solved off the branch (flagged); a result keeps its values after later solves, and
+    the real-time solver's buffers are left alone (issue 18: one target)."""
+    from pipeline.kinematics import ik_compiled
+
+    b = parse_branch("right-up-noflip")
+    rng = np.random.default_rng(21)
+    lim = np.deg2rad(robot3.robot.limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], (400, 6))
+    q[::4, 4] = np.abs(rng.normal(0.0, np.deg2rad(0.5), len(q[::4])))  # some near the wrist
+    q = q[np.all(puma560.branch_of(q) == [1, 1, 1], axis=1)][:60]
+    T = invert_transform(robot3.sensor_from_base) @ forward_kinematics(robot3.signature.chain, q)
+    q_near = q + 0.01 if near else None
+    monkeypatch.setattr(ik_compiled, "THREADED_MIN_TARGETS", 2)
+    batch = robot3.solve(T, branch=b, q_near=q_near)
+    solver = robot3.realtime(b)
+    solver.q[:] = 7.0
+    ones = [
+        robot3.solve(T[k], branch=b, q_near=None if q_near is None else q_near[k])
+        for k in range(len(T))
+    ]
+    np.testing.assert_array_equal(solver.q, 7.0)
+    assert all(vars(one).keys() == vars(batch).keys() for one in ones)  # every field set
+    fields = ("q", "converged", "iterations", "position_error_cm", "orientation_error_rad",
+              "status", "branch_changed")  # fmt: skip
+    for name in fields:
+        got = np.concatenate([getattr(one, name) for one in ones])
+        np.testing.assert_array_equal(got, getattr(batch, name), err_msg=name)
+        assert got.dtype == getattr(batch, name).dtype, name
+
+
+def test_one_target_passes_few_arrays(robot3: Controller) -> None:
+    """Regression (issue 18, one-target latency): Controller.solve of one target makes
+    one compiled call of six arrays (the model and scratch packed once per solver);
+    numba wraps each array argument in one record of its runtime, so its allocation
+    counter counts the arrays passed: 6 per target (before: 32, ~5.8 µs of dispatch)."""
+    from numba.core.runtime import _nrt_python, rtsys
+
+    b = parse_branch("right-up-noflip")
+    q, T = _targets(robot3, 400, 11)
+    T = T[np.all(puma560.branch_of(q) == [1, 1, 1], axis=1)][:50]
+    robot3.solve(T[0], branch=b)  # compiled and warm
+    _nrt_python.memsys_enable_stats()
+    before = rtsys.get_allocation_stats().alloc
+    for k in range(len(T)):
+        assert robot3.solve(T[k], branch=b).converged[0]
+    # 6 per call, and a few targets' Levenberg-Marquardt scratch (11 arrays each)
+    assert rtsys.get_allocation_stats().alloc - before <= 6 * len(T) + 25

@@ -55,6 +55,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -171,6 +172,16 @@ class IKResult:
     history: IKHistory | None = None
     task_axes: tuple[int, ...] = (0, 1, 2, 3, 4, 5)
     branch_changed: BoolArray | None = None
+
+    @classmethod
+    def of_one_target(cls, **fields: Any) -> IKResult:
+        """The result of one target (a real-time solver's), every field given but
+        ``history`` and ``task_axes`` (their defaults). Filled in directly: the frozen
+        dataclass's ``__init__`` sets its nine fields one ``object.__setattr__`` at a
+        time, 1.8 µs, a sixth of a one-target solve."""
+        result = object.__new__(cls)
+        result.__dict__.update(history=None, task_axes=ALL_AXES, **fields)
+        return result
 
 
 # --------------------------------------------------------------------------- helpers

@@ -77,7 +77,16 @@ def jit(func: Kernel) -> Kernel:
     return cast(Kernel, numba.njit(cache=True, nogil=True)(func))
 
 
-@jit
+def inline_jit(func: Kernel) -> Kernel:
+    """:func:`jit` for a small kernel called per iteration, inlined into its callers by
+    numba. A call that is not inlined increments and decrements the (atomic) reference
+    count of each array argument: perf put 22-30 % of the Jacobi kernel's samples in
+    ``NRT_incref``/``NRT_decref``; inlined, the serial Jacobi solve of robot3 went from
+    11.8 to 8.9 µs per target and Newton-Raphson from 4.1 to 3.7 µs, with the same bits."""
+    return cast(Kernel, numba.njit(cache=True, nogil=True, inline="always")(func))
+
+
+@inline_jit
 def _pose_into(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     q: Buf, T: Buf, J: Buf, jacobian: bool,
@@ -160,7 +169,7 @@ def homogeneous(base: Array, links: Array, tool: Array) -> bool:
                 and np.all(tool[..., 3, :] == last))  # fmt: skip
 
 
-@jit
+@inline_jit
 def pose(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf, q: Buf, T: Buf
 ) -> None:  # fmt: skip
@@ -168,7 +177,7 @@ def pose(
     _pose_into(base, links, tool, offsets, prismatic, q, T, T, False)
 
 
-@jit
+@inline_jit
 def _pose_jacobian(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf, q: Buf, T: Buf, J: Buf,
 ) -> None:  # fmt: skip
@@ -177,7 +186,7 @@ def _pose_jacobian(
     _pose_into(base, links, tool, offsets, prismatic, q, T, J, True)
 
 
-@jit
+@inline_jit
 def _delta(T_from: Buf, T_to: Buf, out: Buf) -> None:
     """``differential_motion(T_from, T_to)`` into ``out`` (6,): origin difference and
     the axis-angle vector of ``R = R_to R_fromᵀ`` (its entries as scalars)."""
@@ -275,7 +284,7 @@ def _lu_solve6(A: Buf, b: Buf, x: Buf, M: Buf) -> bool:
     return True
 
 
-@jit
+@inline_jit
 def _errors(d: Buf) -> tuple[float, float]:
     """Radial position error (cm) and rotation angle (rad) of δ (6,)."""
     return (

@@ -41,6 +41,7 @@ from pipeline.kinematics.ik_compiled import (
     _delta,
     _errors,
     homogeneous,
+    inline_jit,
     jit,
     pose,
     run_in_shares,
@@ -64,13 +65,15 @@ _TWO_PI = 2.0 * math.pi
 _SINGULAR = puma560.WRIST_SINGULAR_TOL
 
 
-@jit
+@inline_jit
 def _wrap(t: float) -> float:
     """:func:`pipeline.kinematics.transforms.wrap_angle` of one angle: (-π, π]."""
-    return math.pi - np.mod(math.pi - t, _TWO_PI)
+    a = math.pi - t
+    # np.mod(a, 2π) is a itself for 0 <= a < 2π (fmod is exact): skip its call there
+    return math.pi - (a if 0.0 <= a < _TWO_PI else np.mod(a, _TWO_PI))
 
 
-@jit
+@inline_jit
 def _design_start(
     pre: Buf, post: Buf, branch: Buf, margins: Buf, target: Buf, q_near: Buf, q: Buf, Tw: Buf
 ) -> bool:
@@ -160,7 +163,7 @@ def _design_start(
     return True
 
 
-@jit
+@inline_jit
 def _into_limits(q: Buf, lower: Buf, upper: Buf, turn: Buf) -> None:
     """``pipeline.control._shift_into`` of one configuration (6,), in place."""
     for j in range(q.shape[0]):
@@ -186,7 +189,7 @@ OFF_BRANCH = 3
 WRIST_TURNS = np.array([1.0, -1.0, 2.0, -2.0, 3.0, -3.0, 4.0]) * (np.pi / 4.0)
 
 
-@jit
+@inline_jit
 def _to_sensor(X: Buf, T_base: Buf, target: Buf) -> None:
     """``target = X · T_base`` (4, 4): a pose in the design base frame in the sensor frame."""
     for r in range(4):
@@ -195,7 +198,7 @@ def _to_sensor(X: Buf, T_base: Buf, target: Buf) -> None:
                             + X[r, 2] * T_base[2, c] + X[r, 3] * T_base[3, c])  # fmt: skip
 
 
-@jit
+@inline_jit
 def _on_branch(q: Buf, branch: Buf) -> bool:
     """:func:`pipeline.robots.puma560.branch_of` of ``q`` (6,) equals ``branch`` (3,)."""
     s23, c23 = math.sin(q[1] + q[2]), math.cos(q[1] + q[2])
@@ -290,6 +293,43 @@ def _solve_realtime(
         _into_limits(q, lower, upper, turn)
 
 
+#: :class:`PumaSolver`'s constant arrays packed into one float array, in this order
+#: (six joints): base, links, tool, offsets, pre, post, branch, margins, resolution,
+#: step cap, settings, X, lower and upper limits, turn. One array instead of 15,
+#: because numba's dispatch costs ~0.18 µs per array argument (measured: a call of 32
+#: arrays 5.8 µs, of 4 arrays 1.1 µs), more than the kernel's own work on one target.
+_PACK_SIZES = (16, 96, 16, 6, 16, 16, 3, 2, 6, 6, 4, 16, 6, 6, 6)
+(_P_BASE, _P_LINKS, _P_TOOL, _P_OFFSETS, _P_PRE, _P_POST, _P_BRANCH, _P_MARGINS, _P_RES,
+ _P_LIMIT, _P_SETTINGS, _P_X, _P_LOWER, _P_UPPER, _P_TURN, _P_END) = (
+    np.cumsum((0, *_PACK_SIZES)).tolist())  # fmt: skip
+#: Its scratch packed likewise: q0, q, δ, errors, target, Tw, spare (2, 6), then the
+#: :func:`~pipeline.kinematics.ik_compiled.workspace` T, J, M, dq, q_new, δ_new.
+_SCRATCH_SIZES = (6, 6, 6, 2, 16, 16, 12, 16, 36, 42, 6, 6, 6)
+(_S_Q0, _S_Q, _S_DELTA, _S_ERRORS, _S_TARGET, _S_TW, _S_SPARE, _S_T, _S_J, _S_M, _S_DQ,
+ _S_QNEW, _S_DNEW, _S_END) = np.cumsum((0, *_SCRATCH_SIZES)).tolist()  # fmt: skip
+
+
+@jit
+def _solve_packed(
+    P: Buf, prismatic: Buf, S: Buf, info: Buf, T_base: Buf, q_near: Buf
+) -> None:  # fmt: skip
+    """:func:`_solve_realtime` of one target with the model ``P`` and the scratch ``S``
+    packed (:data:`_PACK_SIZES`, :data:`_SCRATCH_SIZES`): views, nothing allocated."""
+    ws = (S[_S_T:_S_J].reshape(4, 4), S[_S_J:_S_M].reshape(6, 6), S[_S_M:_S_DQ].reshape(6, 7),
+          S[_S_DQ:_S_QNEW], S[_S_QNEW:_S_DNEW], S[_S_DNEW:_S_END])  # fmt: skip
+    _solve_realtime(
+        P[_P_BASE:_P_LINKS].reshape(4, 4), P[_P_LINKS:_P_TOOL].reshape(6, 4, 4),
+        P[_P_TOOL:_P_OFFSETS].reshape(4, 4), P[_P_OFFSETS:_P_PRE], prismatic,
+        P[_P_PRE:_P_POST].reshape(4, 4), P[_P_POST:_P_BRANCH].reshape(4, 4),
+        P[_P_BRANCH:_P_MARGINS], P[_P_MARGINS:_P_RES], P[_P_RES:_P_LIMIT],
+        P[_P_LIMIT:_P_SETTINGS], P[_P_SETTINGS:_P_X], P[_P_X:_P_LOWER].reshape(4, 4),
+        T_base, q_near, S[_S_Q0:_S_Q], S[_S_Q:_S_DELTA], S[_S_DELTA:_S_ERRORS],
+        S[_S_TARGET:_S_TW].reshape(4, 4), S[_S_TW:_S_SPARE].reshape(4, 4),
+        S[_S_SPARE:_S_T].reshape(2, 6), ws, info, S[_S_ERRORS:_S_TARGET],
+        P[_P_LOWER:_P_UPPER], P[_P_UPPER:_P_TURN], P[_P_TURN:_P_END],
+    )  # fmt: skip
+
+
 #: Jacobi kernel outcomes besides converged: stalled (no progress in
 #: :data:`~pipeline.kinematics.ik.JACOBI_STALL_PATIENCE` iterations), no design
 #: inverse (both ``STATUS_UNREACHABLE``), and the iteration cap.
@@ -325,7 +365,7 @@ def _anderson(Qh: Buf, Gh: Buf, count: int, out: Buf, dF: Buf, dG: Buf, f: Buf) 
         out[i] = acc
 
 
-@jit
+@inline_jit
 def _jacobi_map(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
@@ -349,7 +389,7 @@ def _jacobi_map(
     return _design_start(pre, post, branch, margins, Tk, q, q_next, Tw)  # C.2 step 6
 
 
-@jit
+@inline_jit
 def _error_at(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     target: Buf, q: Buf, Ts: Buf, d: Buf, length: float,
@@ -376,7 +416,7 @@ def _jacobi_work(n: int) -> JacobiWork:
     )  # fmt: skip
 
 
-@jit
+@inline_jit
 def _jacobi_one(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
@@ -478,6 +518,11 @@ def _jacobi_targets(
         )  # fmt: skip
 
 
+#: Templates of a one-target result's flags and status (:meth:`PumaSolver.solve`).
+_ONE_TRUE, _ONE_FALSE = np.ones(1, bool), np.zeros(1, bool)
+_ONE_ZERO = np.zeros(1, np.int64)
+
+
 class PumaSolver:
     """Newton-Raphson from the Puma design start, bound to one signature and branch.
 
@@ -545,18 +590,25 @@ class PumaSolver:
         c = np.ascontiguousarray
         self.chain = chain
         self.branch = branch
-        self.resolution = c(np.broadcast_to(resolution, (n,)), float)
-        self.settings = (max_iter, position_tol_cm, orientation_tol_rad, max_step)
-        self._model = (
-            c(chain.base, float), c(chain.links, float), c(chain.tool, float),
-            c(chain.joint_offsets, float), c(chain.prismatic, np.bool_),
-            c(invert_transform(design_base)), c(invert_transform(flange_to_tool)),
-            np.array([branch.shoulder, branch.elbow, branch.wrist], float),
-            np.array(margins, float), self.resolution,
-            np.full(n, max_step), np.array(
-                [max_iter, chain.length_scale, position_tol_cm, orientation_tol_rad], float
-            ),
+        parts = (
+            chain.base, chain.links, chain.tool, chain.joint_offsets,
+            invert_transform(design_base), invert_transform(flange_to_tool),
+            [branch.shoulder, branch.elbow, branch.wrist], margins,
+            np.broadcast_to(resolution, (n,)), np.full(n, max_step),
+            [max_iter, chain.length_scale, position_tol_cm, orientation_tol_rad],
+            sensor_from_base, *limits,
         )  # fmt: skip
+        #: Every constant array of the kernels, packed (:data:`_PACK_SIZES`); the
+        #: arrays below are views of it.
+        self._packed = np.concatenate([np.asarray(a, float).ravel() for a in parts])
+        views = np.split(self._packed, np.cumsum(_PACK_SIZES)[:-1])
+        shapes = ((4, 4), (n, 4, 4), (4, 4), (n,), (4, 4), (4, 4)) + ((-1,),) * 5
+        model = [v.reshape(shape) for v, shape in zip(views, shapes, strict=False)]
+        self._prismatic = c(chain.prismatic, np.bool_)
+        model.insert(4, self._prismatic)
+        self.resolution = model[9]
+        self.settings = (max_iter, position_tol_cm, orientation_tol_rad, max_step)
+        self._model = tuple(model)
         if design is not None and not homogeneous(design.base, design.links, design.tool):
             raise ValueError("PumaSolver needs a design chain of homogeneous transforms")
         self.design = design
@@ -565,24 +617,33 @@ class PumaSolver:
             c(design.joint_offsets, float), np.array(jacobi_margins, float),
         )  # fmt: skip
         self._frames = (design_base, flange_to_tool)  # for the numpy design inverse
-        self._X = c(sensor_from_base, float)
-        self._limits = tuple(c(a, float) for a in limits)
+        self._X = views[11].reshape(4, 4)
+        self._limits = (views[12], views[13], views[14])
         self._q_ref = c(chain.joint_offsets, float)  # q^s: the default q_near
+        #: Scratch of :meth:`solve_one`, packed (:data:`_SCRATCH_SIZES`); the buffers
+        #: below are views of it.
+        self._scratch = np.empty(_S_END)
+        S = self._scratch
         #: The last solution of :meth:`solve_one` (6,), rad; overwritten by the next call
         #: (before the first: q^s). May be passed back as ``q_near``.
-        self.q = self._q_ref.copy()
+        self.q = S[_S_Q:_S_DELTA]
+        self.q[:] = self._q_ref
         #: The last start (the design inverse) of :meth:`solve_one` (6,), rad.
-        self.q0 = np.empty(n)
+        self.q0 = S[_S_Q0:_S_Q]
         #: The last final δ of :meth:`solve_one` (6,): cm and rad.
-        self.delta = np.empty(6)
+        self.delta = S[_S_DELTA:_S_ERRORS]
         #: The last kernel outcome and iteration count of :meth:`solve_one`.
         self.info = np.zeros(2, np.int64)
         #: Whether the last solution of :meth:`solve_one` lies on another branch (step 3).
         self.branch_changed = False
         #: The last position (cm) and rotation (rad) error of :meth:`solve_one`.
-        self.errors = np.empty(2)
-        self._target, self._Tw, self._spare = np.empty((4, 4)), np.empty((4, 4)), np.empty((2, 6))
-        self._ws = workspace(n)
+        self.errors = S[_S_ERRORS:_S_TARGET]
+        self._target = S[_S_TARGET:_S_TW].reshape(4, 4)
+        #: :meth:`solve`'s scratch and outcome for one target (the real-time buffers
+        #: above are :meth:`solve_one`'s alone).
+        one = np.empty(_S_END)
+        self._one = (one, np.zeros(2, np.int64), one[_S_Q:_S_DELTA].reshape(1, n),
+                     one[_S_ERRORS:_S_TARGET])  # fmt: skip
 
     def solve_one(self, T_base: Array, q_near: Array | None = None) -> bool:
         """Solve one pose (4, 4) given in the design base frame; True when converged.
@@ -598,9 +659,7 @@ class PumaSolver:
         result as ``Controller.solve``.
         """
         near = self._q_ref if q_near is None else q_near
-        _solve_realtime(*self._model, self._X, T_base, near, self.q0, self.q, self.delta,
-                        self._target, self._Tw, self._spare, self._ws, self.info, self.errors,
-                        *self._limits)  # fmt: skip
+        _solve_packed(self._packed, self._prismatic, self._scratch, self.info, T_base, near)
         if self.info[0] == FAST_CONVERGED or self.info[0] == OFF_BRANCH:
             self.branch_changed = self.info[0] == OFF_BRANCH
             return True
@@ -612,44 +671,57 @@ class PumaSolver:
         self.branch_changed = bool(res.branch_changed is not None and res.branch_changed[0])
         return bool(res.converged[0])
 
-    def solve(self, T_base: Array, q_near: Array) -> ik.IKResult:
+    def solve(self, T_base: Array, q_near: Array | None = None) -> ik.IKResult:
         """Solve targets (m, 4, 4) given in the design base frame from ``q_near``
-        (m, 6), rad.
+        ((6,) or (m, 6), rad; None: q^s).
 
         Batched: one kernel call (threads for large batches:
         :func:`~pipeline.kinematics.ik_compiled.run_in_shares`); every target
         is solved alone by the arithmetic of :meth:`solve_one`, so a batch
-        equals a loop bit for bit. Joints are shifted into the limits by ±2π
-        where that helps, as :meth:`solve_one` and
-        :meth:`pipeline.control.Controller.solve` do.
+        equals a loop bit for bit. One target takes :meth:`solve_one`'s kernel
+        call with buffers of its own (the result's arrays are the only allocations;
+        :attr:`q` and the other real-time buffers are left alone). Joints
+        are shifted into the limits by ±2π where that helps, as :meth:`solve_one`
+        and :meth:`pipeline.control.Controller.solve` do.
         """
         Tb = np.ascontiguousarray(T_base, float)
-        m, n = len(Tb), self.chain.n_joints
-        near = np.ascontiguousarray(np.broadcast_to(q_near, (m, n)), float)
-        solved = m == 1 and self.solve_one(Tb[0], near[0])
-        if solved and self.info[0] in (FAST_CONVERGED, OFF_BRANCH):
-            # One target the kernel solved: the real-time call's buffers.
-            return ik.IKResult(
-                q=self.q[None].copy(), converged=np.ones(1, bool),
-                iterations=self.info[1:].copy(), position_error_cm=self.errors[:1].copy(),
-                orientation_error_rad=self.errors[1:].copy(), status=np.zeros(1, np.int64),
-                branch_changed=np.array([self.info[0] == OFF_BRANCH]),
-            )  # fmt: skip
+        m, n = len(Tb), 6  # six joints (checked at construction)
+        if m == 1:
+            one = self._q_ref if q_near is None else np.ascontiguousarray(q_near, float)
+            S, info, q_one, errors_one = self._one
+            _solve_packed(self._packed, self._prismatic, S, info, Tb[0],
+                          one if q_near is None else one.reshape(n))  # fmt: skip
+            kind, count = info.tolist()
+            if kind == FAST_CONVERGED or kind == OFF_BRANCH:
+                # The result's arrays copied from small templates: ~0.2 µs each, where
+                # np.ones(1, bool) or a comparison ufunc take ~1 µs.
+                errors = errors_one.copy()
+                return ik.IKResult.of_one_target(
+                    q=q_one.copy(), converged=_ONE_TRUE.copy(),
+                    iterations=np.array([count]), position_error_cm=errors[:1],
+                    orientation_error_rad=errors[1:], status=_ONE_ZERO.copy(),
+                    branch_changed=(_ONE_FALSE if kind == FAST_CONVERGED else _ONE_TRUE).copy(),
+                )  # fmt: skip
+        near = np.ascontiguousarray(
+            np.broadcast_to(self._q_ref if q_near is None else q_near, (m, n)), float
+        )
         q0, q, delta, T = np.empty((m, n)), np.empty((m, n)), np.empty((m, 6)), np.empty_like(Tb)
         outcome, iterations = np.empty(m, np.int64), np.empty(m, np.int64)
         errors = np.empty((m, 2))
 
         def run(rows: slice) -> None:
-            _solve_targets(*self._model, self._X, Tb[rows], near[rows], q0[rows], q[rows],
-                           delta[rows], T[rows], outcome[rows], iterations[rows],
-                           errors[rows], *self._limits)  # fmt: skip
+            *model, X, lower, upper, turn = _own((*self._model, self._X, *self._limits))
+            _solve_targets(*model, X, Tb[rows], near[rows], q0[rows], q[rows], delta[rows],
+                           T[rows], outcome[rows], iterations[rows], errors[rows], lower,
+                           upper, turn)  # type: ignore[call-arg]  # fmt: skip
 
         run_in_shares(run, m)
         return self.finish(T, near, q0, q, outcome, iterations, delta, errors)
 
-    def solve_jacobi(self, T_base: Array, q_near: Array) -> ik.IKResult:
+    def solve_jacobi(self, T_base: Array, q_near: Array | None = None) -> ik.IKResult:
         """The Jacobi iteration (5.8) of targets (m, 4, 4) in the design base frame from
-        the design start near ``q_near`` (m, 6), rad (:meth:`solve`'s arguments).
+        the design start near ``q_near`` ((6,) or (m, 6), rad; None: q^s)
+        (:meth:`solve`'s arguments).
 
         Compiled while the map contracts (:func:`_jacobi_one`); the targets it
         defers run :func:`pipeline.kinematics.ik.jacobi_iterative` (Anderson
@@ -660,14 +732,16 @@ class PumaSolver:
         design = self._design
         Tb = np.ascontiguousarray(T_base, float)
         m, n = len(Tb), self.chain.n_joints
-        near = np.ascontiguousarray(np.broadcast_to(q_near, (m, n)), float)
+        near = np.ascontiguousarray(
+            np.broadcast_to(self._q_ref if q_near is None else q_near, (m, n)), float
+        )
         q0, q, delta, T = np.empty((m, n)), np.empty((m, n)), np.empty((m, 6)), np.empty_like(Tb)
         outcome, iterations = np.empty(m, np.int64), np.empty(m, np.int64)
 
         def run(rows: slice) -> None:
-            _jacobi_targets(*self._model, *design, self._X, Tb[rows], near[rows],
-                            q0[rows], q[rows], delta[rows], T[rows], outcome[rows],
-                            iterations[rows])  # fmt: skip
+            *model, X = _own((*self._model, *design, self._X))
+            _jacobi_targets(*model, X, Tb[rows], near[rows], q0[rows], q[rows], delta[rows],
+                            T[rows], outcome[rows], iterations[rows])  # type: ignore[call-arg]  # fmt: skip
 
         run_in_shares(run, m)
         lost = np.flatnonzero(outcome == NO_START)
@@ -729,6 +803,15 @@ class PumaSolver:
             position_error_cm=errors[:, 0], orientation_error_rad=errors[:, 1], status=status,
             branch_changed=changed,
         )  # fmt: skip
+
+
+def _own(arrays: tuple[Array, ...]) -> tuple[Array, ...]:
+    """Copies of the model's arrays for one share of a batch (one thread): a compiled
+    call increments and decrements the reference count of each array it is passed
+    and of each view it makes, atomically; on arrays shared by two threads these
+    counts bounce between the cores. Measured on robot3 (100,000 targets, two
+    threads, best of 5): Newton-Raphson 447,000 -> 486,000 targets/s, Jacobi unchanged."""
+    return tuple(a.copy() for a in arrays)
 
 
 def _shift(q: Array, limits: tuple[Array, ...]) -> None:
