@@ -1,5 +1,6 @@
-"""The speed-of-sound spline's basis (issue 18): numpy's FITPACK recurrence gives scipy's
-``BSpline.design_matrix`` bit for bit, so the refine tables keep their content hashes."""
+"""The speed-of-sound spline (issue 18): numpy's FITPACK recurrence gives scipy's
+``BSpline.design_matrix`` bit for bit, and the fit on the normal equations is the dense
+design's minimum-norm least squares."""
 
 from __future__ import annotations
 
@@ -29,3 +30,29 @@ def test_basis_is_scipys_design_matrix_bit_for_bit(seed: int) -> None:
     idx, val = spline.basis(t)
     np.testing.assert_array_equal(np.take_along_axis(got, idx, axis=1), val)
     assert np.array_equal(idx[:, 1:] - idx[:, :-1], np.ones((len(t), DEGREE), int))
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_fit_is_the_dense_least_squares(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    span = rng.uniform(600.0, 20_000.0)
+    t = np.sort(rng.uniform(0.0, span, int(span / 3.0)))  # a cycle every ~3 s
+    gap = seed % 2 == 1  # ~8 knot intervals no cycle touches
+    if gap:
+        t = t[(t < 0.3 * span) | (t > 0.3 * span + 1000.0)]
+    v = 1.0 + 0.01 * np.sin(t / 300.0) + rng.normal(0.0, 1e-4, len(t))
+    spline = TimeSpline.over(0.0, span, 120.0)
+    B = spline.design(t)
+    want = np.linalg.lstsq(B, v - v.mean(), rcond=None)[0] + v.mean()
+    got = spline.fit(t, v)
+    if not gap:  # well determined: the same coefficients
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-11)
+        return
+    # At a gap's edges a coefficient may be touched only by a basis function's tail
+    # (~1e-9): the dense lstsq keeps that direction (coefficients up to ~7e3 seen), the
+    # normal equations' cutoff (singular values squared) may drop it. Both fit the data
+    # equally well, and a coefficient no cycle touches keeps the mean in both.
+    untouched = ~(B != 0).any(axis=0)
+    assert untouched.any() and np.all(got[untouched] == v.mean())
+    fit_got, fit_want = np.linalg.norm(B @ got - v), np.linalg.norm(B @ want - v)
+    assert fit_got <= fit_want * (1 + 1e-9) + 1e-12

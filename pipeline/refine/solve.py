@@ -88,13 +88,16 @@ class Solution:
 def linearize(problem: Problem, x: Array) -> Linearization:
     """The block's linearization at ``x``, on the rows ``problem.keep`` leaves in the fit."""
     lin = problem.block.linearize(problem.model.positions(x[: problem.n_kin]), x[problem.n_kin :])
-    if problem.keep is None:
-        return lin
-    rows = np.flatnonzero((lin.pos < 0) | problem.keep[np.maximum(lin.pos, 0)])
+    return lin if problem.keep is None else kept_rows(lin, problem.keep)
+
+
+def kept_rows(lin: Linearization, keep: npt.NDArray[np.bool_]) -> Linearization:
+    """The rows of ``lin`` on the positions ``keep`` (K,) leaves, and every row of no
+    position (the block's own: rods, priors)."""
+    rows = np.flatnonzero((lin.pos < 0) | keep[np.maximum(lin.pos, 0)])
     if len(rows) == len(lin.r):
         return lin
-    d_x = lin.d_x[rows] if sparse.issparse(lin.d_x) else lin.d_x[rows]
-    return Linearization(r=lin.r[rows], pos=lin.pos[rows], d_p=lin.d_p[rows], d_x=d_x)
+    return Linearization(r=lin.r[rows], pos=lin.pos[rows], d_p=lin.d_p[rows], d_x=lin.d_x[rows])
 
 
 def residuals(problem: Problem, x: Array) -> Array:
@@ -114,16 +117,20 @@ def residuals_and_jacobian(problem: Problem, x: Array) -> tuple[Array, Array]:
     return lin.r, J
 
 
-def _block_information(lin: Linearization, X: Array, w: Array) -> Array:
-    """``XᵀWX`` of the block's ``d_x`` (dense ``X``): group by group when the block names
-    its rows' column patterns (:class:`~pipeline.refine.block.Linearization`), else one
-    product of ``X``."""
+def _block_information(lin: Linearization, w: Array) -> Array:
+    """``XᵀWX`` of the block's ``d_x`` (``X``): group by group when the block names its
+    rows' column patterns (:class:`~pipeline.refine.block.Linearization`), else one
+    product of ``X``, sparse where ``X`` is."""
     sw = np.sqrt(w)
-    if lin.d_x_groups is None or isinstance(lin.d_x, np.ndarray):
-        Xs = X * sw[:, None]
+    if isinstance(lin.d_x, np.ndarray):
+        Xs = lin.d_x * sw[:, None]
         return np.asarray(Xs.T @ Xs)
+    if lin.d_x_groups is None:  # a sparse product: linear in the rows, as the groups are
+        Xs = sparse.csr_array(lin.d_x.multiply(sw[:, None]))
+        return dense(Xs.T @ Xs)
     data = lin.d_x.data
-    out = np.zeros((X.shape[1], X.shape[1]))
+    n = lin.d_x.shape[1]
+    out = np.zeros((n, n))
     for rows, entries, cols in lin.d_x_groups:
         V = data[entries] * sw[rows, None]
         out[np.ix_(cols, cols)] += V.T @ V
@@ -142,13 +149,16 @@ def normal_equations(problem: Problem, x: Array, lin: Linearization) -> Normal:
 
     ``DᵀWD`` is block-diagonal (3 × 3 per position, summed by key), so the kinematic part
     costs ~R·9 + 3K·n_kin² instead of R·P² (robot3: 48,115 ranges on 601 positions).
-    ``∂p/∂θ``, ``D`` and the dense ``X`` are formed at the first call only.
+    ``DᵀWX`` is a sparse product when ``X`` is sparse: never the dense R × n_x, whose
+    columns (the speed spline's) grow with the session's length, so a dense ``X`` made
+    the cost grow as points² (refine 25.7 s at 1,600 points per sweep, 2.9 s at 400).
+    ``∂p/∂θ`` and ``D`` are formed at the first call only.
     """
     n_kin, K = problem.n_kin, problem.model.theta.shape[0]
     n = n_kin if problem.fixed_block else problem.n_params
     on = np.flatnonzero(lin.pos >= 0)
     key, d_p = lin.pos[on], lin.d_p[on]
-    cache: list[tuple[Array, sparse.csr_array, Array]] = []
+    cache: list[tuple[Array, sparse.csr_array]] = []
 
     def normal(w: Array) -> tuple[Array, Array]:
         if not cache:
@@ -156,9 +166,8 @@ def normal_equations(problem: Problem, x: Array, lin: Linearization) -> Normal:
             cols = np.repeat(on, 3)  # Dᵀ (3K, R): row 3k + i holds d_p[:, i] of k's rows
             rows = (3 * key[:, None] + np.arange(3)).ravel()
             Dt = sparse.csr_array((d_p.ravel(), (rows, cols)), (3 * K, len(lin.r)))
-            X = dense(lin.d_x) if n > n_kin else np.zeros((len(lin.r), 0))
-            cache.append((P, Dt, X))
-        P, Dt, X = cache[0]
+            cache.append((P, Dt))
+        P, Dt = cache[0]
         wk = w[on]
         H = np.empty((K, 3, 3))  # Σ over k's rows of w d_p d_pᵀ
         for i in range(3):
@@ -170,9 +179,9 @@ def normal_equations(problem: Problem, x: Array, lin: Linearization) -> Normal:
         g = np.empty(n)
         g[:n_kin] = P.T @ (DtW @ lin.r)
         if n > n_kin:
-            A[:n_kin, n_kin:] = P.T @ (DtW @ X)
+            A[:n_kin, n_kin:] = P.T @ dense(DtW @ lin.d_x)
             A[n_kin:, :n_kin] = A[:n_kin, n_kin:].T
-            A[n_kin:, n_kin:] = _block_information(lin, X, w)
+            A[n_kin:, n_kin:] = _block_information(lin, w)
             g[n_kin:] = lin.d_x.T @ (w * lin.r)  # sparse where the block's is
         return A, g
 

@@ -156,7 +156,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "refine",
-    2,  # 2: normal equations from the problem's structure (values move at rounding level)
+    3,  # 3: the rods' speed spline fit on its normal equations (linear in the samples)
     ("session", "joints", "positions", "frames", "ranges"),
     Params(),
     compute,

@@ -128,7 +128,7 @@ def verdict_line(session_dir: Path) -> str | None:
 
 STAGE = Stage(
     "verdict",
-    1,
+    2,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm)
     ("session", "refine", "uncertainty", "holdout", "chain"),
     Params(),
     compute,
