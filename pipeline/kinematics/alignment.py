@@ -97,7 +97,7 @@ def _observable_directions(residual: Callable[[Array], Array]) -> Array:
     at the start x = 0: right singular vectors above :data:`GAUGE_RCOND`."""
     _, s, Vt = np.linalg.svd(_jacobian(residual, np.zeros(12)), full_matrices=False)
     keep = s > GAUGE_RCOND * s[0]
-    if keep.all():  # no symmetry: the parameters as they are (same iterates as before)
+    if keep.all():  # no symmetry: the parameters as they are
         return np.eye(12)
     out: Array = Vt[keep].T
     return out
