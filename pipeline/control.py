@@ -208,7 +208,7 @@ class Controller:
         if not record_history and branch is not None and self._compilable:
             # The compiled path: one target takes the real-time kernel call, so this is
             # thin (cached solver and checks; q_near checked only when given).
-            solver = self._solvers.get(branch) or self.realtime(branch)
+            solver = self.realtime(branch)
             near = None if q_near is None else self._starts(T.shape[0], q_near)
             if method == "nr":
                 return solver.solve(T, near)  # shifted into the limits by the solver

@@ -100,11 +100,6 @@ def kept_rows(lin: Linearization, keep: npt.NDArray[np.bool_]) -> Linearization:
     return Linearization(r=lin.r[rows], pos=lin.pos[rows], d_p=lin.d_p[rows], d_x=lin.d_x[rows])
 
 
-def residuals(problem: Problem, x: Array) -> Array:
-    """The whitened residuals at ``x`` (R,)."""
-    return linearize(problem, x).r
-
-
 def residuals_and_jacobian(problem: Problem, x: Array) -> tuple[Array, Array]:
     """The whitened residuals (R,) and the dense ``∂r/∂x`` (R, n_params) at ``x`` from one
     linearization of the block, per the module docstring."""

@@ -687,10 +687,9 @@ class PumaSolver:
         Tb = np.ascontiguousarray(T_base, float)
         m, n = len(Tb), 6  # six joints (checked at construction)
         if m == 1:
-            one = self._q_ref if q_near is None else np.ascontiguousarray(q_near, float)
+            one = self._q_ref if q_near is None else np.ascontiguousarray(q_near, float).reshape(n)
             S, info, q_one, errors_one = self._one
-            _solve_packed(self._packed, self._prismatic, S, info, Tb[0],
-                          one if q_near is None else one.reshape(n))  # fmt: skip
+            _solve_packed(self._packed, self._prismatic, S, info, Tb[0], one)
             kind, count = info.tolist()
             if kind == FAST_CONVERGED or kind == OFF_BRANCH:
                 # The result's arrays copied from small templates: ~0.2 µs each, where
