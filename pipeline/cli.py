@@ -16,6 +16,7 @@ Every error is one line on stderr starting ``error:``.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import shlex
 import sys
@@ -24,7 +25,6 @@ import warnings
 from collections.abc import Iterator, Sequence
 from typing import Annotated, Any
 
-import numpy as np
 import typer
 from typer.core import TyperGroup
 
@@ -49,12 +49,14 @@ def _quiet_numpy(debug: bool) -> Iterator[None]:
     armsig checks its numbers itself (finite inputs, dropouts as NaN, feature
     checks) and reports what matters as warnings of its own or as an error, so
     numpy's ``invalid value`` / ``divide by zero`` / ``Mean of empty slice`` lines
-    would only precede those. Other warning categories still print.
+    would only precede those. They are all RuntimeWarnings (numpy's default error
+    state warns), so the filter silences them without importing numpy: a warm
+    ``identify`` needs none (issue 18). Other warning categories still print.
     """
     if debug:
         yield
         return
-    with np.errstate(all="ignore"), warnings.catch_warnings():
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         yield
 
@@ -162,7 +164,7 @@ def _joint_values(text: str, option: str) -> list[float]:
 
 def _finite(values: Sequence[float], option: str) -> list[float]:
     """``values`` when every one is finite, else the one-line error of ``option``."""
-    if not np.isfinite(values).all():
+    if not all(math.isfinite(v) for v in values):
         raise ArmsigError(
             f"{option} must hold finite numbers", got=" ".join(f"{v:g}" for v in values)
         )
@@ -191,6 +193,8 @@ def fk(
     of that tool. For a robot: the pose of its design flange.
     """
     from pathlib import Path
+
+    import numpy as np
 
     values = _joint_values(q, "--q")
     if Path(robot).is_dir():
@@ -569,6 +573,8 @@ def ik(
     as_json: JsonOption = False,
 ) -> None:
     """Joint readings that put the identified tool at a pose (signature-based control)."""
+    import numpy as np
+
     from pipeline.control import Controller, solve_arrow, solve_poses
     from pipeline.kinematics.ik import STATUS_NAMES
     from pipeline.kinematics.transforms import transform_from_xyz_rpy

@@ -1,4 +1,10 @@
-"""``identify``: recording -> cached stages -> signature.json -> report, under the session lock."""
+"""``identify``: recording -> cached stages -> signature.json -> report, under the session lock.
+
+A plain run (no ``force``, ``from_stage``, ``only`` or ``overrides``) that finds the
+session folder and the code as its last complete run left them answers from that run's
+record (:mod:`pipeline.identify_record`): the runner, the stage modules, numpy and
+pyarrow are imported only when there is something to check or to do (issue 18).
+"""
 
 from __future__ import annotations
 
@@ -7,10 +13,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from pipeline.signature_file import FILE_NAME, read_signature_document
+from pipeline import identify_record
+from pipeline.progress import Progress
+from pipeline.stages.base import StageRun, session_folder
 from pipeline.stages.lock import session_lock
-from pipeline.stages.runner import PRODUCT, StageRun, run, session_folder
-from pipeline.stages.verdict import verdict_line
 
 
 @dataclass(frozen=True)
@@ -38,25 +44,67 @@ def identify(
     """Bring the session's stages and signature up to date, then write its report
     (``progress``: where the progress line of the stages goes; None: silent)."""
     sdir = session_folder(session_dir)
+    plain = not force and from_stage is None and only is None and not overrides
     with session_lock(sdir):  # one lock for stages, signature and report
-        runs = run(
-            sdir,
-            force=force,
-            from_stage=from_stage,
-            only=only,
-            overrides=overrides,
-            progress=progress,
-        )
-        if next(r for r in runs if r.name == PRODUCT[0]).action == "not written":
-            why = (
-                f"{FILE_NAME} not written: stages after --only {only} are stale; "
-                f"`pipeline identify {sdir}` brings them and the signature up to date"
+        done = identify_record.recall(sdir, report) if plain else None
+        if done is not None:
+            return _replayed(sdir, done, progress)
+        result = _run(sdir, force, from_stage, only, overrides, report, progress)
+        if plain and result.signature is not None:
+            identify_record.remember(
+                sdir,
+                report,
+                [r.name for r in result.runs],
+                str(result.signature.relative_to(sdir)),
+                None if result.report is None else str(result.report.relative_to(sdir)),
+                result.warnings,
+                result.verdict,
             )
-            return IdentifyResult(runs, None, None, [why])
-        sig = sdir / FILE_NAME
-        doc = read_signature_document(sig)
-        rep = _report_if_stale(sdir, doc["provenance"]["stages"]) if report else None
-        line = verdict_line(sdir)
+    return result
+
+
+def _replayed(sdir: Path, done: dict[str, Any], progress: TextIO | None) -> IdentifyResult:
+    """What the runner would return for a session the record says is complete."""
+    runs = identify_record.replay(done)
+    bar = Progress("identify", len(runs) - 1, progress, unit="stages")  # as the runner's
+    for _ in runs[:-1]:
+        bar.step()
+    report = None if done["report"] is None else sdir / done["report"]
+    return IdentifyResult(runs, sdir / done["signature"], report, done["warnings"], done["verdict"])
+
+
+def _run(
+    sdir: Path,
+    force: bool,
+    from_stage: str | None,
+    only: str | None,
+    overrides: Mapping[str, Mapping[str, Any]] | None,
+    report: bool,
+    progress: TextIO | None,
+) -> IdentifyResult:
+    """The runner's full check and work (call under the session lock)."""
+    from pipeline.signature_file import FILE_NAME, read_signature_document
+    from pipeline.stages.runner import PRODUCT, run
+    from pipeline.stages.verdict import verdict_line
+
+    runs = run(
+        sdir,
+        force=force,
+        from_stage=from_stage,
+        only=only,
+        overrides=overrides,
+        progress=progress,
+    )
+    if next(r for r in runs if r.name == PRODUCT[0]).action == "not written":
+        why = (
+            f"{FILE_NAME} not written: stages after --only {only} are stale; "
+            f"`pipeline identify {sdir}` brings them and the signature up to date"
+        )
+        return IdentifyResult(runs, None, None, [why])
+    sig = sdir / FILE_NAME
+    doc = read_signature_document(sig)
+    rep = _report_if_stale(sdir, doc["provenance"]["stages"]) if report else None
+    line = verdict_line(sdir)
     return IdentifyResult(runs, sig, rep, doc["warnings"], line)
 
 

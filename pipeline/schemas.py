@@ -8,21 +8,13 @@ from collections.abc import Callable
 from functools import cache
 from importlib import resources
 from pathlib import Path
-from typing import Any
-
-import pyarrow as pa
+from typing import TYPE_CHECKING, Any
 
 from pipeline.errors import SchemaError
 
-_TYPES: dict[str, pa.DataType] = {
-    "int32": pa.int32(),
-    "int64": pa.int64(),
-    "float64": pa.float64(),
-    "bool": pa.bool_(),
-    "string": pa.string(),
-    "list<float64>": pa.list_(pa.float64()),
-    "list<string>": pa.list_(pa.string()),
-}
+if TYPE_CHECKING:  # pyarrow where tables are made (a warm identify needs none: issue 18)
+    import pyarrow as pa
+
 UNITS = ("", "cm", "cm2", "deg", "s", "degF")
 
 
@@ -99,6 +91,17 @@ def mcap_json_schema(channel: str) -> dict[str, Any]:
 @cache
 def arrow_schema(name: str) -> pa.Schema:
     """Arrow schema of a table, with ``unit`` and ``description`` in each field's metadata."""
+    import pyarrow as pa
+
+    types = {
+        "int32": pa.int32(),
+        "int64": pa.int64(),
+        "float64": pa.float64(),
+        "bool": pa.bool_(),
+        "string": pa.string(),
+        "list<float64>": pa.list_(pa.float64()),
+        "list<string>": pa.list_(pa.string()),
+    }
     path = schema_dir() / "arrow" / f"{name}.json"
     doc = _read_json(path)
     fields = []
@@ -108,8 +111,8 @@ def arrow_schema(name: str) -> pa.Schema:
             fname, ftype, unit = f["name"], f["type"], f["unit"]
         except KeyError as exc:
             raise SchemaError(f"{where}: missing key {exc}", expected="name, type, unit") from exc
-        if ftype not in _TYPES:
-            raise SchemaError(f"{where}: unknown type", expected=", ".join(_TYPES), got=repr(ftype))
+        if ftype not in types:
+            raise SchemaError(f"{where}: unknown type", expected=", ".join(types), got=repr(ftype))
         if unit not in UNITS:
             raise SchemaError(
                 f"{where}: unknown unit", expected=", ".join(map(repr, UNITS)), got=repr(unit)
@@ -121,7 +124,7 @@ def arrow_schema(name: str) -> pa.Schema:
             )
         meta = {"unit": unit, "description": f.get("description", "")}
         fields.append(
-            pa.field(fname, _TYPES[ftype], nullable=bool(f.get("nullable", False)), metadata=meta)
+            pa.field(fname, types[ftype], nullable=bool(f.get("nullable", False)), metadata=meta)
         )
     meta = {"schema_name": doc.get("name", name), "schema_version": str(doc.get("version", 1))}
     return pa.schema(fields, metadata=meta)
@@ -138,6 +141,8 @@ def validate_table(table: pa.Table, name: str, source: str = "table") -> pa.Tabl
     SchemaError
         Naming the source, the column, what was expected and what arrived.
     """
+    import pyarrow as pa
+
     schema = arrow_schema(name)
     if table.column_names != schema.names:
         raise SchemaError(

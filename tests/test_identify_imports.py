@@ -1,6 +1,7 @@
 """What a cold and a warm `identify` import (issue 18): a cached run needs none of the
-heavy libraries, a cold one no pyplot, no scipy.stats and no scipy.optimize. Each run in a
-fresh interpreter."""
+heavy libraries, and a run of an unchanged session (its record: pipeline.identify_record)
+not even numpy, pyarrow or the runner; a cold one no pyplot, no scipy.stats and no
+scipy.optimize. Each run in a fresh interpreter."""
 
 import json
 import shutil
@@ -67,6 +68,17 @@ def test_cold_run_imports_no_pyplot_no_scipy_stats_no_scipy_optimize(session: Pa
 def test_warm_run_imports_none_of_the_heavy_libraries(session: Path) -> None:
     _imported(session)  # writes the report
     assert _imported(session) == []
+
+
+def test_unchanged_session_imports_no_numpy_no_pyarrow_no_runner(session: Path) -> None:
+    _imported(session)  # writes the report and the record
+    assert _imported(session, ("numpy", "pyarrow", "pipeline.stages.runner")) == []
+    (session / "stages" / ".identified.json").unlink()  # the full check: the runner
+    assert _imported(session, ("numpy", "pyarrow", "pipeline.stages.runner")) == [
+        "numpy",
+        "pipeline.stages.runner",
+        "pyarrow",
+    ]
 
 
 def test_warm_run_imports_no_compute_module(session: Path) -> None:

@@ -9,13 +9,27 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-import pyarrow as pa
+from pipeline.errors import ArmsigError, StageError
 
-from pipeline.errors import ArmsigError
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 RECORDING = "recording"
+
+
+def session_folder(session_dir: str | Path) -> Path:
+    """``session_dir`` as a Path, refused with one line unless it holds a recording."""
+    sdir = Path(session_dir)
+    if not (sdir / "recording.mcap").is_file():
+        raise StageError(
+            f"{sdir}: no recording.mcap" + ("" if sdir.is_dir() else " (no such folder)"),
+            expected="a session folder holding recording.mcap",
+            fix="`pipeline simulate NAME` records a simulated session",
+        )
+    return sdir
 
 
 def check_param(params: Any, stage: str, name: str, ok: bool, rule: str) -> None:
@@ -74,3 +88,13 @@ class Stage:
 
     def params_dict(self, params: Any | None = None) -> dict[str, Any]:
         return dataclasses.asdict(params if params is not None else self.params)
+
+
+@dataclass(frozen=True)
+class StageRun:
+    """What the runner did with one stage: ``ran`` or ``cached``, and how long it took."""
+
+    name: str
+    action: str
+    seconds: float
+    rows: int

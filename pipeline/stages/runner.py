@@ -37,7 +37,7 @@ from pipeline.atomic import remove_debris
 from pipeline.errors import ArmsigError, StageError
 from pipeline.progress import Progress
 from pipeline.schemas import validate_table
-from pipeline.stages.base import RECORDING, Stage
+from pipeline.stages.base import RECORDING, Stage, StageRun, session_folder
 from pipeline.stages.lock import session_lock
 from pipeline.stages.recording import file_sha256, read_recording
 from pipeline.stages.session import session_sensor
@@ -158,18 +158,6 @@ def _load_file_input(sdir: Path, name: str, hashes: _Hashes) -> Any:
     return _function(loader)(path)
 
 
-def session_folder(session_dir: str | Path) -> Path:
-    """``session_dir`` as a Path, refused with one line unless it holds a recording."""
-    sdir = Path(session_dir)
-    if not (sdir / "recording.mcap").is_file():
-        raise StageError(
-            f"{sdir}: no recording.mcap" + ("" if sdir.is_dir() else " (no such folder)"),
-            expected="a session folder holding recording.mcap",
-            fix="`pipeline simulate NAME` records a simulated session",
-        )
-    return sdir
-
-
 def stage_path(session_dir: Path, name: str) -> Path:
     """Where a stage's committed output lives."""
     return session_dir / "stages" / f"{name}.arrow"
@@ -191,16 +179,6 @@ class StageStatus:
     name: str
     state: str
     reason: str
-
-
-@dataclass(frozen=True)
-class StageRun:
-    """What the runner did with one stage: ``ran`` or ``cached``, and how long it took."""
-
-    name: str
-    action: str
-    seconds: float
-    rows: int
 
 
 def _params(stage: Stage, overrides: Mapping[str, Mapping[str, Any]]) -> Any:
