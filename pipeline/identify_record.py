@@ -9,7 +9,8 @@ code, would find every stage, the signature and the report fresh and change noth
 That run leaves ``stages/.identified.json``: a digest of the folder (every file's
 path and SHA-256, every folder's path), a digest of the code (the path, size and
 modification time of every file of the ``pipeline`` package and of the schemas, as
-Python's own bytecode cache decides whether a module changed), and what a warm run
+Python's own bytecode cache decides whether a module changed; the same of the
+libraries' ``__init__`` files and the interpreter's version), and what a warm run
 returns: the stage names, the signature's warnings and the verdict line, with their
 SHA-256 (a record changed since it was written is no record).
 
@@ -23,8 +24,10 @@ format. The record is read and written under the session lock, and written atomi
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import json
 import os
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -35,6 +38,9 @@ from pipeline.stages.lock import LOCK_NAME
 
 RECORD = Path("stages") / ".identified.json"
 FORMAT = 1
+#: The libraries a run computes and checks with: an upgrade (pip rewrites a package's
+#: files) means a full check, as a new interpreter does.
+LIBRARIES = ("numpy", "scipy", "pyarrow", "mcap", "zstandard", "fastjsonschema", "matplotlib")
 #: What a warm run replays: every stage, then the signature, ``cached``.
 CACHED = "cached"
 
@@ -72,6 +78,12 @@ def session_digest(sdir: Path) -> str:
     return h.hexdigest()
 
 
+def _stamp(path: Path) -> str:
+    """A file's size and modification time (ns): what Python's bytecode cache compares."""
+    st = path.stat()
+    return f"{st.st_size} {st.st_mtime_ns}"
+
+
 def code_digest(roots: tuple[Path, ...] | None = None) -> str:
     """SHA-256 over the path, size and modification time (ns) of every file under
     ``roots`` (default: the ``pipeline`` package and the schemas folder, which a
@@ -83,12 +95,20 @@ def code_digest(roots: tuple[Path, ...] | None = None) -> str:
     h = hashlib.sha256()
     for root in roots:
         for rel, path in _files(root, set()):
-            stamp = ""
-            if path is not None:
-                st = path.stat()
-                stamp = f"{st.st_size} {st.st_mtime_ns}"
+            stamp = "" if path is None else _stamp(path)
             h.update(f"{root}\0{rel}\0{stamp}\0".encode())
     return h.hexdigest()
+
+
+def library_stamps() -> list[str]:
+    """The interpreter's version and path, and the path, size and modification time (ns)
+    of each of :data:`LIBRARIES`' ``__init__`` file (found, not imported)."""
+    stamps = [sys.version, sys.executable]
+    for name in LIBRARIES:
+        spec = importlib.util.find_spec(name)
+        origin = None if spec is None else spec.origin
+        stamps.append(f"{name} {origin} {'' if origin is None else _stamp(Path(origin))}")
+    return stamps
 
 
 def _key(sdir: Path, report: bool) -> dict[str, Any] | None:
@@ -98,6 +118,7 @@ def _key(sdir: Path, report: bool) -> dict[str, Any] | None:
             "format": FORMAT,
             "report": report,
             "code": code_digest(),
+            "libraries": library_stamps(),
             "session": session_digest(sdir),
         }
     except _Linked:

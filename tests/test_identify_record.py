@@ -119,10 +119,11 @@ def test_a_linked_folder_has_no_record(session: Path, runner_calls: list[int]) -
     assert runner_calls == [1, 1]
 
 
-def test_other_code_gets_the_full_check(
-    session: Path, runner_calls: list[int], monkeypatch: pytest.MonkeyPatch
+@pytest.mark.parametrize("stamp", ["code_digest", "library_stamps"])
+def test_other_code_or_libraries_get_the_full_check(
+    session: Path, runner_calls: list[int], monkeypatch: pytest.MonkeyPatch, stamp: str
 ) -> None:
-    monkeypatch.setattr(identify_record, "code_digest", lambda: "0" * 64)
+    monkeypatch.setattr(identify_record, stamp, lambda: "other")
     identify(session)
     assert runner_calls == [1]
     identify(session)  # the record of this code
