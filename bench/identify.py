@@ -13,6 +13,7 @@ imports, stages, signature and report included).
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import resource
@@ -36,10 +37,10 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def _run(cmd: list[str]) -> tuple[float, float]:
+def _run(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
     """Wall and CPU seconds of one command."""
     c0, t0 = _cpu(), time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True)
+    subprocess.run(cmd, check=True, capture_output=True, env=env)
     return time.perf_counter() - t0, _cpu() - c0
 
 
@@ -48,6 +49,44 @@ def _cold(exe: str, d: Path) -> tuple[float, float]:
         shutil.rmtree(d / name, ignore_errors=True)
     (d / "signature.json").unlink(missing_ok=True)
     return _run([exe, "identify", str(d)])
+
+
+#: The stages of the refinement (issue 15), which commit ace4dae did not have.
+REFINEMENT = ("refine", "uncertainty", "holdout", "verdict")
+_REPORT_ALONE = (
+    "import sys; from pipeline.report.identification import write_report; write_report(sys.argv[1])"
+)
+
+
+def _floor(exe: str, d: Path, cold_target_cpu: float | None) -> None:
+    """Where a cold run's CPU goes: the report alone (a fresh process: imports, matplotlib,
+    the PNGs) and the refinement's stages (their seconds from ``--json``; one thread, so
+    wall ~ CPU on a quiet machine), against the issue-18 cold target when known."""
+    refine: list[float] = []
+    report: list[float] = []
+    for _ in range(max(1, RUNS // 2)):
+        for name in ("stages", "report"):
+            shutil.rmtree(d / name, ignore_errors=True)
+        (d / "signature.json").unlink(missing_ok=True)
+        out = subprocess.run(
+            [exe, "identify", str(d), "--no-report", "--json"],
+            check=True, capture_output=True, text=True,
+        )  # fmt: skip
+        stages = json.loads(out.stdout)["stages"]
+        refine.append(sum(r["seconds"] for r in stages if r["name"] in REFINEMENT))
+        shutil.rmtree(d / "report", ignore_errors=True)
+        python = str(Path(exe).with_name("python"))
+        env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}  # as the console script starts
+        report.append(_run([python, "-c", _REPORT_ALONE, str(d)], env)[1])
+    print(
+        f"{'report alone (fresh process: imports, matplotlib, PNGs), CPU':60s} {min(report):7.3f} s"
+    )
+    print(f"{'refinement stages (' + ', '.join(REFINEMENT) + ')':60s} {min(refine):7.3f} s")
+    if cold_target_cpu is not None:
+        print(
+            f"report + refinement {min(report) + min(refine):.3f} s against the cold target "
+            f"{cold_target_cpu:.3f} s CPU (0.5 x the baseline's cold run)"
+        )
 
 
 def _scaling(exe: str, tmp: Path) -> None:
@@ -114,5 +153,11 @@ def main() -> None:
                 "(for the issue-18 ratios set BENCH_BASELINE to a checkout of ace4dae with "
                 "its own .venv)"
             )
+        first = min(times["baseline " + bases[0]]["cold CPU"]) if bases else None
+        _floor(
+            exes["this checkout"],
+            dirs["this checkout"],
+            None if first is None else COLD_TARGET * first,
+        )
         if os.environ.get("BENCH_SCALING", "1") != "0":
             _scaling(exes["this checkout"], Path(tmp))
