@@ -166,7 +166,10 @@ def remember(
         "verdict": verdict,
     }
     doc = {"key": key, "run": run, "digest": _digest(run)}
-    write_text_atomic(sdir / RECORD, json.dumps(doc, indent=1))
+    try:
+        write_text_atomic(sdir / RECORD, json.dumps(doc, indent=1))
+    except OSError:  # e.g. a read-only stages folder: warm runs then get the full check
+        pass
 
 
 def replay(run: dict[str, Any]) -> list[StageRun]:

@@ -119,6 +119,19 @@ def test_a_linked_folder_has_no_record(session: Path, runner_calls: list[int]) -
     assert runner_calls == [1, 1]
 
 
+def test_a_record_that_cannot_be_written_is_no_error(
+    identified_session: Path, tmp_path: Path, runner_calls: list[int]
+) -> None:
+    d = tmp_path / "s"
+    shutil.copytree(identified_session, d)
+    (d / identify_record.RECORD).unlink(missing_ok=True)
+    (d / identify_record.RECORD).mkdir()  # not writable as a file, even by root
+    assert identify(d, report=False).signature is not None
+    assert identify(d, report=False).signature is not None
+    assert runner_calls == [1, 1]
+    assert not [p for p in (d / "stages").iterdir() if p.name.endswith(".tmp")]
+
+
 @pytest.mark.parametrize("stamp", ["code_digest", "library_stamps"])
 def test_other_code_or_libraries_get_the_full_check(
     session: Path, runner_calls: list[int], monkeypatch: pytest.MonkeyPatch, stamp: str
