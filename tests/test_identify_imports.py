@@ -1,5 +1,5 @@
 """What a cold and a warm `identify` import (issue 18): a cached run needs none of the
-heavy libraries, and a run of an unchanged session (its record: pipeline.identify_record)
+heavy libraries, and a run of an unchanged session (its record: pipeline.identify.record)
 not even numpy, pyarrow or the runner; a cold one no pyplot, no scipy.stats and no
 scipy.optimize. Each run in a fresh interpreter."""
 

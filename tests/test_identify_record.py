@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 import pipeline.stages.runner as runner
-from pipeline import identify_record
+from pipeline.identify import record as identify_record
 from pipeline.cli import app
 from pipeline.identify import IdentifyResult, identify
 
@@ -187,3 +187,17 @@ def test_the_code_digest_sees_a_touched_file(tmp_path: Path) -> None:
     assert identify_record.code_digest((tmp_path,)) != before
     (tmp_path / "n.py").write_text("")
     assert identify_record.code_digest((tmp_path,)) != before
+
+
+def test_the_code_digest_covers_every_stage_module() -> None:
+    import pipeline.stages.dh as dh
+
+    path = Path(dh.__file__)
+    st = path.stat()
+    before = identify_record.code_digest()
+    try:
+        os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 1))
+        assert identify_record.code_digest() != before
+    finally:
+        os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert identify_record.code_digest() == before

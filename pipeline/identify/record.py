@@ -91,7 +91,7 @@ def code_digest(roots: tuple[Path, ...] | None = None) -> str:
     if roots is None:
         from pipeline.schemas import schema_dir
 
-        roots = tuple(dict.fromkeys((Path(__file__).resolve().parent, schema_dir())))
+        roots = tuple(dict.fromkeys((Path(__file__).resolve().parents[1], schema_dir())))
     h = hashlib.sha256()
     for root in roots:
         for rel, path in _files(root, set()):

@@ -2,7 +2,7 @@
 
 A plain run (no ``force``, ``from_stage``, ``only`` or ``overrides``) that finds the
 session folder and the code as its last complete run left them answers from that run's
-record (:mod:`pipeline.identify_record`): the runner, the stage modules, numpy and
+record (:mod:`pipeline.identify.record`): the runner, the stage modules, numpy and
 pyarrow are imported only when there is something to check or to do (issue 18).
 """
 
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from pipeline import identify_record
+from pipeline.identify import record
 from pipeline.progress import Progress
 from pipeline.stages.base import StageRun, session_folder
 from pipeline.stages.lock import session_lock
@@ -46,12 +46,12 @@ def identify(
     sdir = session_folder(session_dir)
     plain = not force and from_stage is None and only is None and not overrides
     with session_lock(sdir):  # one lock for stages, signature and report
-        done = identify_record.recall(sdir, report) if plain else None
+        done = record.recall(sdir, report) if plain else None
         if done is not None:
             return _replayed(sdir, done, progress)
         result = _run(sdir, force, from_stage, only, overrides, report, progress)
         if plain and result.signature is not None:
-            identify_record.remember(
+            record.remember(
                 sdir,
                 report,
                 [r.name for r in result.runs],
@@ -65,7 +65,7 @@ def identify(
 
 def _replayed(sdir: Path, done: dict[str, Any], progress: TextIO | None) -> IdentifyResult:
     """What the runner would return for a session the record says is complete."""
-    runs = identify_record.replay(done)
+    runs = record.replay(done)
     bar = Progress("identify", len(runs) - 1, progress, unit="stages")  # as the runner's
     for _ in runs[:-1]:
         bar.step()
