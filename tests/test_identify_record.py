@@ -13,9 +13,9 @@ import pytest
 from typer.testing import CliRunner
 
 import pipeline.stages.runner as runner
-from pipeline.identify import record as identify_record
 from pipeline.cli import app
 from pipeline.identify import IdentifyResult, identify
+from pipeline.identify import record as identify_record
 
 
 @pytest.fixture
