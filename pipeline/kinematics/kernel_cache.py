@@ -44,7 +44,6 @@ the kernels are compiled in memory, once per process: slower to start, never sta
 from __future__ import annotations
 
 import hashlib
-import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator
@@ -128,9 +127,10 @@ def choose_cache_dir(digest: str, user_dir: str, tree_dir: Path) -> Path | None:
 @cache
 def cache_dir() -> Path | None:
     """This process's cache folder for the kernels (None: compile in memory)."""
-    return choose_cache_dir(
-        sources_digest(), numba.config.CACHE_DIR, Path(__file__).resolve().parent / "__pycache__"
-    )
+    # numba.config's names are set from the environment at runtime: unknown to mypy.
+    user_dir = str(numba.config.CACHE_DIR)  # type: ignore[attr-defined]
+    tree_dir = Path(__file__).resolve().parent / "__pycache__"
+    return choose_cache_dir(sources_digest(), user_dir, tree_dir)
 
 
 @contextmanager
