@@ -114,6 +114,10 @@ def test_unwritable_folder_means_no_disk_cache(tmp_path: Path) -> None:
     blocker.write_text("")
     assert C.choose_cache_dir("d", str(blocker / "cache"), tmp_path) is None
     assert C.choose_cache_dir("d", "", blocker / "__pycache__") is None
+    assert C.choose_cache_dir("d", "", blocker / "__pycache__", blocker / "home") is None
+    # A read-only tree: the user's cache folder, named for the digest too.
+    home = C.choose_cache_dir("d", "", blocker / "__pycache__", tmp_path / "home")
+    assert home == tmp_path / "home/armsig-kernels-d" and home.is_dir()
 
 
 _PROBE = """
@@ -195,3 +199,19 @@ def test_a_change_to_an_inlined_kernel_of_another_file_recompiles(tmp_path: Path
     assert text.count("np.sqrt(d[0] * d[0]") == 1
     source.write_text(text.replace("np.sqrt(d[0] * d[0]", "2.0 * np.sqrt(d[0] * d[0]"))
     assert error() == 2.0 * before
+
+
+def test_read_only_tree_caches_in_the_user_cache_or_in_memory(tmp_path: Path) -> None:
+    """A ``__pycache__`` that cannot be written (here a file: the tests run as root,
+    where permissions would not stop a write) sends the cache to the user's cache."""
+    skip = shutil.ignore_patterns("__pycache__")
+    shutil.copytree(ROOT / "pipeline", tmp_path / "pipeline", ignore=skip)
+    (tmp_path / "pipeline/kinematics/__pycache__").write_text("")
+    home = tmp_path / "home"
+    env = {"PYTHONPATH": str(tmp_path), "XDG_CACHE_HOME": str(home)}
+    folder, *caches = _run(_PROBE, env, tmp_path).split()
+    assert Path(folder) == home / f"armsig/armsig-kernels-{C.sources_digest()}"
+    assert caches == ["FunctionCache", "FunctionCache"]
+    assert {"puma560_solver._wrap", "ik_compiled._delta"} <= _index_files(Path(folder))
+    env["XDG_CACHE_HOME"] = str(tmp_path / "pipeline/kinematics/__pycache__")
+    assert _run(_PROBE, env, tmp_path).split() == ["None", "NullCache", "NullCache"]

@@ -36,14 +36,18 @@ otherwise ``numba-kernels-<digest>`` in this package's ``__pycache__`` (beside
 the sources, as before). When a new folder is made in ``__pycache__`` the
 other ``numba-kernels-*`` folders there are removed: they hold code of sources
 this checkout no longer has. Inside a user's ``NUMBA_CACHE_DIR`` (which several
-checkouts or versions may share) old folders are left to the user. Where the
-folder cannot be written (read-only install, or an unusable ``NUMBA_CACHE_DIR``)
-the kernels are compiled in memory, once per process: slower to start, never stale.
+checkouts or versions may share) old folders are left to the user. Where
+``__pycache__`` cannot be written (read-only install) the folder is made in the
+user's cache, ``$XDG_CACHE_HOME/armsig`` or ``~/.cache/armsig`` (as numba itself
+falls back to its user-wide folder; shared by installs, so not pruned either).
+Where no folder can be written (or an unusable ``NUMBA_CACHE_DIR``) the kernels
+are compiled in memory, once per process: slower to start, never stale.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator
@@ -103,11 +107,14 @@ def _writable(folder: Path) -> bool:
     return True
 
 
-def choose_cache_dir(digest: str, user_dir: str, tree_dir: Path) -> Path | None:
+def choose_cache_dir(
+    digest: str, user_dir: str, tree_dir: Path, home_dir: Path | None = None
+) -> Path | None:
     """The kernels' cache folder for ``digest`` (None: compile in memory).
 
     ``user_dir``: numba's ``CACHE_DIR`` as the user set it ("" when unset);
-    ``tree_dir``: the ``__pycache__`` beside the sources. A folder newly made in
+    ``tree_dir``: the ``__pycache__`` beside the sources; ``home_dir``: the user's
+    cache, used where ``tree_dir`` cannot be written. A folder newly made in
     ``tree_dir`` removes its stale ``numba-kernels-*`` siblings.
     """
     if user_dir:
@@ -116,7 +123,10 @@ def choose_cache_dir(digest: str, user_dir: str, tree_dir: Path) -> Path | None:
     folder = tree_dir / f"{TREE_PREFIX}{digest}"
     fresh = not folder.is_dir()
     if not _writable(folder):
-        return None
+        if home_dir is None:
+            return None
+        folder = home_dir / f"{USER_PREFIX}{digest}"
+        return folder if _writable(folder) else None
     if fresh:
         for old in tree_dir.glob(f"{TREE_PREFIX}*"):
             if old != folder:
@@ -130,7 +140,12 @@ def cache_dir() -> Path | None:
     # numba.config's names are set from the environment at runtime: unknown to mypy.
     user_dir = str(numba.config.CACHE_DIR)  # type: ignore[attr-defined]
     tree_dir = Path(__file__).resolve().parent / "__pycache__"
-    return choose_cache_dir(sources_digest(), user_dir, tree_dir)
+    try:
+        home = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+        home_dir: Path | None = home / "armsig"
+    except RuntimeError:  # no home directory to be found
+        home_dir = None
+    return choose_cache_dir(sources_digest(), user_dir, tree_dir, home_dir)
 
 
 @contextmanager
