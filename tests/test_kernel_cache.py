@@ -120,6 +120,18 @@ def test_unwritable_folder_means_no_disk_cache(tmp_path: Path) -> None:
     assert home == tmp_path / "home/armsig-kernels-d" and home.is_dir()
 
 
+def test_unreadable_sources_mean_no_disk_cache(monkeypatch: pytest.MonkeyPatch) -> None:
+    def unreadable(*_: object) -> str:
+        raise FileNotFoundError("ik.py")  # e.g. the package imported from a zip
+
+    monkeypatch.setattr(C, "sources_digest", unreadable)
+    C.cache_dir.cache_clear()
+    try:
+        assert C.cache_dir() is None
+    finally:
+        C.cache_dir.cache_clear()
+
+
 _PROBE = """
 import numpy as np
 from pipeline.kinematics import ik_compiled as K, kernel_cache as C

@@ -145,7 +145,11 @@ def cache_dir() -> Path | None:
         home_dir: Path | None = home / "armsig"
     except RuntimeError:  # no home directory to be found
         home_dir = None
-    return choose_cache_dir(sources_digest(), user_dir, tree_dir, home_dir)
+    try:
+        digest = sources_digest()
+    except OSError:  # sources not readable as files (e.g. a zip import): no digest, no cache
+        return None
+    return choose_cache_dir(digest, user_dir, tree_dir, home_dir)
 
 
 @contextmanager
