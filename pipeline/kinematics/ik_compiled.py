@@ -4,8 +4,10 @@ robot: the fast path of :func:`pipeline.kinematics.ik.newton_raphson`.
 Why compiled: a numpy solve of one target costs ~500 small numpy calls of
 0.5-1 µs each (four pose-and-Jacobian evaluations, three 6×6 solves and the
 per-iteration bookkeeping), ~430 µs measured; the same arithmetic as scalar
-loops takes a few µs. The kernel is compiled once by numba and cached beside
-this module (``__pycache__``).
+loops takes a few µs. The kernel is compiled once by numba and cached on disk
+in a folder named for a digest of every source the kernels are compiled from
+(:mod:`pipeline.kinematics.kernel_cache`; by default in this package's
+``__pycache__``), so a change to any of them compiles afresh.
 
 What it does: for each target independently, the plain Newton iteration of
 :func:`~pipeline.kinematics.ik.newton_raphson`: the Newton step ``J⁻¹ δ`` (LU
@@ -33,11 +35,11 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar, cast
 
-import numba
 import numpy as np
 import numpy.typing as npt
 
 from pipeline.kinematics.ik_stall import STALL_RATIO
+from pipeline.kinematics.kernel_cache import njit_cached
 from pipeline.kinematics.transforms import Array
 
 #: Kernel outcome of a target: converged by the stopping rule.
@@ -73,8 +75,9 @@ Work = tuple[Buf, Buf, Buf, Buf, Buf, Buf]
 
 
 def jit(func: Kernel) -> Kernel:
-    """Compile ``func`` with numba (no Python objects, GIL released, cached on disk)."""
-    return cast(Kernel, numba.njit(cache=True, nogil=True)(func))
+    """Compile ``func`` with numba (no Python objects, GIL released, cached on disk in
+    :func:`~pipeline.kinematics.kernel_cache.cache_dir`)."""
+    return cast(Kernel, njit_cached(func, nogil=True))
 
 
 def inline_jit(func: Kernel) -> Kernel:
@@ -83,7 +86,7 @@ def inline_jit(func: Kernel) -> Kernel:
     count of each array argument: perf put 22-30 % of the Jacobi kernel's samples in
     ``NRT_incref``/``NRT_decref``; inlined, the serial Jacobi solve of robot3 went from
     11.8 to 8.9 µs per target and Newton-Raphson from 4.1 to 3.7 µs, with the same bits."""
-    return cast(Kernel, numba.njit(cache=True, nogil=True, inline="always")(func))
+    return cast(Kernel, njit_cached(func, nogil=True, inline="always"))
 
 
 @inline_jit
