@@ -10,11 +10,11 @@ from import_data import TWO_LINK, TWO_LINK_MAP, TWO_LINK_VALUES, sscanss2_text, 
 from mcap.reader import make_reader
 
 from pipeline.contract.channels import POINT_CHANNELS
+from pipeline.contract.digest import file_sha256
 from pipeline.contract.mcap_read import read_mcap
 from pipeline.errors import ArmsigError
 from pipeline.importers import import_file
 from pipeline.importers.write import SOURCE_METADATA
-from pipeline.stages.recording import file_sha256
 
 
 def _read(session: Path) -> dict[str, list[dict]]:

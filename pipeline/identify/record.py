@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.atomic import write_text_atomic
+from pipeline.contract.digest import file_sha256
 from pipeline.stages.base import StageRun
 from pipeline.stages.lock import LOCK_NAME
 
@@ -73,8 +74,7 @@ def session_digest(sdir: Path) -> str:
     for rel, path in _files(sdir, {Path(LOCK_NAME), RECORD}):
         h.update(f"{rel}\0".encode())
         if path is not None:
-            with open(path, "rb") as fh:
-                h.update(hashlib.file_digest(fh, "sha256").digest())
+            h.update(file_sha256(path).encode())
     return h.hexdigest()
 
 

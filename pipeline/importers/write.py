@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from pipeline.contract.channels import POINT_CHANNELS
+from pipeline.contract.digest import file_sha256
 from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
 from pipeline.stages.lock import session_lock
-from pipeline.stages.recording import file_sha256
 
 #: MCAP metadata record naming the foreign file a recording was converted from.
 SOURCE_METADATA = "armsig.source"

@@ -13,7 +13,6 @@ a result.
 
 from __future__ import annotations
 
-import hashlib
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -23,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.contract.channels import SENSOR_CHANNELS
+from pipeline.contract.digest import file_sha256
 from pipeline.errors import ArmsigError, RecordingError
 from pipeline.stages.recording_keys import (
     CHECK_SWEEP,
@@ -88,15 +88,6 @@ class Recording:
     point_sigma_cm: np.ndarray  # (P,) isotropic std per coordinate, NaN = not recorded
     point_cov_cm2: np.ndarray  # (P, 3, 3) covariance, NaN = not recorded
     point_wxyz: np.ndarray  # (P, 4) unit quaternion of a 6-D target, NaN = not recorded
-
-
-def file_sha256(path: Path) -> str:
-    """Content hash of a file (hex)."""
-    h = hashlib.sha256()
-    with path.open("rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def read_recording(path: str | Path, sha256: str | None = None) -> Recording:

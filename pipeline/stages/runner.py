@@ -34,12 +34,13 @@ from threadpoolctl import threadpool_limits
 
 from pipeline import __version__
 from pipeline.atomic import remove_debris
+from pipeline.contract.digest import file_sha256
 from pipeline.errors import ArmsigError, StageError
 from pipeline.progress import Progress
 from pipeline.schemas import validate_table
 from pipeline.stages.base import RECORDING, Stage, StageRun, session_folder
 from pipeline.stages.lock import session_lock
-from pipeline.stages.recording import file_sha256, read_recording
+from pipeline.stages.recording import read_recording
 from pipeline.stages.session import session_sensor
 from pipeline.stages.tables import (
     CheckedTable,
