@@ -44,10 +44,15 @@ def _run(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, floa
     return time.perf_counter() - t0, _cpu() - c0
 
 
-def _cold(exe: str, d: Path) -> tuple[float, float]:
+def _clear(d: Path) -> None:
+    """Leave only the recording: the next identify of ``d`` is cold."""
     for name in ("stages", "report"):
         shutil.rmtree(d / name, ignore_errors=True)
     (d / "signature.json").unlink(missing_ok=True)
+
+
+def _cold(exe: str, d: Path) -> tuple[float, float]:
+    _clear(d)
     return _run([exe, "identify", str(d)])
 
 
@@ -65,9 +70,7 @@ def _floor(exe: str, d: Path, cold_target_cpu: float | None) -> None:
     refine: list[float] = []
     report: list[float] = []
     for _ in range(max(1, RUNS // 2)):
-        for name in ("stages", "report"):
-            shutil.rmtree(d / name, ignore_errors=True)
-        (d / "signature.json").unlink(missing_ok=True)
+        _clear(d)
         out = subprocess.run(
             [exe, "identify", str(d), "--no-report", "--json"],
             check=True, capture_output=True, text=True,
