@@ -1,7 +1,7 @@
 """Refinement accuracy over simulated sessions, against the simulator's truth (issue 15).
 
 ``python -m bench.accuracy [default|faults|all] [--workers N]`` (not part of ``make bench``:
-~40 identifications). Per session: the independent audit (:mod:`pipeline.audit`, 1,000
+~40 identifications). Per session: the independent audit (:mod:`pipeline.rig.audit`, 1,000
 configurations) of the thesis S-Model (``frames``) and of the refined signature (``chain``),
 the predicted RMS (stage ``uncertainty``, scaled by the fitted noise) and the Cramér-Rao
 bound of the refinement's own measurement model: the same propagation of ``(JᵀWJ)⁻¹``
@@ -41,9 +41,9 @@ def _session(folder: Path, name: str, seed: int | None, **opts: Any) -> Path:
 
 def measure(folder: str, name: str, seed: int | None, opts: dict[str, Any]) -> dict[str, Any]:
     """Simulate (or copy), identify and audit one session; the numbers of one row."""
-    from pipeline.audit import read_truth
     from pipeline.identify import identify
     from pipeline.montecarlo.refine_study import session_accuracy
+    from pipeline.rig.audit import read_truth
     from pipeline.stages.runner import stage_path
     from pipeline.stages.tables import read_table
 

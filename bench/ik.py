@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.kinematics import best_of
-from pipeline.control import Controller
+from pipeline.control.controller import Controller
 from pipeline.identify import identify
 from pipeline.kinematics.chain import forward_kinematics
 from pipeline.kinematics.transforms import invert_transform

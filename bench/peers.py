@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from bench.ik import _targets, controller
-from pipeline.control import Controller
+from pipeline.control.controller import Controller
 from pipeline.kinematics import ik
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.transforms import differential_motion

@@ -198,7 +198,7 @@ def fk(
 
     values = _joint_values(q, "--q")
     if Path(robot).is_dir():
-        from pipeline.control import Controller
+        from pipeline.control.controller import Controller
 
         pose = Controller.from_session(robot).pose(values, design=design)
     else:
@@ -524,7 +524,7 @@ def audit(
     configurations: Annotated[int, typer.Option(help="Random configurations.")] = 1000,
 ) -> None:
     """Compare the signature and the design model with a simulated session's truth."""
-    from pipeline.audit import audit as run_audit
+    from pipeline.rig.audit import audit as run_audit
 
     r = run_audit(session, configurations=configurations)
     if as_json:
@@ -575,7 +575,7 @@ def ik(
     """Joint readings that put the identified tool at a pose (signature-based control)."""
     import numpy as np
 
-    from pipeline.control import Controller, solve_arrow, solve_poses
+    from pipeline.control.controller import Controller, solve_arrow, solve_poses
     from pipeline.kinematics.ik import STATUS_NAMES
     from pipeline.kinematics.transforms import transform_from_xyz_rpy
 
@@ -662,7 +662,7 @@ def ik_convergence(
     ] = 3,
 ) -> None:
     """Per-iteration errors of Newton-Raphson and Jacobi (Tables 5-1, 5-2, Section 5.4)."""
-    from pipeline.convergence import convergence_tables, format_tables
+    from pipeline.control.convergence import convergence_tables, format_tables
 
     typer.echo(format_tables(convergence_tables(session, seed=seed)))
 

@@ -322,7 +322,7 @@ def _alarm(seconds: float) -> Iterator[None]:
 def _tool_positions(signature_path: Path) -> np.ndarray:
     """Signature tool positions (cm) at fixed random configurations within the limits."""
     from pipeline.kinematics.chain import forward_kinematics
-    from pipeline.signature_file import load_signature
+    from pipeline.signature.file import load_signature
     from pipeline.units import joints_to_internal
 
     sig = load_signature(signature_path)

@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from pipeline.audit import AuditResult, audit
 from pipeline.cli import app
 from pipeline.errors import ArmsigError, RobotDescriptionError
 from pipeline.identify import identify
@@ -20,6 +19,7 @@ from pipeline.kinematics.chain import forward_kinematics
 from pipeline.kinematics.signature import chain_from_pseudo_dh, pseudo_dh_from_chain
 from pipeline.kinematics.transforms import pose_error
 from pipeline.kinematics.true_dh import true_dh_from_chain
+from pipeline.rig.audit import AuditResult, audit
 from pipeline.rig.plan import DEFAULT_RADIUS_CM, default_sensor_from_base, plan_measurements
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.robots import builtin_names, get_robot, load_description
@@ -78,7 +78,7 @@ def test_default_noise_signature_beats_design(sessions, robot: str) -> None:
 
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_design_alignment_takes_no_share_of_a_symmetry(sessions, robot: str) -> None:
-    from pipeline.control import Controller, solve_poses
+    from pipeline.control.controller import Controller, solve_poses
 
     c = Controller.from_session(sessions[robot, False])
     # Y: design tool -> signature tool (the probe). The probe is at most 15 cm from
@@ -275,7 +275,7 @@ def test_user_description_file_end_to_end_on_the_command_line(tmp_path: Path) ->
     assert dh["type"][2] == "prismatic" and dh["a_cm"][2] == 0.0
     # `pipeline ik --near` for an arm without a closed-form inverse: the flange pose at
     # q (the design flange as user tool, --tool 0 0 0 0 0 0) comes back as q itself.
-    from pipeline.control import Controller
+    from pipeline.control.controller import Controller
     from pipeline.kinematics.chain import forward_kinematics
     from pipeline.kinematics.transforms import invert_transform, xyz_rpy_from_transform
 

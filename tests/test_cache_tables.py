@@ -14,7 +14,7 @@ import pytest
 
 from pipeline.errors import StageError
 from pipeline.identify import identify
-from pipeline.signature_file import load_signature
+from pipeline.signature.file import load_signature
 from pipeline.stages.runner import run, stage_path, status
 from pipeline.stages.tables import EDITED, content_hash, read_table
 

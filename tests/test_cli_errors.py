@@ -255,12 +255,12 @@ def test_ik_wrong_column_set_names_the_column(session: Path, tmp_path: Path) -> 
 def test_ik_unwritable_out_is_refused_before_the_solve(
     session: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import pipeline.control
+    import pipeline.control.controller
 
     def no_solve(*args: object, **kwargs: object) -> None:
         raise AssertionError("solved before --out was checked")
 
-    monkeypatch.setattr(pipeline.control, "solve_poses", no_solve)
+    monkeypatch.setattr(pipeline.control.controller, "solve_poses", no_solve)
     t = str(targets(tmp_path))
     (tmp_path / "file").write_text("")
     for out, fragment in (

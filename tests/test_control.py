@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.control import Controller, parse_branch
+from pipeline.control.controller import Controller, parse_branch
 from pipeline.errors import ArmsigError
 from pipeline.identify import identify
 from pipeline.kinematics.chain import forward_kinematics
@@ -84,7 +84,7 @@ def test_cli_ik_pose_batch_and_convergence(robot3: Controller, tmp_path: Path) -
     from typer.testing import CliRunner
 
     from pipeline.cli import app
-    from pipeline.convergence import convergence_tables
+    from pipeline.control.convergence import convergence_tables
 
     d = tmp_path / "s"
     d.mkdir()
@@ -358,7 +358,7 @@ def test_compiled_kernels_allocate_nothing_per_target(robot3: Controller) -> Non
     allocation counter: a 200-target batch allocates hardly more than a 10-target one."""
     from numba.core.runtime import _nrt_python, rtsys
 
-    from pipeline.control import _shift_into
+    from pipeline.control.controller import _shift_into
 
     b = parse_branch("right-up-noflip")
     q, T = _targets(robot3, 3000, 11)

@@ -9,10 +9,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.audit import audit
-from pipeline.control import Controller, solve_poses
+from pipeline.control.controller import Controller, solve_poses
 from pipeline.errors import RobotDescriptionError
 from pipeline.identify import identify
+from pipeline.rig.audit import audit
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.robots.description import (
     description_from_dict,

@@ -104,7 +104,7 @@ def test_new_signature_reruns_the_program(tmp_path) -> None:
 def _resealed(doc: dict) -> str:
     """A deliberately edited signature with its self-digest recomputed (a hand edit
     without it is corrupt, and ``identify`` rewrites it)."""
-    from pipeline.signature_file import signature_text
+    from pipeline.signature.file import signature_text
 
     return signature_text({k: v for k, v in doc.items() if k != "sha256"})
 

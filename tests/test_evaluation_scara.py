@@ -9,7 +9,7 @@ Simulations are small (12 points per sweep, one cycle) to keep the file fast.
 import numpy as np
 import pytest
 
-from pipeline.control import Controller, solve_poses, task_axes_for
+from pipeline.control.controller import Controller, solve_poses, task_axes_for
 from pipeline.evaluation.evaluate import evaluate
 from pipeline.evaluation.score import dropped_indices, restrict_orientation
 from pipeline.evaluation.tasks import (

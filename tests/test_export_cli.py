@@ -10,8 +10,8 @@ import pytest
 from typer.testing import CliRunner, Result
 
 from pipeline.cli import EXIT_REFUSED, app
-from pipeline.signature_checks import DIGEST_KEY
-from pipeline.signature_file import signature_text
+from pipeline.signature.checks import DIGEST_KEY
+from pipeline.signature.file import signature_text
 
 
 def invoke(*args: str) -> Result:

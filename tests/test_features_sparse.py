@@ -9,7 +9,6 @@ import polars as pl
 import pytest
 from typer.testing import CliRunner
 
-from pipeline.audit import audit
 from pipeline.cli import app
 from pipeline.contract.channels import POINT_CHANNELS
 from pipeline.features.accuracy import revolute_accuracy
@@ -23,6 +22,7 @@ from pipeline.features.expected import (
 from pipeline.features.line import fit_line
 from pipeline.features.plane import fit_plane_lsq, orient_normal
 from pipeline.identify import identify
+from pipeline.rig.audit import audit
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.stages.runner import stage_path
 from tests.feature_data import arc, cross_angle

@@ -11,16 +11,16 @@ import numpy as np
 import polars as pl
 import pytest
 
-from pipeline.audit import audit
 from pipeline.errors import RecordingError, StageError
 from pipeline.identify import identify
 from pipeline.kinematics.chain import forward_kinematics
 from pipeline.kinematics.signature import chain_from_pseudo_dh, pseudo_dh_from_chain
 from pipeline.kinematics.transforms import pose_error
+from pipeline.rig.audit import audit
 from pipeline.rig.recorder import Message, write_recording
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.schemas import arrow_schema
-from pipeline.signature_file import load_signature
+from pipeline.signature.file import load_signature
 from pipeline.stages import runner
 from pipeline.stages.runner import run, stage_path, stages, status
 from pipeline.stages.tables import read_provenance

@@ -10,13 +10,13 @@ import time
 import numpy as np
 import pytest
 
+from pipeline.control import puma560_inverse as pc
+from pipeline.control.puma560_inverse import puma_design_inverse
 from pipeline.errors import KinematicsError
 from pipeline.kinematics import ik
 from pipeline.kinematics.chain import forward_kinematics
 from pipeline.robots import get_robot
 from pipeline.robots import puma560 as P
-from pipeline.robots import puma560_control as pc
-from pipeline.robots.puma560_control import puma_design_inverse
 
 PUMA = get_robot("puma560")
 DESIGN = PUMA.design_chain()

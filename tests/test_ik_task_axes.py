@@ -9,7 +9,7 @@ arm cannot reach), solved for position and rotation about Z only.
 import numpy as np
 import pytest
 
-from pipeline.control import task_axes_for
+from pipeline.control.controller import task_axes_for
 from pipeline.errors import KinematicsError
 from pipeline.kinematics import ik
 from pipeline.kinematics.chain import SerialChain, chain_from_dh, forward_kinematics

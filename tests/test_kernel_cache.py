@@ -54,7 +54,7 @@ def _kernel_modules() -> set[str]:
 
 def test_digest_covers_every_kernel_module_and_what_it_imports() -> None:
     kernels = _kernel_modules()
-    assert {"pipeline.kinematics.ik_compiled", "pipeline.robots.puma560_solver"} <= kernels
+    assert {"pipeline.kinematics.ik_compiled", "pipeline.control.puma560_solver"} <= kernels
     closure, todo = set(), list(kernels)
     while todo:
         m = todo.pop()
@@ -135,7 +135,7 @@ def test_unreadable_sources_mean_no_disk_cache(monkeypatch: pytest.MonkeyPatch) 
 _PROBE = """
 import numpy as np
 from pipeline.kinematics import ik_compiled as K, kernel_cache as C
-from pipeline.robots import puma560_solver as S
+from pipeline.control import puma560_solver as S
 assert S._wrap(7.0) < 3.15
 a, out = np.eye(4), np.empty(6)
 K._delta(a, a, out)
@@ -188,7 +188,8 @@ def test_unusable_numba_cache_dir_compiles_in_memory(tmp_path: Path) -> None:
 
 _ERROR_AT = """
 import numpy as np
-from pipeline.robots import puma560, puma560_solver as S
+from pipeline.control import puma560_solver as S
+from pipeline.robots import puma560
 c, T = puma560.simulator_chain(), np.eye(4)
 T[:3, 3] = [10.0, 20.0, 30.0]
 arrays = [np.ascontiguousarray(a) for a in (c.base, c.links, c.tool, c.joint_offsets, c.prismatic)]
@@ -198,7 +199,7 @@ print(S._error_at(*arrays, T, np.zeros(6), np.empty((4, 4)), np.empty(6), 1.0)[0
 
 def test_a_change_to_an_inlined_kernel_of_another_file_recompiles(tmp_path: Path) -> None:
     """puma560_solver._error_at inlines ik_compiled._errors: an edit of ik_compiled.py
-    alone must reach it (numba alone keeps the code cached for puma560_solver.py)."""
+    alone must reach it (numba alone keeps the code cached for control/puma560_solver.py)."""
     skip = shutil.ignore_patterns("__pycache__")
     shutil.copytree(ROOT / "pipeline", tmp_path / "pipeline", ignore=skip)
 

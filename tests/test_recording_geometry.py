@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 import pipeline.rig.simulate as simulate
-from pipeline.audit import audit
 from pipeline.errors import ArmsigError
 from pipeline.features.checks import spacing_warnings
 from pipeline.identify import identify
 from pipeline.rig.atmosphere import Atmosphere
+from pipeline.rig.audit import audit
 from pipeline.rig.digitizer import DigitizerModel, digitize
 from pipeline.sensor.geometry import check_geometry, default_geometry
 from pipeline.sensor.triangulation import Trilateration

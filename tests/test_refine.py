@@ -14,12 +14,12 @@ import pyarrow as pa
 import pytest
 from recording_data import small_session
 
-from pipeline.audit import audit
 from pipeline.errors import ArmsigError
 from pipeline.identify import identify
 from pipeline.refine.kinematics import ChainModel
 from pipeline.refine.points import point_block
 from pipeline.refine.solve import Problem, refit, solve
+from pipeline.rig.audit import audit
 from pipeline.schemas import validate_table
 from pipeline.stages.refine import refine_summary
 from pipeline.stages.runner import run, stage_path

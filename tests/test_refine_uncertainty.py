@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.audit import _aligned_errors
 from pipeline.kinematics.alignment import LEVER_CM, fit_alignment
 from pipeline.refine.kinematics import TOOL_POINT, ChainModel
 from pipeline.refine.uncertainty import model_error_maps, predict_model, tool_model, tool_poses
+from pipeline.rig.audit import _aligned_errors
 
 
 def _random_chain(seed: int, m: int) -> tuple[ChainModel, np.ndarray]:

@@ -9,9 +9,9 @@ import numpy as np
 import polars as pl
 import pytest
 
-from pipeline.audit import audit
 from pipeline.identify import identify
 from pipeline.kinematics.signature import frames_at_signature
+from pipeline.rig.audit import audit
 from pipeline.rig.resettle import resettle
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.robots import get_robot

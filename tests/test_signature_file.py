@@ -16,11 +16,11 @@ import pytest
 from typer.testing import CliRunner
 
 from pipeline.cli import app
-from pipeline.control import Controller
+from pipeline.control.controller import Controller
 from pipeline.errors import ArmsigError
 from pipeline.identify import identify
 from pipeline.schemas import schema_dir
-from pipeline.signature_file import load_signature, signature_text
+from pipeline.signature.file import load_signature, signature_text
 from pipeline.stages.runner import EVALUATE_STAGE_MODULES, STAGE_MODULES, run, status
 
 Doc = dict[str, Any]
@@ -165,7 +165,7 @@ def _kill_between_commit_and_signature(d: Path, monkeypatch) -> None:
     def killed(*args: Any, **kwargs: Any) -> Any:
         raise KeyboardInterrupt  # stands for kill -9: nothing after this point runs
 
-    monkeypatch.setattr("pipeline.signature_file.write_signature", killed)
+    monkeypatch.setattr("pipeline.signature.file.write_signature", killed)
     with pytest.raises(KeyboardInterrupt):
         run(d, overrides={"features": {"plane_method": "eigen"}})
     monkeypatch.undo()

@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 from recording_data import read_raw, small_session, write_raw
 
-from pipeline.audit import audit
 from pipeline.contract.channels import POINT_CHANNELS
 from pipeline.errors import ArmsigError, StageError
 from pipeline.identify import identify
+from pipeline.rig.audit import audit
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.stages.runner import run, stage_path, status
 from pipeline.stages.tables import read_table

@@ -31,13 +31,13 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
-from pipeline.control import Controller, into_limits, task_axes_for
+from pipeline.control.controller import Controller, into_limits, task_axes_for
 from pipeline.evaluation.tasks import Task
 from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
 from pipeline.kinematics.ik import ALL_AXES, newton_raphson
 from pipeline.kinematics.transforms import Array, invert_transform, rot_z
 from pipeline.robots.description import RobotDescription
-from pipeline.signature_file import Signature
+from pipeline.signature.file import Signature
 from pipeline.units import joints_to_internal
 
 BoolArray = npt.NDArray[np.bool_]
@@ -99,7 +99,7 @@ class DesignModel:
         m = len(T)
         q = np.full((m, self.robot.n_joints), np.nan)
         if self.robot.name == "puma560":
-            from pipeline.robots.puma560_control import puma_design_inverse
+            from pipeline.control.puma560_inverse import puma_design_inverse
 
             d = self.robot.design_chain()
             for br in dict.fromkeys(branches):

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.control import task_axes_for
+from pipeline.control.controller import task_axes_for
 from pipeline.evaluation.grid12 import CORNER_VERTICES
 from pipeline.evaluation.recording import read_evaluation
 from pipeline.evaluation.score import AXIS_LETTERS, dropped_indices

@@ -233,7 +233,7 @@ def tasks_for(robot: RobotDescription, tool: Array) -> tuple[Task, ...]:
     """
     if robot.name == "puma560":
         return puma_tasks()
-    from pipeline.control import task_axes_for
+    from pipeline.control.controller import task_axes_for
     from pipeline.kinematics.ik import ALL_AXES
     from pipeline.robots import get_robot
 

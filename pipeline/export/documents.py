@@ -13,7 +13,7 @@ import numpy as np
 from pipeline.export.dh_table import HAYATI_DEG, DHTable, ModifiedDHTable
 from pipeline.kinematics.chain import SerialChain
 from pipeline.robots.description import RobotDescription
-from pipeline.signature_file import matrix_rows
+from pipeline.signature.file import matrix_rows
 from pipeline.units import joints_to_boundary
 
 DH_CONVENTION = (

@@ -17,8 +17,8 @@ from pipeline.errors import ArmsigError
 from pipeline.fleet.run import TABLE_NAME
 from pipeline.report.figures import panel_figure, save_png
 from pipeline.report.identification import markdown_table, sig
-from pipeline.signature_checks import DIGEST_KEY
-from pipeline.signature_file import FILE_NAME, chain_alignment
+from pipeline.signature.checks import DIGEST_KEY
+from pipeline.signature.file import FILE_NAME, chain_alignment
 
 REPORT_DIR = "fleet-report"
 
@@ -36,7 +36,7 @@ def load_rows(folder: Path) -> list[dict[str, Any]]:
 def drift(rows: list[dict[str, Any]]) -> dict[str, list[tuple[str, float | None]]]:
     """Per robot with two or more identified sessions, in identification order: each later
     session's RMS tool position difference (cm) from the one before, after aligning the two
-    signatures' bases and tools (:func:`~pipeline.signature_file.chain_alignment`: no
+    signatures' bases and tools (:func:`~pipeline.signature.file.chain_alignment`: no
     ground truth, independent of each session's sensor frame). None when a session's
     signature.json is no longer the one ``fleet.arrow`` recorded."""
     by_robot: dict[str, list[dict[str, Any]]] = {}
@@ -58,7 +58,7 @@ def drift(rows: list[dict[str, Any]]) -> dict[str, list[tuple[str, float | None]
 
 def _signature(row: dict[str, Any]) -> Any:
     """The session's signature if it is still the one of ``row`` (same digest), else None."""
-    from pipeline.signature_file import read_signature_document, signature_from_document
+    from pipeline.signature.file import read_signature_document, signature_from_document
 
     path = Path(row["session"]) / FILE_NAME
     try:

@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.signature_checks import DIGEST_KEY
-from pipeline.signature_file import FILE_NAME, read_signature_document
+from pipeline.signature.checks import DIGEST_KEY
+from pipeline.signature.file import FILE_NAME, read_signature_document
 from pipeline.stages.runner import stage_path
 from pipeline.stages.session import session_sensor
 from pipeline.stages.tables import read_table

@@ -83,7 +83,7 @@ def _run(
     progress: TextIO | None,
 ) -> IdentifyResult:
     """The runner's full check and work (call under the session lock)."""
-    from pipeline.signature_file import FILE_NAME, read_signature_document
+    from pipeline.signature.file import FILE_NAME, read_signature_document
     from pipeline.stages.runner import PRODUCT, run
     from pipeline.stages.verdict import verdict_line
 

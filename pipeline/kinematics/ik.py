@@ -4,7 +4,7 @@ Signature models have no closed-form inverse (Section 5.1), so the joint
 coordinates ``q*`` with ``F_s(q*) = T*`` are found iteratively, starting from the
 closed-form inverse of the *design* model on the desired configuration branch
 (Section 5.2; for the Puma 560 that is
-:func:`pipeline.robots.puma560_control.puma_design_inverse`). Both solvers are
+:func:`pipeline.control.puma560_inverse.puma_design_inverse`). Both solvers are
 batch-first: ``m`` targets of shape ``(m, 4, 4)`` and ``m`` starts of shape
 ``(m, n)``; a single target is a batch of one. Every target iterates and stops on
 its own. Lengths are in cm, angles in radians.
@@ -159,7 +159,7 @@ class IKResult:
     branch_changed : ndarray of bool, shape (m,), or None
         True where a converged solution lies on another configuration branch
         than the one requested (a solver's last resort, see
-        :class:`pipeline.robots.puma560_solver.PumaSolver`); None where the
+        :class:`pipeline.control.puma560_solver.PumaSolver`); None where the
         solve had no branch to keep (a start given by the caller).
     """
 

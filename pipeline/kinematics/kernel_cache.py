@@ -4,7 +4,7 @@ stale machine code in use.
 
 Why: numba checks a cached kernel only against the file that *defines* it (its
 index stores that file's stamp, ``numba/core/caching.py``). A kernel of
-:mod:`pipeline.robots.puma560_solver` inlines kernels of
+:mod:`pipeline.control.puma560_solver` inlines kernels of
 :mod:`pipeline.kinematics.ik_compiled` and freezes module globals (``STALL_RATIO``,
 the Puma's design lengths) into its machine code as constants; after a change to
 those files alone numba would load the old code. Here every kernel of the
@@ -70,7 +70,7 @@ KERNEL_SOURCES = (
     "pipeline.kinematics.kernel_cache",
     "pipeline.kinematics.transforms",
     "pipeline.robots.puma560",
-    "pipeline.robots.puma560_solver",
+    "pipeline.control.puma560_solver",
 )
 #: Hex digits of the sha256 in the folder name: 64 bits, no collision in practice.
 DIGEST_CHARS = 16

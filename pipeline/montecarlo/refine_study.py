@@ -5,7 +5,7 @@ default plan), at every slant-range noise factor k (Section 7.4.3; (7.9) × k) w
 same robot and the same deviates (common random numbers, as the misalignment study):
 the simulate seed of robot r is drawn from its seed sequence and recorded as the index
 ``simulate_seed``, so ``pipeline simulate NAME --seed N --noise-factor K`` re-records it.
-The pipeline never reads the truth; only the audit (:func:`pipeline.audit.table_errors`,
+The pipeline never reads the truth; only the audit (:func:`pipeline.rig.audit.table_errors`,
 1,000 configurations) does. The session folder is temporary.
 
 Cost: ~1.8 s of CPU per robot and setting on a quiet machine (planning the session, ~2.3 s,
@@ -28,9 +28,9 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg  # noqa: F401  (its OpenBLAS loaded before the thread limit is set)
 
-from pipeline.audit import ModelError, table_errors
 from pipeline.errors import ArmsigError
 from pipeline.kinematics.transforms import Array
+from pipeline.rig.audit import ModelError, table_errors
 from pipeline.rig.simulate import SimulationOptions
 
 #: Swept slant-range noise factors k (Section 7.4.3): the thesis's ends and the middle.

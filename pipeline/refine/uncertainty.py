@@ -7,7 +7,7 @@ configuration ``i`` by ``δp_i = J_i δθ`` and turns it by ``ω_i = W_i δθ``
 
     ``σ_i = sqrt(trace(J_i Σ J_iᵀ))``                                   (raw)
 
-**Aligned.** The audit (:mod:`pipeline.audit`) compares a model with the truth after
+**Aligned.** The audit (:mod:`pipeline.rig.audit`) compares a model with the truth after
 the best-fit constant base ``X`` and tool ``Y`` (:func:`~pipeline.kinematics.alignment.
 fit_alignment`), so part of ``δθ`` never shows there. To first order ``X = I + [ω_b, v_b]``
 and ``Y = I + [ω_t, v_t]`` add to the tool pose

@@ -312,7 +312,7 @@ def _audit_section(audit: dict[str, Any]) -> str:
 
 
 def _convergence_section(sdir: Path) -> str:
-    from pipeline.convergence import format_tables, realistic_tables
+    from pipeline.control.convergence import format_tables, realistic_tables
 
     head = "## Control: convergence on this signature (cf. Tables 5-1, 5-2)\n\n"
     if not (sdir / "signature.json").is_file():
@@ -351,7 +351,7 @@ def _verdict_parts(sdir: Path, prov: dict[str, dict[str, Any]], out: Path) -> li
 def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -> Path:
     """Write ``report/report.md`` and its PNG figures for an identified session.
 
-    ``audit`` is :meth:`pipeline.audit.AuditResult.to_dict` output, reported when given.
+    ``audit`` is :meth:`pipeline.rig.audit.AuditResult.to_dict` output, reported when given.
     Raises :class:`StageError` when a stage output is missing. Returns the report path.
     """
     sdir = Path(session_dir)

@@ -16,8 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.audit import read_truth, true_chain
-from pipeline.control import task_axes_for
+from pipeline.control.controller import task_axes_for
 from pipeline.errors import ArmsigError
 from pipeline.evaluation.controllers import (
     DesignModel,
@@ -37,6 +36,7 @@ from pipeline.evaluation.tasks import (
 from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
 from pipeline.kinematics.ik import ALL_AXES, newton_raphson
 from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans
+from pipeline.rig.audit import read_truth, true_chain
 from pipeline.rig.plan import PROBE_LENGTH_CM
 from pipeline.rig.recorder import EVAL_CHANNELS, Message, write_recording
 from pipeline.rig.simulate import T0_NS

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.control import task_axes_for
+from pipeline.control.controller import task_axes_for
 from pipeline.evaluation.indices import improvement
 from pipeline.evaluation.score import task_indices
 from pipeline.evaluation.tasks import tasks_for

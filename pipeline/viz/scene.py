@@ -18,7 +18,7 @@ import pyarrow as pa
 from pipeline.errors import StageError
 from pipeline.kinematics.chain import link_frames
 from pipeline.kinematics.transforms import invert_transform
-from pipeline.signature_file import Signature
+from pipeline.signature.file import Signature
 from pipeline.viz import foxglove as fg
 
 SENSOR = "sensor"

@@ -11,9 +11,9 @@ kernel computes, without Python objects:
    flange to signature tool);
 2. the closed-form design inverse on the requested branch, pulled onto the
    design workspace where the pose lies outside it
-   (:func:`pipeline.robots.puma560_control._puma_clamp`'s rule and margins),
+   (:func:`pipeline.control.puma560_inverse._puma_clamp`'s rule and margins),
    with θ4 kept from ``q_near`` at a wrist singularity and every joint in the
-   2π class nearest ``q_near`` (:func:`~pipeline.robots.puma560_control.puma_design_inverse`);
+   2π class nearest ``q_near`` (:func:`~pipeline.control.puma560_inverse.puma_design_inverse`);
 3. the Newton-Raphson / Levenberg-Marquardt iteration of
    :mod:`pipeline.kinematics.ik_compiled` from that start.
 
@@ -760,7 +760,7 @@ class PumaSolver:
 
     def _numpy_inverse(self) -> ik.DesignInverse:
         """The numpy design inverse of the Jacobi iteration (same branch and margins)."""
-        from pipeline.robots.puma560_control import puma_design_inverse
+        from pipeline.control.puma560_inverse import puma_design_inverse
 
         assert self._design is not None
         margins = self._design[4]

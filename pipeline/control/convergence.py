@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.control import Controller
+from pipeline.control.controller import Controller
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans
-from pipeline.signature_file import design_alignment
+from pipeline.signature.file import design_alignment
 from pipeline.units import joints_to_internal
 
 POOR_ERROR_CM = 6.8  # Table 5-1, iteration 0

@@ -37,7 +37,7 @@ from pipeline.kinematics.ik import (
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.robots.description import RobotDescription
 from pipeline.robots.fk import ToolPose, chain_pose
-from pipeline.signature_file import Signature, load_session_signature
+from pipeline.signature.file import Signature, load_session_signature
 from pipeline.units import joints_to_internal
 
 METHODS = ("nr", "jacobi")
@@ -67,7 +67,7 @@ class Controller:
     @classmethod
     def from_session(cls, session_dir: str | Path) -> Controller:
         """Load ``signature.json`` of an identified session; refused unless it matches the
-        session's committed stages (:func:`pipeline.signature_file.load_session_signature`)."""
+        session's committed stages (:func:`pipeline.signature.file.load_session_signature`)."""
         sig = load_session_signature(Path(session_dir) / "signature.json")
         return cls(sig, sig.robot, sig.sensor_from_design_base, sig.design_flange_to_tool)
 
@@ -114,7 +114,7 @@ class Controller:
         the Jacobi iteration's), in the sensor frame."""
         inv = self._design_inverses.get((branch, jacobi))
         if inv is None:
-            from pipeline.robots import puma560_control as pc
+            from pipeline.control import puma560_inverse as pc
 
             inv = pc.puma_design_inverse(
                 branch,
@@ -241,7 +241,7 @@ class Controller:
 
     @cached_property
     def _compilable(self) -> bool:
-        """Whether a solve on one branch runs in :mod:`pipeline.robots.puma560_solver`
+        """Whether a solve on one branch runs in :mod:`pipeline.control.puma560_solver`
         (start and solve compiled): a Puma signature of six revolute joints."""
         c = self.signature.chain
         return self.robot.name == "puma560" and ik_compilable(c) and not c.prismatic.any()
@@ -264,7 +264,7 @@ class Controller:
                 if solver.solve_one(T, q_near=solver.q):   # previous solution: 2π class
                     send(solver.q)                # rad; the solver's own buffer
 
-        :meth:`~pipeline.robots.puma560_solver.PumaSolver.solve_one` starts from the
+        :meth:`~pipeline.control.puma560_solver.PumaSolver.solve_one` starts from the
         closed-form design inverse and iterates, both compiled, in one call that
         allocates nothing (the result is in the solver's buffers); the same
         solver answers :meth:`solve` (Newton-Raphson, full pose), so one target
@@ -281,8 +281,8 @@ class Controller:
                 expected="a Puma 560 signature of six revolute joints and a branch",
                 fix="use Controller.solve",
             )
-        from pipeline.robots import puma560_control as pc
-        from pipeline.robots.puma560_solver import PumaSolver
+        from pipeline.control import puma560_inverse as pc
+        from pipeline.control.puma560_solver import PumaSolver
 
         solver = PumaSolver(
             self.signature.chain, self.sensor_from_base, self.flange_to_tool,

@@ -24,7 +24,7 @@ from pipeline.robots.description import (
     description_from_dict,
     description_to_dict,
 )
-from pipeline.signature_checks import (
+from pipeline.signature.checks import (
     DIGEST_KEY,
     FORMAT,
     FORMAT_VERSION,
@@ -233,7 +233,7 @@ def signature_text(doc: dict[str, Any]) -> str:
 
 
 def read_signature_document(path: str | Path) -> dict[str, Any]:
-    """Read and check a signature file (:func:`pipeline.signature_checks.check_document`)."""
+    """Read and check a signature file (:func:`pipeline.signature.checks.check_document`)."""
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
@@ -319,7 +319,7 @@ class Signature:
 def load_signature(path: str | Path) -> Signature:
     """Read a signature file; a one-line error for a missing, foreign, corrupt or
     inconsistent file (schemas/signature.schema.json and
-    :func:`pipeline.signature_checks.check_document`)."""
+    :func:`pipeline.signature.checks.check_document`)."""
     p = Path(path)
     return signature_from_document(read_signature_document(p), str(p))
 
