@@ -18,6 +18,7 @@ import numpy as np
 
 from bench.kinematics import best_of
 from pipeline.control.controller import Controller
+from pipeline.control.targets import session_controller
 from pipeline.identify import identify
 from pipeline.kinematics.chain import forward_kinematics
 from pipeline.kinematics.transforms import invert_transform
@@ -43,7 +44,7 @@ def controller() -> Controller:
         d.mkdir()
         shutil.copy(ROOT / "sessions/robot3/recording.mcap", d)
         identify(d, report=False)
-        return Controller.from_session(d)
+        return session_controller(d)
 
 
 def main(c: Controller | None = None) -> None:

@@ -28,6 +28,7 @@ from typing import Annotated, Any
 import typer
 from typer.core import TyperGroup
 
+from pipeline.control.targets import session_controller
 from pipeline.errors import ArmsigError, one_line
 
 EXIT_REFUSED = 1
@@ -198,9 +199,8 @@ def fk(
 
     values = _joint_values(q, "--q")
     if Path(robot).is_dir():
-        from pipeline.control.controller import Controller
 
-        pose = Controller.from_session(robot).pose(values, design=design)
+        pose = session_controller(robot).pose(values, design=design)
     else:
         from pipeline.robots import get_robot
         from pipeline.robots.fk import design_pose
@@ -575,11 +575,12 @@ def ik(
     """Joint readings that put the identified tool at a pose (signature-based control)."""
     import numpy as np
 
-    from pipeline.control.controller import Controller, solve_arrow, solve_poses
+    from pipeline.control.controller import solve_poses
+    from pipeline.control.targets import solve_arrow
     from pipeline.kinematics.ik import STATUS_NAMES
     from pipeline.kinematics.transforms import transform_from_xyz_rpy
 
-    ctl = Controller.from_session(session)
+    ctl = session_controller(session)
     q_near = None if near is None else np.array(_joint_values(near, "--near"))
     tool_label = "signature"
     if tool is not None:

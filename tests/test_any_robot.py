@@ -13,6 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from pipeline.cli import app
+from pipeline.control.targets import session_controller
 from pipeline.errors import ArmsigError, RobotDescriptionError
 from pipeline.identify import identify
 from pipeline.kinematics.chain import forward_kinematics
@@ -78,9 +79,9 @@ def test_default_noise_signature_beats_design(sessions, robot: str) -> None:
 
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_design_alignment_takes_no_share_of_a_symmetry(sessions, robot: str) -> None:
-    from pipeline.control.controller import Controller, solve_poses
+    from pipeline.control.controller import solve_poses
 
-    c = Controller.from_session(sessions[robot, False])
+    c = session_controller(sessions[robot, False])
     # Y: design tool -> signature tool (the probe). The probe is at most 15 cm from
     # the design tool (Puma: the probe on the flange); a SCARA's shift along its
     # parallel axes, free in the fit, once put 1,400 cm here (alignment.GAUGE_RCOND).
@@ -275,11 +276,10 @@ def test_user_description_file_end_to_end_on_the_command_line(tmp_path: Path) ->
     assert dh["type"][2] == "prismatic" and dh["a_cm"][2] == 0.0
     # `pipeline ik --near` for an arm without a closed-form inverse: the flange pose at
     # q (the design flange as user tool, --tool 0 0 0 0 0 0) comes back as q itself.
-    from pipeline.control.controller import Controller
     from pipeline.kinematics.chain import forward_kinematics
     from pipeline.kinematics.transforms import invert_transform, xyz_rpy_from_transform
 
-    ctl = Controller.from_session(d).with_tool(np.eye(4))
+    ctl = session_controller(d).with_tool(np.eye(4))
     q = np.array([30.0, 45.0, 10.0, 20.0])  # deg, deg, cm, deg
     T = invert_transform(ctl.sensor_from_base) @ forward_kinematics(
         ctl.signature.chain, joints_to_internal(q, ctl.robot.prismatic)

@@ -22,7 +22,7 @@ from pipeline.cli import app
 from pipeline.identify import identify
 from pipeline.robots import get_robot
 from pipeline.robots.fk import design_pose
-from pipeline.signature.file import load_session_signature
+from pipeline.signature.session import load_session_signature
 from pipeline.stages.runner import EVALUATE_STAGE_MODULES, stage_path
 
 ROOT = Path(__file__).resolve().parent.parent

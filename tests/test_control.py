@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.control.controller import Controller, parse_branch
+from pipeline.control.targets import session_controller
 from pipeline.errors import ArmsigError
 from pipeline.identify import identify
 from pipeline.kinematics.chain import forward_kinematics
@@ -23,7 +24,7 @@ def robot3(tmp_path_factory) -> Controller:
     d = tmp_path_factory.mktemp("robot3")
     shutil.copy(ROOT / "sessions/robot3/recording.mcap", d)
     identify(d, report=False)
-    return Controller.from_session(d)
+    return session_controller(d)
 
 
 def _targets(c: Controller, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:

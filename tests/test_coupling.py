@@ -9,7 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.control.controller import Controller, solve_poses
+from pipeline.control.controller import solve_poses
+from pipeline.control.targets import session_controller
 from pipeline.errors import RobotDescriptionError
 from pipeline.identify import identify
 from pipeline.rig.audit import audit
@@ -79,7 +80,7 @@ def test_coupled_noiseless_session_is_exact(coupled_session: Path) -> None:
 
 
 def test_control_returns_readings(coupled_session: Path) -> None:
-    ctl = Controller.from_session(coupled_session)
+    ctl = session_controller(coupled_session)
     readings = np.array([30.0, 40.0, 10.0, 20.0])
     pose = ctl.pose(readings)
     q, res = solve_poses(ctl, pose.xyz_cm[None], pose.rpy_deg[None], near=readings + 2.0)

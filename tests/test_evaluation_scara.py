@@ -9,7 +9,8 @@ Simulations are small (12 points per sweep, one cycle) to keep the file fast.
 import numpy as np
 import pytest
 
-from pipeline.control.controller import Controller, solve_poses, task_axes_for
+from pipeline.control.controller import solve_poses, task_axes_for
+from pipeline.control.targets import session_controller
 from pipeline.evaluation.evaluate import evaluate
 from pipeline.evaluation.score import dropped_indices, restrict_orientation
 from pipeline.evaluation.tasks import (
@@ -88,7 +89,7 @@ def test_scara_design_is_exact_on_a_perfect_arm(tmp_path) -> None:
 
 def test_controller_solves_position_and_yaw(noisy, rng) -> None:
     sdir, _ = noisy
-    c = Controller.from_session(sdir)
+    c = session_controller(sdir)
     sig = c.signature.chain
     in_base = SerialChain(sig.links, sig.prismatic,
                           invert_transform(c.sensor_from_base) @ sig.base, sig.tool,

@@ -22,7 +22,8 @@ from pipeline.identify import identify
 from pipeline.kinematics.chain import forward_kinematics
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.rig.simulate import SimulationOptions, simulate_session
-from pipeline.signature.file import Signature, load_session_signature
+from pipeline.signature.file import Signature
+from pipeline.signature.session import load_session_signature
 from pipeline.units import joints_to_internal
 
 REPO = Path(__file__).resolve().parents[1]

@@ -13,7 +13,7 @@ from pipeline.errors import StageError
 from pipeline.report.identification import write_report
 from pipeline.rig.audit import audit
 from pipeline.rig.simulate import SimulationOptions, simulate_session
-from pipeline.signature.file import write_signature
+from pipeline.signature.session import write_signature
 from pipeline.stages.runner import STAGE_MODULES, run, stage_path
 from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_provenance, read_table

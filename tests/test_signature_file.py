@@ -16,7 +16,7 @@ import pytest
 from typer.testing import CliRunner
 
 from pipeline.cli import app
-from pipeline.control.controller import Controller
+from pipeline.control.targets import session_controller
 from pipeline.errors import ArmsigError
 from pipeline.identify import identify
 from pipeline.schemas import schema_dir
@@ -165,7 +165,7 @@ def _kill_between_commit_and_signature(d: Path, monkeypatch) -> None:
     def killed(*args: Any, **kwargs: Any) -> Any:
         raise KeyboardInterrupt  # stands for kill -9: nothing after this point runs
 
-    monkeypatch.setattr("pipeline.signature.file.write_signature", killed)
+    monkeypatch.setattr("pipeline.signature.session.write_signature", killed)
     with pytest.raises(KeyboardInterrupt):
         run(d, overrides={"features": {"plane_method": "eigen"}})
     monkeypatch.undo()
@@ -183,7 +183,7 @@ def test_kill_between_commit_and_signature(
     assert all(st[n].state == "fresh" for n in STAGE_MODULES)  # ...the new stages committed
     assert st["signature"].state == "stale" and "other stage outputs" in st["signature"].reason
     with pytest.raises(ArmsigError, match="does not match the session's stages") as exc:
-        Controller.from_session(d)
+        session_controller(d)
     assert "\n" not in str(exc.value) and "pipeline identify" in str(exc.value)
     r = CliRunner().invoke(app, ["ik", str(d), "--pose", "40", "20", "60", "180", "0", "90"])
     assert r.exit_code == 1 and r.output.count("\n") == 1
@@ -192,7 +192,7 @@ def test_kill_between_commit_and_signature(
     runs = {r.name: r.action for r in identify(d, overrides=over, report=False).runs}
     assert runs["signature"] == "written" and set(runs.values()) == {"cached", "written"}
     assert {s.state for s in status(d, over)} == {"fresh"}
-    Controller.from_session(d)
+    session_controller(d)
 
 
 @pytest.fixture(scope="module")
@@ -232,7 +232,7 @@ def test_only_leaves_the_signature_unwritten_while_stages_are_stale(
     st = {s.name: s for s in status(d, over)}
     assert st["frames"].state == "stale" and st["signature"].state == "stale"
     with pytest.raises(ArmsigError, match="does not match the session's stages"):
-        Controller.from_session(d)
+        session_controller(d)
 
 
 COMMITTED = sorted((Path(__file__).resolve().parent.parent / "sessions").glob("*/recording.mcap"))

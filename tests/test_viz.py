@@ -22,7 +22,7 @@ from pipeline.cli import app
 from pipeline.identify import identify
 from pipeline.kinematics.chain import link_frames
 from pipeline.schemas import schema_dir
-from pipeline.signature.file import load_session_signature
+from pipeline.signature.session import load_session_signature
 from pipeline.stages.runner import stage_path
 from pipeline.stages.tables import read_table
 from pipeline.units import joints_to_internal

@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.control.controller import Controller
+from pipeline.control.targets import session_controller
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans
-from pipeline.signature.file import design_alignment
+from pipeline.signature.alignment import design_alignment
 from pipeline.units import joints_to_internal
 
 POOR_ERROR_CM = 6.8  # Table 5-1, iteration 0
@@ -79,7 +80,7 @@ def _tables(c: Controller, q_true: np.ndarray, label: str) -> list[ConvergenceTa
 
 def realistic_tables(session_dir: str | Path, seed: int = 3) -> list[ConvergenceTable]:
     """Tables 5-1/5-2 for the session's own signature only (cheap: two solves)."""
-    c = Controller.from_session(session_dir)
+    c = session_controller(session_dir)
     return _tables(c, _target(c, seed), "realistic")
 
 
@@ -94,7 +95,7 @@ def convergence_tables(session_dir: str | Path, seed: int = 3) -> list[Convergen
     """Tables 5-1/5-2 for the session's signature and for a poor one (Puma sessions)."""
     from pipeline.robots.puma560 import Branch, branch_of
 
-    c = Controller.from_session(session_dir)
+    c = session_controller(session_dir)
     q_true = _target(c, seed)
     branch = Branch(*(int(v) for v in branch_of(q_true)))
     tables = _tables(c, q_true, "realistic")

@@ -96,7 +96,7 @@ def validate_against(
     (parsed in memory, never written into the session): its first target vs the model."""
     from pipeline.importers import parse_foreign
     from pipeline.importers.mapping import ImportMap, load_map
-    from pipeline.signature.file import load_session_signature
+    from pipeline.signature.session import load_session_signature
 
     sdir = Path(session_dir)
     sig = load_session_signature(sdir / "signature.json")

@@ -30,7 +30,8 @@ from pipeline.export.documents import chain_document, dh_document, mdh_document
 from pipeline.export.urdf import M_PER_CM, chain_from_origins, urdf_text, written_origins
 from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
 from pipeline.kinematics.transforms import invert_transform, pose_error
-from pipeline.signature.file import FILE_NAME, Signature, load_session_signature
+from pipeline.signature.file import FILE_NAME, Signature
+from pipeline.signature.session import load_session_signature
 from pipeline.units import joints_to_internal
 
 FORMATS = ("urdf", "dh", "mdh", "json")

@@ -17,8 +17,9 @@ from pipeline.errors import ArmsigError
 from pipeline.fleet.run import TABLE_NAME
 from pipeline.report.figures import panel_figure, save_png
 from pipeline.report.identification import markdown_table, sig
+from pipeline.signature.alignment import chain_alignment
 from pipeline.signature.checks import DIGEST_KEY
-from pipeline.signature.file import FILE_NAME, chain_alignment
+from pipeline.signature.file import FILE_NAME
 
 REPORT_DIR = "fleet-report"
 
@@ -36,7 +37,7 @@ def load_rows(folder: Path) -> list[dict[str, Any]]:
 def drift(rows: list[dict[str, Any]]) -> dict[str, list[tuple[str, float | None]]]:
     """Per robot with two or more identified sessions, in identification order: each later
     session's RMS tool position difference (cm) from the one before, after aligning the two
-    signatures' bases and tools (:func:`~pipeline.signature.file.chain_alignment`: no
+    signatures' bases and tools (:func:`~pipeline.signature.alignment.chain_alignment`: no
     ground truth, independent of each session's sensor frame). None when a session's
     signature.json is no longer the one ``fleet.arrow`` recorded."""
     by_robot: dict[str, list[dict[str, Any]]] = {}

@@ -104,7 +104,7 @@ EVALUATE_STAGE_MODULES = (
 #: name -> (file name, ``module:function`` that loads it from its path).
 #: They are hashed by content, like the recording.
 FILE_INPUTS = {
-    "signature": ("signature.json", "pipeline.signature.file:load_session_signature"),
+    "signature": ("signature.json", "pipeline.signature.session:load_session_signature"),
     "evaluation": ("evaluation.mcap", "pipeline.evaluation.recording:read_evaluation"),
 }
 #: The product of the identification stages, written by the run that commits them:
@@ -113,8 +113,8 @@ FILE_INPUTS = {
 #: ``(session_dir, hashes) -> (state, reason)``; ``hashes``: the stages' content hashes.
 PRODUCT = (
     "signature",
-    "pipeline.signature.file:write_signature",
-    "pipeline.signature.file:signature_status",
+    "pipeline.signature.session:write_signature",
+    "pipeline.signature.session:signature_status",
 )
 FAILED = "failed"
 

@@ -55,7 +55,7 @@ def _rms(v: np.ndarray) -> float | None:
 
 def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, float | None]]:
     """The evidence of a session's stage tables, and the numbers of the verdict row."""
-    from pipeline.signature.file import design_alignment
+    from pipeline.signature.alignment import design_alignment
     from pipeline.stages.frames import chain_from_frames
     from pipeline.stages.refine import refine_summary
     from pipeline.stages.session import session_robot

@@ -22,7 +22,8 @@ from pipeline import __version__
 from pipeline.atomic import atomic_write, check_writable
 from pipeline.contract.mcap_write import checked_writer, json_bytes
 from pipeline.errors import ArmsigError, StageError
-from pipeline.signature.file import FILE_NAME, load_session_signature
+from pipeline.signature.file import FILE_NAME
+from pipeline.signature.session import load_session_signature
 from pipeline.stages.lock import session_lock
 from pipeline.stages.runner import session_folder, stage_path
 from pipeline.stages.tables import check_table
