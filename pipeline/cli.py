@@ -370,7 +370,7 @@ def validate(
     as_json: JsonOption = False,
 ) -> None:
     """The signature's position error on a second file (read in memory, nothing written)."""
-    from pipeline.evaluation.validation import validate_against
+    from pipeline.evaluate.validate import validate_against
 
     r = validate_against(session, against, format, map)
     if as_json:
@@ -681,7 +681,7 @@ def evaluate(
     report: Annotated[bool, typer.Option(help="Write report/evaluation.md.")] = True,
 ) -> None:
     """Grid-touching tasks under design-model and signature control, recorded and scored."""
-    from pipeline.evaluation.evaluate import evaluate as run_evaluate
+    from pipeline.evaluate import evaluate as run_evaluate
 
     rig = None
     if perfect_servo or exact_instruments:

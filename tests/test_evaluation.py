@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.errors import ArmsigError, StageError
-from pipeline.evaluation.evaluate import evaluate
+from pipeline.evaluate import evaluate
 from pipeline.evaluation.recording import read_evaluation
 from pipeline.rig.evaluation import EvaluationRigOptions
 from pipeline.rig.recorder import EVAL_CHANNELS

@@ -15,7 +15,7 @@ from recording_data import read_raw, write_raw
 
 from pipeline.contract.channels import EVAL_CHANNELS
 from pipeline.errors import ArmsigError
-from pipeline.evaluation.evaluate import evaluate
+from pipeline.evaluate import evaluate
 
 ROBOT1 = Path(__file__).resolve().parent.parent / "sessions" / "robot1"
 

@@ -11,7 +11,7 @@ import pytest
 
 from pipeline.control.controller import solve_poses, task_axes_for
 from pipeline.control.targets import session_controller
-from pipeline.evaluation.evaluate import evaluate
+from pipeline.evaluate import evaluate
 from pipeline.evaluation.score import dropped_indices, restrict_orientation
 from pipeline.evaluation.tasks import (
     FIT_MARGIN_CM,

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from import_data import TWO_LINK, sscanss2_text
 
-from pipeline.evaluation.validation import validate_against
+from pipeline.evaluate.validate import validate_against
 from pipeline.identify import identify
 from pipeline.importers import import_file
 from pipeline.stages.tables import read_table

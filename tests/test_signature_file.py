@@ -197,7 +197,7 @@ def test_kill_between_commit_and_signature(
 
 @pytest.fixture(scope="module")
 def evaluated(identified_session: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from pipeline.evaluation.evaluate import evaluate
+    from pipeline.evaluate import evaluate
 
     d = shutil.copytree(identified_session, tmp_path_factory.mktemp("evaluated") / "s")
     evaluate(d, report=False)

@@ -29,7 +29,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-import pyarrow as pa
 
 from pipeline.control.controller import Controller, into_limits, task_axes_for
 from pipeline.evaluation.tasks import Task
@@ -231,21 +230,13 @@ def solve_with_wrist_flip(
     return q, ok
 
 
-def flange_angle(chain: SerialChain, joints: pa.Table, pos: pa.Table) -> float:
+def flange_angle(chain: SerialChain, q: Array, p: Array) -> float:
     """Angle δ (rad) of the last joint's target about the last S-Model frame's Z axis.
 
-    The circular mean over the last sweep of ``atan2(y, x)`` of the target in
-    the chain's last link frame (tool excluded) at each recorded reading; ``pos``: the
-    ``positions`` table (its first target id of the last sweep when there are several).
+    The circular mean over the last sweep of ``atan2(y, x)`` of the target in the
+    chain's last link frame (tool excluded); ``q`` (m, n): the joint values of the sweep's
+    steps (deg / cm), ``p`` (m, 3): the target's measured positions (cm), NaN where none.
     """
-    from pipeline.stages.frames import readings_at
-    from pipeline.stages.positions import positions, sweep_rows, sweep_targets
-
-    n = chain.n_joints
-    rows = sweep_rows(pos, n, sweep_targets(pos, n)[0])
-    steps = rows.column("step").to_numpy().astype(np.int64)
-    q = readings_at(joints, n, steps, n, chain.prismatic)  # paired by (sweep, step)
-    p = positions(rows)
     ok = np.isfinite(p).all(axis=1)
     bare = SerialChain(chain.links, chain.prismatic, chain.base, np.eye(4), chain.joint_offsets)
     L = forward_kinematics(bare, joints_to_internal(q[ok], chain.prismatic))

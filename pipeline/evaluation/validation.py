@@ -13,12 +13,10 @@ second file measured from another tracker station.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pipeline.errors import ArmsigError
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.units import joints_to_internal
 
@@ -87,33 +85,3 @@ def position_errors(raw: np.ndarray, registered: np.ndarray | None) -> PositionE
 def model_points(chain: SerialChain, q: np.ndarray, prismatic: np.ndarray) -> np.ndarray:
     """The chain's tool point (m, 3) cm at joint values ``q`` (m, n) deg / cm."""
     return forward_kinematics(chain, joints_to_internal(q, prismatic))[:, :3, 3]
-
-
-def validate_against(
-    session_dir: str | Path, path: str | Path, fmt: str, map_path: str | Path | None = None
-) -> dict[str, Any]:
-    """The signature of ``session_dir`` against every row of a second foreign file
-    (parsed in memory, never written into the session): its first target vs the model."""
-    from pipeline.importers import parse_foreign
-    from pipeline.importers.mapping import ImportMap, load_map
-    from pipeline.signature.session import load_session_signature
-
-    sdir = Path(session_dir)
-    sig = load_session_signature(sdir / "signature.json")
-    imap = ImportMap() if map_path is None else load_map(Path(map_path))
-    rows, _ = parse_foreign(Path(path), fmt, sig.robot, imap)
-    target = next(iter(rows.targets))
-    measured = rows.targets[target]
-    ok = np.isfinite(rows.q).all(axis=1) & np.isfinite(measured).all(axis=1)
-    if not ok.any():
-        raise ArmsigError(f"{Path(path).name}: no row with finite readings and coordinates")
-    q = sig.robot.joints_from_readings(rows.q[ok])
-    raw, reg = error_distances(model_points(sig.chain, q, sig.prismatic), measured[ok])
-    return {
-        "session": str(sdir),
-        "file": Path(path).name,
-        "format": fmt,
-        "target": target,
-        "rows_skipped": int((~ok).sum()),
-        **position_errors(raw, reg).to_dict(),
-    }

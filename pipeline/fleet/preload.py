@@ -22,7 +22,7 @@ from pipeline.stages.runner import (
 MODULES = (
     "pipeline.fleet.run",
     "pipeline.identify",
-    "pipeline.evaluation.evaluate",
+    "pipeline.evaluate",
     "pipeline.report.identification",
     "matplotlib.figure",
     "matplotlib.backends.backend_agg",

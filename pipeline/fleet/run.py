@@ -1,7 +1,7 @@
 """``pipeline fleet``: every session under the given folders is one Dask task.
 
 The task (:func:`session_task`) calls the same importable function as the single-session
-command (:func:`pipeline.identify.identify`, :func:`pipeline.evaluation.evaluate.evaluate`)
+command (:func:`pipeline.identify.identify`, :func:`pipeline.evaluate.evaluate`)
 and returns the session's row of ``fleet.arrow``. A refused session (an
 :class:`~pipeline.errors.ArmsigError`) is an answer, not a failure: its row carries the
 one-line error and the other sessions go on. Anything else (a bug, a killed worker) is
@@ -39,7 +39,7 @@ def session_task(command: str, session_dir: str) -> dict[str, Any]:
     sdir = Path(session_dir)
     try:
         if command == "evaluate":
-            from pipeline.evaluation.evaluate import evaluate
+            from pipeline.evaluate import evaluate
 
             row = session_row(sdir, command, evaluate(sdir).summary)
         else:

@@ -14,9 +14,9 @@ import numpy as np
 
 from pipeline.atomic import write_text_atomic
 from pipeline.evaluation.indices import GRID3D_INDICES
-from pipeline.evaluation.summary import summarize
 from pipeline.evaluation.tasks import CATHETOMETER_CM, GRID2D_SHAPE
 from pipeline.report import evaluation_figures as figs
+from pipeline.report.evaluation_summary import summarize
 from pipeline.report.identification import markdown_table
 from pipeline.stages.runner import stage_path
 from pipeline.stages.tables import read_table

@@ -23,9 +23,12 @@ from pipeline.evaluation.controllers import (
 )
 from pipeline.evaluation.geometry import workspace_from_points
 from pipeline.evaluation.tasks import tasks_for
+from pipeline.kinematics.chain import SerialChain
 from pipeline.kinematics.transforms import trans
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.evaluate_teach import joint_columns, joints_from_columns
+from pipeline.stages.frames import readings_at
+from pipeline.stages.positions import positions, sweep_rows, sweep_targets
 from pipeline.stages.session import session_plan, session_robot
 from pipeline.units import joints_to_boundary, joints_to_internal
 
@@ -44,7 +47,10 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     sig = inputs["signature"]
     models = (
         DesignModel(robot, tool),
-        SignatureModel(sig, flange_angle(sig.chain, inputs["joints"], inputs["positions"])),
+        SignatureModel(
+            sig,
+            flange_angle(sig.chain, *_last_sweep(inputs["joints"], inputs["positions"], sig.chain)),
+        ),
     )
     teach = inputs["evaluate_teach"]
     names = teach.column("task").to_pylist()
@@ -95,3 +101,14 @@ STAGE = Stage(
     compute,
     "joint programs of the design and signature controllers",
 )
+
+
+def _last_sweep(
+    joints: pa.Table, pos: pa.Table, chain: SerialChain
+) -> tuple[np.ndarray, np.ndarray]:
+    """Joint values (m, n) deg / cm and positions (m, 3) cm of the last sweep's first target
+    (paired by ``(sweep, step)``), for :func:`~pipeline.evaluation.controllers.flange_angle`."""
+    n = chain.n_joints
+    rows = sweep_rows(pos, n, sweep_targets(pos, n)[0])
+    steps = rows.column("step").to_numpy().astype(np.int64)
+    return readings_at(joints, n, steps, n, chain.prismatic), positions(rows)

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from pipeline.evaluation.recording import read_evaluation
-from pipeline.evaluation.summary import summarize
+from pipeline.report.evaluation_summary import summarize
 from pipeline.stages.lock import session_lock
 from pipeline.stages.runner import (
     EVALUATE_STAGE_MODULES,
