@@ -8,9 +8,9 @@ import jsonschema
 import numpy as np
 import pytest
 
+from pipeline.contract.evaluation import read_evaluation
 from pipeline.errors import ArmsigError, StageError
 from pipeline.evaluate import evaluate
-from pipeline.evaluation.recording import read_evaluation
 from pipeline.rig.evaluation import EvaluationRigOptions
 from pipeline.rig.recorder import EVAL_CHANNELS
 from pipeline.rig.simulate import SimulationOptions, simulate_session

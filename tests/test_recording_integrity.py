@@ -14,8 +14,8 @@ from mcap.stream_reader import StreamReader
 from recording_data import Raw, read_raw, rewrite_keeping_digest, small_session, write_raw
 
 from pipeline.contract.digest import DIGEST_NAME, content_digest
+from pipeline.contract.evaluation import read_evaluation
 from pipeline.errors import RecordingError
-from pipeline.evaluation.recording import read_evaluation
 from pipeline.stages.recording import read_recording
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from pipeline.evaluation.recording import read_evaluation
+from pipeline.contract.evaluation import read_evaluation
 from pipeline.report.evaluation_summary import summarize
 from pipeline.stages.lock import session_lock
 from pipeline.stages.runner import (

@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.contract.evaluation import read_evaluation
 from pipeline.control.controller import task_axes_for
 from pipeline.evaluation.grid12 import CORNER_VERTICES
-from pipeline.evaluation.recording import read_evaluation
 from pipeline.evaluation.score import AXIS_LETTERS, dropped_indices
 from pipeline.evaluation.tasks import TASK_NAMES, reading_resolution
 from pipeline.stages.runner import stage_path

@@ -105,7 +105,7 @@ EVALUATE_STAGE_MODULES = (
 #: They are hashed by content, like the recording.
 FILE_INPUTS = {
     "signature": ("signature.json", "pipeline.signature.session:load_session_signature"),
-    "evaluation": ("evaluation.mcap", "pipeline.evaluation.recording:read_evaluation"),
+    "evaluation": ("evaluation.mcap", "pipeline.contract.evaluation:read_evaluation"),
 }
 #: The product of the identification stages, written by the run that commits them:
 #: its name (a :data:`FILE_INPUTS` key) and ``module:function`` of its writer
