@@ -15,6 +15,7 @@ from pipeline.control.puma560_inverse import puma_design_inverse
 from pipeline.errors import KinematicsError
 from pipeline.kinematics import ik
 from pipeline.kinematics.chain import forward_kinematics
+from pipeline.kinematics.ik.jacobi import _anderson
 from pipeline.robots import get_robot
 from pipeline.robots import puma560 as P
 
@@ -466,6 +467,6 @@ def test_anderson_step_solves_an_affine_map(rng) -> None:
         Q[:, j] = q
         G[:, j] = q = np.einsum("kij,kj->ki", A, q) + b
     fixed = np.linalg.solve(np.eye(n) - A, b[..., None])[..., 0]
-    np.testing.assert_allclose(ik._anderson(Q, G, np.full(k, n + 1)), fixed, atol=1e-8)
+    np.testing.assert_allclose(_anderson(Q, G, np.full(k, n + 1)), fixed, atol=1e-8)
     # With a single stored iterate it is the plain step G(q_k).
-    np.testing.assert_allclose(ik._anderson(Q, G, np.ones(k, np.int64)), G[:, -1], atol=0)
+    np.testing.assert_allclose(_anderson(Q, G, np.ones(k, np.int64)), G[:, -1], atol=0)

@@ -54,7 +54,12 @@ def _kernel_modules() -> set[str]:
 
 def test_digest_covers_every_kernel_module_and_what_it_imports() -> None:
     kernels = _kernel_modules()
-    assert {"pipeline.kinematics.ik_compiled", "pipeline.control.puma560_solver"} <= kernels
+    assert {
+        "pipeline.kinematics.ik_compiled",
+        "pipeline.control.puma560_start",
+        "pipeline.control.puma560_newton",
+        "pipeline.control.puma560_jacobi",
+    } <= kernels
     closure, todo = set(), list(kernels)
     while todo:
         m = todo.pop()
@@ -135,7 +140,7 @@ def test_unreadable_sources_mean_no_disk_cache(monkeypatch: pytest.MonkeyPatch) 
 _PROBE = """
 import numpy as np
 from pipeline.kinematics import ik_compiled as K, kernel_cache as C
-from pipeline.control import puma560_solver as S
+from pipeline.control import puma560_start as S
 assert S._wrap(7.0) < 3.15
 a, out = np.eye(4), np.empty(6)
 K._delta(a, a, out)
@@ -165,7 +170,7 @@ def test_kernels_cache_in_the_digest_folder_of_numba_cache_dir(tmp_path: Path) -
     assert Path(folder) == tmp_path / f"armsig-kernels-{C.sources_digest()}"
     assert caches == ["FunctionCache", "FunctionCache"]
     assert {p.parent.parent for p in tmp_path.rglob("*.nbi")} == {Path(folder)}
-    assert {"puma560_solver._wrap", "ik_compiled._delta"} <= _index_files(Path(folder))
+    assert {"puma560_start._wrap", "ik_compiled._delta"} <= _index_files(Path(folder))
 
 
 def test_kernels_cache_in_the_digest_folder_beside_the_sources() -> None:
@@ -174,7 +179,7 @@ def test_kernels_cache_in_the_digest_folder_beside_the_sources() -> None:
     tree = ROOT / "pipeline/kinematics/__pycache__"
     assert Path(folder) == tree / f"numba-kernels-{C.sources_digest()}"
     assert caches == ["FunctionCache", "FunctionCache"]
-    assert {"puma560_solver._wrap", "ik_compiled._delta"} <= _index_files(Path(folder))
+    assert {"puma560_start._wrap", "ik_compiled._delta"} <= _index_files(Path(folder))
     # Nothing written where numba caches by default (keyed on the defining file alone).
     for p in (ROOT / "pipeline").glob("*/__pycache__/*.nbi"):
         assert p.stat().st_mtime < start, p
@@ -188,7 +193,7 @@ def test_unusable_numba_cache_dir_compiles_in_memory(tmp_path: Path) -> None:
 
 _ERROR_AT = """
 import numpy as np
-from pipeline.control import puma560_solver as S
+from pipeline.control import puma560_jacobi as S
 from pipeline.robots import puma560
 c, T = puma560.simulator_chain(), np.eye(4)
 T[:3, 3] = [10.0, 20.0, 30.0]
@@ -198,8 +203,8 @@ print(S._error_at(*arrays, T, np.zeros(6), np.empty((4, 4)), np.empty(6), 1.0)[0
 
 
 def test_a_change_to_an_inlined_kernel_of_another_file_recompiles(tmp_path: Path) -> None:
-    """puma560_solver._error_at inlines ik_compiled._errors: an edit of ik_compiled.py
-    alone must reach it (numba alone keeps the code cached for control/puma560_solver.py)."""
+    """puma560_jacobi._error_at inlines ik_compiled._errors: an edit of ik_compiled.py
+    alone must reach it (numba alone keeps the code cached for control/puma560_jacobi.py)."""
     skip = shutil.ignore_patterns("__pycache__")
     shutil.copytree(ROOT / "pipeline", tmp_path / "pipeline", ignore=skip)
 
@@ -225,6 +230,6 @@ def test_read_only_tree_caches_in_the_user_cache_or_in_memory(tmp_path: Path) ->
     folder, *caches = _run(_PROBE, env, tmp_path).split()
     assert Path(folder) == home / f"armsig/armsig-kernels-{C.sources_digest()}"
     assert caches == ["FunctionCache", "FunctionCache"]
-    assert {"puma560_solver._wrap", "ik_compiled._delta"} <= _index_files(Path(folder))
+    assert {"puma560_start._wrap", "ik_compiled._delta"} <= _index_files(Path(folder))
     env["XDG_CACHE_HOME"] = str(tmp_path / "pipeline/kinematics/__pycache__")
     assert _run(_PROBE, env, tmp_path).split() == ["None", "NullCache", "NullCache"]

@@ -1,10 +1,10 @@
-"""The compiled Puma design start (pipeline.control.puma560_solver) against the numpy
+"""The compiled Puma design start (pipeline.control.puma560_start) against the numpy
 design inverse it stands in for: every branch, clamped poses, the wrist singularity."""
 
 import numpy as np
 import pytest
 
-from pipeline.control import puma560_solver as S
+from pipeline.control import puma560_start as S
 from pipeline.control.puma560_inverse import puma_design_inverse
 from pipeline.kinematics.chain import forward_kinematics
 from pipeline.kinematics.transforms import invert_transform, transform_from_xyz_rpy

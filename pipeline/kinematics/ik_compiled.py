@@ -338,7 +338,7 @@ def solve_one_target(
                 base, links, tool, offsets, prismatic, target, q, res, limit, settings,
                 delta, J, it - 1,
             )  # fmt: skip
-        worst = 1.0  # C.1 step 7, the step capped per joint (ik._cap_step)
+        worst = 1.0  # C.1 step 7, the step capped per joint (ik.steps._cap_step)
         for j in range(n):
             worst = max(worst, abs(dq[j]) / limit[j])
         small = True  # Appendix C.1 step 8: every increment below one count

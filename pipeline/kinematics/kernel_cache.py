@@ -4,10 +4,11 @@ stale machine code in use.
 
 Why: numba checks a cached kernel only against the file that *defines* it (its
 index stores that file's stamp, ``numba/core/caching.py``). A kernel of
-:mod:`pipeline.control.puma560_solver` inlines kernels of
-:mod:`pipeline.kinematics.ik_compiled` and freezes module globals (``STALL_RATIO``,
-the Puma's design lengths) into its machine code as constants; after a change to
-those files alone numba would load the old code. Here every kernel of the
+:mod:`pipeline.control.puma560_jacobi` inlines kernels of
+:mod:`pipeline.kinematics.ik_compiled` and :mod:`pipeline.control.puma560_start`
+and freezes module globals (``STALL_RATIO``, ``JACOBI_SLOW_RATIO``, the Puma's
+design lengths) into its machine code as constants; after a change to those
+files alone numba would load the old code. Here every kernel of the
 package is cached in one folder named for a sha256 of all those files, so a
 change to any of them compiles afresh into a new folder.
 
@@ -18,8 +19,9 @@ of modules its module imports, and a constant it reads may be computed in a
 module further down (``puma560.DESIGN_D_CM`` from ``chain``/``transforms``), hence
 the transitive closure rather than the direct imports. Package ``__init__``
 files are left out (they define nothing a kernel reads). The cost of the closure:
-an edit of e.g. ``ik.py`` recompiles the kernels (~20-25 s once). The list is
-written out, not computed at import (parsing ~10 modules would cost every
+an edit of e.g. ``ik/jacobi.py`` recompiles the kernels (~20-25 s once); one of
+``ik/newton.py`` or ``ik/safeguard.py`` (no kernel imports them) does not. The list
+is written out, not computed at import (parsing ~18 modules would cost every
 import); ``tests/test_kernel_cache.py`` recomputes the closure from the
 package's sources and fails when a module is missing here.
 
@@ -63,14 +65,21 @@ KERNEL_SOURCES = (
     "pipeline.errors",
     "pipeline.kinematics.chain",
     "pipeline.kinematics.dh",
-    "pipeline.kinematics.ik",
+    "pipeline.kinematics.ik.batch",
+    "pipeline.kinematics.ik.iterate",
+    "pipeline.kinematics.ik.jacobi",
+    "pipeline.kinematics.ik.result",
+    "pipeline.kinematics.ik.steps",
+    "pipeline.kinematics.ik.task",
     "pipeline.kinematics.ik_compiled",
     "pipeline.kinematics.ik_stall",
     "pipeline.kinematics.jacobian",
     "pipeline.kinematics.kernel_cache",
     "pipeline.kinematics.transforms",
     "pipeline.robots.puma560",
-    "pipeline.control.puma560_solver",
+    "pipeline.control.puma560_jacobi",
+    "pipeline.control.puma560_newton",
+    "pipeline.control.puma560_start",
 )
 #: Hex digits of the sha256 in the folder name: 64 bits, no collision in practice.
 DIGEST_CHARS = 16
