@@ -61,3 +61,45 @@ def test_graph_sees_function_level_imports() -> None:
     assert "pipeline.kinematics.ik_compiled" in graph["pipeline.kinematics.ik"]
     assert "pipeline.report.evaluation" in graph["pipeline.evaluation.evaluate"]
     assert "pipeline.kinematics.ik_stall" in graph["pipeline.kinematics.ik_compiled"]
+
+
+# Issue 31 item 3: the math floor takes arrays and dataclasses; stage modules adapt tables to it.
+MATH = ("pipeline.optim", "pipeline.kinematics", "pipeline.sensor", "pipeline.features", "pipeline.refine")
+ABOVE_MATH = tuple(
+    f"pipeline.{p}"
+    for p in (
+        "stages", "contract", "rig", "importers", "identify", "evaluation", "report", "export",
+        "viz", "fleet", "montecarlo", "cli", "signature", "control", "atomic",
+    )
+)
+
+
+def _under(module: str, packages: tuple[str, ...]) -> bool:
+    return any(module == p or module.startswith(p + ".") for p in packages)
+
+
+def test_math_imports_no_stage_or_io_module() -> None:
+    graph = import_graph()
+    upward = sorted(
+        f"{m} -> {d}"
+        for m, deps in graph.items()
+        if _under(m, MATH)
+        for d in deps
+        if _under(d, ABOVE_MATH)
+    )
+    assert upward == []
+
+
+def test_optimiser_sits_below_the_math() -> None:
+    graph = import_graph()  # pipeline.optim: numpy/scipy and the foundations only
+    deps = {d for m, ds in graph.items() if _under(m, ("pipeline.optim",)) for d in ds}
+    assert deps <= {"pipeline.errors", "pipeline.units"} | {m for m in graph if _under(m, ("pipeline.optim",))}
+    assert "pipeline.optim" in graph
+
+
+def test_math_packages_form_no_circle() -> None:
+    graph = import_graph()  # package level: refine -> sensor -> refine was a circle of packages
+    pkg = {m: m.split(".")[1] for m in graph if _under(m, MATH)}
+    edges = {(pkg[m], pkg[d]) for m in pkg for d in graph[m] if d in pkg and pkg[d] != pkg[m]}
+    pgraph = {p: {b for a, b in edges if a == p} for p in set(pkg.values())}
+    assert sorted(p for p in pgraph if p in _reachable(pgraph, p)) == []

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
 from pipeline.errors import ArmsigError
-from pipeline.refine.block import dense
+from pipeline.optim.block import dense
 from pipeline.rig.atmosphere import Atmosphere
 from pipeline.rig.digitizer import DigitizerModel, digitize
 from pipeline.rig.simulate import SimulationOptions, simulate_session

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyarrow as pa
 
-from pipeline.refine.block import Array, Linearization
+from pipeline.optim.block import Array, Linearization
 from pipeline.sensor.geometry import DigitizerGeometry
 from pipeline.sensor.noise import range_sigma_cm
 from pipeline.stages.positions import _COV_INDEX, COV_ENTRIES, positions
@@ -89,7 +89,7 @@ def position_covariances(rows: pa.Table, geometry: DigitizerGeometry | None = No
 
 @dataclass(eq=False)  # not frozen: MeasurementBlock declares settable attributes
 class PointBlock:
-    """A :class:`~pipeline.refine.block.MeasurementBlock` of measured target positions."""
+    """A :class:`~pipeline.optim.block.MeasurementBlock` of measured target positions."""
 
     keys: pa.Table
     measured: Array  # (K, 3) cm

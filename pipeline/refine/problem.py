@@ -18,7 +18,7 @@ import numpy.typing as npt
 import pyarrow as pa
 
 from pipeline.errors import StageError
-from pipeline.refine.block import Array, MeasurementBlock
+from pipeline.optim.block import Array, MeasurementBlock
 from pipeline.refine.kinematics import ChainModel, model_for_keys, start_points
 from pipeline.refine.points import PointBlock, point_block, with_reading_noise
 from pipeline.refine.solve import Problem

@@ -1,6 +1,6 @@
 """The sonic digitizer at the level of its raw slant ranges: a measurement block.
 
-:class:`RangeBlock` implements :class:`pipeline.refine.block.MeasurementBlock` for a
+:class:`RangeBlock` implements :class:`pipeline.optim.block.MeasurementBlock` for a
 sonic session (stage tables ``ranges`` and ``session``). Its rows, each whitened by
 the range noise of :mod:`pipeline.sensor.noise` ((7.9) and the 0.01 cm rounding,
 evaluated at the measured range):
@@ -64,7 +64,7 @@ import pyarrow as pa
 from scipy import sparse
 
 from pipeline.errors import ArmsigError
-from pipeline.refine.block import Group, Linearization, MeasurementBlock
+from pipeline.optim.block import Group, Linearization, MeasurementBlock
 from pipeline.sensor.geometry import MICROPHONES, DigitizerGeometry
 from pipeline.sensor.noise import range_sigma_cm
 from pipeline.sensor.range_rows import RangeRows, check_cycle_order, range_rows, unique_rows
@@ -319,7 +319,7 @@ class RangeBlock:
 
     @cached_property
     def d_x_groups(self) -> tuple[Group, ...]:
-        """``d_x``'s rows grouped by their columns (:class:`~pipeline.refine.block.
+        """``d_x``'s rows grouped by their columns (:class:`~pipeline.optim.block.
         Linearization`): ~6 per speed coefficient (a microphone's target rows, a rod's
         microphone), one per prior."""
         cols, indptr = self.d_x_pattern

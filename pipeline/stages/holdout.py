@@ -64,7 +64,7 @@ class StepRefit:
         object.__setattr__(self, "_at_x_hat", (full, linearize(full, self.x_hat)))
 
     def __call__(self, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        from pipeline.refine.lm import rho
+        from pipeline.optim.lm import rho
         from pipeline.refine.solve import kept_rows, normal_equations
 
         full, lin = self._at_x_hat  # type: ignore[attr-defined]

@@ -30,7 +30,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.errors import StageError
-from pipeline.refine.lm import LOSSES
+from pipeline.optim.lm import LOSSES
 from pipeline.stages.base import Stage, check_param
 from pipeline.stages.session import session_sensor
 
