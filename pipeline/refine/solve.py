@@ -23,8 +23,8 @@ from scipy import sparse
 
 from pipeline.errors import ArmsigError
 from pipeline.optim.block import Array, Linearization, MeasurementBlock, dense
-from pipeline.refine.kinematics import ChainModel
 from pipeline.optim.lm import LOSSES, Normal, levenberg_marquardt
+from pipeline.refine.kinematics import ChainModel
 
 #: Solver tolerances: at 1e-15 (relative cost, step and gradient) a noiseless session
 #: converges to its rounding floor (audit ~1e-12 cm, well inside the 1e-6 cm acceptance);
