@@ -33,7 +33,7 @@ from pipeline.stages import ranges as ranges_stage
 from pipeline.stages import session as session_stage
 from pipeline.stages.base import RECORDING, NoParams
 from pipeline.stages.recording import read_recording
-from pipeline.stages.recording_keys import TOOL_SWEEP
+from pipeline.sweeps import TOOL_SWEEP
 
 
 def _tables(sdir: Path) -> tuple[pa.Table, pa.Table]:
