@@ -66,6 +66,19 @@ def refine_summary(table: pa.Table) -> dict[str, Any]:
     return json.loads(raw) if raw else {}
 
 
+def internal_factors(refine: pa.Table) -> np.ndarray:
+    """Per row of a ``refine`` table, the factor from its boundary unit to the internal
+    one (deg -> rad; cm and ratios unchanged): values scale by it, covariances by its
+    outer product."""
+    unit = np.array(refine.column("unit").to_pylist())
+    return np.where(unit == "deg", np.radians(1.0), 1.0)
+
+
+def refined_x(refine: pa.Table) -> np.ndarray:
+    """The fitted ``x`` (internal units) of a ``refine`` table."""
+    return np.asarray(refine.column("value").to_numpy() * internal_factors(refine), float)
+
+
 def resolved_level(params: Params, sensor: str) -> str:
     """The measurement level a session is refined at: ``auto`` is ``ranges`` for sonic
     sessions (every raw range, the sensor calibrated in the fit), ``points`` for point
@@ -107,8 +120,8 @@ def _disabled(level: str) -> pa.Table:
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
-    from pipeline.refine.problem import session_problem
     from pipeline.refine.solve import recorded_chi2, solve
+    from pipeline.stages.refine_problem import session_problem
 
     sensor = session_sensor(inputs["session"])
     level = resolved_level(params, sensor)
