@@ -61,7 +61,7 @@ def test_cold_run_imports_no_pyplot_no_scipy_stats_no_scipy_optimize(session: Pa
     imported = _imported(session, (*HEAVY, "matplotlib.pyplot", "scipy.interpolate"))
     assert "matplotlib.pyplot" not in imported and "scipy.stats" not in imported
     assert "scipy.interpolate" not in imported  # the speed-of-sound spline: numpy
-    assert "scipy.optimize" not in imported  # the design alignment: refine.lm
+    assert "scipy.optimize" not in imported  # the design alignment: optim.lm
     assert (session / "report" / "report.md").is_file()
 
 

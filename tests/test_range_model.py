@@ -14,26 +14,22 @@ from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
 from pipeline.errors import ArmsigError
-from pipeline.refine.block import dense
+from pipeline.optim.block import dense
 from pipeline.rig.atmosphere import Atmosphere
 from pipeline.rig.digitizer import DigitizerModel, digitize
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.sensor.geometry import MICROPHONES, DigitizerGeometry, default_geometry
 from pipeline.sensor.noise import range_sigma_cm
 from pipeline.sensor.range_calibration import sensor_calibration
-from pipeline.sensor.range_model import (
-    RangeBlock,
-    RangeModelOptions,
-    phi,
-    range_block,
-)
+from pipeline.sensor.range_model import RangeBlock, RangeModelOptions, phi
 from pipeline.sensor.range_rows import unique_rows
 from pipeline.sensor.speed_spline import TimeSpline
 from pipeline.stages import ranges as ranges_stage
 from pipeline.stages import session as session_stage
 from pipeline.stages.base import RECORDING, NoParams
 from pipeline.stages.recording import read_recording
-from pipeline.stages.recording_keys import TOOL_SWEEP
+from pipeline.stages.refine_problem import session_range_block
+from pipeline.sweeps import TOOL_SWEEP
 
 
 def _tables(sdir: Path) -> tuple[pa.Table, pa.Table]:
@@ -55,7 +51,7 @@ def _true_positions(block: RangeBlock, truth: dict) -> np.ndarray:
 
 def _simulate(tmp: Path, **kw: object) -> tuple[RangeBlock, dict, np.ndarray]:
     simulate_session(tmp, SimulationOptions(**kw))  # type: ignore[arg-type]
-    block = range_block(*_tables(tmp))
+    block = session_range_block(*_tables(tmp))
     truth = json.loads((tmp / "rig-truth.json").read_text())
     return block, truth, _true_positions(block, truth)
 
@@ -135,7 +131,7 @@ def test_linear_speed_model_against_the_exact_integral() -> None:
     """Gradient and drift, no noise: fitting the sensor parameters with the positions at
     the truth leaves the model-versus-integral error of the linear-speed law (B-3)."""
     ranges, session, p, _ = _atmosphere_tables(_LAB, 0.0, 5)
-    block = range_block(ranges, session)
+    block = session_range_block(ranges, session)
     pk = p[block.keys["sweep"].to_numpy() - 1]
     sol = least_squares(
         lambda x: block.linearize(pk, x).r,
@@ -170,7 +166,7 @@ def test_phi_and_its_derivative() -> None:
 
 def test_jacobians_against_central_differences() -> None:
     ranges, session, p, _ = _atmosphere_tables(_LAB, 1.0, 7)
-    block = range_block(ranges, session)
+    block = session_range_block(ranges, session)
     pk = p[block.keys["sweep"].to_numpy() - 1]
     rng = np.random.default_rng(3)
     x = block.x0.copy()
@@ -253,7 +249,7 @@ def _drop(ranges: pa.Table, mask: pa.ChunkedArray) -> pa.Table:
 
 def _one_line_error(ranges: pa.Table, session: pa.Table, match: str) -> None:
     with pytest.raises(ArmsigError, match=match) as info:
-        range_block(ranges, session)
+        session_range_block(ranges, session)
     assert "\n" not in str(info.value) and "expected" in str(info.value)
 
 

@@ -17,11 +17,11 @@ from recording_data import small_session
 from pipeline.errors import ArmsigError
 from pipeline.identify import identify
 from pipeline.refine.kinematics import ChainModel
-from pipeline.refine.points import point_block
 from pipeline.refine.solve import Problem, refit, solve
 from pipeline.rig.audit import audit
 from pipeline.schemas import validate_table
 from pipeline.stages.refine import refine_summary
+from pipeline.stages.refine_problem import point_block
 from pipeline.stages.runner import run, stage_path
 from pipeline.stages.tables import content_hash, read_table
 
@@ -120,7 +120,7 @@ def test_disabled_gives_the_thesis_tables_byte_for_byte(tmp_path_factory, tmp_pa
 def test_a_sweep_without_usable_positions_is_one_line(tmp_path_factory, tmp_path) -> None:
     """All positions of a sweep null (a corrupted input): refused with one line, not a
     traceback or a silently wrong chain."""
-    from pipeline.refine.problem import session_problem
+    from pipeline.stages.refine_problem import session_problem
 
     d = _identified(tmp_path_factory, sensor="tracker", seed=1, noiseless=True, points=5)
     t = {n: read_table(stage_path(d, n)) for n in ("session", "joints", "positions", "frames")}

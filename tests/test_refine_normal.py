@@ -12,7 +12,6 @@ from recording_data import small_session
 
 from pipeline.identify import identify
 from pipeline.refine import solve as solve_module
-from pipeline.refine.problem import session_problem
 from pipeline.refine.solve import (
     normal_equations,
     recorded_chi2,
@@ -20,6 +19,7 @@ from pipeline.refine.solve import (
     solve,
 )
 from pipeline.stages.refine import STAGE
+from pipeline.stages.refine_problem import session_problem
 from pipeline.stages.runner import stage_path
 from pipeline.stages.tables import read_table
 

@@ -98,14 +98,6 @@ def normal_deviation(points: ArrayLike, start: ArrayLike, end: ArrayLike) -> Arr
     return out
 
 
-def angle_between(u: ArrayLike, v: ArrayLike) -> Array:
-    """Angle (rad, [0, π]) between vectors (..., 3); atan2 keeps it exact near 90°."""
-    a = np.asarray(u, float)
-    b = np.asarray(v, float)
-    out: Array = np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
-    return out
-
-
 def signed_extreme(x: ArrayLike, axis: int = -1) -> Array:
     """The entry of largest magnitude along ``axis``, sign kept (Tables 6-8/6-9 columns)."""
     a = np.asarray(x, float)

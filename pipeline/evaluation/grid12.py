@@ -28,8 +28,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.evaluation.geometry import angle_between
-from pipeline.kinematics.transforms import invert_transform, pose_error, rot_y, rot_z
+from pipeline.kinematics.transforms import angle_between, invert_transform, pose_error, rot_y, rot_z
 
 Array = npt.NDArray[np.float64]
 

@@ -12,14 +12,13 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.evaluation.geometry import (
-    angle_between,
     distance,
     normal_deviation,
     rotation_from_vector,
     rotation_vector,
     signed_extreme,
 )
-from pipeline.kinematics.transforms import Array
+from pipeline.kinematics.transforms import Array, angle_between
 
 #: Table 6-6: one signed line-length error per line (cm).
 LINES1D_UNIT = "cm"

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.evaluation.geometry import angle_between
+from pipeline.kinematics.transforms import angle_between
 
 #: A target must move / sit at least this far from the axis (cm): far above a tracker's
 #: or the sonic rig's noise, far below any real target radius (10-40 cm in the thesis).

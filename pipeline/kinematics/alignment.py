@@ -70,9 +70,9 @@ def fit_alignment(T_ref: ArrayLike, T_model: ArrayLike) -> tuple[Array, Array]:
         r: Array = ((T - Tr)[:, :3, :] @ lever).ravel()
         return r
 
-    # The refinement's Levenberg-Marquardt (numpy only): scipy.optimize's import cost
+    # The optimiser's Levenberg-Marquardt (numpy only): scipy.optimize's import cost
     # ~0.1-0.4 s of CPU in every identify for a fit of 12 parameters.
-    from pipeline.refine.lm import levenberg_marquardt
+    from pipeline.optim.lm import levenberg_marquardt
 
     V = _observable_directions(residual)  # (12, k)
 

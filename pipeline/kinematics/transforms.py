@@ -182,6 +182,14 @@ def cross3(a: Array, b: Array, axis: int = -1) -> Array:
     )
 
 
+def angle_between(u: ArrayLike, v: ArrayLike) -> Array:
+    """Angle (rad, [0, π]) between vectors (..., 3); atan2 keeps it exact near 90°."""
+    a = np.asarray(u, float)
+    b = np.asarray(v, float)
+    out: Array = np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
+    return out
+
+
 #: Flat indices into a 3x3 matrix: R21, R02, R10, R12, R20, R01, R00, R11, R22.
 _SKEW_TRACE = np.array([7, 2, 3, 5, 6, 1, 0, 4, 8])
 _ONES3 = np.ones(3)

@@ -38,15 +38,16 @@ the points from :func:`start_points` reproduces the thesis chain.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
-import pyarrow as pa
 
 from pipeline.errors import StageError
 from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans, trans_z
+from pipeline.sweeps import CHECK_SWEEP, TOOL_SWEEP
 
 Array = npt.NDArray[np.float64]
 
@@ -286,37 +287,27 @@ def point_name(sweep: int, target: str, tool_target: str | None) -> str:
     (``plan.sweeps_measure_tool``, imports), else None: a tracker's joint sweeps may
     reuse the tool's id for their own nests.
     """
-    from pipeline.stages.recording_keys import CHECK_SWEEP, TOOL_SWEEP
-
     if sweep in (TOOL_SWEEP, CHECK_SWEEP) or (tool_target is not None and target == tool_target):
         return TOOL_POINT
     return f"sweep{sweep}/{target}"
 
 
-def model_for_keys(
-    keys: pa.Table, session: pa.Table, joints: pa.Table, frames: pa.Table
+def chain_model(
+    sweep: npt.NDArray[np.int64],
+    target: Sequence[str],
+    theta: Array,
+    frames0: Array,
+    prismatic: npt.NDArray[np.bool_],
+    tool_target: str | None,
 ) -> ChainModel:
-    """The model of the observations ``keys`` (columns sweep, step, target), started at
-    the thesis ``frames`` table, with each key's readings joined from ``joints`` by
-    (sweep, step)."""
-    from pipeline.stages.frames import chain_from_frames, matrices_from_columns, readings_at
-    from pipeline.stages.session import session_plan, session_robot
-    from pipeline.units import joints_to_internal
+    """The model of the observations (``sweep``, ``target``) (K,), started at the thesis
+    frames ``frames0`` (n, 4, 4) of the joints ``prismatic`` (n,).
 
-    robot = session_robot(session)
-    n, pris = robot.n_joints, robot.prismatic
-    plan = session_plan(session)
-    shared = plan.get("sweeps_measure_tool", False) and plan.get("tool_target") is not None
-    tool_target = str(plan["tool_target"]) if shared else None
-    q_sig = chain_from_frames(frames, pris).joint_offsets
-    sweep = keys.column("sweep").to_numpy().astype(np.int64)
-    step = keys.column("step").to_numpy().astype(np.int64)
-    target = keys.column("target").to_pylist()
-    theta = np.zeros((len(sweep), n))
-    for s in np.unique(sweep):
-        sel = np.flatnonzero(sweep == s)
-        q = readings_at(joints, int(s), step[sel], n, pris)
-        theta[sel] = joints_to_internal(q, pris) - q_sig
+    ``theta`` (K, n): each observation's joint readings minus ``q̄^s`` (rad / cm);
+    ``tool_target``: as in :func:`point_name`. The stage tables are read by
+    :func:`pipeline.stages.refine_problem.model_for_keys`.
+    """
+    n = len(prismatic)
     names = [point_name(int(s), str(t), tool_target) for s, t in zip(sweep, target, strict=True)]
     point_names = tuple(dict.fromkeys(names))
     index = {p: j for j, p in enumerate(point_names)}
@@ -329,8 +320,8 @@ def model_for_keys(
             fix="re-record the session",
         )
     return ChainModel(
-        frames0=matrices_from_columns(frames)[:n],
-        prismatic=pris,
+        frames0=frames0,
+        prismatic=prismatic,
         link=link.astype(np.int64),
         theta=theta,
         point=np.array([index[p] for p in names], np.int64),

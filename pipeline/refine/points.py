@@ -18,14 +18,15 @@ measured position, ``p`` the chain's prediction; ``∂r/∂p = L⁻¹``. Σ per 
   given (:data:`RESOLUTION_VAR_CM2` floor);
 - every position (point sensors and sonic positions alike) adds the noise of the encoder
   readings it is predicted at, ``Σ_k g_k g_kᵀ · resolution_k² / 12`` with ``g_k = ∂p/∂q_k``
-  (:func:`with_reading_noise`, built in :func:`pipeline.refine.problem.session_problem`):
+  (:func:`with_reading_noise`, built in :func:`pipeline.refine.problem.chain_problem`):
   tracker seeds 5, 7, 8 (20 points) moved from thesis/refined 0.84, 1.43, 0.88 to 0.88,
   1.44, 0.96 with it;
 - a row with no stated noise takes the median variance of the rows that have one (1 cm²
   when none has: the covariance is scaled by the fitted noise χ²/dof anyway).
 
 Rows without a position (null) are not in the block. Validation rows (sweep ``check``,
-−1) are never in the block: held out for :mod:`pipeline.stages.validation` and the holdout.
+−1) are never in the block: held out for :mod:`pipeline.stages.validation` and the holdout
+(the block of a ``positions`` table: :func:`pipeline.stages.refine_problem.point_block`).
 """
 
 from __future__ import annotations
@@ -35,18 +36,37 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyarrow as pa
 
-from pipeline.refine.block import Array, Linearization
+from pipeline.optim.block import Array, Linearization
 from pipeline.sensor.geometry import DigitizerGeometry
 from pipeline.sensor.noise import range_sigma_cm
-from pipeline.stages.positions import _COV_INDEX, COV_ENTRIES, positions
-from pipeline.stages.recording import CHECK_SWEEP
 
 #: Variance of a uniform rounding to the sonic digitizer's 0.01 cm resolution (cm²).
 RESOLUTION_VAR_CM2 = 0.01**2 / 12.0
 
 
-def _column(table: pa.Table, name: str) -> np.ndarray:
-    return table.column(name).to_numpy(zero_copy_only=False).astype(float)
+@dataclass(frozen=True)
+class PositionRows:
+    """Measured target positions and what their source states of their noise (the rows
+    of a ``positions`` table: :func:`pipeline.stages.refine_problem.position_rows`).
+
+    Attributes
+    ----------
+    p : ndarray, shape (m, 3)
+        Positions (sensor frame, cm); NaN where none.
+    cov : ndarray, shape (m, 3, 3)
+        Recorded covariances (cm²); NaN where not all six entries are recorded.
+    sigma_cm, scatter_cm : ndarray, shape (m,)
+        Recorded isotropic σ (NaN where none); scatter of the averaged cycles (sonic).
+    n_used, n_samples : ndarray, shape (m,)
+        Cycles averaged (float) and recorded (int) per position.
+    """
+
+    p: Array
+    cov: Array
+    sigma_cm: Array
+    scatter_cm: Array
+    n_used: Array
+    n_samples: np.ndarray
 
 
 def trilateration_covariances(
@@ -60,24 +80,20 @@ def trilateration_covariances(
     return np.einsum("kij,kj,klj->kil", U_inv, var, U_inv) / n_used[:, None, None]
 
 
-def position_covariances(rows: pa.Table, geometry: DigitizerGeometry | None = None) -> np.ndarray:
-    """Σ (m, 3, 3) of the rows of a ``positions`` table, per the module docstring."""
-    m = rows.num_rows
-    cov = np.full((m, 3, 3), np.nan)
-    entries = [_column(rows, f"cov_{e}_cm2") for e in COV_ENTRIES]
-    full = np.isfinite(np.stack(entries, axis=1)).all(axis=1)
-    for v, (i, j) in zip(entries, _COV_INDEX, strict=True):
-        cov[full, i, j] = cov[full, j, i] = v[full]
-    var = _column(rows, "sigma_cm") ** 2
-    scatter = _column(rows, "scatter_cm")
-    n_used = rows.column("n_used").to_numpy().astype(float)
-    sonic = np.isnan(var) & ~full & (rows.column("n_samples").to_numpy() > 1)
+def position_covariances(rows: PositionRows, geometry: DigitizerGeometry | None = None) -> Array:
+    """Σ (m, 3, 3) of measured positions, per the module docstring."""
+    cov = rows.cov.copy()
+    full = np.isfinite(cov).all(axis=(1, 2))
+    var = rows.sigma_cm**2
+    scatter = rows.scatter_cm
+    n_used = rows.n_used
+    sonic = np.isnan(var) & ~full & (rows.n_samples > 1)
     with np.errstate(invalid="ignore", divide="ignore"):
         var = np.where(sonic, np.maximum(scatter**2 / n_used, RESOLUTION_VAR_CM2), var)
     if geometry is not None and sonic.any():
         at = sonic & (n_used > 0)
         var[at] = np.nan
-        cov[at] = trilateration_covariances(positions(rows)[at], geometry, n_used[at])
+        cov[at] = trilateration_covariances(rows.p[at], geometry, n_used[at])
     iso = ~full & np.isfinite(var)
     cov[iso] = var[iso, None, None] * np.eye(3)
     stated = np.isfinite(cov).all(axis=(1, 2))
@@ -89,7 +105,7 @@ def position_covariances(rows: pa.Table, geometry: DigitizerGeometry | None = No
 
 @dataclass(eq=False)  # not frozen: MeasurementBlock declares settable attributes
 class PointBlock:
-    """A :class:`~pipeline.refine.block.MeasurementBlock` of measured target positions."""
+    """A :class:`~pipeline.optim.block.MeasurementBlock` of measured target positions."""
 
     keys: pa.Table
     measured: Array  # (K, 3) cm
@@ -118,17 +134,3 @@ def with_reading_noise(block: PointBlock, tangents: Array, var_q: Array) -> Poin
     L = np.linalg.inv(block.whiten)
     cov = L @ np.swapaxes(L, 1, 2) + np.einsum("kni,knj,n->kij", tangents, tangents, var_q)
     return PointBlock(block.keys, block.measured, np.linalg.inv(np.linalg.cholesky(cov)))
-
-
-def point_block(table: pa.Table, geometry: DigitizerGeometry | None = None) -> PointBlock:
-    """The block of every usable fit position of a ``positions`` table (module docstring)."""
-    p = positions(table)
-    sweep = table.column("sweep").to_numpy()
-    use = np.isfinite(p).all(axis=1) & (sweep != CHECK_SWEEP)
-    rows = table.filter(pa.array(use))
-    L = np.linalg.cholesky(position_covariances(rows, geometry))
-    return PointBlock(
-        keys=rows.select(["sweep", "step", "target"]),
-        measured=p[use],
-        whiten=np.linalg.inv(L),
-    )

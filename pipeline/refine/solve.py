@@ -2,11 +2,11 @@
 
 The parameters are ``x = [θ_kin, x_block]`` (:class:`~pipeline.refine.kinematics.ChainModel`'s,
 then the block's). The residuals are the block's whitened residuals at the chain's predicted
-positions, and the Jacobian chains the two (:mod:`pipeline.refine.block`)::
+positions, and the Jacobian chains the two (:mod:`pipeline.optim.block`)::
 
     J = [ d_p[rows] · ∂p/∂θ[pos[rows]],  d_x ]
 
-solved by Levenberg-Marquardt on the normal equations (:mod:`pipeline.refine.lm`: a robust
+solved by Levenberg-Marquardt on the normal equations (:mod:`pipeline.optim.lm`: a robust
 loss in whitened units by reweighting), formed from that structure without the dense ``J``
 (:func:`normal_equations`). The covariance is Gauss-Newton at the solution,
 ``(JᵀWJ)⁻¹ · χ²/dof`` with ``W`` the robust weights and ``χ² = 2 · cost`` (the robust χ²;
@@ -22,9 +22,9 @@ import numpy.typing as npt
 from scipy import sparse
 
 from pipeline.errors import ArmsigError
-from pipeline.refine.block import Array, Linearization, MeasurementBlock, dense
+from pipeline.optim.block import Array, Linearization, MeasurementBlock, dense
+from pipeline.optim.lm import LOSSES, Normal, levenberg_marquardt
 from pipeline.refine.kinematics import ChainModel
-from pipeline.refine.lm import LOSSES, Normal, levenberg_marquardt
 
 #: Solver tolerances: at 1e-15 (relative cost, step and gradient) a noiseless session
 #: converges to its rounding floor (audit ~1e-12 cm, well inside the 1e-6 cm acceptance);
@@ -114,7 +114,7 @@ def residuals_and_jacobian(problem: Problem, x: Array) -> tuple[Array, Array]:
 
 def _block_information(lin: Linearization, w: Array) -> Array:
     """``XᵀWX`` of the block's ``d_x`` (``X``): group by group when the block names its
-    rows' column patterns (:class:`~pipeline.refine.block.Linearization`), else one
+    rows' column patterns (:class:`~pipeline.optim.block.Linearization`), else one
     product of ``X``, sparse where ``X`` is."""
     sw = np.sqrt(w)
     if isinstance(lin.d_x, np.ndarray):

@@ -1,7 +1,7 @@
 """The sonic digitizer at the level of its raw slant ranges: a measurement block.
 
-:class:`RangeBlock` implements :class:`pipeline.refine.block.MeasurementBlock` for a
-sonic session (stage tables ``ranges`` and ``session``). Its rows, each whitened by
+:class:`RangeBlock` implements :class:`pipeline.optim.block.MeasurementBlock` for a
+sonic session (its ``ranges`` table and recorded geometry). Its rows, each whitened by
 the range noise of :mod:`pipeline.sensor.noise` ((7.9) and the 0.01 cm rounding,
 evaluated at the measured range):
 
@@ -53,7 +53,6 @@ measures, against the speed and the microphone positions.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import TYPE_CHECKING
@@ -64,7 +63,7 @@ import pyarrow as pa
 from scipy import sparse
 
 from pipeline.errors import ArmsigError
-from pipeline.refine.block import Group, Linearization, MeasurementBlock
+from pipeline.optim.block import Group, Linearization, MeasurementBlock
 from pipeline.sensor.geometry import MICROPHONES, DigitizerGeometry
 from pipeline.sensor.noise import range_sigma_cm
 from pipeline.sensor.range_rows import RangeRows, check_cycle_order, range_rows, unique_rows
@@ -319,7 +318,7 @@ class RangeBlock:
 
     @cached_property
     def d_x_groups(self) -> tuple[Group, ...]:
-        """``d_x``'s rows grouped by their columns (:class:`~pipeline.refine.block.
+        """``d_x``'s rows grouped by their columns (:class:`~pipeline.optim.block.
         Linearization`): ~6 per speed coefficient (a microphone's target rows, a rod's
         microphone), one per prior."""
         cols, indptr = self.d_x_pattern
@@ -353,30 +352,23 @@ def _gauge(mics: Array) -> tuple[Array, Array, Array]:
 
 
 def range_block(
-    ranges: pa.Table, session: pa.Table, options: RangeModelOptions | None = None
+    ranges: pa.Table,
+    geometry: DigitizerGeometry,
+    order: list[int | str],
+    options: RangeModelOptions | None = None,
 ) -> RangeBlock:
-    """The :class:`RangeBlock` of a sonic session from its ``ranges`` and ``session`` tables.
+    """The :class:`RangeBlock` of a sonic session's ``ranges`` table, its digitizer's
+    recorded ``geometry`` and its plan's measurement ``order`` (sweeps as recorded). The
+    session's tables are read by :func:`pipeline.stages.refine_problem.session_range_block`.
 
     Raises
     ------
     ArmsigError
-        A point-sensor session, a bad geometry or ranges table, cycle times out of the
-        measurement order, no rod ranges at B or D, or a microphone that never heard the
-        target.
+        A bad geometry or ranges table, cycle times out of the measurement order, no rod
+        ranges at B or D, or a microphone that never heard the target.
     """
     opts = options or RangeModelOptions()
-    rig = json.loads(session.column("rig_json")[0].as_py())
-    if rig.get("sensor", "sonic") != "sonic":
-        raise ArmsigError(
-            "the range model needs a sonic session",
-            expected="sensor 'sonic' in /rig/description",
-            got=repr(rig.get("sensor")),
-            fix="use the point-sensor block for this session",
-        )
-    from pipeline.stages.session import session_plan
-
-    geometry = DigitizerGeometry.from_dict(rig)
-    check_cycle_order(ranges, session_plan(session)["order"])
+    check_cycle_order(ranges, order)
     rows = range_rows(ranges, geometry)
     origin, axes, geo0 = _gauge(geometry.microphones)
     d_mic = np.zeros((4, 3, N_GEO))

@@ -24,6 +24,7 @@ import pyarrow.compute as pc
 from pipeline.errors import ArmsigError
 from pipeline.sensor.compensation import rod_ratios
 from pipeline.sensor.geometry import MICROPHONES, DigitizerGeometry
+from pipeline.sweeps import sweep_id, sweep_name
 
 Array = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -178,8 +179,6 @@ def check_cycle_order(ranges: pa.Table, order: list[int | str]) -> None:
     ArmsigError
         One line naming the first cycle recorded before its predecessor.
     """
-    from pipeline.stages.recording_keys import sweep_id, sweep_name
-
     rank = {sweep_id(s): k for k, s in enumerate(order)}
     sweep = _column(ranges, "sweep").astype(np.int64)
     step = _column(ranges, "step").astype(np.int64)

@@ -28,8 +28,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     if refine.num_rows == 0:
         return frames
     from pipeline.refine.kinematics import TOOL_POINT, ChainModel
-    from pipeline.refine.problem import refined_x
     from pipeline.stages.frames import matrices_from_columns, matrices_to_columns
+    from pipeline.stages.refine import refined_x
 
     robot = session_robot(inputs["session"])
     n = robot.n_joints

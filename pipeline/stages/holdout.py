@@ -64,7 +64,7 @@ class StepRefit:
         object.__setattr__(self, "_at_x_hat", (full, linearize(full, self.x_hat)))
 
     def __call__(self, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        from pipeline.refine.lm import rho
+        from pipeline.optim.lm import rho
         from pipeline.refine.solve import kept_rows, normal_equations
 
         full, lin = self._at_x_hat  # type: ignore[attr-defined]
@@ -79,10 +79,10 @@ class StepRefit:
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.refine.holdout import check_configurations, kfold
-    from pipeline.refine.problem import internal_factors, refined_x, rows_at, session_problem
     from pipeline.refine.solve import refit
     from pipeline.stages.positions import positions as xyz_of
-    from pipeline.stages.refine import refine_summary
+    from pipeline.stages.refine import internal_factors, refine_summary, refined_x
+    from pipeline.stages.refine_problem import rows_at, session_problem
 
     refine = inputs["refine"]
     if refine.num_rows == 0:
@@ -132,17 +132,10 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 def _covariances(inputs: Mapping[str, Any], rows: pa.Table) -> np.ndarray:
     """The positions' covariances (m, 3, 3) as the refinement weighs them (sonic: the
     trilateration covariance of the digitizer's geometry)."""
-    import json
+    from pipeline.stages.refine_problem import table_covariances
+    from pipeline.stages.session import session_geometry
 
-    from pipeline.refine.points import position_covariances
-    from pipeline.sensor.geometry import DigitizerGeometry
-    from pipeline.stages.session import session_sensor
-
-    session = inputs["session"]
-    geometry = None
-    if session_sensor(session) == "sonic":
-        geometry = DigitizerGeometry.from_dict(json.loads(session.column("rig_json")[0].as_py()))
-    return position_covariances(rows, geometry)  # type: ignore[no-any-return]
+    return table_covariances(rows, session_geometry(inputs["session"]))
 
 
 def _check_rows(inputs: Mapping[str, Any], pos: pa.Table) -> tuple[pa.Table, np.ndarray] | None:

@@ -25,17 +25,14 @@ from pipeline.contract.channels import SENSOR_CHANNELS
 from pipeline.contract.digest import file_sha256
 from pipeline.errors import ArmsigError, RecordingError
 from pipeline.stages.recording_keys import (
-    CHECK_SWEEP,
     KEY_FIX,
-    TOOL_SWEEP,
     key_text,
     message_keys,
     pair_keys,
     refuse_duplicates,
     refuse_step_gaps,
-    sweep_id,
-    sweep_name,
 )
+from pipeline.sweeps import CHECK_SWEEP, TOOL_SWEEP, sweep_id, sweep_name
 
 __all__ = ["CHECK_SWEEP", "TOOL_SWEEP", "Recording", "read_recording", "sweep_name"]
 

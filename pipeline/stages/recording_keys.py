@@ -1,4 +1,5 @@
-"""Message keys of a session recording: sweep ids, their checks and their pairing.
+"""Message keys of a session recording: their checks and their pairing (the sweep ids
+themselves: :mod:`pipeline.sweeps`).
 
 Shared by the sonic reader (:mod:`pipeline.stages.recording`) and the point reader
 (:mod:`pipeline.stages.recording_points`). Every refusal names the key.
@@ -13,21 +14,9 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import RecordingError
+from pipeline.sweeps import sweep_id, sweep_name
 
-TOOL_SWEEP = 0  # the tool-probe measurement's sweep id in tables ("tool" in the recording)
-CHECK_SWEEP = -1  # validation configurations' sweep id in tables ("check" in the recording)
-_NAMED = {"tool": TOOL_SWEEP, "check": CHECK_SWEEP}
 KEY_FIX = "repair the rig's writer: keys are documented in schemas/mcap/ (docs/rig.md)"
-
-
-def sweep_name(sweep: int) -> str:
-    """A sweep id as the recording spells it: the target number, 'tool' or 'check'."""
-    return {TOOL_SWEEP: "tool", CHECK_SWEEP: "check"}.get(int(sweep), str(int(sweep)))
-
-
-def sweep_id(recorded: int | str) -> int:
-    """The table id of a recorded sweep (a joint number, 'tool' or 'check')."""
-    return _NAMED[recorded] if isinstance(recorded, str) else int(recorded)
 
 
 def key_text(sweep: Any, step: Any, repeat: Any = None, target: Any = None) -> str:

@@ -16,14 +16,8 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import RecordingError
-from pipeline.stages.recording_keys import (
-    KEY_FIX,
-    TOOL_SWEEP,
-    key_text,
-    message_keys,
-    refuse_duplicates,
-    sweep_name,
-)
+from pipeline.stages.recording_keys import KEY_FIX, key_text, message_keys, refuse_duplicates
+from pipeline.sweeps import TOOL_SWEEP, sweep_name
 
 TOPIC = "/points"
 #: A recorded covariance may be asymmetric by this fraction of its largest entry: the

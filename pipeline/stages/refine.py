@@ -30,7 +30,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.errors import StageError
-from pipeline.refine.lm import LOSSES
+from pipeline.optim.lm import LOSSES
 from pipeline.stages.base import Stage, check_param
 from pipeline.stages.session import session_sensor
 
@@ -64,6 +64,19 @@ def refine_summary(table: pa.Table) -> dict[str, Any]:
     """The solver's summary recorded with a ``refine`` table (``{}`` when absent)."""
     raw = (table.schema.metadata or {}).get(META_KEY)
     return json.loads(raw) if raw else {}
+
+
+def internal_factors(refine: pa.Table) -> np.ndarray:
+    """Per row of a ``refine`` table, the factor from its boundary unit to the internal
+    one (deg -> rad; cm and ratios unchanged): values scale by it, covariances by its
+    outer product."""
+    unit = np.array(refine.column("unit").to_pylist())
+    return np.where(unit == "deg", np.radians(1.0), 1.0)
+
+
+def refined_x(refine: pa.Table) -> np.ndarray:
+    """The fitted ``x`` (internal units) of a ``refine`` table."""
+    return np.asarray(refine.column("value").to_numpy() * internal_factors(refine), float)
 
 
 def resolved_level(params: Params, sensor: str) -> str:
@@ -107,8 +120,8 @@ def _disabled(level: str) -> pa.Table:
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
-    from pipeline.refine.problem import session_problem
     from pipeline.refine.solve import recorded_chi2, solve
+    from pipeline.stages.refine_problem import session_problem
 
     sensor = session_sensor(inputs["session"])
     level = resolved_level(params, sensor)

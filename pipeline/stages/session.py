@@ -48,3 +48,12 @@ def session_plan(session: pa.Table) -> dict[str, Any]:
     """The recorded measurement plan and signature configuration."""
     doc = json.loads(session.column("robot_json")[0].as_py())
     return {"signature_q": doc["signature_q"], **doc["plan"]}
+
+
+def session_geometry(session: pa.Table):  # -> DigitizerGeometry | None
+    """The recorded digitizer geometry of a sonic session; None for a point sensor."""
+    if session_sensor(session) != "sonic":
+        return None
+    from pipeline.sensor.geometry import DigitizerGeometry
+
+    return DigitizerGeometry.from_dict(json.loads(session.column("rig_json")[0].as_py()))

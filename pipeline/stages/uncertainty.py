@@ -58,7 +58,7 @@ def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.
             fix="`pipeline identify SESSION --force` recomputes the refinement",
         )
     idx = np.array(axis + tool)
-    from pipeline.refine.problem import internal_factors, refined_x
+    from pipeline.stages.refine import internal_factors, refined_x
 
     scale = internal_factors(refine)
     x = refined_x(refine)

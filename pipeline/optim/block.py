@@ -15,12 +15,14 @@ The solver chains the two: ``J = [d_p[rows] · dp/dθ[pos[rows]], d_x]``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import numpy.typing as npt
-import pyarrow as pa
 from scipy import sparse
+
+if TYPE_CHECKING:  # a block's keys are an Arrow table; the optimiser never reads them
+    import pyarrow as pa
 
 Array = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]

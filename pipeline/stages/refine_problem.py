@@ -1,0 +1,160 @@
+"""The refinement's problem from a session's stage tables: the adapter between the tables
+(``session``, ``joints``, ``positions``, ``frames``, ``ranges``) and the math of
+:mod:`pipeline.refine` and :mod:`pipeline.sensor.range_model`, which take arrays and
+dataclasses. Used by the stages ``refine`` and ``holdout``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+import pyarrow as pa
+
+from pipeline.errors import ArmsigError
+from pipeline.optim.block import Array, MeasurementBlock
+from pipeline.refine.kinematics import ChainModel, chain_model
+from pipeline.refine.points import PointBlock, PositionRows, position_covariances
+from pipeline.refine.problem import SessionProblem, chain_problem, check_coverage
+from pipeline.sensor.geometry import DigitizerGeometry
+from pipeline.stages.frames import chain_from_frames, matrices_from_columns, readings_at
+from pipeline.stages.positions import _COV_INDEX, COV_ENTRIES, positions
+from pipeline.stages.session import session_geometry, session_plan, session_robot, session_sensor
+from pipeline.sweeps import CHECK_SWEEP
+from pipeline.units import joints_to_internal
+
+if TYPE_CHECKING:  # the range model is imported when a session is refined at its ranges
+    from pipeline.sensor.range_model import RangeBlock, RangeModelOptions
+
+
+def _column(table: pa.Table, name: str) -> np.ndarray:
+    return table.column(name).to_numpy(zero_copy_only=False).astype(float)
+
+
+def position_rows(table: pa.Table) -> PositionRows:
+    """The positions of a ``positions`` table and their recorded noise (null -> NaN)."""
+    m = table.num_rows
+    cov = np.full((m, 3, 3), np.nan)
+    entries = [_column(table, f"cov_{e}_cm2") for e in COV_ENTRIES]
+    full = np.isfinite(np.stack(entries, axis=1)).all(axis=1)
+    for v, (i, j) in zip(entries, _COV_INDEX, strict=True):
+        cov[full, i, j] = cov[full, j, i] = v[full]
+    return PositionRows(
+        p=positions(table),
+        cov=cov,
+        sigma_cm=_column(table, "sigma_cm"),
+        scatter_cm=_column(table, "scatter_cm"),
+        n_used=table.column("n_used").to_numpy().astype(float),
+        n_samples=table.column("n_samples").to_numpy(),
+    )
+
+
+def table_covariances(table: pa.Table, geometry: DigitizerGeometry | None = None) -> Array:
+    """Σ (m, 3, 3) of the rows of a ``positions`` table, as the refinement weighs them
+    (:func:`pipeline.refine.points.position_covariances`)."""
+    return position_covariances(position_rows(table), geometry)
+
+
+def point_block(table: pa.Table, geometry: DigitizerGeometry | None = None) -> PointBlock:
+    """The block of every usable fit position of a ``positions`` table: finite, and not
+    of the check sweep (held out) (:mod:`pipeline.refine.points`)."""
+    p = positions(table)
+    sweep = table.column("sweep").to_numpy()
+    use = np.isfinite(p).all(axis=1) & (sweep != CHECK_SWEEP)
+    rows = table.filter(pa.array(use))
+    L = np.linalg.cholesky(table_covariances(rows, geometry))
+    return PointBlock(
+        keys=rows.select(["sweep", "step", "target"]),
+        measured=p[use],
+        whiten=np.linalg.inv(L),
+    )
+
+
+def session_range_block(
+    ranges: pa.Table, session: pa.Table, options: RangeModelOptions | None = None
+) -> RangeBlock:
+    """The range-level block of a sonic session (:func:`pipeline.sensor.range_model.
+    range_block`) from its ``ranges`` and ``session`` tables; a point-sensor session is
+    refused with one line."""
+    from pipeline.sensor.range_model import range_block
+
+    geometry = session_geometry(session)
+    if geometry is None:
+        raise ArmsigError(
+            "the range model needs a sonic session",
+            expected="sensor 'sonic' in /rig/description",
+            got=repr(session_sensor(session)),
+            fix="use the point-sensor block for this session",
+        )
+    return range_block(ranges, geometry, session_plan(session)["order"], options)
+
+
+def rows_at(keys: pa.Table, table: pa.Table) -> npt.NDArray[np.int64]:
+    """Row of ``table`` at each (sweep, step, target) of ``keys``, joined by key; −1 where
+    the table has none."""
+    cols = ("sweep", "step", "target")
+    at = {
+        k: i for i, k in enumerate(zip(*(table.column(c).to_pylist() for c in cols), strict=True))
+    }
+    rows = [at.get(k, -1) for k in zip(*(keys.column(c).to_pylist() for c in cols), strict=True)]
+    return np.array(rows, np.int64)
+
+
+def measured_at(keys: pa.Table, table: pa.Table) -> Array:
+    """Positions (K, 3) of a ``positions`` table at ``keys`` (sweep, step, target), joined
+    by key; NaN where the table has none."""
+    p = np.vstack([positions(table), np.full((1, 3), np.nan)])
+    return p[rows_at(keys, table)]
+
+
+def model_for_keys(
+    keys: pa.Table, session: pa.Table, joints: pa.Table, frames: pa.Table
+) -> ChainModel:
+    """The chain model of the observations ``keys`` (columns sweep, step, target), started
+    at the thesis ``frames`` table, with each key's readings joined from ``joints`` by
+    (sweep, step) (:func:`pipeline.refine.kinematics.chain_model`)."""
+    robot = session_robot(session)
+    n, pris = robot.n_joints, robot.prismatic
+    plan = session_plan(session)
+    shared = plan.get("sweeps_measure_tool", False) and plan.get("tool_target") is not None
+    tool_target = str(plan["tool_target"]) if shared else None
+    q_sig = chain_from_frames(frames, pris).joint_offsets
+    sweep = keys.column("sweep").to_numpy().astype(np.int64)
+    step = keys.column("step").to_numpy().astype(np.int64)
+    theta = np.zeros((len(sweep), n))
+    for s in np.unique(sweep):
+        sel = np.flatnonzero(sweep == s)
+        q = readings_at(joints, int(s), step[sel], n, pris)
+        theta[sel] = joints_to_internal(q, pris) - q_sig
+    target = keys.column("target").to_pylist()
+    return chain_model(sweep, target, theta, matrices_from_columns(frames)[:n], pris, tool_target)
+
+
+def session_problem(
+    inputs: Mapping[str, Any],
+    loss: str = "soft_l1",
+    f_scale: float = 3.0,
+    level: str = "points",
+    speed_knot_s: float = 120.0,
+) -> SessionProblem:
+    """The problem of a session at ``level`` (``inputs``: session, joints, positions, frames;
+    level ``ranges``: and ranges) (:func:`pipeline.refine.problem.chain_problem`)."""
+    session = inputs["session"]
+    robot = session_robot(session)
+    block: MeasurementBlock
+    if level == "ranges":
+        from pipeline.sensor.range_model import RangeModelOptions
+
+        block = session_range_block(inputs["ranges"], session, RangeModelOptions(speed_knot_s))
+        measured = measured_at(block.keys, inputs["positions"])
+        usable = block.keys.filter(pa.array(np.isfinite(measured).all(axis=1)))
+    else:
+        block = points = point_block(inputs["positions"], session_geometry(session))
+        measured, usable = points.measured, points.keys
+    sweep = usable.column("sweep").to_numpy()
+    check_coverage(sweep, robot.n_joints, robot.prismatic, "positions")
+    model = model_for_keys(block.keys, session, inputs["joints"], inputs["frames"])
+    res = joints_to_internal(robot.encoder_resolution, robot.prismatic)
+    return chain_problem(model, block, measured, loss, f_scale, res**2 / 12.0)
