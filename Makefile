@@ -20,7 +20,9 @@ test: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check pipeline tests bench
+	$(BIN)/ruff format --check pipeline tests bench
 	$(BIN)/mypy pipeline
+	$(BIN)/lint-imports --no-cache
 
 # The peer comparison needs the optional `bench` extra (rtb); installed here when absent,
 # and skipped by bench/peers.py with the reason when it cannot be installed.

@@ -9,6 +9,10 @@ function still ties the two modules together). Issue 16 broke the last two:
 from __future__ import annotations
 
 import ast
+import os
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -105,3 +109,40 @@ def test_math_packages_form_no_circle() -> None:
     edges = {(pkg[m], pkg[d]) for m in pkg for d in graph[m] if d in pkg and pkg[d] != pkg[m]}
     by_pkg = {p: {b for a, b in edges if a == p} for p in set(pkg.values())}
     assert sorted(p for p in by_pkg if p in _reachable(by_pkg, p)) == []
+
+
+# --- The layer contract (pyproject.toml [tool.importlinter], docs/architecture.md) ---------
+
+_LINT = (
+    "import sys; from importlinter.cli import lint_imports; "
+    "sys.exit(lint_imports(config_filename='pyproject.toml', no_cache=True, no_logo=True))"
+)
+
+
+def _lint_imports(root: Path) -> subprocess.CompletedProcess[str]:
+    """import-linter on the package under ``root`` with ``root/pyproject.toml``'s contracts."""
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    argv = [sys.executable, "-c", _LINT]
+    return subprocess.run(argv, cwd=root, env=env, capture_output=True, text=True, timeout=300)
+
+
+def test_layer_contract_is_kept() -> None:
+    out = _lint_imports(ROOT)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_layer_contract_fails_on_an_upward_import(tmp_path: Path) -> None:
+    """A copy of the package with one upward import (math -> stages, inside a function)."""
+    shutil.copytree(
+        ROOT / "pipeline", tmp_path / "pipeline", ignore=shutil.ignore_patterns("__pycache__")
+    )
+    shutil.copy(ROOT / "pyproject.toml", tmp_path)
+    low = tmp_path / "pipeline" / "kinematics" / "transforms.py"
+    low.write_text(
+        low.read_text(encoding="utf-8")
+        + "\n\ndef _upward():\n    from pipeline.stages.runner import run\n\n    return run\n",
+        encoding="utf-8",
+    )
+    out = _lint_imports(tmp_path)
+    assert out.returncode != 0
+    assert "pipeline.kinematics.transforms -> pipeline.stages.runner" in out.stdout
