@@ -11,7 +11,7 @@ from typing import Any
 import typer
 
 
-class NotReached(Exception):  # noqa: N818  (a signal, not an error: the output is complete)
+class NotReached(Exception):  # a signal, not an error: the output is complete
     """Raised by a command after its output when a target was not reached; the command
     group (:mod:`pipeline.cli`) turns it into exit code 3."""
 
