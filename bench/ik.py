@@ -18,7 +18,7 @@ import numpy as np
 
 from bench.kinematics import best_of
 from pipeline.control.controller import Controller
-from pipeline.control.targets import session_controller
+from pipeline.control.session import session_controller
 from pipeline.identify import identify
 from pipeline.kinematics.chain import forward_kinematics
 from pipeline.kinematics.transforms import invert_transform

@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from pipeline.cli import app
-from pipeline.control.targets import session_controller
+from pipeline.control.session import session_controller
 from pipeline.errors import ArmsigError, RobotDescriptionError
 from pipeline.identify import identify
 from pipeline.kinematics.chain import forward_kinematics

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.control.controller import Controller, parse_branch
-from pipeline.control.targets import session_controller
+from pipeline.control.session import session_controller
 from pipeline.errors import ArmsigError
 from pipeline.identify import identify
 from pipeline.kinematics.chain import forward_kinematics

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pipeline.control.controller import solve_poses
-from pipeline.control.targets import session_controller
+from pipeline.control.session import session_controller
 from pipeline.errors import RobotDescriptionError
 from pipeline.identify import identify
 from pipeline.rig.audit import audit

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pipeline.control.controller import solve_poses, task_axes_for
-from pipeline.control.targets import session_controller
+from pipeline.control.session import session_controller
 from pipeline.evaluate import evaluate
 from pipeline.evaluation.score import dropped_indices, restrict_orientation
 from pipeline.evaluation.tasks import (

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.control.controller import Controller
-from pipeline.control.targets import session_controller
+from pipeline.control.session import session_controller
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans
 from pipeline.signature.alignment import design_alignment

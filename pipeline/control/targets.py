@@ -1,5 +1,4 @@
-"""Targets from files and solutions to files: the I/O of ``pipeline ik --targets``, and the
-controller of an identified session (its ``signature.json``, refused when stale).
+"""Targets from files and solutions to files: the I/O of ``pipeline ik --targets``.
 
 :mod:`pipeline.control.controller` holds the solving; this module reads and writes.
 """
@@ -13,16 +12,6 @@ import numpy as np
 
 from pipeline.control.controller import Controller, solve_poses
 from pipeline.errors import ArmsigError
-from pipeline.signature.file import FILE_NAME
-from pipeline.signature.session import load_session_signature
-
-
-def session_controller(session_dir: str | Path) -> Controller:
-    """The controller of an identified session: its ``signature.json``, refused unless it
-    matches the session's committed stages
-    (:func:`pipeline.signature.session.load_session_signature`)."""
-    return Controller.from_signature(load_session_signature(Path(session_dir) / FILE_NAME))
-
 
 #: Columns of an ``ik --targets`` file: the poses, in the design base frame.
 TARGET_COLUMNS = ("x_cm", "y_cm", "z_cm", "rx_deg", "ry_deg", "rz_deg")

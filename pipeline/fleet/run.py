@@ -129,6 +129,27 @@ def run_fleet(
     return FleetResult(sorted(rows, key=lambda r: r["session"]), path, wall)
 
 
+def fleet(
+    command: str,
+    folders: list[str],
+    scheduler: str | None = None,
+    workers: int | None = None,
+    out: str | Path | None = None,
+    progress: TextIO | None = sys.stderr,
+) -> FleetResult:
+    """:func:`run_fleet` on the Dask ``scheduler`` (tcp://HOST:PORT; None: the
+    environment's, else a local cluster of ``workers`` for this call, sharing the cores);
+    ``out``: the folder of fleet.arrow (default: the first of ``folders``). The sessions
+    and ``out`` are refused before a cluster starts."""
+    from pipeline.atomic import check_writable
+    from pipeline.fleet.engine import FLEET_PRELOAD, dask_client
+
+    sessions = find_sessions(folders)
+    folder = check_writable(out or folders[0], "--out", folder=True)
+    with dask_client(scheduler, workers, preload=FLEET_PRELOAD, share_cores=True) as client:
+        return run_fleet(command, sessions, client, folder, progress=progress)
+
+
 def write_fleet(path: Path, rows: list[dict[str, Any]], command: str, wall_s: float) -> Path:
     """``fleet.arrow`` written atomically, with its schema name and version and provenance."""
     from pipeline import __version__

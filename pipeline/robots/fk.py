@@ -55,8 +55,13 @@ def chain_pose(
         chain, joints_to_internal(robot.joints_from_readings(qq), robot.prismatic)
     )
     xyz, rpy = xyz_rpy_from_transform(T)
+    return ToolPose(T, xyz, np.rad2deg(rpy), outside_limits(robot, qq))
+
+
+def outside_limits(robot: RobotDescription, q: list[float] | np.ndarray) -> tuple[str, ...]:
+    """The names of ``robot``'s joints whose readings ``q`` (n,) (deg / cm) lie outside
+    their limits."""
     lim = robot.limits
-    outside = tuple(
-        j.name for j, v, (lo, hi) in zip(robot.joints, qq, lim, strict=True) if not lo <= v <= hi
+    return tuple(
+        j.name for j, v, (lo, hi) in zip(robot.joints, q, lim, strict=True) if not lo <= v <= hi
     )
-    return ToolPose(T, xyz, np.rad2deg(rpy), outside)

@@ -1,0 +1,130 @@
+"""The ``pipeline`` command line. Commands are thin; the work is in importable functions.
+
+One module per command group, in the order of the data's path:
+:mod:`~pipeline.cli.record` (robots, simulate, import), :mod:`~pipeline.cli.session`
+(identify, status, show, audit, validate), :mod:`~pipeline.cli.control` (fk, ik,
+ik-convergence), :mod:`~pipeline.cli.evaluate`, :mod:`~pipeline.cli.outputs` (viz,
+export), :mod:`~pipeline.cli.montecarlo` and the ``fleet`` group
+(:mod:`~pipeline.cli.fleet`); :mod:`~pipeline.cli.options` and
+:mod:`~pipeline.cli.output` hold what they share. Each command imports numpy and the
+modules doing its work when it runs, not when the command line starts (issue 18).
+
+Only this module turns exceptions into exit codes, in one place (:class:`_Pipeline`):
+
+==  =====================================================================
+0   done
+1   refused input or data (an :class:`~pipeline.errors.ArmsigError`)
+2   usage error (unknown command or option, missing or malformed argument)
+3   ``ik``: a target was not reached (the joints are still printed / written)
+70  internal error: a bug in armsig (the traceback with ``ARMSIG_DEBUG=1``)
+==  =====================================================================
+
+Every error is one line on stderr starting ``error:``.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import sys
+import traceback
+from collections.abc import Sequence
+from typing import Annotated, Any
+
+import typer
+from typer.core import TyperGroup
+
+from pipeline.cli import control, evaluate, fleet, montecarlo, outputs, record, session
+from pipeline.cli.output import NotReached, quiet_numpy
+from pipeline.errors import ArmsigError, one_line
+
+EXIT_REFUSED = 1
+EXIT_USAGE = 2
+EXIT_NOT_REACHED = 3
+EXIT_INTERNAL = 70  # EX_SOFTWARE of sysexits.h
+DEBUG_ENV = "ARMSIG_DEBUG"
+
+
+def _fail(message: str, code: int) -> int:
+    typer.echo(f"error: {one_line(message)}", err=True)
+    return code
+
+
+class _Pipeline(TyperGroup):
+    """The command group: maps every outcome of a command to one exit code."""
+
+    def main(  # type: ignore[override]
+        self,
+        args: Sequence[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        **extra: Any,
+    ) -> Any:
+        argv = list(sys.argv[1:] if args is None else args)
+        prog = prog_name or "pipeline"
+        debug = os.environ.get(DEBUG_ENV) == "1"
+        try:
+            with quiet_numpy(debug):
+                rv = super().main(argv, prog, complete_var, standalone_mode=False, **extra)
+            code = rv if isinstance(rv, int) else 0  # an int: typer.Exit's code (--help: 0)
+        except typer.TyperException as exc:  # the parser's: unknown option, bad value, ...
+            where = getattr(getattr(exc, "ctx", None), "command_path", None) or prog
+            code = _fail(f"{exc.format_message().rstrip('.')}; try: {where} --help", EXIT_USAGE)
+        except typer.Abort:
+            code = _fail("aborted", EXIT_REFUSED)
+        except ArmsigError as exc:
+            code = _fail(str(exc), EXIT_REFUSED)
+        except NotReached:  # the output is complete; the exit code says a target was missed
+            code = EXIT_NOT_REACHED
+        except (SystemExit, KeyboardInterrupt):
+            raise
+        except BaseException as exc:  # noqa: B036  (also a Rust panic of polars / pyarrow)
+            if debug:
+                traceback.print_exc()
+            command = shlex.join([prog, *argv])
+            code = _fail(
+                f"internal error (a bug in armsig): {type(exc).__name__}: {exc}; "
+                f"try: report it with the output of {DEBUG_ENV}=1 {command}",
+                EXIT_INTERNAL,
+            )
+        if not standalone_mode:
+            return code
+        sys.exit(code)
+
+
+app = typer.Typer(
+    name="pipeline",
+    help="armsig: identify a robot arm's kinematic signature and control it with it.",
+    cls=_Pipeline,
+    add_completion=True,
+    pretty_exceptions_enable=False,
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        from pipeline import __version__
+
+        typer.echo(f"armsig {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_version, is_eager=True, help="Print the version and exit."
+        ),
+    ] = False,
+) -> None:
+    pass  # the group's options; its help is the app's
+
+
+# `pipeline --help` lists the commands in this order.
+for _group in (record, session, control, evaluate, outputs, montecarlo):
+    app.add_typer(_group.commands)
+app.add_typer(fleet.commands, name="fleet")
+
+__all__ = ["DEBUG_ENV", "EXIT_INTERNAL", "EXIT_NOT_REACHED", "EXIT_REFUSED", "EXIT_USAGE", "app"]

@@ -1,0 +1,141 @@
+"""Control commands: a session's signature (or a design model) driven (fk, ik,
+ik-convergence). The work is in :mod:`pipeline.control`."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from pipeline.cli.options import JsonOption, SessionArg, finite, joint_values
+from pipeline.cli.output import NotReached, print_json, warn, warn_outside_limits
+from pipeline.errors import ArmsigError
+
+commands = typer.Typer()
+
+#: x y z (cm) rx ry rz (deg, fixed axes)
+Pose = tuple[float, float, float, float, float, float]
+
+
+@commands.command()
+def fk(
+    robot: Annotated[
+        str,
+        typer.Argument(
+            help="Identified session folder, built-in robot name or path to a .toml description."
+        ),
+    ],
+    q: Annotated[
+        str, typer.Option("--q", help="Joint values, comma or space separated (deg / cm).")
+    ],
+    design: Annotated[
+        bool, typer.Option(help="For a session: the design model's pose of the session's tool.")
+    ] = False,
+) -> None:
+    """Print the tool pose at joint values Q (a session's signature or a design model).
+
+    For a session: the pose of its signature's tool in the design base frame (what
+    `pipeline ik SESSION --pose` takes back); with --design, the design model's pose
+    of that tool. For a robot: the pose of its design flange.
+    """
+    import numpy as np
+
+    from pipeline.control.poses import tool_pose
+
+    pose = tool_pose(robot, joint_values(q, "--q"), design=design)
+    with np.printoptions(precision=6, suppress=True):
+        typer.echo(f"xyz_cm  = {pose.xyz_cm}")
+        typer.echo(f"rpy_deg = {pose.rpy_deg}")
+        typer.echo("T =")
+        typer.echo(str(pose.matrix))
+    warn_outside_limits(pose.outside_limits)
+
+
+@commands.command()
+def ik(
+    session: SessionArg,
+    pose: Annotated[
+        Pose | None,
+        typer.Option(help="x y z (cm) rx ry rz (deg, fixed axes) in the design base frame."),
+    ] = None,
+    branch: Annotated[
+        str | None, typer.Option(help="Puma branch, e.g. right-up-noflip (default: that of q^s).")
+    ] = None,
+    method: Annotated[str, typer.Option(help="nr (Newton-Raphson) or jacobi.")] = "nr",
+    targets: Annotated[
+        str | None, typer.Option(help="Arrow file: x_cm y_cm z_cm rx_deg ry_deg rz_deg [branch].")
+    ] = None,
+    out: Annotated[str | None, typer.Option(help="Arrow file for the joints of --targets.")] = None,
+    tool: Annotated[
+        Pose | None,
+        typer.Option(
+            help="User tool x y z (cm) rx ry rz (deg, fixed axes) in the design flange frame; "
+            "poses are then for that tool (default: the signature's tool)."
+        ),
+    ] = None,
+    near: Annotated[
+        str | None,
+        typer.Option(
+            help="Start near these joint readings (deg / cm, comma or space separated): "
+            "the Puma takes their branch unless --branch is given; other arms return "
+            "the solution the search from there reaches (default: the signature's q^s)."
+        ),
+    ] = None,
+    as_json: JsonOption = False,
+) -> None:
+    """Joint readings that put the identified tool at a pose (signature-based control)."""
+    from pipeline.control.poses import solve_pose, solve_targets
+
+    q_near = None if near is None else joint_values(near, "--near")
+    user_tool = None if tool is None else finite(tool, "--tool")
+    if targets is not None:
+        if out is None:
+            raise ArmsigError("--targets needs --out", fix="--out joints.arrow")
+        if pose is not None:
+            raise ArmsigError(
+                "--pose and --targets both given", expected="one of them", fix="drop one"
+            )
+        done = solve_targets(session, targets, out, method=method, tool=user_tool, near=q_near)
+        if as_json:
+            print_json(done.to_dict())
+        else:
+            typer.echo(done.summary)
+        if done.failed:
+            raise NotReached
+        return
+    if pose is None:
+        raise ArmsigError("give --pose x y z rx ry rz, or --targets FILE --out FILE")
+    r = solve_pose(
+        session,
+        finite(pose, "--pose"),
+        branch=branch,
+        method=method,
+        tool=user_tool,
+        near=q_near,
+    )
+    if as_json:
+        print_json(r.to_dict())
+    else:
+        typer.echo("q = " + "  ".join(f"{v:.4f} {u}" for v, u in zip(r.q, r.units, strict=True)))
+        typer.echo(
+            f"{r.status} after {r.iterations} iterations; "
+            f"residual {r.position_error_cm:.2e} cm, {r.orientation_error_deg:.2e} deg"
+        )
+    warn_outside_limits(r.outside_limits)
+    if r.branch_changed:
+        warn("no solution on the requested branch; this one is on another")
+    if not r.converged:
+        raise NotReached
+
+
+@commands.command("ik-convergence")
+def ik_convergence(
+    session: SessionArg,
+    seed: Annotated[
+        int, typer.Option(min=0, help="Seed of the target and the poor signature.")
+    ] = 3,
+) -> None:
+    """Per-iteration errors of Newton-Raphson and Jacobi (Tables 5-1, 5-2, Section 5.4)."""
+    from pipeline.control.convergence import convergence_tables, format_tables
+
+    typer.echo(format_tables(convergence_tables(session, seed=seed)))

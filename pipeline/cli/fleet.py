@@ -1,0 +1,107 @@
+"""The ``fleet`` group: many sessions at once on Dask (identify, evaluate, validate,
+report). The work is in :mod:`pipeline.fleet`."""
+
+from __future__ import annotations
+
+import sys
+from typing import Annotated
+
+import typer
+
+from pipeline.cli.output import warn
+from pipeline.errors import ArmsigError
+
+commands = typer.Typer(
+    help="Many sessions at once on Dask: one task per session, one fleet.arrow for all.",
+    no_args_is_help=True,
+)
+
+FleetDirs = Annotated[
+    list[str], typer.Argument(help="Session folders, or folders to search for sessions.")
+]
+SchedulerOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Dask scheduler tcp://HOST:PORT (else $DASK_SCHEDULER_ADDRESS, else a local "
+        "cluster for this command; `local` forces it)."
+    ),
+]
+FleetWorkers = Annotated[
+    int | None,
+    typer.Option(min=1, max=256, help="Workers of the local cluster (default: the cores)."),
+]
+FleetOut = Annotated[
+    str | None, typer.Option(help="Folder of fleet.arrow (default: the first DIR).")
+]
+
+
+def _fleet(
+    command: str, dirs: list[str], scheduler: str | None, workers: int | None, out: str | None
+) -> None:
+    """Run ``command`` over the sessions; print one line per session, and refuse (exit 1)
+    when any session failed, after every other one is done and fleet.arrow is written."""
+    from pipeline.fleet.run import fleet
+
+    r = fleet(command, dirs, scheduler, workers, out, progress=sys.stderr)
+    for row in r.rows:
+        if row["error"] is not None:
+            typer.echo(f"  FAILED {row['session']}: {row['error']}")
+            continue
+        extra = (
+            f"  check RMS {row['check_rms_cm']:.4g} cm" if row["check_rms_cm"] is not None
+            else ""
+        ) + (
+            f"  gain {row['gain_evaluation']:.3g}" if row["gain_evaluation"] is not None else ""
+        )  # fmt: skip
+        typer.echo(f"  ok     {row['session']}: {row['signature_sha256'][:12]}{extra}")
+        for w in row["warnings"]:
+            warn(f"{row['session']}: {w}")
+    typer.echo(f"{len(r.rows)} sessions in {r.wall_s:.1f} s; wrote {r.table}")
+    if r.failed:
+        raise ArmsigError(
+            f"{len(r.failed)} of {len(r.rows)} sessions failed (the others are done)",
+            fix=f"see the error column of {r.table}; a rerun redoes only what is stale",
+        )
+
+
+@commands.command("identify")
+def fleet_identify(
+    dirs: FleetDirs,
+    scheduler: SchedulerOption = None,
+    workers: FleetWorkers = None,
+    out: FleetOut = None,
+) -> None:
+    """`pipeline identify` on every session, one Dask task each; writes fleet.arrow."""
+    _fleet("identify", dirs, scheduler, workers, out)
+
+
+@commands.command("evaluate")
+def fleet_evaluate(
+    dirs: FleetDirs,
+    scheduler: SchedulerOption = None,
+    workers: FleetWorkers = None,
+    out: FleetOut = None,
+) -> None:
+    """`pipeline evaluate` on every session (design vs signature gain); writes fleet.arrow."""
+    _fleet("evaluate", dirs, scheduler, workers, out)
+
+
+@commands.command("validate")
+def fleet_validate(
+    dirs: FleetDirs,
+    scheduler: SchedulerOption = None,
+    workers: FleetWorkers = None,
+    out: FleetOut = None,
+) -> None:
+    """The validation (check) errors of every point session; sonic sessions have none."""
+    _fleet("validate", dirs, scheduler, workers, out)
+
+
+@commands.command("report")
+def fleet_report(
+    folder: Annotated[str, typer.Argument(help="Folder holding fleet.arrow.")],
+) -> None:
+    """Write FOLDER/fleet-report/fleet.md with figures from FOLDER/fleet.arrow."""
+    from pipeline.fleet.report import write_fleet_report
+
+    typer.echo(f"wrote {write_fleet_report(folder)}")

@@ -1,0 +1,50 @@
+"""The ``montecarlo`` command: studies of design-model and signature control (Chapter 7)."""
+
+from __future__ import annotations
+
+import sys
+from typing import Annotated
+
+import typer
+
+commands = typer.Typer()
+
+
+@commands.command()
+def montecarlo(
+    study: Annotated[
+        str,
+        typer.Option(
+            help="encoder, machining, noise, points, radius, misalignment, features, refine "
+            "(S-Model against refined signature; whole simulate + identify sessions, ~1.8 s of "
+            "CPU per robot and setting) or all (refine last)."
+        ),
+    ],
+    robots: Annotated[
+        int, typer.Option(min=2, max=100_000, help="Simulated robots per setting.")
+    ] = 500,
+    seed: Annotated[int, typer.Option(min=0, help="Study seed (same seed, same numbers).")] = 0,
+    out: Annotated[str, typer.Option(help="Output folder.")] = "montecarlo",
+    workers: Annotated[
+        int, typer.Option(min=1, max=256, help="Worker processes (or local Dask workers).")
+    ] = 1,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            help="Run the batches on Dask: tcp://HOST:PORT, or `local` for a local cluster "
+            "of --workers (same numbers as without)."
+        ),
+    ] = None,
+) -> None:
+    """Monte-Carlo study of design-model and signature control (Chapter 7, Appendix G)."""
+    from pipeline.montecarlo.studies import run_montecarlo
+
+    if scheduler is None:
+        lines = run_montecarlo(study, robots, seed, out, workers, progress=sys.stderr)
+    else:
+        from pipeline.fleet.engine import dask_client
+
+        with dask_client(scheduler, workers) as client:
+            lines = run_montecarlo(study, robots, seed, out, progress=sys.stderr, client=client)
+    for line in lines:
+        typer.echo(line)

@@ -1,0 +1,72 @@
+"""What every command group shares: argument and option types, and their parsers.
+
+The parsers turn option text into values and refuse it with one line naming the option
+(an :class:`~pipeline.errors.ArmsigError`). Nothing here imports numpy (issue 18).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from pipeline.errors import ArmsigError
+
+SessionArg = Annotated[str, typer.Argument(help="Session folder, e.g. sessions/robot3.")]
+#: ``--json``: machine output on stdout (warnings and errors stay on stderr).
+JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON on stdout for machines.")]
+#: The ``NAME`` of ``simulate`` and ``import``: a new session's name or folder.
+NewSessionArg = Annotated[
+    str, typer.Argument(help="Session name (sessions/NAME) or a folder path.")
+]
+ForceRecording = Annotated[
+    bool, typer.Option(help="Replace the recording of an existing session (else refused).")
+]
+
+
+def new_session_folder(name: str) -> Path:
+    """``sessions/NAME`` for a bare name, else the folder path ``name``."""
+    return Path(name) if ("/" in name or Path(name).is_absolute()) else Path("sessions") / name
+
+
+def comma_list(text: str) -> list[str]:
+    """The non-empty, stripped items of comma-separated ``text``."""
+    return [item.strip() for item in text.split(",") if item.strip()]
+
+
+def joint_values(text: str, option: str) -> list[float]:
+    """Joint values from a comma- or space-separated option (deg / cm)."""
+    try:
+        values = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError as exc:
+        raise ArmsigError(
+            f"{option} must hold numbers", got=repr(text), fix=f'{option} "0 -90 90 0 0 0"'
+        ) from exc
+    return finite(values, option)
+
+
+def finite(values: Sequence[float], option: str) -> list[float]:
+    """``values`` when every one is finite, else the one-line error of ``option``."""
+    if not all(math.isfinite(v) for v in values):
+        raise ArmsigError(
+            f"{option} must hold finite numbers", got=" ".join(f"{v:g}" for v in values)
+        )
+    return list(values)
+
+
+def stage_params(values: list[str] | None) -> dict[str, dict[str, str]]:
+    """``--param STAGE.NAME=VALUE`` options as ``{stage: {name: value}}``."""
+    out: dict[str, dict[str, str]] = {}
+    for item in values or []:
+        key, sep, value = item.partition("=")
+        stage, dot, name = key.partition(".")
+        if not sep or not dot:
+            raise ArmsigError(
+                f"--param {item!r} is not STAGE.NAME=VALUE",
+                fix="--param features.plane_method=eigen",
+            )
+        out.setdefault(stage, {})[name] = value
+    return out

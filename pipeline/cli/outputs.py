@@ -1,0 +1,68 @@
+"""Output commands: a session's signature as files for other tools (export, viz)."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from pipeline.cli.options import JsonOption, SessionArg, joint_values
+from pipeline.cli.output import print_json, warn_outside_limits
+
+commands = typer.Typer()
+
+
+@commands.command()
+def viz(
+    session: SessionArg,
+    q: Annotated[
+        str | None,
+        typer.Option(
+            "--q",
+            help="Joint values of the link frames, comma or space separated (deg / cm); "
+            "default: the signature configuration q^s.",
+        ),
+    ] = None,
+    out: Annotated[
+        str | None, typer.Option(help="Output MCAP file (default: SESSION/viz.mcap).")
+    ] = None,
+) -> None:
+    """Write viz.mcap for Foxglove's 3-D panel: frames, fitted features, measured points (m)."""
+    from pipeline.viz.write import viz as run_viz
+
+    r = run_viz(session, None if q is None else joint_values(q, "--q"), out)
+    shown = " ".join(f"{v:g}" for v in r.configuration)
+    typer.echo(f"wrote {r.path}: {sum(r.topics.values())} messages on {len(r.topics)} topics")
+    typer.echo(f"link frames at q = {shown} (deg / cm); lengths in metres")
+    warn_outside_limits(r.outside_limits)
+
+
+@commands.command()
+def export(
+    session: SessionArg,
+    format_: Annotated[
+        str, typer.Option("--format", help="urdf, dh, mdh (Craig) or json (docs/export.md).")
+    ],
+    out: Annotated[
+        str | None,
+        typer.Option(help="Output file (default: SESSION/export/); an existing one needs --force."),
+    ] = None,
+    design: Annotated[bool, typer.Option(help="Export the design model instead.")] = False,
+    frame: Annotated[
+        str, typer.Option(help="World frame: sensor, or design-base (via the design alignment).")
+    ] = "sensor",
+    force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
+    as_json: JsonOption = False,
+) -> None:
+    """Export the session's signature (checked against its FK) as URDF, D-H or JSON."""
+    from pipeline.export import export as run_export
+
+    r = run_export(session, format_, out=out, design=design, frame=frame, force=force)
+    if as_json:
+        print_json(r.to_dict())
+        return
+    typer.echo(
+        f"wrote {r.path} ({r.model}, {r.frame} frame); reproduces the chain at "
+        f"{r.configurations} configurations to {r.max_position_error_m:.1e} m, "
+        f"{r.max_orientation_error_rad:.1e} rad"
+    )

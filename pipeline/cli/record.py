@@ -1,0 +1,143 @@
+"""Recording commands: the built-in robots, and a session recorded on the simulated rig
+or imported from a file of measured points (robots, simulate, import)."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from pipeline.cli.options import ForceRecording, NewSessionArg, comma_list, new_session_folder
+
+commands = typer.Typer()
+
+
+@commands.command()
+def robots() -> None:
+    """List the built-in robots with their joints."""
+    from pipeline.robots import builtin_names, get_robot
+
+    for name in builtin_names():
+        rob = get_robot(name)
+        joints = ", ".join(
+            f"{j.name} ({j.type[0].upper()}, {j.lower:g}..{j.upper:g} {j.unit})" for j in rob.joints
+        )
+        typer.echo(f"{name}: {rob.n_joints} joints: {joints}")
+
+
+@commands.command()
+def simulate(
+    name: NewSessionArg,
+    robot: Annotated[
+        str,
+        typer.Option(
+            help="Built-in robot (`pipeline robots`) or path to a .toml description file "
+            "(schemas/robot_description.md)."
+        ),
+    ] = "puma560",
+    seed: Annotated[int, typer.Option(min=0, help="Seed of every random draw.")] = 1,
+    sigma_p: Annotated[
+        float, typer.Option(min=0.0, help="Positional manufacturing error σ_p (cm).")
+    ] = 0.03,
+    sigma_o: Annotated[float, typer.Option(min=0.0, help="Orientational error σ_o (deg).")] = 0.03,
+    sigma_e: Annotated[
+        float, typer.Option(min=0.0, help="Encoder calibration error σ_e (deg).")
+    ] = 0.3,
+    noise_factor: Annotated[
+        float, typer.Option(min=0.0, help="Multiplier of slant-range noise (7.9).")
+    ] = 1.0,
+    # The thesis used 5 to 100 positions and 10 cycles; the caps bound memory and file size.
+    points: Annotated[
+        int, typer.Option(min=3, max=1000, help="Positions per joint sweep, N_i.")
+    ] = 100,
+    repeats: Annotated[
+        int, typer.Option(min=1, max=100, help="Digitize cycles per position, N_avg.")
+    ] = 10,
+    faults: Annotated[str, typer.Option(help="Comma-separated: bias, dropouts, outliers.")] = "",
+    wac_error_cm: Annotated[
+        float,
+        typer.Option(
+            min=-100.0, max=100.0, help="Error of the recorded W_AC calibration (cm), Section 7.3."
+        ),
+    ] = 0.0,
+    noiseless: Annotated[
+        bool, typer.Option(help="No range noise or quantization, uniform 70 °F, perfect servo.")
+    ] = False,
+    max_sweep_deg: Annotated[
+        float,
+        typer.Option(
+            min=1.0, max=720.0, help="Cap of every revolute sweep (deg); under 180 violates B-3."
+        ),
+    ] = 300.0,
+    resettle_counts: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            max=1000,
+            help="Held joints re-settle by ±1..K encoder counts between sweeps (0: never).",
+        ),
+    ] = 0,
+    sensor: Annotated[
+        str,
+        typer.Option(
+            help="sonic (the sparker digitizer) or tracker (a laser tracker, docs/rig.md)."
+        ),
+    ] = "sonic",
+    targets: Annotated[
+        int, typer.Option(min=1, help="Tracker: reflectors per sweep in a nest, ids T1..TK.")
+    ] = 1,
+    nest_on_axis: Annotated[
+        int,
+        typer.Option(min=0, help="Tracker: put this joint's last nest reflector on its axis."),
+    ] = 0,
+    check: Annotated[
+        int, typer.Option(min=0, help="Tracker: random validation configurations (sweep check).")
+    ] = 0,
+    force: ForceRecording = False,
+) -> None:
+    """Record a simulated session: recording.mcap plus rig-truth.json."""
+    from pipeline.rig.simulate import SimulationOptions, simulate_session
+    from pipeline.rig.true_robot import ErrorSigmas
+
+    folder = new_session_folder(name)
+    opts = SimulationOptions(
+        robot=robot,
+        seed=seed,
+        sigmas=ErrorSigmas(sigma_p, sigma_o, sigma_e),
+        noise_factor=noise_factor,
+        points=points,
+        repeats=repeats,
+        faults=tuple(comma_list(faults)),
+        wac_error_cm=wac_error_cm,
+        noiseless=noiseless,
+        max_sweep_deg=max_sweep_deg,
+        resettle_counts=resettle_counts,
+        sensor=sensor,
+        targets=targets,
+        nest_on_axis=nest_on_axis,
+        check=check,
+    )
+    path = simulate_session(folder, opts, force=force)
+    typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")
+
+
+@commands.command("import")
+def import_(
+    file: Annotated[str, typer.Argument(help="The foreign file of measured points.")],
+    name: NewSessionArg,
+    format: Annotated[str, typer.Option(help="sscanss2 | table | rct (docs/import.md).")],
+    robot: Annotated[str, typer.Option(help="Robot description .toml of the measured machine.")],
+    map: Annotated[
+        str | None, typer.Option(help="Map file (TOML): columns, units, sweeps (docs/import.md).")
+    ] = None,
+    force: ForceRecording = False,
+) -> None:
+    """Convert a file of measured points into a point session (recording.mcap)."""
+    from pipeline.importers import import_file
+
+    out = import_file(file, format, robot, new_session_folder(name), map, force)
+    n_check = int((out.rows.sweep < 0).sum())
+    typer.echo(
+        f"wrote {out.recording}: {len(out.rows.where)} configurations "
+        f"({n_check} for validation), tool from {out.tool.note}"
+    )

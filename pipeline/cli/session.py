@@ -1,0 +1,172 @@
+"""Session commands: identify a recorded session and look at it (identify, status, show,
+audit, validate)."""
+
+from __future__ import annotations
+
+import sys
+from typing import Annotated, Any
+
+import typer
+
+from pipeline.cli.options import JsonOption, SessionArg, comma_list, stage_params
+from pipeline.cli.output import print_json, warn
+
+commands = typer.Typer()
+
+
+@commands.command()
+def identify(
+    session: SessionArg,
+    force: Annotated[bool, typer.Option(help="Rerun every stage.")] = False,
+    from_: Annotated[
+        str | None, typer.Option("--from", help="Rerun this stage and every later one.")
+    ] = None,
+    only: Annotated[str | None, typer.Option(help="Rerun just this stage.")] = None,
+    param: Annotated[
+        list[str] | None, typer.Option(help="Stage parameter, STAGE.NAME=VALUE (repeatable).")
+    ] = None,
+    report: Annotated[bool, typer.Option(help="Write report/report.md.")] = True,
+    as_json: JsonOption = False,
+) -> None:
+    """Identify the arm signature of a recorded session (stages, signature.json, report)."""
+    from pipeline.identify import identify as run_identify
+
+    result = run_identify(
+        session,
+        force=force,
+        from_stage=from_,
+        only=only,
+        overrides=stage_params(param),
+        report=report,
+        progress=sys.stderr,
+    )
+    if as_json:
+        print_json(
+            {
+                "session": session,
+                "stages": [_run_dict(r) for r in result.runs],
+                "signature": None if result.signature is None else str(result.signature),
+                "report": None if result.report is None else str(result.report),
+                "warnings": result.warnings,
+                "verdict": result.verdict,
+            }
+        )
+    else:
+        for r in result.runs:
+            if r.action == "ran":
+                typer.echo(f"  {r.name:12s} ran     {r.seconds * 1e3:7.1f} ms  {r.rows} rows")
+            else:
+                typer.echo(f"  {r.name:12s} {r.action}")
+    for w in result.warnings:
+        warn(w)
+    if not as_json:
+        typer.echo(f"signature: {result.signature or 'not written'}")
+        if result.report:
+            typer.echo(f"report:    {result.report}")
+        if result.verdict:
+            typer.echo(result.verdict)  # the last line (issue 15)
+
+
+def _run_dict(r: Any) -> dict[str, Any]:
+    """A :class:`~pipeline.stages.base.StageRun` for ``--json`` (seconds and rows of a
+    stage that ran, else null)."""
+    ran = r.action == "ran"
+    return {
+        "name": r.name,
+        "action": r.action,
+        "seconds": round(r.seconds, 4) if ran else None,
+        "rows": r.rows if ran else None,
+    }
+
+
+@commands.command()
+def status(session: SessionArg, as_json: JsonOption = False) -> None:
+    """Show every stage of a session as fresh, stale or missing, and why.
+
+    The identification stages, signature.json, then, once the session has an
+    evaluation.mcap, the `pipeline evaluate` stages.
+    """
+    from pipeline.stages.inspection import session_status
+
+    states = session_status(session)
+    if as_json:
+        print_json([{"name": s.name, "state": s.state, "reason": s.reason} for s in states])
+        return
+    for st in states:
+        typer.echo(f"  {st.name:21s} {st.state:8s} {st.reason}")
+
+
+@commands.command()
+def show(
+    session: SessionArg,
+    stage: Annotated[str, typer.Argument(help="Stage name, e.g. features.")],
+    rows: Annotated[int, typer.Option(help="Rows to print.")] = 20,
+    columns: Annotated[
+        str | None, typer.Option(help="Comma-separated columns to print (default: all).")
+    ] = None,
+) -> None:
+    """Print a stage table (polars) with its provenance."""
+    import json
+
+    import polars as pl
+
+    from pipeline.stages.inspection import stage_table
+
+    st = stage_table(session, stage, None if columns is None else comma_list(columns))
+    typer.echo(json.dumps(st.provenance, indent=1, sort_keys=True))
+    with pl.Config(tbl_rows=rows, tbl_cols=-1, tbl_width_chars=4000, fmt_str_lengths=60):
+        typer.echo(pl.DataFrame(st.table).head(rows))
+
+
+@commands.command()
+def audit(
+    session: SessionArg,
+    as_json: JsonOption = False,
+    configurations: Annotated[int, typer.Option(help="Random configurations.")] = 1000,
+) -> None:
+    """Compare the signature and the design model with a simulated session's truth."""
+    from pipeline.rig.audit import audit as run_audit
+
+    r = run_audit(session, configurations=configurations)
+    if as_json:
+        print_json(r.to_dict())
+        return
+    typer.echo(f"{r.session}: {r.configurations} random configurations, best-fit base and tool")
+    for name, e in (("signature", r.signature), ("design", r.design)):
+        typer.echo(
+            f"  {name:9s} position max {e.max_position_cm:.3e} cm  rms {e.rms_position_cm:.3e} cm"
+            f"   orientation max {e.max_orientation_deg:.3e} deg"
+            f"  rms {e.rms_orientation_deg:.3e} deg"
+        )
+    typer.echo(f"  design / signature RMS position error: {r.improvement:.1f}x")
+
+
+@commands.command()
+def validate(
+    session: SessionArg,
+    against: Annotated[str, typer.Option(help="A second file of measured points.")],
+    format: Annotated[str, typer.Option(help="sscanss2 | table | rct (docs/import.md).")],
+    map: Annotated[str | None, typer.Option(help="Map file (TOML) of the second file.")] = None,
+    as_json: JsonOption = False,
+) -> None:
+    """The signature's position error on a second file (read in memory, nothing written)."""
+    from pipeline.evaluate.validate import validate_against
+
+    r = validate_against(session, against, format, map)
+    if as_json:
+        print_json(r)
+        return
+    typer.echo(
+        f"{r['file']}: {r['n']} points of target {r['target']} vs the signature of {session}"
+    )
+    typer.echo(
+        f"  as measured:      mean {r['mean_cm']:.4g}  RMS {r['rms_cm']:.4g}  "
+        f"max {r['max_cm']:.4g} cm"
+    )
+    if r["registered_rms_cm"] is None:
+        typer.echo("  base registered:  not possible (fewer than 3 points, or collinear)")
+    else:
+        typer.echo(
+            f"  base registered:  mean {r['registered_mean_cm']:.4g}  "
+            f"RMS {r['registered_rms_cm']:.4g}  max {r['registered_max_cm']:.4g} cm"
+        )

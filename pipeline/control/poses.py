@@ -1,0 +1,165 @@
+"""Poses and joints in boundary units (cm, deg): the work of ``pipeline fk`` and
+``pipeline ik``, for tests and notebooks too.
+
+- :func:`tool_pose`: the tool pose at joint readings, of a session's signature or of a
+  robot's design model;
+- :func:`solve_pose`: the joint readings that put a session's tool at one pose;
+- :func:`solve_targets`: an Arrow file of poses solved into an Arrow file of joints.
+
+Refused input raises an :class:`~pipeline.errors.ArmsigError`; a target that is not
+reached is an answer (``converged`` false), not an error.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from pipeline.robots.fk import ToolPose, outside_limits
+
+if TYPE_CHECKING:
+    from pipeline.control.controller import Controller
+
+
+def tool_pose(robot: str | Path, q: Sequence[float], design: bool = False) -> ToolPose:
+    """The tool pose at joint readings ``q`` (n,), deg / cm.
+
+    ``robot``: an identified session folder (the pose of its signature's tool in the
+    design base frame, what :func:`solve_pose` takes back; ``design``: the design
+    model's pose of that tool), else a built-in robot name or a ``.toml`` description
+    (the pose of its design flange).
+    """
+    if Path(robot).is_dir():
+        from pipeline.control.session import session_controller
+
+        return session_controller(robot).pose(list(q), design=design)
+    from pipeline.robots import get_robot
+    from pipeline.robots.fk import design_pose
+
+    return design_pose(get_robot(str(robot)), list(q))
+
+
+def tool_controller(
+    session: str | Path, tool: Sequence[float] | None = None
+) -> tuple[Controller, str]:
+    """The controller of a session's signature and the label of its tool.
+
+    ``tool``: None for the signature's tool, else a user tool x y z (cm) rx ry rz (deg,
+    fixed axes) in the design flange frame (:meth:`Controller.with_tool`).
+    """
+    from pipeline.control.session import session_controller
+    from pipeline.kinematics.transforms import transform_from_xyz_rpy
+
+    ctl = session_controller(session)
+    if tool is None:
+        return ctl, "signature"
+    t = np.asarray(tool, float)
+    ctl = ctl.with_tool(transform_from_xyz_rpy(t[:3], np.deg2rad(t[3:])))
+    return ctl, "flange " + " ".join(f"{v:g}" for v in tool)
+
+
+@dataclass(frozen=True)
+class PoseSolution:
+    """The joint readings ``q`` (deg / cm) of one pose, and how the solver got there."""
+
+    joints: tuple[str, ...]
+    units: tuple[str, ...]
+    q: tuple[float, ...]
+    status: str
+    converged: bool
+    iterations: int
+    position_error_cm: float
+    orientation_error_deg: float
+    outside_limits: tuple[str, ...]
+    branch_changed: bool  # no solution on the requested branch: this one is on another
+    tool: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields as JSON types (``ik --json``)."""
+        d = dataclasses.asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+
+def solve_pose(
+    session: str | Path,
+    pose: Sequence[float],
+    *,
+    branch: str | None = None,
+    method: str = "nr",
+    tool: Sequence[float] | None = None,
+    near: Sequence[float] | None = None,
+) -> PoseSolution:
+    """The joint readings that put the session's tool at ``pose``: x y z (cm) rx ry rz
+    (deg, fixed axes) in the design base frame.
+
+    ``branch``: Puma branch (default: that of ``near``, else of q^s); ``method``: ``nr``
+    or ``jacobi``; ``tool``: a user tool (:func:`tool_controller`); ``near``: joint
+    readings (deg / cm) to start from (:func:`pipeline.control.controller.solve_poses`).
+    """
+    from pipeline.control.controller import solve_poses
+    from pipeline.kinematics.ik import STATUS_NAMES
+
+    ctl, label = tool_controller(session, tool)
+    p = np.asarray(pose, float)
+    q_near = None if near is None else np.asarray(near, float)
+    q, res = solve_poses(ctl, p[:3], p[3:], [branch], method, q_near)
+    joints = ctl.robot.joints
+    return PoseSolution(
+        joints=tuple(j.name for j in joints),
+        units=tuple(j.unit for j in joints),
+        q=tuple(float(v) for v in q[0]),
+        status=STATUS_NAMES[int(res.status[0])],
+        converged=bool(res.converged[0]),
+        iterations=int(res.iterations[0]),
+        position_error_cm=float(res.position_error_cm[0]),
+        orientation_error_deg=float(np.degrees(res.orientation_error_rad[0])),
+        outside_limits=outside_limits(ctl.robot, q[0]),
+        branch_changed=bool(res.branch_changed is not None and res.branch_changed[0]),
+        tool=label,
+    )
+
+
+@dataclass(frozen=True)
+class TargetsSolution:
+    """What :func:`solve_targets` wrote; ``summary``: its one line for people."""
+
+    targets: int
+    converged: int
+    failed: int
+    out: str
+    method: str
+    tool: str
+    summary: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """The counts and settings (``ik --targets --json``)."""
+        d = dataclasses.asdict(self)
+        del d["summary"]
+        return d
+
+
+def solve_targets(
+    session: str | Path,
+    targets: str | Path,
+    out: str | Path,
+    *,
+    method: str = "nr",
+    tool: Sequence[float] | None = None,
+    near: Sequence[float] | None = None,
+) -> TargetsSolution:
+    """Solve the poses of the Arrow file ``targets`` (columns
+    :data:`~pipeline.control.targets.TARGET_COLUMNS`, optional ``branch``) and write
+    them with their joints to ``out`` (:func:`pipeline.control.targets.solve_arrow`)."""
+    from pipeline.control.targets import solve_arrow
+    from pipeline.stages.tables import read_table
+
+    ctl, label = tool_controller(session, tool)
+    q_near = None if near is None else np.asarray(near, float)
+    summary, failed = solve_arrow(ctl, targets, out, method, label, q_near)
+    n = read_table(Path(out)).num_rows
+    return TargetsSolution(n, n - failed, failed, str(out), method, label, summary)
