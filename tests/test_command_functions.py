@@ -13,8 +13,9 @@ import pytest
 from typer.testing import CliRunner
 
 from pipeline.cli import EXIT_NOT_REACHED, app
-from pipeline.control.controller import TARGET_COLUMNS, Controller
 from pipeline.control.poses import solve_pose, solve_targets, tool_pose
+from pipeline.control.session import session_controller
+from pipeline.control.targets import TARGET_COLUMNS
 from pipeline.errors import ArmsigError
 from pipeline.robots import get_robot
 from pipeline.robots.fk import design_pose
@@ -25,7 +26,7 @@ runner = CliRunner()
 
 
 def test_tool_pose_of_a_session_and_of_a_robot(identified_session: Path) -> None:
-    want = Controller.from_session(identified_session).pose(Q).matrix
+    want = session_controller(identified_session).pose(Q).matrix
     np.testing.assert_array_equal(tool_pose(identified_session, Q).matrix, want)
     np.testing.assert_array_equal(
         tool_pose("puma560", Q).matrix, design_pose(get_robot("puma560"), Q).matrix
