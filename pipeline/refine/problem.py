@@ -19,7 +19,7 @@ from pipeline.optim.block import Array, MeasurementBlock
 from pipeline.refine.kinematics import ChainModel, start_points
 from pipeline.refine.points import PointBlock, with_reading_noise
 from pipeline.refine.solve import Problem
-from pipeline.sweeps import sweep_name
+from pipeline.sweeps import TOOL_SWEEP, sweep_name
 
 BLOCK_GROUPS = ("mic", "bias", "speed")
 
@@ -57,10 +57,10 @@ def check_coverage(
     for the model (a revolute axis needs 3 positions, a prismatic line 2, the tool 1);
     ``sweep`` (K,): the sweep of each usable position."""
     for s in range(0, n + 1):
-        need = 1 if s == 0 else (2 if prismatic[s - 1] else 3)
+        need = 1 if s == TOOL_SWEEP else (2 if prismatic[s - 1] else 3)
         have = int((sweep == s).sum())
         if have < need:
-            what = "the tool measurement" if s == 0 else f"sweep {sweep_name(s)}"
+            what = "the tool measurement" if s == TOOL_SWEEP else f"sweep {sweep_name(s)}"
             raise StageError(
                 f"{source}: {what} has {have} usable positions",
                 expected=f"at least {need} to refine the chain",

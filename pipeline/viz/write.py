@@ -22,6 +22,7 @@ from pipeline import __version__
 from pipeline.atomic import atomic_write, check_writable
 from pipeline.contract.mcap_write import checked_writer, json_bytes
 from pipeline.errors import ArmsigError, StageError
+from pipeline.robots.fk import outside_limits
 from pipeline.signature.file import FILE_NAME
 from pipeline.signature.session import load_session_signature
 from pipeline.stages.lock import session_lock
@@ -145,8 +146,7 @@ def viz(
                 "package_version": __version__,
             },
         )
-    lim = sig.robot.limits
-    outside = [n for n, v, (lo, hi) in zip(names, q_b, lim, strict=True) if not lo <= v <= hi]
+    outside = list(outside_limits(sig.robot, q_b))
     topics: dict[str, int] = {}
     for m in messages:
         topics[m.topic] = topics.get(m.topic, 0) + 1
