@@ -14,7 +14,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from bench.identify import ROOT, _wall
+from bench.identify import ROOT, _run
 
 REPEATS = 3
 
@@ -41,9 +41,9 @@ def main() -> None:
             cold = []
             for _ in range(REPEATS):
                 _fresh(src, d, identified)
-                cold.append(_wall([exe, "evaluate", str(d)]))
+                cold.append(_run([exe, "evaluate", str(d)])[0])
             rows.append((f"cold, {label}", min(cold)))
-        warm = [_wall([exe, "evaluate", str(d)]) for _ in range(REPEATS)]
+        warm = [_run([exe, "evaluate", str(d)])[0] for _ in range(REPEATS)]
         rows.append(("warm", min(warm)))
     for label, sec in rows:
         print(f"{'pipeline evaluate robot3, ' + label + f' (best of {REPEATS})':64s} {sec:9.3f} s")

@@ -146,3 +146,19 @@ def test_layer_contract_fails_on_an_upward_import(tmp_path: Path) -> None:
     out = _lint_imports(tmp_path)
     assert out.returncode != 0
     assert "pipeline.kinematics.transforms -> pipeline.stages.runner" in out.stdout
+
+
+def test_every_bench_module_imports() -> None:
+    """`make bench` imports every benchmark module first (bench/__main__.py); a name moved
+    or removed in the package or in another benchmark must fail here, not in `make bench`
+    (regression: bench/evaluate.py imported a `_wall` that bench/identify.py no longer had)."""
+    names = sorted(p.stem for p in (ROOT / "bench").glob("*.py") if p.stem != "__main__")
+    code = "import importlib\n" + "".join(f"importlib.import_module('bench.{n}')\n" for n in names)
+    out = subprocess.run(
+        [sys.executable, "-c", code.replace("bench.__init__", "bench")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stderr
