@@ -42,14 +42,7 @@ from pipeline.stages.base import RECORDING, Stage, StageRun, session_folder
 from pipeline.stages.lock import session_lock
 from pipeline.stages.recording import read_recording
 from pipeline.stages.session import session_sensor
-from pipeline.stages.tables import (
-    CheckedTable,
-    check_table,
-    content_hash,
-    read_verified,
-    write_checked,
-    write_verified,
-)
+from pipeline.stages.tables import CheckedTable, check_table, content_hash, write_table
 
 #: Identification stage modules of a sonic session in pipeline order (each defines
 #: ``STAGE``): ranges -> compensate -> triangulate -> the sensor-neutral ``positions``.
@@ -223,8 +216,6 @@ class _Hashes:
         self._product: tuple[str, str] | None = None
         self._sensor: str | None = None
         self.pending: set[str] = set()  # stages written in this run, not committed yet
-        #: committed stage files' bytes that passed their check (tables.VERIFIED)
-        self.verified = read_verified(session_dir / "stages")
 
     def sensor(self) -> str:
         """The recorded sensor kind: from the committed ``session`` table when it was made
@@ -260,8 +251,7 @@ class _Hashes:
         """The checked stage file, or None when there is none."""
         if name not in self._tables:
             path = self.path(name)
-            known = None if name in self.pending else self.verified.get(name)
-            self._tables[name] = check_table(path, name, known) if path.is_file() else None
+            self._tables[name] = check_table(path, name) if path.is_file() else None
         return self._tables[name]
 
     def get(self, name: str) -> str | None:
@@ -290,19 +280,6 @@ class _Hashes:
     def put(self, name: str, checked: CheckedTable) -> None:
         """Record a stage output written in this run."""
         self._tables[name] = checked
-
-    def save_verified(self) -> None:
-        """Record the file hashes of the committed stage files checked or written in this
-        run (:data:`pipeline.stages.tables.VERIFIED`); the others keep their entry only
-        while their file still exists."""
-        stages_dir = self.session_dir / "stages"
-        out = {n: h for n, h in self.verified.items() if stage_path(self.session_dir, n).is_file()}
-        for name, checked in self._tables.items():
-            out.pop(name, None)
-            if checked is not None and not checked.problem and checked.file_sha256:
-                out[name] = checked.file_sha256
-        self.verified = out
-        write_verified(stages_dir, out)
 
 
 def committed_hashes(session_dir: str | Path) -> dict[str, str | None]:
@@ -439,7 +416,6 @@ def run(
                 if name in hashes.pending:
                     os.replace(pending / f"{name}.arrow", stage_path(sdir, name))
             hashes.pending.clear()
-            hashes.save_verified()
             shutil.rmtree(failed_dir(sdir), ignore_errors=True)
         finally:
             bar.close()
@@ -579,5 +555,6 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
         "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
     }
     hashes.pending.add(stage.name)
-    hashes.put(stage.name, write_checked(hashes.path(stage.name), table, provenance))
+    written = write_table(hashes.path(stage.name), table, provenance)
+    hashes.put(stage.name, CheckedTable(written, provenance))
     return table
