@@ -248,3 +248,31 @@ def test_every_committed_session_signature_matches_the_schema(recording: Path, t
     identify(d, report=False)
     schema = json.loads((schema_dir() / "signature.schema.json").read_text())
     jsonschema.Draft202012Validator(schema).validate(_doc(d))
+
+
+def test_users_refuse_a_signature_of_another_recording(
+    identified_session: Path, tmp_path: Path
+) -> None:
+    """Regression (issue 32): after the recording changed (``import --force``, a recording
+    copied in, an ``identify`` that fails on the new data) ``status`` said stale, yet fk,
+    ik, export, viz and validate used the old signature with exit 0."""
+    d = shutil.copytree(identified_session, tmp_path / "s")
+    mine = (d / "recording.mcap").read_bytes()
+    other = next(p for p in COMMITTED if p.read_bytes() != mine)
+    shutil.copy(other, d / "recording.mcap")
+    assert {s.name: s for s in status(d)}["session"].reason == "input recording changed"
+    with pytest.raises(ArmsigError, match="identified from another recording.mcap") as exc:
+        session_controller(d)
+    assert "\n" not in str(exc.value) and f"pipeline identify {d}" in str(exc.value)
+    for argv in (
+        ["fk", str(d), "--q", "0 -45 180 0 45 90"],
+        ["ik", str(d), "--pose", "40", "20", "60", "180", "0", "90"],
+        ["export", str(d), "--format", "dh", "--out", str(tmp_path / "dh.txt")],
+        ["viz", str(d), "--out", str(tmp_path / "viz.mcap")],
+    ):
+        r = CliRunner().invoke(app, argv)
+        assert r.exit_code == 1 and r.output.count("\n") == 1, (argv, r.output)
+        assert "identified from another recording.mcap" in r.output, argv
+    assert not (tmp_path / "dh.txt").exists() and not (tmp_path / "viz.mcap").exists()
+    shutil.copy(identified_session / "recording.mcap", d / "recording.mcap")
+    session_controller(d)  # the recording it was identified from: served again

@@ -15,6 +15,7 @@ import pyarrow as pa
 
 from pipeline import __version__
 from pipeline.atomic import write_text_atomic
+from pipeline.contract.digest import file_sha256
 from pipeline.errors import ArmsigError
 from pipeline.robots.description import description_to_dict
 from pipeline.signature.alignment import design_alignment
@@ -206,14 +207,29 @@ def load_session_signature(
     path: str | Path, committed: dict[str, str | None] | None = None
 ) -> Signature:
     """Read ``SESSION/signature.json``, refused unless it was built from the stage outputs
-    committed in ``SESSION/stages`` (e.g. after a run killed between the two).
+    committed in ``SESSION/stages`` (e.g. after a run killed between the two) and from the
+    session's recording as it is now (e.g. after ``import --force`` or a recording copied
+    in, until ``identify`` succeeds on it).
 
     ``committed``: their content hashes when the caller has already checked the files
-    (the stage runner); otherwise every stage file is read back and checked here."""
+    (the stage runner, which has also hashed the recording); otherwise every stage file
+    and the recording are read back and checked here."""
     p = Path(path)
     doc = read_signature_document(p)
+    fix = f"run `pipeline identify {p.parent}`"
     if doc["provenance"]["stages"] != (
         committed_hashes(p.parent) if committed is None else committed
     ):
-        raise ArmsigError(f"{p}: {STALE}", fix=f"run `pipeline identify {p.parent}`")
+        raise ArmsigError(f"{p}: {STALE}", fix=fix)
+    if committed is None:
+        recording = p.parent / "recording.mcap"
+        built_from = doc["provenance"]["recording_sha256"]
+        now = file_sha256(recording) if recording.is_file() else "missing"
+        if now != built_from:
+            raise ArmsigError(
+                f"{p}: identified from another recording.mcap than the session's",
+                expected=f"recording sha256 {built_from[:12]}…",
+                got="no recording" if now == "missing" else f"sha256 {now[:12]}…",
+                fix=fix,
+            )
     return signature_from_document(doc, str(p))
