@@ -16,6 +16,8 @@ from typing import IO
 
 #: Temp files are ``.<name>.<random>.tmp`` beside their target.
 TEMP_SUFFIX = ".tmp"
+#: A session's measured inputs: no command writes over them, not even with ``--force``.
+SESSION_INPUTS = ("recording.mcap", "evaluation.mcap")
 
 
 @contextlib.contextmanager
@@ -92,6 +94,11 @@ def check_writable(path: str | Path, what: str, *, folder: bool = False) -> Path
     else:
         if p.is_dir():
             raise ArmsigError(f"{what} {p} is a folder", expected="a file path")
+        if p.resolve().name in SESSION_INPUTS:
+            raise ArmsigError(
+                f"{what} {p} is a session's measurements, which no command writes over",
+                fix="give another file name",
+            )
         parent = p.absolute().parent
         if not parent.exists():
             raise ArmsigError(
@@ -107,4 +114,15 @@ def check_writable(path: str | Path, what: str, *, folder: bool = False) -> Path
             f"{what} {p}: cannot write in {parent}", got=exc.strerror or str(exc),
             fix="give a path in a writable folder",
         ) from exc  # fmt: skip
+    return p
+
+
+def check_new_file(path: str | Path, what: str, force: bool) -> Path:
+    """:func:`check_writable`, and refuse a file that exists unless ``force`` (a user's
+    file is never replaced without asking)."""
+    from pipeline.errors import ArmsigError
+
+    p = check_writable(path, what)
+    if p.exists() and not force:
+        raise ArmsigError(f"{what} {p} already exists", fix="another path, or --force")
     return p

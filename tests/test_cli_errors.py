@@ -315,6 +315,31 @@ def test_ik_output_columns_in_the_input_are_replaced_not_repeated(
     assert pl.read_ipc(out2).columns == df.columns
 
 
+def test_no_output_replaces_a_users_file_or_a_sessions_measurements(
+    session: Path, tmp_path: Path
+) -> None:
+    """Regression (issue 32): ``ik --out FILE`` overwrote any file without ``--force``, the
+    session's ``recording.mcap`` included; ``export --force`` could overwrite it too."""
+    t = str(targets(tmp_path))
+    mine = tmp_path / "mine.arrow"
+    mine.write_bytes(b"a user's file")
+    r = invoke("ik", str(session), "--targets", t, "--out", str(mine))
+    assert_one_error(r, EXIT_REFUSED, f"--out {mine} already exists", "--force")
+    assert mine.read_bytes() == b"a user's file"
+    assert invoke("ik", str(session), "--targets", t, "--out", str(mine), "--force").exit_code == 0
+    assert pl.read_ipc(mine)["converged"][0] is True
+    recording = (session / "recording.mcap").read_bytes()
+    for name in ("recording.mcap", "evaluation.mcap"):
+        for argv in (
+            ("ik", str(session), "--targets", t, "--out", str(session / name), "--force"),
+            ("export", str(session), "--format", "dh", "--out", str(session / name), "--force"),
+        ):
+            r = invoke(*argv)
+            assert_one_error(r, EXIT_REFUSED, f"{session / name} is a session's measurements")
+    assert (session / "recording.mcap").read_bytes() == recording
+    assert not (session / "evaluation.mcap").exists()
+
+
 def test_non_finite_joint_values_and_poses_are_refused(session: Path) -> None:
     # fk printed a NaN pose with exit 0; ik blamed the design inverse.
     r = invoke("fk", "puma560", "--q", "nan 0 0 0 0 0")

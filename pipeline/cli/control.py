@@ -66,6 +66,7 @@ def ik(
         str | None, typer.Option(help="Arrow file: x_cm y_cm z_cm rx_deg ry_deg rz_deg [branch].")
     ] = None,
     out: Annotated[str | None, typer.Option(help="Arrow file for the joints of --targets.")] = None,
+    force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
     tool: Annotated[
         Pose | None,
         typer.Option(
@@ -95,7 +96,9 @@ def ik(
             raise ArmsigError(
                 "--pose and --targets both given", expected="one of them", fix="drop one"
             )
-        done = solve_targets(session, targets, out, method=method, tool=user_tool, near=q_near)
+        done = solve_targets(
+            session, targets, out, method=method, tool=user_tool, near=q_near, force=force
+        )
         if as_json:
             print_json(done.to_dict())
         else:

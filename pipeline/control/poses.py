@@ -151,6 +151,7 @@ def solve_targets(
     method: str = "nr",
     tool: Sequence[float] | None = None,
     near: Sequence[float] | None = None,
+    force: bool = False,
 ) -> TargetsSolution:
     """Solve the poses of the Arrow file ``targets`` (columns
     :data:`~pipeline.control.targets.TARGET_COLUMNS`, optional ``branch``) and write
@@ -160,6 +161,6 @@ def solve_targets(
 
     ctl, label = tool_controller(session, tool)
     q_near = None if near is None else np.asarray(near, float)
-    summary, failed = solve_arrow(ctl, targets, out, method, label, q_near)
+    summary, failed = solve_arrow(ctl, targets, out, method, label, q_near, force)
     n = read_table(Path(out)).num_rows
     return TargetsSolution(n, n - failed, failed, str(out), method, label, summary)

@@ -83,28 +83,30 @@ def solve_arrow(
     method: str,
     tool: str = "signature",
     near: np.ndarray | None = None,
+    force: bool = False,
 ) -> tuple[str, int]:
     """Solve an Arrow file of poses and write the joints beside them (atomically).
 
     ``tool`` names the tool the poses are for, for the output's metadata (the
     controller's own tool: see :meth:`Controller.with_tool`). Columns of the input
     that carry an output's name (a file that is itself an output) are replaced.
-    ``out`` is checked before the solve. Returns a summary line and the number of
-    targets not reached."""
+    ``out`` is checked before the solve: an existing file is replaced only with ``force``,
+    a session's measurements never (:func:`pipeline.atomic.check_new_file`). Returns a
+    summary line and the number of targets not reached."""
     import pyarrow as pa
 
-    from pipeline.atomic import check_writable
+    from pipeline.atomic import check_new_file
     from pipeline.kinematics.ik import STATUS_NAMES
     from pipeline.stages.tables import write_table
 
     table, poses, branches = read_targets(targets)
-    check_writable(out, "--out")
     if Path(out).resolve() == Path(targets).resolve():
         raise ArmsigError(
             f"--out {out} is the --targets file",
             expected="an output file other than the input",
             fix="--out joints.arrow",
         )
+    check_new_file(out, "--out", force)
     q, res = solve_poses(controller, poses[:, :3], poses[:, 3:], branches, method, near)
     extra: dict[str, pa.Array] = {}
     for i, j in enumerate(controller.robot.joints):

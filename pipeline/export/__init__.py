@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.atomic import check_writable, write_text_atomic
+from pipeline.atomic import check_new_file, check_writable, write_text_atomic
 from pipeline.errors import ArmsigError
 from pipeline.export.dh_table import (
     DHTable,
@@ -185,9 +185,7 @@ def export(
         path = default_path(sdir, fmt, design, frame)
         check_writable(path.parent, "export folder", folder=True)
     else:
-        path = check_writable(out, "--out")
-        if path.exists() and not force:
-            raise ArmsigError(f"--out {path} already exists", fix="another path, or --force")
+        path = check_new_file(out, "--out", force)
     sig = load_session_signature(sdir / FILE_NAME)
     model = "design" if design else "signature"
     chain = export_chain(sig, design, frame)
