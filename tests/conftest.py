@@ -6,6 +6,26 @@ import numpy as np
 import pytest
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """With pytest-xdist workers, compile the numba kernels once, before they start
+    (tests/kernel_warmup.py): otherwise every worker compiles them on a fresh checkout."""
+    workers = getattr(config.option, "numprocesses", None) or 0
+    if hasattr(config, "workerinput") or not workers or config.option.collectonly:
+        return
+    from kernel_warmup import warm
+
+    seconds = warm(min(int(workers), os.cpu_count() or 1))
+    config.stash[_WARMUP_SECONDS] = seconds
+
+
+_WARMUP_SECONDS = pytest.StashKey[float]()
+
+
+def pytest_report_header(config: pytest.Config) -> str | None:
+    seconds = config.stash.get(_WARMUP_SECONDS, None)
+    return None if seconds is None else f"numba kernels warmed in {seconds:.1f} s"
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20261122)
