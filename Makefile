@@ -15,8 +15,12 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
+# The suite runs on one pytest-xdist worker per core (tests/conftest.py compiles the numba
+# kernels once before they start); serially: `make test PYTEST_ARGS=-n0`.
+PYTEST_ARGS ?= -n auto
+
 test: $(STAMP)
-	$(BIN)/pytest
+	$(BIN)/pytest $(PYTEST_ARGS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check pipeline tests bench
