@@ -16,8 +16,9 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 # The suite runs on one pytest-xdist worker per core (tests/conftest.py compiles the numba
-# kernels once before they start); serially: `make test PYTEST_ARGS=-n0`.
-PYTEST_ARGS ?= -n auto
+# kernels once before they start), each test file on one worker (its module fixtures made
+# once); serially: `make test PYTEST_ARGS=-n0`.
+PYTEST_ARGS ?= -n auto --dist loadfile
 
 test: $(STAMP)
 	$(BIN)/pytest $(PYTEST_ARGS)

@@ -11,9 +11,12 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def pytest_configure(config: pytest.Config) -> None:
     """With pytest-xdist workers, compile the numba kernels once, before they start
-    (tests/kernel_warmup.py): otherwise every worker compiles them on a fresh checkout."""
+    (tests/kernel_warmup.py): otherwise every worker compiles them on a fresh checkout.
+    ``ARMSIG_KERNEL_WARMUP=0`` leaves it out."""
     workers = getattr(config.option, "numprocesses", None) or 0
     if hasattr(config, "workerinput") or not workers or config.option.collectonly:
+        return
+    if os.environ.get("ARMSIG_KERNEL_WARMUP") == "0":  # to measure the suite without it
         return
     from kernel_warmup import warm
 

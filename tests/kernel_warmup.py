@@ -71,8 +71,8 @@ def _solve_all_ways(method: str) -> None:
 
 
 def puma_newton() -> None:
-    """Controller.solve by Newton-Raphson, the real-time solver, and the design start
-    and limit shift that tests/test_puma_solver.py calls on their own."""
+    """Controller.solve by Newton-Raphson, the real-time solver, and the inline kernels
+    that tests call on their own."""
     import numpy as np
 
     from pipeline.control import puma560_solver as S
@@ -88,6 +88,7 @@ def puma_newton() -> None:
     flags, margins = np.array([1.0, 1.0, 1.0]), np.array([np.deg2rad(1.0), 1.0])
     q0, Tw = np.empty(6), np.empty((4, 4))
     S._design_start(np.eye(4), np.eye(4), flags, margins, T[0], q[0], q0, Tw)
+    S._wrap(7.0)  # tests/test_kernel_cache.py calls it on its own
 
 
 def puma_jacobi() -> None:
