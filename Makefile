@@ -15,9 +15,8 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-# The suite runs on one pytest-xdist worker per core (tests/conftest.py compiles the numba
-# kernels once before they start), each test file on one worker (its module fixtures made
-# once); serially: `make test PYTEST_ARGS=-n0`.
+# The suite runs on one pytest-xdist worker per core, each test file on one worker (its
+# module fixtures made once); serially: `make test PYTEST_ARGS=-n0`.
 PYTEST_ARGS ?= -n auto --dist loadfile
 
 test: $(STAMP)

@@ -10,13 +10,15 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """With pytest-xdist workers, compile the numba kernels once, before they start
-    (tests/kernel_warmup.py): otherwise every worker compiles them on a fresh checkout.
-    ``ARMSIG_KERNEL_WARMUP=0`` leaves it out."""
+    """``ARMSIG_KERNEL_WARMUP=1`` with pytest-xdist workers: compile the numba kernels
+    once, before the workers start (tests/kernel_warmup.py), rather than in each worker
+    that calls them. Off by default: on a fresh checkout, 2 cores, `--dist loadfile`,
+    measured 339 s wall with it (65 s of it the warm-up) against 306 s without; the
+    workers compile little twice, and compile while the other worker runs tests."""
     workers = getattr(config.option, "numprocesses", None) or 0
     if hasattr(config, "workerinput") or not workers or config.option.collectonly:
         return
-    if os.environ.get("ARMSIG_KERNEL_WARMUP") == "0":  # to measure the suite without it
+    if os.environ.get("ARMSIG_KERNEL_WARMUP") != "1":
         return
     from kernel_warmup import warm
 

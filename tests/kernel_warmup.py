@@ -1,4 +1,5 @@
-"""Compile armsig's cached numba kernels before the test workers start (tests/conftest.py).
+"""Compile armsig's cached numba kernels before the test workers start (tests/conftest.py,
+with ``ARMSIG_KERNEL_WARMUP=1``; off by default, see its ``pytest_configure``).
 
 On a fresh checkout the kernels' cache folder (:mod:`pipeline.kinematics.kernel_cache`)
 is empty, and compiling them costs about 2 CPU minutes. Left to the pytest-xdist
