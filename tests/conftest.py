@@ -1,9 +1,12 @@
 import os
+import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture
@@ -31,6 +34,20 @@ def identified_session(tmp_path_factory: pytest.TempPathFactory):
 
     d = tmp_path_factory.mktemp("identified") / "s"
     simulate_session(d, SimulationOptions(seed=2, points=12, repeats=2))
+    identify(d, report=False)
+    return d
+
+
+@pytest.fixture(scope="session")
+def robot3_identified(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The committed robot3 recording (recording.mcap alone), identified without a report:
+    once per test process. Read it, or work on a copy: ``shutil.copytree`` to a folder
+    of your own (tests/test_control.py, test_export.py, test_identify.py)."""
+    from pipeline.identify import identify
+
+    d = tmp_path_factory.mktemp("robot3-identified") / "robot3"
+    d.mkdir()
+    shutil.copy(ROOT / "sessions" / "robot3" / "recording.mcap", d)
     identify(d, report=False)
     return d
 

@@ -385,19 +385,21 @@ def fuzz(
     progress: Callable[[int, Outcome], None] | None = None,
 ) -> list[Outcome]:
     """Run ``n_byte`` byte-level and ``n_json`` JSON-level mutations of ``recording``,
-    interleaved, stopping early once ``budget_s`` seconds have passed."""
+    interleaved, stopping early once ``budget_s`` seconds of this process's CPU time have
+    passed: CPU, not wall-clock, so that a loaded machine or parallel test workers do not
+    shrink the sample (the mutations are identified in this process)."""
     original = recording.read_bytes()
     parsed = parse(original)
     rng = np.random.default_rng(seed)
     out: list[Outcome] = []
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     with tempfile.TemporaryDirectory(prefix="armsig-fuzz-") as tmp:
         work = Path(tmp)
         reference = _tool_positions(identify_copy(original, work, "original"))
         plan = ["byte"] * n_byte + ["json"] * n_json
         order = rng.permutation(len(plan))
         for k, which in enumerate(plan[i] for i in order):
-            if budget_s is not None and time.perf_counter() - t0 > budget_s:
+            if budget_s is not None and time.process_time() - t0 > budget_s:
                 break
             mutation = (
                 byte_mutation(original, rng) if which == "byte" else json_mutation(parsed, rng)

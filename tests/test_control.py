@@ -20,11 +20,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(scope="module")
-def robot3(tmp_path_factory) -> Controller:
-    d = tmp_path_factory.mktemp("robot3")
-    shutil.copy(ROOT / "sessions/robot3/recording.mcap", d)
-    identify(d, report=False)
-    return session_controller(d)
+def robot3(robot3_identified: Path) -> Controller:
+    return session_controller(robot3_identified)
 
 
 def _targets(c: Controller, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:

@@ -36,13 +36,12 @@ VARIANTS = [(False, "sensor"), (False, "design-base"), (True, "sensor")]
 
 
 @pytest.fixture(scope="module")
-def sessions(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+def sessions(
+    tmp_path_factory: pytest.TempPathFactory, robot3_identified: Path
+) -> dict[str, Path]:
     out = {}
     d = tmp_path_factory.mktemp("export") / "robot3"
-    d.mkdir()
-    shutil.copy(REPO / "sessions" / "robot3" / "recording.mcap", d)
-    identify(d, report=False)
-    out["robot3"] = d
+    out["robot3"] = shutil.copytree(robot3_identified, d)
     for robot in ("stanford", "scara"):
         d = tmp_path_factory.mktemp("export") / robot
         opts = SimulationOptions(robot=robot, seed=1, noiseless=True, points=12, repeats=1)

@@ -52,11 +52,11 @@ def test_noiseless_identification_is_exact(tmp_path: Path, robot: str) -> None:
 
 
 @pytest.fixture(scope="module")
-def small_session(tmp_path_factory) -> Path:
-    d = tmp_path_factory.mktemp("small")
-    simulate_session(d, SimulationOptions(seed=2, **SMALL))
-    identify(d, report=False)
-    return d
+def small_session(identified_session: Path) -> Path:
+    """conftest's session of these options (seed 2, SMALL), identified once per process;
+    the tests here read it or copy its recording."""
+    assert SMALL == {"points": 12, "repeats": 2}
+    return identified_session
 
 
 @pytest.mark.parametrize("name", [s.name for s in stages()])
@@ -204,12 +204,10 @@ def test_short_sweep_identifies_with_warning(tmp_path: Path) -> None:
     assert (f_short["sigma_delta_deg"] > 2 * f_long["sigma_delta_deg"]).all()
 
 
-def test_robot3_signature_beats_design(tmp_path: Path) -> None:
-    d = tmp_path / "robot3"
-    d.mkdir()
-    for f in ("recording.mcap", "rig-truth.json"):
-        shutil.copy(ROOT / "sessions/robot3" / f, d / f)
-    identify(d, report=False)
+def test_robot3_signature_beats_design(robot3_identified: Path, tmp_path: Path) -> None:
+    d = shutil.copytree(robot3_identified, tmp_path / "robot3")
+    shutil.copy(ROOT / "sessions/robot3/rig-truth.json", d)  # for the audit
+    assert identify(d, report=False).signature == d / "signature.json"
     r = audit(d, configurations=500)
     assert r.design.rms_position_cm >= 5 * r.signature.rms_position_cm
     feats = pl.read_ipc(stage_path(d, "features"))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import pytest
@@ -12,8 +13,9 @@ from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.stages.runner import committed_hashes
 
 
-def _hashes(folder: Path, threads: int) -> dict[str, str | None]:
-    simulate_session(folder, SimulationOptions(seed=7, noise_factor=4.6))
+def _hashes(recording: Path, folder: Path, threads: int) -> dict[str, str | None]:
+    folder.mkdir()
+    shutil.copy(recording, folder / "recording.mcap")
     with threadpool_limits(threads, user_api="blas"):
         identify(folder, report=False)
     return committed_hashes(folder)
@@ -26,6 +28,8 @@ def _hashes(folder: Path, threads: int) -> dict[str, str | None]:
 def test_stage_hashes_do_not_depend_on_the_callers_blas_threads(tmp_path: Path) -> None:
     # Before the runner pinned one thread, this session's refine, chain and every later
     # table hashed differently with 2 BLAS threads than with 1.
-    one, two = _hashes(tmp_path / "one", 1), _hashes(tmp_path / "two", 2)
+    simulate_session(tmp_path / "sim", SimulationOptions(seed=7, noise_factor=4.6))
+    recording = tmp_path / "sim" / "recording.mcap"  # one recording, identified twice
+    one, two = _hashes(recording, tmp_path / "one", 1), _hashes(recording, tmp_path / "two", 2)
     assert one == two
     assert one["refine"] is not None
