@@ -36,9 +36,7 @@ VARIANTS = [(False, "sensor"), (False, "design-base"), (True, "sensor")]
 
 
 @pytest.fixture(scope="module")
-def sessions(
-    tmp_path_factory: pytest.TempPathFactory, robot3_identified: Path
-) -> dict[str, Path]:
+def sessions(tmp_path_factory: pytest.TempPathFactory, robot3_identified: Path) -> dict[str, Path]:
     out = {}
     d = tmp_path_factory.mktemp("export") / "robot3"
     out["robot3"] = shutil.copytree(robot3_identified, d)

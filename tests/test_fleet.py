@@ -73,9 +73,7 @@ def _signature_without_time(path: Path) -> bytes:
     return json.dumps(doc, indent=1).encode()
 
 
-def test_fleet_identify_equals_sequential_identify(
-    recorded: Path, tmp_path: Path, threads
-) -> None:
+def test_fleet_identify_equals_sequential_identify(recorded: Path, tmp_path: Path, threads) -> None:
     """The same stage tables and signature.json, byte for byte, up to the creation times
     that stage provenance and signature.json record (to the second)."""
     fleet, seq = _copy(recorded, tmp_path / "fleet"), _copy(recorded, tmp_path / "seq")

@@ -71,9 +71,7 @@ def evaluate(
         return _evaluate(sdir, rig, report, progress)
 
 
-def _evaluate(
-    sdir: Path, rig: Any | None, report: bool, progress: TextIO | None
-) -> EvaluateResult:
+def _evaluate(sdir: Path, rig: Any | None, report: bool, progress: TextIO | None) -> EvaluateResult:
     from pipeline.identify import identify
 
     ident = identify(sdir, report=report, progress=progress)
@@ -102,8 +100,7 @@ def _evaluate(
             record_evaluation(sdir, _program_payloads(program, units), opts)
             recorded.append("program")
     runs = [
-        first.get(r.name, r)
-        for r in run(sdir, modules=EVALUATE_STAGE_MODULES, progress=progress)
+        first.get(r.name, r) for r in run(sdir, modules=EVALUATE_STAGE_MODULES, progress=progress)
     ]
     summary = summarize(sdir)
     rep = _report_if_stale(sdir) if report else None

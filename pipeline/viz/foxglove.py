@@ -106,9 +106,7 @@ def line_strip(points_cm: np.ndarray, rgba: RGBA) -> Json:
     }
 
 
-def arrow(
-    tail_cm: np.ndarray, direction: np.ndarray, length_cm: float, rgba: RGBA
-) -> Json:
+def arrow(tail_cm: np.ndarray, direction: np.ndarray, length_cm: float, rgba: RGBA) -> Json:
     """``foxglove.ArrowPrimitive`` from ``tail_cm`` along the unit vector ``direction``."""
     R = np.eye(3)
     if not np.allclose(direction, [1.0, 0.0, 0.0]):  # identity orientation points along +x
