@@ -189,3 +189,23 @@ def test_fresh_process_with_cached_stages(session, tmp_path) -> None:
     )
     assert res.returncode == 0, res.stderr[-2000:]
     assert set(json.loads(res.stdout)["tasks"]) == {"lines1d", "grid2d", "grid3d", "grid12"}
+
+
+COMMITTED = sorted(p.parent for p in (ROBOT1.parent).glob("*/evaluation.mcap"))
+
+
+@pytest.mark.parametrize("committed", COMMITTED, ids=lambda p: p.name)
+def test_evaluate_keeps_a_committed_evaluation_recording(committed: Path, tmp_path: Path) -> None:
+    """`pipeline evaluate sessions/robot5` (a README command) rewrote the committed
+    evaluation.mcap of every session: the program recorded in it was not the one the code
+    computes now, so the rig recorded it again (issue 30). A change of the evaluation
+    program must come with refreshed recordings (run `pipeline evaluate` on each and
+    commit them)."""
+    d = tmp_path / committed.name
+    d.mkdir()
+    for name in ("recording.mcap", "evaluation.mcap", "rig-truth.json"):  # what git holds
+        shutil.copy(committed / name, d)
+    before = (d / "evaluation.mcap").read_bytes()
+    result = evaluate(d, report=False)
+    assert result.recorded == []
+    assert (d / "evaluation.mcap").read_bytes() == before
