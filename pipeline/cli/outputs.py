@@ -6,8 +6,8 @@ from typing import Annotated
 
 import typer
 
-from pipeline.cli.options import JsonOption, SessionArg, joint_values
-from pipeline.cli.output import print_json, warn_outside_limits
+from pipeline.cli.options import AcceptVerdict, JsonOption, SessionArg, joint_values
+from pipeline.cli.output import print_json, warn, warn_outside_limits
 
 commands = typer.Typer()
 
@@ -52,12 +52,23 @@ def export(
         str, typer.Option(help="World frame: sensor, or design-base (via the design alignment).")
     ] = "sensor",
     force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
+    accept_verdict: AcceptVerdict = False,
     as_json: JsonOption = False,
 ) -> None:
     """Export the session's signature (checked against its FK) as URDF, D-H or JSON."""
     from pipeline.export import export as run_export
 
-    r = run_export(session, format_, out=out, design=design, frame=frame, force=force)
+    r = run_export(
+        session,
+        format_,
+        out=out,
+        design=design,
+        frame=frame,
+        force=force,
+        accept_verdict=accept_verdict,
+    )
+    if r.verdict_warning:
+        warn(r.verdict_warning)
     if as_json:
         print_json(r.to_dict())
         return
