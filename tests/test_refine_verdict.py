@@ -58,12 +58,26 @@ def test_each_rule_fires(change: dict[str, object], level: str, words: str) -> N
         assert v.reasons == ()
     else:
         assert len(v.reasons) == 1 and words in v.reasons[0], v.reasons
+        assert v.findings[0].level == level and v.findings[0].text == v.reasons[0]
         assert v.line.startswith(level) and words in v.line
 
 
 def test_fail_outranks_check_and_lists_every_reason() -> None:
     v = judge(dataclasses.replace(GOOD, predicted_rms_cm=0.71, improvement=0.5))
     assert v.level == FAIL and len(v.reasons) == 2 and "(+1 more)" in v.line
+    fail, check = v.findings
+    assert (fail.level, fail.rule, fail.value, fail.threshold) == (
+        FAIL,
+        "max_predicted_rms_cm",
+        0.71,
+        0.1,
+    )
+    assert (check.level, check.rule, check.value, check.threshold) == (
+        CHECK,
+        "min_improvement",
+        0.5,
+        1.0,
+    )
 
 
 def test_fleet_row_reads_the_verdict_stage(identified_session: Path, tmp_path: Path) -> None:
