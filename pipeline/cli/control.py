@@ -107,12 +107,12 @@ def ik(
             force=force,
             accept_verdict=accept_verdict,
         )
-        if done.verdict_warning:
-            warn(done.verdict_warning)
         if as_json:
             print_json(done.to_dict())
         else:
             typer.echo(done.summary)
+        if done.verdict_warning:
+            warn(done.verdict_warning)
         if done.failed:
             raise NotReached
         return
@@ -127,8 +127,6 @@ def ik(
         near=q_near,
         accept_verdict=accept_verdict,
     )
-    if r.verdict_warning:
-        warn(r.verdict_warning)
     if as_json:
         print_json(r.to_dict())
     else:
@@ -137,6 +135,8 @@ def ik(
             f"{r.status} after {r.iterations} iterations; "
             f"residual {r.position_error_cm:.2e} cm, {r.orientation_error_deg:.2e} deg"
         )
+    if r.verdict_warning:
+        warn(r.verdict_warning)
     warn_outside_limits(r.outside_limits)
     if r.branch_changed:
         warn("no solution on the requested branch; this one is on another")

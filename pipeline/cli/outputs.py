@@ -67,13 +67,13 @@ def export(
         force=force,
         accept_verdict=accept_verdict,
     )
-    if r.verdict_warning:
-        warn(r.verdict_warning)
     if as_json:
         print_json(r.to_dict())
-        return
-    typer.echo(
-        f"wrote {r.path} ({r.model}, {r.frame} frame); reproduces the chain at "
-        f"{r.configurations} configurations to {r.max_position_error_m:.1e} m, "
-        f"{r.max_orientation_error_rad:.1e} rad"
-    )
+    else:
+        typer.echo(
+            f"wrote {r.path} ({r.model}, {r.frame} frame); reproduces the chain at "
+            f"{r.configurations} configurations to {r.max_position_error_m:.1e} m, "
+            f"{r.max_orientation_error_rad:.1e} rad"
+        )
+    if r.verdict_warning:
+        warn(r.verdict_warning)
