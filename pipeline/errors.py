@@ -63,3 +63,9 @@ class SessionLockedError(ArmsigError):
 
 class ImportFileError(ArmsigError):
     """A foreign measurement file (or its map) given to ``pipeline import`` cannot be converted."""
+
+
+class VerdictFailError(ArmsigError):
+    """A signature's verdict is FAIL (docs/verdict.md): ``identify`` raises it after its
+    output is complete, ``export`` and ``ik`` before using the signature (unless
+    ``--accept-verdict``). The command line exits 4."""

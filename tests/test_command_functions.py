@@ -63,7 +63,8 @@ def test_solve_targets_writes_the_joints(identified_session: Path, tmp_path: Pat
     r = solve_targets(identified_session, tmp_path / "t.arrow", tmp_path / "q.arrow", near=Q)
     assert (r.targets, r.converged, r.failed) == (2, 1, 1)
     assert r.summary.startswith("1 of 2 targets converged")
-    assert set(r.to_dict()) == {"targets", "converged", "failed", "out", "method", "tool"}
+    keys = {"targets", "converged", "failed", "out", "method", "tool"}
+    assert set(r.to_dict()) == keys | {"verdict", "verdict_warning"}
 
 
 def test_session_status_is_what_status_prints(identified_session: Path) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import signal
 import threading
@@ -120,6 +121,7 @@ def test_a_corrupted_session_is_reported_and_the_others_finish(
     assert bad["signature_sha256"][0] is None
     assert df.filter(pl.col("error").is_null()).height == N_SESSIONS - 1
     assert f"FAILED {fleet / 'r3'}:" in res.output
+    assert re.search(rf"^  (PASS|CHECK|FAIL) +{re.escape(str(fleet / 'r0'))}:", res.output, re.M)
     assert all((fleet / f"r{i}" / "signature.json").is_file() for i in range(8) if i != 3)
 
 

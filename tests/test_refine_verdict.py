@@ -58,12 +58,26 @@ def test_each_rule_fires(change: dict[str, object], level: str, words: str) -> N
         assert v.reasons == ()
     else:
         assert len(v.reasons) == 1 and words in v.reasons[0], v.reasons
+        assert v.findings[0].level == level and v.findings[0].text == v.reasons[0]
         assert v.line.startswith(level) and words in v.line
 
 
 def test_fail_outranks_check_and_lists_every_reason() -> None:
     v = judge(dataclasses.replace(GOOD, predicted_rms_cm=0.71, improvement=0.5))
     assert v.level == FAIL and len(v.reasons) == 2 and "(+1 more)" in v.line
+    fail, check = v.findings
+    assert (fail.level, fail.rule, fail.value, fail.threshold) == (
+        FAIL,
+        "max_predicted_rms_cm",
+        0.71,
+        0.1,
+    )
+    assert (check.level, check.rule, check.value, check.threshold) == (
+        CHECK,
+        "min_improvement",
+        0.5,
+        1.0,
+    )
 
 
 def test_fleet_row_reads_the_verdict_stage(identified_session: Path, tmp_path: Path) -> None:
@@ -71,13 +85,11 @@ def test_fleet_row_reads_the_verdict_stage(identified_session: Path, tmp_path: P
     without one, null (the columns exist either way)."""
     import shutil
 
-    import pyarrow as pa
-
     from pipeline.fleet.row import session_row
     from pipeline.schemas import validate_table
     from pipeline.stages.runner import stage_path
     from pipeline.stages.tables import write_table
-    from pipeline.stages.verdict import NUMBERS
+    from pipeline.stages.verdict import NUMBERS, verdict_table
 
     d = shutil.copytree(identified_session, tmp_path / "s")
     stage_path(d, "verdict").unlink()  # a session identified before the verdict stage
@@ -85,10 +97,7 @@ def test_fleet_row_reads_the_verdict_stage(identified_session: Path, tmp_path: P
     assert row["verdict"] is None and row["predicted_rms_cm"] is None
     v = judge(dataclasses.replace(GOOD, improvement=0.5))
     numbers = dict.fromkeys(NUMBERS, None) | {"predicted_rms_cm": 0.006, "predicted_p95_cm": 0.011}
-    table = pa.table({
-        "verdict": [v.level], "reasons": [list(v.reasons)], "line": [v.line],
-        **{k: pa.array([numbers[k]], pa.float64()) for k in NUMBERS},
-    })  # fmt: skip
+    table = verdict_table(v, numbers)
     write_table(stage_path(d, "verdict"), validate_table(table, "verdict"), {})
     row = session_row(d, "identify")
     assert row["verdict"] == CHECK and row["verdict_reasons"] == list(v.reasons)

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from pipeline.cli import app
+from pipeline.cli import EXIT_VERDICT_FAIL, app
 from pipeline.fleet.row import session_row
 from pipeline.report.identification import write_report
 from pipeline.stages.runner import identification_names, stage_path
@@ -39,12 +39,12 @@ def test_identify_prints_the_verdict_last(identified_session: Path, tmp_path: Pa
 
 
 def test_a_verdict_parameter_changes_the_line(identified_session: Path, tmp_path: Path) -> None:
-    """A threshold below the session's predicted error: FAIL, with that reason."""
+    """A threshold below the session's predicted error: FAIL, with that reason, exit 4."""
     d = shutil.copytree(identified_session, tmp_path / "s")
     r = runner.invoke(
         app, ["identify", str(d), "--no-report", "--param", "verdict.max_predicted_rms_cm=1e-6"]
     )
-    assert r.exit_code == 0, r.output
+    assert r.exit_code == EXIT_VERDICT_FAIL, r.output
     last = r.stdout.strip().splitlines()[-1]
     assert last.startswith("s: FAIL  predicted ") and "> 1e-06 cm" in last
 

@@ -16,6 +16,9 @@ Only this module turns exceptions into exit codes, in one place (:class:`_Pipeli
 1   refused input or data (an :class:`~pipeline.errors.ArmsigError`)
 2   usage error (unknown command or option, missing or malformed argument)
 3   ``ik``: a target was not reached (the joints are still printed / written)
+4   the signature's verdict is FAIL (docs/verdict.md): ``identify`` after writing the
+    signature and the report and printing the verdict; ``export`` and ``ik`` refuse it
+    unless ``--accept-verdict`` (a :class:`~pipeline.errors.VerdictFailError`)
 70  internal error: a bug in armsig (the traceback with ``ARMSIG_DEBUG=1``)
 ==  =====================================================================
 
@@ -36,11 +39,12 @@ from typer.core import TyperGroup
 
 from pipeline.cli import control, evaluate, fleet, montecarlo, outputs, record, session
 from pipeline.cli.output import NotReached, quiet_numpy
-from pipeline.errors import ArmsigError, one_line
+from pipeline.errors import ArmsigError, VerdictFailError, one_line
 
 EXIT_REFUSED = 1
 EXIT_USAGE = 2
 EXIT_NOT_REACHED = 3
+EXIT_VERDICT_FAIL = 4
 EXIT_INTERNAL = 70  # EX_SOFTWARE of sysexits.h
 DEBUG_ENV = "ARMSIG_DEBUG"
 
@@ -73,6 +77,8 @@ class _Pipeline(TyperGroup):
             code = _fail(f"{exc.format_message().rstrip('.')}; try: {where} --help", EXIT_USAGE)
         except typer.Abort:
             code = _fail("aborted", EXIT_REFUSED)
+        except VerdictFailError as exc:  # before ArmsigError, its base
+            code = _fail(str(exc), EXIT_VERDICT_FAIL)
         except ArmsigError as exc:
             code = _fail(str(exc), EXIT_REFUSED)
         except NotReached:  # the output is complete; the exit code says a target was missed
@@ -127,4 +133,12 @@ for _group in (record, session, control, evaluate, outputs, montecarlo):
     app.add_typer(_group.commands)
 app.add_typer(fleet.commands, name="fleet")
 
-__all__ = ["DEBUG_ENV", "EXIT_INTERNAL", "EXIT_NOT_REACHED", "EXIT_REFUSED", "EXIT_USAGE", "app"]
+__all__ = [
+    "DEBUG_ENV",
+    "EXIT_INTERNAL",
+    "EXIT_NOT_REACHED",
+    "EXIT_REFUSED",
+    "EXIT_USAGE",
+    "EXIT_VERDICT_FAIL",
+    "app",
+]

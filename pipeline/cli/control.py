@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from pipeline.cli.options import JsonOption, SessionArg, finite, joint_values
+from pipeline.cli.options import AcceptVerdict, JsonOption, SessionArg, finite, joint_values
 from pipeline.cli.output import NotReached, print_json, warn, warn_outside_limits
 from pipeline.errors import ArmsigError
 
@@ -82,6 +82,7 @@ def ik(
             "the solution the search from there reaches (default: the signature's q^s)."
         ),
     ] = None,
+    accept_verdict: AcceptVerdict = False,
     as_json: JsonOption = False,
 ) -> None:
     """Joint readings that put the identified tool at a pose (signature-based control)."""
@@ -97,12 +98,21 @@ def ik(
                 "--pose and --targets both given", expected="one of them", fix="drop one"
             )
         done = solve_targets(
-            session, targets, out, method=method, tool=user_tool, near=q_near, force=force
+            session,
+            targets,
+            out,
+            method=method,
+            tool=user_tool,
+            near=q_near,
+            force=force,
+            accept_verdict=accept_verdict,
         )
         if as_json:
             print_json(done.to_dict())
         else:
             typer.echo(done.summary)
+        if done.verdict_warning:
+            warn(done.verdict_warning)
         if done.failed:
             raise NotReached
         return
@@ -115,6 +125,7 @@ def ik(
         method=method,
         tool=user_tool,
         near=q_near,
+        accept_verdict=accept_verdict,
     )
     if as_json:
         print_json(r.to_dict())
@@ -124,6 +135,8 @@ def ik(
             f"{r.status} after {r.iterations} iterations; "
             f"residual {r.position_error_cm:.2e} cm, {r.orientation_error_deg:.2e} deg"
         )
+    if r.verdict_warning:
+        warn(r.verdict_warning)
     warn_outside_limits(r.outside_limits)
     if r.branch_changed:
         warn("no solution on the requested branch; this one is on another")

@@ -53,7 +53,8 @@ def _fleet(
         ) + (
             f"  gain {row['gain_evaluation']:.3g}" if row["gain_evaluation"] is not None else ""
         )  # fmt: skip
-        typer.echo(f"  ok     {row['session']}: {row['signature_sha256'][:12]}{extra}")
+        done = row["verdict"] or "ok"  # PASS / CHECK / FAIL, "ok" without a verdict stage
+        typer.echo(f"  {done:6s} {row['session']}: {row['signature_sha256'][:12]}{extra}")
         for w in row["warnings"]:
             warn(f"{row['session']}: {w}")
     typer.echo(f"{len(r.rows)} sessions in {r.wall_s:.1f} s; wrote {r.table}")

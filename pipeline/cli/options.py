@@ -22,6 +22,13 @@ JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON on stdout f
 NewSessionArg = Annotated[
     str, typer.Argument(help="Session name (sessions/NAME) or a folder path.")
 ]
+#: ``--accept-verdict``: use a signature whose verdict is FAIL (docs/verdict.md).
+AcceptVerdict = Annotated[
+    bool,
+    typer.Option(
+        "--accept-verdict", help="Use the signature even if its verdict is FAIL (docs/verdict.md)."
+    ),
+]
 ForceRecording = Annotated[
     bool, typer.Option(help="Replace the recording of an existing session (else refused).")
 ]

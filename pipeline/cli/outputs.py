@@ -6,8 +6,8 @@ from typing import Annotated
 
 import typer
 
-from pipeline.cli.options import JsonOption, SessionArg, joint_values
-from pipeline.cli.output import print_json, warn_outside_limits
+from pipeline.cli.options import AcceptVerdict, JsonOption, SessionArg, joint_values
+from pipeline.cli.output import print_json, warn, warn_outside_limits
 
 commands = typer.Typer()
 
@@ -52,17 +52,28 @@ def export(
         str, typer.Option(help="World frame: sensor, or design-base (via the design alignment).")
     ] = "sensor",
     force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
+    accept_verdict: AcceptVerdict = False,
     as_json: JsonOption = False,
 ) -> None:
     """Export the session's signature (checked against its FK) as URDF, D-H or JSON."""
     from pipeline.export import export as run_export
 
-    r = run_export(session, format_, out=out, design=design, frame=frame, force=force)
+    r = run_export(
+        session,
+        format_,
+        out=out,
+        design=design,
+        frame=frame,
+        force=force,
+        accept_verdict=accept_verdict,
+    )
     if as_json:
         print_json(r.to_dict())
-        return
-    typer.echo(
-        f"wrote {r.path} ({r.model}, {r.frame} frame); reproduces the chain at "
-        f"{r.configurations} configurations to {r.max_position_error_m:.1e} m, "
-        f"{r.max_orientation_error_rad:.1e} rad"
-    )
+    else:
+        typer.echo(
+            f"wrote {r.path} ({r.model}, {r.frame} frame); reproduces the chain at "
+            f"{r.configurations} configurations to {r.max_position_error_m:.1e} m, "
+            f"{r.max_orientation_error_rad:.1e} rad"
+        )
+    if r.verdict_warning:
+        warn(r.verdict_warning)

@@ -10,6 +10,7 @@ import typer
 
 from pipeline.cli.options import JsonOption, SessionArg, comma_list, stage_params
 from pipeline.cli.output import print_json, warn
+from pipeline.signature.verdict import verdict_failed
 
 commands = typer.Typer()
 
@@ -40,6 +41,7 @@ def identify(
         report=report,
         progress=sys.stderr,
     )
+    v = result.assessment
     if as_json:
         print_json(
             {
@@ -49,6 +51,7 @@ def identify(
                 "report": None if result.report is None else str(result.report),
                 "warnings": result.warnings,
                 "verdict": result.verdict,
+                "verdict_detail": None if v is None else v.to_dict(),
             }
         )
     else:
@@ -65,6 +68,8 @@ def identify(
             typer.echo(f"report:    {result.report}")
         if result.verdict:
             typer.echo(result.verdict)  # the last line (issue 15)
+    if v is not None and v.failed:  # the output is complete: exit 4 (issue 30)
+        raise verdict_failed(v, session, "see the reasons above and docs/verdict.md")
 
 
 def _run_dict(r: Any) -> dict[str, Any]:

@@ -44,23 +44,42 @@ def tool_pose(robot: str | Path, q: Sequence[float], design: bool = False) -> To
     return design_pose(get_robot(str(robot)), list(q))
 
 
+@dataclass(frozen=True)
+class ToolController:
+    """The controller of a session's signature, the label of its tool, and its verdict
+    (``verdict``: status, None without one; ``warning``: a CHECK or an accepted FAIL)."""
+
+    controller: Controller
+    label: str
+    verdict: str | None
+    warning: str | None
+
+
 def tool_controller(
-    session: str | Path, tool: Sequence[float] | None = None
-) -> tuple[Controller, str]:
-    """The controller of a session's signature and the label of its tool.
+    session: str | Path, tool: Sequence[float] | None = None, accept_verdict: bool = False
+) -> ToolController:
+    """The controller of a session's signature, passed through its verdict
+    (:func:`pipeline.signature.verdict.verdict_gate`: a FAIL is refused unless
+    ``accept_verdict``).
 
     ``tool``: None for the signature's tool, else a user tool x y z (cm) rx ry rz (deg,
     fixed axes) in the design flange frame (:meth:`Controller.with_tool`).
     """
-    from pipeline.control.session import session_controller
+    from pipeline.control.controller import Controller
     from pipeline.kinematics.transforms import transform_from_xyz_rpy
+    from pipeline.signature.file import FILE_NAME
+    from pipeline.signature.session import load_session_signature
+    from pipeline.signature.verdict import verdict_gate
 
-    ctl = session_controller(session)
+    sig = load_session_signature(Path(session) / FILE_NAME)
+    warning = verdict_gate(sig.verdict, str(session), accept_verdict)
+    status = None if sig.verdict is None else sig.verdict.status
+    ctl = Controller.from_signature(sig)
     if tool is None:
-        return ctl, "signature"
+        return ToolController(ctl, "signature", status, warning)
     t = np.asarray(tool, float)
     ctl = ctl.with_tool(transform_from_xyz_rpy(t[:3], np.deg2rad(t[3:])))
-    return ctl, "flange " + " ".join(f"{v:g}" for v in tool)
+    return ToolController(ctl, "flange " + " ".join(f"{v:g}" for v in tool), status, warning)
 
 
 @dataclass(frozen=True)
@@ -78,6 +97,8 @@ class PoseSolution:
     outside_limits: tuple[str, ...]
     branch_changed: bool  # no solution on the requested branch: this one is on another
     tool: str
+    verdict: str | None = None  # the signature's verdict (None: it has none)
+    verdict_warning: str | None = None  # a CHECK, or a FAIL accepted (accept_verdict)
 
     def to_dict(self) -> dict[str, Any]:
         """The fields as JSON types (``ik --json``)."""
@@ -93,18 +114,21 @@ def solve_pose(
     method: str = "nr",
     tool: Sequence[float] | None = None,
     near: Sequence[float] | None = None,
+    accept_verdict: bool = False,
 ) -> PoseSolution:
     """The joint readings that put the session's tool at ``pose``: x y z (cm) rx ry rz
     (deg, fixed axes) in the design base frame.
 
     ``branch``: Puma branch (default: that of ``near``, else of q^s); ``method``: ``nr``
     or ``jacobi``; ``tool``: a user tool (:func:`tool_controller`); ``near``: joint
-    readings (deg / cm) to start from (:func:`pipeline.control.controller.solve_poses`).
+    readings (deg / cm) to start from (:func:`pipeline.control.controller.solve_poses`);
+    ``accept_verdict``: use a signature whose verdict is FAIL (else refused).
     """
     from pipeline.control.controller import solve_poses
     from pipeline.kinematics.ik import STATUS_NAMES
 
-    ctl, label = tool_controller(session, tool)
+    tc = tool_controller(session, tool, accept_verdict)
+    ctl = tc.controller
     p = np.asarray(pose, float)
     q_near = None if near is None else np.asarray(near, float)
     q, res = solve_poses(ctl, p[:3], p[3:], [branch], method, q_near)
@@ -120,7 +144,9 @@ def solve_pose(
         orientation_error_deg=float(np.degrees(res.orientation_error_rad[0])),
         outside_limits=outside_limits(ctl.robot, q[0]),
         branch_changed=bool(res.branch_changed is not None and res.branch_changed[0]),
-        tool=label,
+        tool=tc.label,
+        verdict=tc.verdict,
+        verdict_warning=tc.warning,
     )
 
 
@@ -135,6 +161,8 @@ class TargetsSolution:
     method: str
     tool: str
     summary: str
+    verdict: str | None = None  # the signature's verdict (None: it has none)
+    verdict_warning: str | None = None  # a CHECK, or a FAIL accepted (accept_verdict)
 
     def to_dict(self) -> dict[str, Any]:
         """The counts and settings (``ik --targets --json``)."""
@@ -152,15 +180,19 @@ def solve_targets(
     tool: Sequence[float] | None = None,
     near: Sequence[float] | None = None,
     force: bool = False,
+    accept_verdict: bool = False,
 ) -> TargetsSolution:
     """Solve the poses of the Arrow file ``targets`` (columns
     :data:`~pipeline.control.targets.TARGET_COLUMNS`, optional ``branch``) and write
-    them with their joints to ``out`` (:func:`pipeline.control.targets.solve_arrow`)."""
+    them with their joints to ``out`` (:func:`pipeline.control.targets.solve_arrow`);
+    ``accept_verdict`` as :func:`solve_pose`."""
     from pipeline.control.targets import solve_arrow
     from pipeline.stages.tables import read_table
 
-    ctl, label = tool_controller(session, tool)
+    tc = tool_controller(session, tool, accept_verdict)
     q_near = None if near is None else np.asarray(near, float)
-    summary, failed = solve_arrow(ctl, targets, out, method, label, q_near, force)
+    summary, failed = solve_arrow(tc.controller, targets, out, method, tc.label, q_near, force)
     n = read_table(Path(out)).num_rows
-    return TargetsSolution(n, n - failed, failed, str(out), method, label, summary)
+    return TargetsSolution(
+        n, n - failed, failed, str(out), method, tc.label, summary, tc.verdict, tc.warning
+    )

@@ -32,6 +32,7 @@ from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
 from pipeline.kinematics.transforms import invert_transform, pose_error
 from pipeline.signature.file import FILE_NAME, Signature
 from pipeline.signature.session import load_session_signature
+from pipeline.signature.verdict import verdict_gate
 from pipeline.units import joints_to_internal
 
 FORMATS = ("urdf", "dh", "mdh", "json")
@@ -57,6 +58,8 @@ class ExportResult:
     configurations: int
     max_position_error_m: float
     max_orientation_error_rad: float
+    verdict: str | None = None  # the signature's verdict (None: it has none)
+    verdict_warning: str | None = None  # a CHECK, or a FAIL accepted (accept_verdict)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -170,11 +173,13 @@ def export(
     design: bool = False,
     frame: str = "sensor",
     force: bool = False,
+    accept_verdict: bool = False,
 ) -> ExportResult:
     """Export a session's signature (``design``: its design model) as ``fmt``.
 
     ``out`` defaults to :func:`default_path` (armsig's own folder, rewritten every time);
-    an ``out`` that exists is refused unless ``force``.
+    an ``out`` that exists is refused unless ``force``. A signature whose verdict is FAIL
+    is refused unless ``accept_verdict`` (:func:`pipeline.signature.verdict.verdict_gate`).
     """
     if fmt not in FORMATS:
         raise ArmsigError(f"unknown export format {fmt!r}", expected=", ".join(FORMATS))
@@ -187,9 +192,13 @@ def export(
     else:
         path = check_new_file(out, "--out", force)
     sig = load_session_signature(sdir / FILE_NAME)
+    warning = verdict_gate(sig.verdict, str(sdir), accept_verdict)
     model = "design" if design else "signature"
     chain = export_chain(sig, design, frame)
     text, written = render(sig, chain, fmt, model, frame)
     pos, rot = _check(chain, written, random_readings(sig, CHECK_CONFIGURATIONS))
     write_text_atomic(path, text)
-    return ExportResult(str(path), fmt, model, frame, CHECK_CONFIGURATIONS, pos, rot)
+    status = None if sig.verdict is None else sig.verdict.status
+    return ExportResult(
+        str(path), fmt, model, frame, CHECK_CONFIGURATIONS, pos, rot, status, warning
+    )

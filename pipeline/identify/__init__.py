@@ -15,6 +15,7 @@ from typing import Any, TextIO
 
 from pipeline.identify import record
 from pipeline.progress import Progress
+from pipeline.signature.verdict import SignatureVerdict, verdict_of
 from pipeline.stages.base import StageRun, session_folder
 from pipeline.stages.lock import session_lock
 
@@ -22,13 +23,16 @@ from pipeline.stages.lock import session_lock
 @dataclass(frozen=True)
 class IdentifyResult:
     """``signature`` and ``report`` are None when not written (``warnings`` says why);
-    ``verdict``: the verdict line (``NAME: PASS  predicted …``), None without one."""
+    ``verdict``: the verdict line (``NAME: PASS  predicted …``), None without one;
+    ``assessment``: that verdict as data (status, reasons with their numbers and
+    thresholds) from the signature written, None without one."""
 
     runs: list[StageRun]
     signature: Path | None
     report: Path | None
     warnings: list[str]
     verdict: str | None = None
+    assessment: SignatureVerdict | None = None
 
 
 def identify(
@@ -69,8 +73,12 @@ def _replayed(sdir: Path, done: dict[str, Any], progress: TextIO | None) -> Iden
     bar = Progress("identify", len(runs) - 1, progress, unit="stages")  # as the runner's
     for _ in runs[:-1]:
         bar.step()
+    import json
+
     report = None if done["report"] is None else sdir / done["report"]
-    return IdentifyResult(runs, sdir / done["signature"], report, done["warnings"], done["verdict"])
+    sig = sdir / done["signature"]  # its bytes are those of the record's run (its digest)
+    assessment = verdict_of(json.loads(sig.read_text(encoding="utf-8")))
+    return IdentifyResult(runs, sig, report, done["warnings"], done["verdict"], assessment)
 
 
 def _run(
@@ -105,7 +113,7 @@ def _run(
     doc = read_signature_document(sig)
     rep = _report_if_stale(sdir, doc["provenance"]["stages"]) if report else None
     line = verdict_line(sdir)
-    return IdentifyResult(runs, sig, rep, doc["warnings"], line)
+    return IdentifyResult(runs, sig, rep, doc["warnings"], line, verdict_of(doc))
 
 
 def _report_if_stale(sdir: Path, hashes: dict[str, str | None]) -> Path:

@@ -85,70 +85,119 @@ class Evidence:
 
 
 @dataclass(frozen=True)
+class Reason:
+    """A rule that fired: its level, its threshold parameter (``verdict.<rule>``; ``converged``
+    and ``refine.enabled`` have none), the number compared with it, and its line."""
+
+    level: str
+    rule: str
+    value: float | None
+    threshold: float | None
+    text: str
+
+
+@dataclass(frozen=True)
 class Verdict:
     level: str
     reasons: tuple[str, ...]
     line: str
+    findings: tuple[Reason, ...] = ()
 
 
 def _g(v: float) -> str:
     return f"{v:.2g}"
 
 
-def _sensor_reasons(e: Evidence, t: Thresholds) -> list[str]:
+def _sensor_reasons(e: Evidence, t: Thresholds) -> list[Reason]:
     out = []
-    for kind, params, limit in (
-        ("range bias", e.biases, t.bias_sigmas),
-        ("position", e.mic_moves, t.mic_sigmas),
+    for kind, params, rule, limit in (
+        ("range bias", e.biases, "bias_sigmas", t.bias_sigmas),
+        ("position", e.mic_moves, "mic_sigmas", t.mic_sigmas),
     ):
         for p in params:
             if p.sigmas > limit:
-                out.append(
+                text = (
                     f"{p.name}: {kind} {p.offset:+.3g} ± {p.sigma:.2g} {p.unit} "
                     f"({p.sigmas:.1f}σ > {limit:g}σ): the digitizer's calibration is off, "
                     f"see {CALIBRATION_DOC}"
                 )
+                out.append(Reason(CHECK, rule, p.sigmas, limit, text))
     return out
 
 
 def judge(e: Evidence, t: Thresholds = Thresholds()) -> Verdict:
     """The verdict on evidence ``e`` under thresholds ``t`` (module docstring)."""
-    fail: list[str] = []
-    check: list[str] = []
+    found: list[Reason] = []
+
+    def fire(level: str, rule: str, value: float | None, limit: float | None, text: str) -> None:
+        found.append(Reason(level, rule, value, limit, text))
+
     if not e.refined:
-        check.append(
+        fire(
+            CHECK,
+            "refine.enabled",
+            None,
+            None,
             "refinement disabled (refine.enabled=false): no predicted accuracy, held-out "
-            "check or χ² test"
+            "check or χ² test",
         )
     if e.refined and e.status != "converged":
-        fail.append(f"the refinement did not converge (status {e.status or 'unknown'})")
-    if e.predicted_rms_cm is not None and e.predicted_rms_cm > t.max_predicted_rms_cm:
-        fail.append(
-            f"predicted RMS tool error {_g(e.predicted_rms_cm)} cm > {t.max_predicted_rms_cm:g} cm"
+        fire(
+            FAIL,
+            "converged",
+            None,
+            None,
+            f"the refinement did not converge (status {e.status or 'unknown'})",
+        )
+    p, limit = e.predicted_rms_cm, t.max_predicted_rms_cm
+    if p is not None and p > limit:
+        fire(
+            FAIL,
+            "max_predicted_rms_cm",
+            p,
+            limit,
+            f"predicted RMS tool error {_g(p)} cm > {limit:g} cm",
         )
     c, c0 = e.chi2_per_dof, e.chi2_recorded_per_dof
     if c is not None and c > t.chi2_fail and (c0 is None or c0 > t.chi2_fail):
-        fail.append(
+        fire(
+            FAIL,
+            "chi2_fail",
+            c,
+            t.chi2_fail,
             f"χ²/dof {c:.2f} (sensor as recorded {c0 if c0 is None else f'{c0:.2f}'}) "
-            f"> {t.chi2_fail:g}: the self-calibration cannot explain the measurements"
+            f"> {t.chi2_fail:g}: the self-calibration cannot explain the measurements",
         )
     elif c is not None and c > t.chi2_check:
-        check.append(
-            f"χ²/dof {c:.2f} > {t.chi2_check:g}: the noise model underestimates the scatter"
+        fire(
+            CHECK,
+            "chi2_check",
+            c,
+            t.chi2_check,
+            f"χ²/dof {c:.2f} > {t.chi2_check:g}: the noise model underestimates the scatter",
         )
-    check += _sensor_reasons(e, t)
+    found += _sensor_reasons(e, t)
     h, hx = e.holdout_rms_cm, e.holdout_expected_rms_cm
     if h is not None and hx is not None and h > t.holdout_ratio * hx:
-        check.append(
-            f"held-out RMS error {_g(h)} cm > {t.holdout_ratio:g} × its prediction {_g(hx)} cm"
+        fire(
+            CHECK,
+            "holdout_ratio",
+            h / hx if hx > 0 else None,
+            t.holdout_ratio,
+            f"held-out RMS error {_g(h)} cm > {t.holdout_ratio:g} × its prediction {_g(hx)} cm",
         )
     if e.improvement is not None and e.improvement < t.min_improvement:
-        check.append(
-            f"improvement over the design model {e.improvement:.2g}× < {t.min_improvement:g}×"
+        fire(
+            CHECK,
+            "min_improvement",
+            e.improvement,
+            t.min_improvement,
+            f"improvement over the design model {e.improvement:.2g}× < {t.min_improvement:g}×",
         )
-    level = FAIL if fail else CHECK if check else PASS
-    reasons = tuple(fail + check)
-    return Verdict(level, reasons, _line(level, e, reasons, t))
+    findings = tuple(sorted(found, key=lambda r: r.level != FAIL))  # FAILs first, stable
+    level = FAIL if any(r.level == FAIL for r in found) else CHECK if found else PASS
+    reasons = tuple(r.text for r in findings)
+    return Verdict(level, reasons, _line(level, e, reasons, t), findings)
 
 
 def _line(level: str, e: Evidence, reasons: tuple[str, ...], t: Thresholds) -> str:

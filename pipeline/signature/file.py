@@ -17,6 +17,7 @@ import numpy as np
 from pipeline.errors import ArmsigError
 from pipeline.robots.description import RobotDescription, description_from_dict
 from pipeline.signature.checks import DIGEST_KEY, check_document, document_digest, parse_json
+from pipeline.signature.verdict import SignatureVerdict, verdict_of
 
 if TYPE_CHECKING:  # the kinematics are imported where a signature is built or loaded
     from pipeline.kinematics.chain import SerialChain
@@ -80,13 +81,15 @@ class Signature:
 
     ``chain``: the S-Model chain (sensor frame, encoder readings in rad / cm);
     ``robot``: the design robot description; ``sensor_from_design_base`` and
-    ``design_flange_to_tool``: the design alignment X, Y (4, 4) of the file.
+    ``design_flange_to_tool``: the design alignment X, Y (4, 4) of the file;
+    ``verdict``: its verdict (None: the file has none).
     """
 
     robot: RobotDescription
     chain: SerialChain
     sensor_from_design_base: np.ndarray
     design_flange_to_tool: np.ndarray
+    verdict: SignatureVerdict | None = None
 
     @property
     def prismatic(self) -> np.ndarray:
@@ -123,4 +126,5 @@ def signature_from_document(doc: dict[str, Any], source: str) -> Signature:
         chain,
         np.array(al["sensor_from_design_base"], float),
         np.array(al["design_flange_to_signature_tool"], float),
+        verdict_of(doc),
     )

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.refine.verdict import Evidence, SensorParameter, Thresholds, judge
+from pipeline.refine.verdict import Evidence, SensorParameter, Thresholds, Verdict, judge
 from pipeline.stages.base import Stage, check_param
 
 #: The verdict table's number columns (nullable: a session may lack one).
@@ -101,17 +101,31 @@ def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, float | Non
     return e, numbers
 
 
-def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
-    e, numbers = evidence(inputs)
-    v = judge(e, params)
+def verdict_table(v: Verdict, numbers: Mapping[str, float | None]) -> pa.Table:
+    """The stage's row: the verdict ``v``, its reasons (text, level, rule, number,
+    threshold) and the ``numbers`` it was judged on (keys :data:`NUMBERS`)."""
+    f = v.findings
+
+    def per_reason(values: list[Any], t: pa.DataType) -> pa.Array:
+        return pa.array([values], pa.list_(t))
+
     return pa.table(
         {
             "verdict": pa.array([v.level], pa.string()),
-            "reasons": pa.array([list(v.reasons)], pa.list_(pa.string())),
+            "reasons": per_reason(list(v.reasons), pa.string()),
             "line": pa.array([v.line], pa.string()),
+            "reason_levels": per_reason([r.level for r in f], pa.string()),
+            "reason_rules": per_reason([r.rule for r in f], pa.string()),
+            "reason_values": per_reason([r.value for r in f], pa.float64()),
+            "reason_thresholds": per_reason([r.threshold for r in f], pa.float64()),
             **{k: pa.array([numbers[k]], pa.float64()) for k in NUMBERS},
         }
     )
+
+
+def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
+    e, numbers = evidence(inputs)
+    return verdict_table(judge(e, params), numbers)
 
 
 def verdict_line(session_dir: Path) -> str | None:
@@ -128,7 +142,8 @@ def verdict_line(session_dir: Path) -> str | None:
 
 STAGE = Stage(
     "verdict",
-    2,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm)
+    3,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
+    # 3: each reason's level, rule, number and threshold (issue 30)
     ("session", "refine", "uncertainty", "holdout", "chain"),
     Params(),
     compute,
