@@ -8,6 +8,7 @@ pyarrow are imported only when there is something to check or to do (issue 18).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -73,8 +74,6 @@ def _replayed(sdir: Path, done: dict[str, Any], progress: TextIO | None) -> Iden
     bar = Progress("identify", len(runs) - 1, progress, unit="stages")  # as the runner's
     for _ in runs[:-1]:
         bar.step()
-    import json
-
     report = None if done["report"] is None else sdir / done["report"]
     sig = sdir / done["signature"]  # its bytes are those of the record's run (its digest)
     assessment = verdict_of(json.loads(sig.read_text(encoding="utf-8")))
