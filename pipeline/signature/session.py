@@ -15,7 +15,6 @@ import pyarrow as pa
 
 from pipeline import __version__
 from pipeline.atomic import write_text_atomic
-from pipeline.contract.digest import file_sha256
 from pipeline.errors import ArmsigError
 from pipeline.robots.description import description_to_dict
 from pipeline.signature.alignment import design_alignment
@@ -29,7 +28,7 @@ from pipeline.signature.file import (
     signature_text,
     smodel_section,
 )
-from pipeline.stages.runner import committed_hashes, stage_path
+from pipeline.stages.runner import committed_hashes, recorded_and_committed, stage_path
 from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_table
 
@@ -217,19 +216,18 @@ def load_session_signature(
     p = Path(path)
     doc = read_signature_document(p)
     fix = f"run `pipeline identify {p.parent}`"
-    if doc["provenance"]["stages"] != (
-        committed_hashes(p.parent) if committed is None else committed
-    ):
-        raise ArmsigError(f"{p}: {STALE}", fix=fix)
+    checked_here = committed is None  # the runner has checked the recording itself
+    recording = None
     if committed is None:
-        recording = p.parent / "recording.mcap"
-        built_from = doc["provenance"]["recording_sha256"]
-        now = file_sha256(recording) if recording.is_file() else "missing"
-        if now != built_from:
-            raise ArmsigError(
-                f"{p}: identified from another recording.mcap than the session's",
-                expected=f"recording sha256 {built_from[:12]}…",
-                got="no recording" if now == "missing" else f"sha256 {now[:12]}…",
-                fix=fix,
-            )
+        recording, committed = recorded_and_committed(p.parent)
+    if doc["provenance"]["stages"] != committed:
+        raise ArmsigError(f"{p}: {STALE}", fix=fix)
+    built_from = doc["provenance"]["recording_sha256"]
+    if checked_here and recording != built_from:
+        raise ArmsigError(
+            f"{p}: identified from another recording.mcap than the session's",
+            expected=f"recording sha256 {built_from[:12]}…",
+            got="no recording" if recording is None else f"sha256 {recording[:12]}…",
+            fix=fix,
+        )
     return signature_from_document(doc, str(p))

@@ -285,8 +285,15 @@ class _Hashes:
 def committed_hashes(session_dir: str | Path) -> dict[str, str | None]:
     """Content hash of every committed identification stage output whose file passes its
     check (None: missing or failing it)."""
+    return recorded_and_committed(session_dir)[1]
+
+
+def recorded_and_committed(session_dir: str | Path) -> tuple[str | None, dict[str, str | None]]:
+    """The SHA-256 of the session's recording (None: missing) and :func:`committed_hashes`,
+    from one look at the files (the recording is hashed once)."""
     hashes = _Hashes(Path(session_dir))
-    return {n: hashes.get(n) for n in hashes.identification()}
+    committed = {n: hashes.get(n) for n in hashes.identification()}
+    return hashes.get(RECORDING), committed
 
 
 def _check(stage: Stage, params: Any, hashes: _Hashes, stale: set[str]) -> StageStatus:
