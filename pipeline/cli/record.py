@@ -93,6 +93,18 @@ def simulate(
     check: Annotated[
         int, typer.Option(min=0, help="Tracker: random validation configurations (sweep check).")
     ] = 0,
+    poses: Annotated[
+        int,
+        typer.Option(
+            min=0, help="Tracker: random whole-arm configurations to identify from (sweep poses)."
+        ),
+    ] = 0,
+    sweeps: Annotated[
+        bool,
+        typer.Option(
+            help="Record the joint sweeps and the tool measurement (--no-sweeps: poses only)."
+        ),
+    ] = True,
     force: ForceRecording = False,
 ) -> None:
     """Record a simulated session: recording.mcap plus rig-truth.json."""
@@ -116,6 +128,8 @@ def simulate(
         targets=targets,
         nest_on_axis=nest_on_axis,
         check=check,
+        poses=poses,
+        sweeps=sweeps,
     )
     path = simulate_session(folder, opts, force=force)
     typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")

@@ -17,13 +17,9 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.kinematics.alignment import register_rigid
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.units import joints_to_internal
-
-#: A registration needs points spread in at least two directions: the second singular
-#: value of the centred points above this fraction of the first (else the rotation
-#: about their line is free and the fit would invent it).
-MIN_SPREAD = 1e-6
 
 
 @dataclass(frozen=True)
@@ -40,24 +36,6 @@ class PositionErrors:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
-
-
-def register_rigid(model: np.ndarray, measured: np.ndarray) -> np.ndarray | None:
-    """The rigid transform (4, 4) best mapping ``model`` (m, 3) onto ``measured`` (m, 3),
-    least squares; None when the points do not fix a rotation (fewer than 3, collinear)."""
-    if len(model) < 3:
-        return None
-    cm, cp = model.mean(axis=0), measured.mean(axis=0)
-    s = np.linalg.svd(model - cm, compute_uv=False)
-    if not s[1] > MIN_SPREAD * max(s[0], 1e-300):
-        return None
-    from scipy.spatial.transform import Rotation  # lazy: ~0.3 s of import (warm runs)
-
-    rot, _ = Rotation.align_vectors(measured - cp, model - cm)
-    T = np.eye(4)
-    T[:3, :3] = rot.as_matrix()
-    T[:3, 3] = cp - T[:3, :3] @ cm
-    return T
 
 
 def error_distances(

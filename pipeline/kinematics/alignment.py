@@ -33,6 +33,31 @@ GAUGE_RCOND = 1e-8
 JACOBIAN_STEP = 1e-6
 
 
+#: A registration needs points spread in at least two directions: the second singular
+#: value of the centred points above this fraction of the first (else the rotation
+#: about their line is free and the fit would invent it).
+MIN_SPREAD = 1e-6
+
+
+def register_rigid(model: np.ndarray, measured: np.ndarray) -> np.ndarray | None:
+    """The rigid transform (4, 4) best mapping ``model`` (m, 3) onto ``measured`` (m, 3),
+    least squares (centroids matched, rotation by SVD: scipy's ``Rotation.align_vectors``,
+    no scale); None when the points do not fix a rotation (fewer than 3, collinear)."""
+    if len(model) < 3:
+        return None
+    cm, cp = model.mean(axis=0), measured.mean(axis=0)
+    s = np.linalg.svd(model - cm, compute_uv=False)
+    if not s[1] > MIN_SPREAD * max(s[0], 1e-300):
+        return None
+    from scipy.spatial.transform import Rotation  # lazy: ~0.3 s of import (warm runs)
+
+    rot, _ = Rotation.align_vectors(measured - cp, model - cm)
+    T = np.eye(4)
+    T[:3, :3] = rot.as_matrix()
+    T[:3, 3] = cp - T[:3, :3] @ cm
+    return T
+
+
 def _pose(x: Array) -> Array:
     return transform_from_xyz_rpy(x[:3], x[3:6])
 

@@ -1,8 +1,8 @@
 """Held-out validation without ground truth: predict positions the fit did not see.
 
-k-fold over the configurations of each joint sweep: fold ``f`` holds out the steps
-``≡ f (mod k)`` of every sweep (so each sweep's target point keeps most of its
-observations), the refinement is refit without them, warm-started at the full fit, and
+k-fold over the configurations of each joint sweep and of the pose set: fold ``f`` holds
+out the steps ``≡ f (mod k)`` of every sweep (so each sweep's target point keeps most of
+its observations), the refinement is refit without them, warm-started at the full fit, and
 the refit chain predicts the held-out positions. A session with validation (``check``)
 configurations uses those instead: the full fit never saw them, so no refit.
 
@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.refine.kinematics import TOOL_POINT, ChainModel
+from pipeline.sweeps import POSES_SWEEP
 
 Array = npt.NDArray[np.float64]
 #: A refit: positions kept (K,) bool -> kinematic parameters (P,) and their covariance.
@@ -78,14 +79,16 @@ def kfold(
     model: ChainModel, sweep: npt.ArrayLike, step: npt.ArrayLike,
     measured: Array, cov_m: Array, refit: Refit, k: int = FOLDS,
 ) -> HeldOut:  # fmt: skip
-    """Held-out errors of the joint sweeps' positions (``sweep`` ≥ 1), k-fold.
+    """Held-out errors of the joint sweeps' and the pose set's positions, k-fold (the
+    targets of one pose share its fold: a pose is held out whole).
 
     ``model`` observes the block's K positions (``measured`` (K, 3), NaN rows not
     scored; their covariances ``cov_m`` (K, 3, 3)); ``refit(keep)`` fits without the
     positions ``~keep``.
     """
     fold = fold_of_steps(step, k)
-    joint = (np.asarray(sweep) >= 1) & np.isfinite(measured).all(axis=1)
+    sweep = np.asarray(sweep)
+    joint = ((sweep >= 1) | (sweep == POSES_SWEEP)) & np.isfinite(measured).all(axis=1)
     out: list[tuple[np.ndarray, ...]] = []
     for f in range(k):
         held = joint & (fold == f)

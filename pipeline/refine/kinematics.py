@@ -15,9 +15,10 @@ with ``S_k = S̄_{k−1}`` and ``p0`` the point at ``q̄^s`` (sensor frame). Onl
   for a revolute joint, ``(r_x, r_y)`` for a prismatic one (its origin does not matter).
   It has no singularity near the start, unlike D-H's ``α`` on nearly parallel axes
   (Hayati's problem): it is the thesis frame moved;
-- each target point's ``p0`` (cm): one per (sweep, target) of the joint sweeps, and one
-  ``tool`` point shared by every measurement of the tool (tool sweep, check sweep and an
-  import's ``plan.tool_target`` rows).
+- each target point's ``p0`` (cm): one per (sweep, target) of the joint sweeps, one
+  ``tool`` point shared by every measurement of the tool (tool sweep, check sweep, the
+  pose set's tool target and an import's ``plan.tool_target`` rows), and one per other
+  target of the pose set (``poses/<target>``, on the last link).
 
 Gauge freedoms and how they are fixed:
 
@@ -47,7 +48,7 @@ import numpy.typing as npt
 
 from pipeline.errors import StageError
 from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans, trans_z
-from pipeline.sweeps import CHECK_SWEEP, TOOL_SWEEP
+from pipeline.sweeps import TOOL_SWEEP, WHOLE_ARM_SWEEPS
 
 Array = npt.NDArray[np.float64]
 
@@ -280,14 +281,19 @@ class ChainModel:
         return np.concatenate([F, F[-1:], tool[None]], axis=0)
 
 
-def point_name(sweep: int, target: str, tool_target: str | None) -> str:
+def point_name(sweep: int, target: str, tool_target: str | None, pose_tool: str | None) -> str:
     """The point a measurement of ``target`` in ``sweep`` sees (module docstring).
 
     ``tool_target``: the tool's target id when the joint sweeps measured the tool too
     (``plan.sweeps_measure_tool``, imports), else None: a tracker's joint sweeps may
-    reuse the tool's id for their own nests.
+    reuse the tool's id for their own nests. ``pose_tool``: the tool's target id in the
+    pose set and the check sweep (None: every target there is the tool, the single
+    target of a session without a nest on the last link). Another target of those
+    sweeps is a point of its own on the last link, ``poses/<target>``.
     """
-    if sweep in (TOOL_SWEEP, CHECK_SWEEP) or (tool_target is not None and target == tool_target):
+    if sweep in WHOLE_ARM_SWEEPS and sweep != TOOL_SWEEP:
+        return TOOL_POINT if pose_tool is None or target == pose_tool else f"poses/{target}"
+    if sweep == TOOL_SWEEP or (tool_target is not None and target == tool_target):
         return TOOL_POINT
     return f"sweep{sweep}/{target}"
 
@@ -299,24 +305,29 @@ def chain_model(
     frames0: Array,
     prismatic: npt.NDArray[np.bool_],
     tool_target: str | None,
+    pose_tool: str | None = None,
 ) -> ChainModel:
     """The model of the observations (``sweep``, ``target``) (K,), started at the thesis
     frames ``frames0`` (n, 4, 4) of the joints ``prismatic`` (n,).
 
     ``theta`` (K, n): each observation's joint readings minus ``q̄^s`` (rad / cm);
-    ``tool_target``: as in :func:`point_name`. The stage tables are read by
+    ``tool_target``, ``pose_tool``: as in :func:`point_name`. The stage tables are read by
     :func:`pipeline.stages.refine_problem.model_for_keys`.
     """
     n = len(prismatic)
-    names = [point_name(int(s), str(t), tool_target) for s, t in zip(sweep, target, strict=True)]
+    names = [
+        point_name(int(s), str(t), tool_target, pose_tool)
+        for s, t in zip(sweep, target, strict=True)
+    ]
     point_names = tuple(dict.fromkeys(names))
     index = {p: j for j, p in enumerate(point_names)}
-    link = np.array([n if p == TOOL_POINT else int(s) for p, s in zip(names, sweep, strict=True)])
+    on_last = np.isin(sweep, WHOLE_ARM_SWEEPS) | (np.array(names) == TOOL_POINT)
+    link = np.where(on_last, n, sweep)
     if ((link < 1) | (link > n)).any():
         bad = int(sweep[(link < 1) | (link > n)][0])
         raise StageError(
             f"refine: sweep {bad} is not a joint of the {n}-joint robot",
-            expected=f"joint sweeps 1..{n}, the tool and check sweeps",
+            expected=f"joint sweeps 1..{n}, the tool and check sweeps and the pose set",
             fix="re-record the session",
         )
     return ChainModel(

@@ -43,7 +43,9 @@ class Problem:
 
     ``keep`` (K,) bool selects the block's positions in the fit (rows of the block that
     depend on no position are always kept); ``fixed_block`` holds the block's own
-    parameters at their start values (the sensor as recorded).
+    parameters at their start values (the sensor as recorded); ``held`` (n_params,) bool
+    holds those parameters at their start (the ones the data cannot identify:
+    :mod:`pipeline.refine.identifiability`).
     """
 
     model: ChainModel
@@ -52,6 +54,7 @@ class Problem:
     f_scale: float = 3.0
     keep: npt.NDArray[np.bool_] | None = None
     fixed_block: bool = False
+    held: npt.NDArray[np.bool_] | None = None
 
     @property
     def n_kin(self) -> int:
@@ -192,6 +195,8 @@ def solve(problem: Problem, x_start: Array, max_evaluations: int = MAX_EVALUATIO
     free = np.ones(problem.n_params, bool)
     if problem.fixed_block:
         free[problem.n_kin :] = False
+    if problem.held is not None:
+        free &= ~problem.held
     x_fixed = np.asarray(x_start, float).copy()
 
     def full(z: Array) -> Array:
@@ -199,10 +204,21 @@ def solve(problem: Problem, x_start: Array, max_evaluations: int = MAX_EVALUATIO
         x[free] = z
         return x
 
+    n_normal = problem.n_kin if problem.fixed_block else problem.n_params
+    on = free[:n_normal]  # the normal equations' parameters that are free
+
     def fun(z: Array) -> tuple[Array, Normal]:
         x = full(z)
         lin = linearize(problem, x)
-        return lin.r, normal_equations(problem, x, lin)  # over the free parameters
+        normal = normal_equations(problem, x, lin)
+        if on.all():
+            return lin.r, normal
+
+        def free_normal(w: Array) -> tuple[Array, Array]:  # over the free parameters
+            A, g = normal(w)
+            return A[np.ix_(on, on)], g[on]
+
+        return lin.r, free_normal
 
     start = fun(x_fixed[free])
     r0 = start[0]

@@ -8,7 +8,7 @@ tests do).
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -69,6 +69,8 @@ class SimulationOptions:
     targets: int = 1  # tracker: reflectors per sweep (a nest), ids T1..TK
     nest_on_axis: int = 0  # tracker: joint whose sweep's last reflector is on its axis
     check: int = 0  # tracker: validation configurations (sweep "check")
+    poses: int = 0  # tracker: random whole-arm configurations identified (sweep "poses")
+    sweeps: bool = True  # joint sweeps and the tool measurement (False: a pose set only)
 
 
 def _check(opts: SimulationOptions) -> None:
@@ -112,8 +114,9 @@ def _options_for_truth(opts: SimulationOptions) -> dict[str, object]:
     """The options as rig-truth.json records them; ``resettle_counts`` only when set, so
     that sessions simulated without it keep their bytes."""
     out = {**asdict(opts), "faults": list(opts.faults)}
-    if not opts.resettle_counts:
-        del out["resettle_counts"]
+    for key, default in (("resettle_counts", 0), ("poses", 0), ("sweeps", True)):
+        if out[key] == default:
+            del out[key]
     return out
 
 
@@ -122,17 +125,26 @@ def _check_tracker(opts: SimulationOptions) -> None:
         raise ArmsigError(
             f"unknown sensor {opts.sensor!r}", expected=", ".join(SENSORS), fix="--sensor tracker"
         )
-    if opts.sensor == "sonic" and (opts.targets != 1 or opts.nest_on_axis or opts.check):
+    point_only = opts.targets != 1 or opts.nest_on_axis or opts.check or opts.poses
+    if opts.sensor == "sonic" and (point_only or not opts.sweeps):
         raise ArmsigError(
-            "--targets, --nest-on-axis and --check need a point sensor",
+            "--targets, --nest-on-axis, --check, --poses and --no-sweeps need a point sensor",
             expected="--sensor tracker",
             got=f"--sensor {opts.sensor}",
         )
-    if not 1 <= opts.targets <= tracker.MAX_TARGETS or not 0 <= opts.check <= 10_000:
+    in_range = 0 <= opts.check <= 10_000 and 0 <= opts.poses <= 100_000
+    if not 1 <= opts.targets <= tracker.MAX_TARGETS or not in_range:
         raise ArmsigError(
             "tracker options out of range",
-            expected=f"--targets 1 to {tracker.MAX_TARGETS}, --check 0 to 10000",
-            got=f"--targets {opts.targets}, --check {opts.check}",
+            expected=f"--targets 1 to {tracker.MAX_TARGETS}, --check 0 to 10000, "
+            "--poses 0 to 100000",
+            got=f"--targets {opts.targets}, --check {opts.check}, --poses {opts.poses}",
+        )
+    if not opts.sweeps and opts.poses == 0:
+        raise ArmsigError(
+            "--no-sweeps leaves nothing to identify",
+            expected="joint sweeps, or a pose set (--poses N)",
+            fix="--poses 50 --no-sweeps",
         )
     robot = get_robot(opts.robot)
     j = opts.nest_on_axis
@@ -229,6 +241,9 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     plan = session_plan(
         robot, geometry_recorded, sensor_from_base, opts.points, opts.repeats, opts.max_sweep_deg
     )
+    if opts.poses:  # the tool reflector off the flange axis, where the poses can see it turn
+        tool = np.array(plan.tool_local_cm) + np.array(tracker.POSE_TOOL_OFFSET_CM)
+        plan = replace(plan, tool_local_cm=(float(tool[0]), float(tool[1]), float(tool[2])))
     pris = robot.prismatic
     res = robot.encoder_resolution
 
@@ -247,14 +262,15 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     # Command list, in recording order: targets n..1, then the tool probe at q^s.
     qs = np.array(plan.signature_q)
     commands: list[tuple[int | str, int, np.ndarray]] = []
-    for sweep in plan.sweeps:
+    for sweep in plan.sweeps if opts.sweeps else ():
         for step, value in enumerate(sweep.q_values):
             q = qs.copy()
             q[sweep.joint - 1] = value
             commands.append((sweep.joint, step, q))
-    commands.append(("tool", 0, qs.copy()))
+    if opts.sweeps:
+        commands.append(("tool", 0, qs.copy()))
     points = opts.sensor == "tracker"
-    nests: dict[int, np.ndarray] = {}
+    nests: dict[int | str, np.ndarray] = {}
     if points:
         rng_check = rng.spawn(1)[0]  # a fifth stream: the four above stay the sonic rig's
         nests = {
@@ -268,6 +284,14 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             rng_check,
         )  # fmt: skip
         commands += [("check", k, q) for k, q in enumerate(q_check)]
+        if opts.poses:  # a sixth and seventh stream: sessions without poses keep their bytes
+            rng_poses, rng_nest = rng.spawn(2)
+            nests["poses"] = tracker.nest_locals(tool_true, opts.targets, False, rng_nest, fixture)
+            q_poses = tracker.check_configurations(
+                opts.poses, robot.limits, true.chain, sensor_from_base, tool_true, geometry_true,
+                rng_poses,
+            )  # fmt: skip
+            commands += [("poses", k, q) for k, q in enumerate(q_poses)]
     n_avg = 1 if points else opts.repeats
     q_cmd = np.array([c[2] for c in commands])
     if opts.noiseless:
@@ -303,7 +327,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     qi = joints_to_internal(q_reached, pris)
     p_target = np.zeros((len(commands), 3))
     for k, (sweep_id, _, _) in enumerate(commands):
-        if sweep_id in ("tool", "check"):
+        if sweep_id in ("tool", "check", "poses"):
             p_target[k] = tool_positions(true.chain, sensor_from_base, qi[k], tool_true)
         else:
             p_target[k] = target_positions(
@@ -440,19 +464,24 @@ def _record_points(
     q_enc: np.ndarray,
     qi: np.ndarray,
     t_config: np.ndarray,
-    nests: dict[int, np.ndarray],
+    nests: dict[int | str, np.ndarray],
     tool_true: np.ndarray,
     target_true: dict[int, np.ndarray],
     rng: np.random.Generator,
 ) -> Path:
-    """The tracker's session: every nest reflector (sweeps) or the tool target (tool,
-    check) measured once per configuration (:mod:`pipeline.rig.tracker`)."""
+    """The tracker's session: every nest reflector (sweeps; the tool's nest at the poses)
+    or the tool target (tool, check) measured once per configuration
+    (:mod:`pipeline.rig.tracker`)."""
     ids = tracker.target_ids(opts.targets)
     rows: list[tuple[int, str, np.ndarray]] = []  # (command, target, true position)
     for k, (sweep_id, _, _) in enumerate(commands):
         if sweep_id in ("tool", "check"):
             p = tool_positions(true.chain, sensor_from_base, qi[k], tool_true)
             rows.append((k, tracker.TOOL_TARGET, p))
+            continue
+        if sweep_id == "poses":
+            for tid, local in zip(ids, nests["poses"], strict=True):
+                rows.append((k, tid, tool_positions(true.chain, sensor_from_base, qi[k], local)))
             continue
         j = int(sweep_id)
         for tid, local in zip(ids, nests[j], strict=True):
@@ -461,7 +490,11 @@ def _record_points(
     p_meas, sigma = tracker.measure(p_true, rng, opts.noiseless)
     messages = [
         Message("/rig/description", T0_NS, tracker.rig_description()),
-        _robot_message(robot, plan.signature_q, tracker.plan_dict(plan, opts.targets, opts.check)),
+        _robot_message(
+            robot,
+            plan.signature_q,
+            tracker.plan_dict(plan, opts.targets, opts.check, opts.poses, opts.sweeps),
+        ),
     ]
     for k, (sweep_id, step, _) in enumerate(commands):
         messages.append(

@@ -13,6 +13,10 @@ the others at :data:`NEST_OFFSETS_CM` from it in the frame moving with the swept
 with ``nest_on_axis`` = i, sweep i's last reflector sits on joint i's true axis
 (revolute), where it cannot show the joint's rotation (the features stage must not use
 it). The tool and the validation configurations are measured at T1 (``tool_target``).
+A pose set (``--poses N``: random configurations inside the limits whose tool is in
+front of the tracker) measures the tool's nest, T1 at the tool and the others at the
+same offsets in the last link's frame, at every pose. With a pose set the tool reflector
+sits :data:`POSE_TOOL_OFFSET_CM` off the planned probe tip (off the flange axis).
 """
 
 from __future__ import annotations
@@ -32,6 +36,11 @@ MAX_TARGETS = len(NEST_OFFSETS_CM)
 #: σ = a + b · L per coordinate: half the MPE of 15 µm + 6 µm/m (a 2σ bound).
 SIGMA_A_CM = 0.00075
 SIGMA_B_CM_PER_M = 0.0003
+#: A session with a pose set mounts the tool reflector this far off the flange, in the
+#: last D-H frame (cm): a reflector on the last joint's axis cannot show that axis's
+#: direction, so the tool's orientation would not be identifiable from positions
+#: (issue 26). 5 cm: the arm of a usual SMR tool adapter.
+POSE_TOOL_OFFSET_CM = (5.0, 0.0, 0.0)
 #: Check configurations drawn per wanted one before giving up (most are visible).
 _CHECK_DRAWS = 200
 
@@ -106,17 +115,26 @@ def check_configurations(
     raise ValueError("no visible validation configuration")  # the plan's tool is visible
 
 
-def plan_dict(plan: MeasurementPlan, k: int, n_check: int) -> dict[str, Any]:
+def plan_dict(
+    plan: MeasurementPlan, k: int, n_check: int, n_poses: int = 0, sweeps: bool = True
+) -> dict[str, Any]:
     """``plan`` as recorded by a point-sensor rig: one reading per configuration, the
-    nest's target ids, the tool target and the validation configurations."""
+    nest's target ids, the tool target, the validation configurations and the pose set
+    (``n_poses`` configurations, the tool's nest of ``k`` targets at each); without
+    ``sweeps`` the pose set alone (no joint sweep, no tool measurement)."""
     doc = plan.to_dict()
     doc["n_avg"] = 1
     for s in doc["sweeps"]:  # type: ignore[attr-defined]
         s["targets"] = target_ids(k)
+    if not sweeps:
+        doc["sweeps"], doc["order"] = [], []
     doc["tool_target"] = TOOL_TARGET
     if n_check:
         doc["check"] = {"n_points": n_check}
         doc["order"] = [*doc["order"], "check"]  # type: ignore[misc]
+    if n_poses:
+        doc["poses"] = {"n_points": n_poses, "targets": target_ids(k)}
+        doc["order"] = [*doc["order"], "poses"]  # type: ignore[misc]
     return doc
 
 

@@ -20,7 +20,7 @@ from pipeline.schemas import arrow_schema
 from pipeline.stages.base import Stage, check_param
 from pipeline.stages.frames import readings_at
 from pipeline.stages.positions import positions, recorded_sigma_cm, sweep_rows, sweep_targets
-from pipeline.stages.session import session_robot
+from pipeline.stages.session import session_plan, session_robot
 
 if TYPE_CHECKING:
     from pipeline.features.targets import TargetFit
@@ -226,6 +226,16 @@ def _sweep_feature(
     return row
 
 
+def swept_joints(session: pa.Table, n: int) -> list[int]:
+    """The joints with a feature: every joint 1..n of a sweep session (a missing sweep is
+    refused by :func:`_sweep_feature`); the planned sweeps of a session with a pose set,
+    which identifies the chain from its poses (none, some or all joints swept too)."""
+    plan = session_plan(session)
+    if "poses" not in plan:
+        return list(range(1, n + 1))
+    return sorted(int(s["joint"]) for s in plan["sweeps"])
+
+
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.features.expected import SIGMA_COLUMNS
 
@@ -237,8 +247,10 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     pos, joints = inputs["positions"], inputs["joints"]
     rows = [
         _sweep_feature(pos, joints, i, robot, params.plane_method)
-        for i in range(1, robot.n_joints + 1)
+        for i in swept_joints(inputs["session"], robot.n_joints)
     ]
+    if not rows:  # a pose set alone: no joint of its own sweep
+        return arrow_schema("features").empty_table()
     out: dict[str, list[Any]] = {}
 
     def put(name: str, value: Any) -> None:

@@ -35,7 +35,7 @@ import pyarrow as pa
 from pipeline.errors import StageError
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.positions import positions, sweep_rows
-from pipeline.stages.recording import TOOL_SWEEP, sweep_name
+from pipeline.stages.recording import POSES_SWEEP, TOOL_SWEEP, sweep_name
 from pipeline.stages.session import session_plan, session_robot
 from pipeline.units import joints_to_internal
 
@@ -198,6 +198,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     robot = session_robot(inputs["session"])
     n, pris = robot.n_joints, robot.prismatic
     feat = inputs["features"]
+    if feat.num_rows != n and "poses" in session_plan(inputs["session"]):
+        return _design_start_table(inputs, robot)
     if feat.num_rows != n:
         raise StageError(
             "features: not one row per joint", expected=f"{n} rows", got=str(feat.num_rows)
@@ -239,7 +241,65 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         ]
     )
     tool = tools.mean(axis=0) if len(tools) > 1 else tools[0]
-    T = np.concatenate([F, tool[None]], axis=0)
+    return _frames_table(np.concatenate([F, tool[None]], axis=0), qs, pris)
+
+
+def pose_tool_target(plan: Mapping[str, Any], pos: pa.Table) -> str:
+    """The target id of the tool point in a session's pose set: ``plan.tool_target``, else
+    the only target it measures (the recording reader refuses several without it)."""
+    if "tool_target" in plan:
+        return str(plan["tool_target"])
+    ids = sorted(set(sweep_rows(pos, POSES_SWEEP).column("target").to_pylist()))
+    return ids[0] if ids else ""
+
+
+def tool_point_rows(
+    inputs: Mapping[str, Any], n: int, pris: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Joint values (K, n, boundary units) and positions (K, 3) of every usable measurement
+    of the tool point in the tool sweep and the pose set, each joined to its joint state by
+    (sweep, step)."""
+    plan = session_plan(inputs["session"])
+    qs, ps = [], []
+    for sweep, target in (
+        (TOOL_SWEEP, None),
+        (POSES_SWEEP, pose_tool_target(plan, inputs["positions"])),
+    ):
+        rows = sweep_rows(inputs["positions"], sweep, target)
+        p = positions(rows)
+        ok = ~np.isnan(p).any(axis=1)
+        steps = rows.column("step").to_numpy().astype(np.int64)[ok]
+        qs.append(
+            readings_at(inputs["joints"], sweep, steps, n, pris) if ok.any() else np.zeros((0, n))
+        )
+        ps.append(p[ok])
+    return np.vstack(qs), np.vstack(ps)
+
+
+def _design_start_table(inputs: Mapping[str, Any], robot: Any) -> pa.Table:
+    """The frames of a session identified from its pose set: the design model registered
+    to the measured tool points (:func:`pipeline.refine.start.design_start`), at q̄^s the
+    recorded signature configuration (the stage ``refine`` fits the chain from there)."""
+    from pipeline.refine.start import design_start
+
+    n, pris = robot.n_joints, robot.prismatic
+    plan = session_plan(inputs["session"])
+    q, p = tool_point_rows(inputs, n, pris)
+    qs = robot.joints_from_readings(np.asarray(plan["signature_q"], float))
+    start = design_start(
+        robot.design_chain(),
+        joints_to_internal(q, pris),
+        p,
+        np.asarray(plan["tool_local_cm"], float),
+        joints_to_internal(qs, pris),
+    )
+    return _frames_table(np.concatenate([start.frames, start.tool[None]], axis=0), qs, pris)
+
+
+def _frames_table(T: np.ndarray, qs: np.ndarray, pris: np.ndarray) -> pa.Table:
+    """The ``frames`` table of ``S̄_0 … S̄_n`` and the tool ``T`` (n + 2, 4, 4) at q̄^s ``qs``
+    (n,, boundary units)."""
+    n = len(pris)
     q_deg = np.full(n + 2, np.nan)
     q_cm = np.full(n + 2, np.nan)
     q_deg[1 : n + 1] = np.where(pris, np.nan, qs)

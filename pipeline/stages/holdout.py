@@ -71,7 +71,9 @@ class StepRefit:
         kept = kept_rows(lin, keep)
         w = rho(full.loss, (kept.r / full.f_scale) ** 2)[1]  # the solver's robust weights
         A, g = normal_equations(full, self.x_hat, kept)(w)
-        N = np.linalg.pinv(A)
+        free = np.ones(len(g), bool) if full.held is None else ~full.held[: len(g)]
+        N = np.zeros_like(A)  # held parameters (not identifiable) stay where the fit held them
+        N[np.ix_(free, free)] = np.linalg.pinv(A[np.ix_(free, free)])
         x = self.x_hat - N @ g
         n = self.problem.model.n_params
         return x[:n], (N * self.noise_var)[:n, :n]
@@ -81,7 +83,12 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.refine.holdout import check_configurations, kfold
     from pipeline.refine.solve import refit
     from pipeline.stages.positions import positions as xyz_of
-    from pipeline.stages.refine import internal_factors, refine_summary, refined_x
+    from pipeline.stages.refine import (
+        held_parameters,
+        internal_factors,
+        refine_summary,
+        refined_x,
+    )
     from pipeline.stages.refine_problem import rows_at, session_problem
 
     refine = inputs["refine"]
@@ -94,6 +101,9 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         summ.get("f_scale", 3.0),
         summ.get("level", "points"),
         summ.get("speed_knot_s", 120.0),
+    )
+    sp = dataclasses.replace(
+        sp, problem=dataclasses.replace(sp.problem, held=held_parameters(refine))
     )
     scale = float(summ.get("noise_scale", 1.0)) ** 2
     model = sp.problem.model

@@ -32,9 +32,9 @@ from pipeline.stages.recording_keys import (
     refuse_duplicates,
     refuse_step_gaps,
 )
-from pipeline.sweeps import CHECK_SWEEP, TOOL_SWEEP, sweep_id, sweep_name
+from pipeline.sweeps import CHECK_SWEEP, POSES_SWEEP, TOOL_SWEEP, sweep_id, sweep_name
 
-__all__ = ["CHECK_SWEEP", "TOOL_SWEEP", "Recording", "read_recording", "sweep_name"]
+__all__ = ["CHECK_SWEEP", "POSES_SWEEP", "TOOL_SWEEP", "Recording", "read_recording", "sweep_name"]
 
 #: every channel a session recording may hold (sonic and point sensors)
 TOPICS = tuple(dict.fromkeys(t for ch in SENSOR_CHANNELS.values() for t in ch))
@@ -58,8 +58,9 @@ class Recording:
     ``(sweep, step)``; ``cycle_*`` (sonic) one row per digitize cycle, sorted by
     ``(sweep, step, repeat)``; ``point_*`` (points) one row per measured target, sorted
     by ``(sweep, step, target)``. ``sweep`` is the target number (the swept joint),
-    :data:`TOOL_SWEEP` for the tool measurement or :data:`CHECK_SWEEP` for the
-    validation configurations. Times are seconds after the earliest joint state.
+    :data:`TOOL_SWEEP` for the tool measurement, :data:`CHECK_SWEEP` for the
+    validation configurations or :data:`POSES_SWEEP` for a pose set. Times are seconds
+    after the earliest joint state.
     """
 
     path: Path
@@ -129,7 +130,7 @@ def _read_cached(p: Path, sha: str) -> Recording:
     rig = _single(p, msgs, "/rig/description")
     robot = _single(p, msgs, "/robot/description")
     desc, units = _check_rig_and_robot(p, rig, robot, sensor)
-    n_points, n_avg = _planned(p, robot, len(units))
+    n_points, n_avg = _planned(p, robot, len(units), sensor)
 
     js = msgs["/robot/joint_state"]
     j_sweep, j_step = message_keys(p, "/robot/joint_state", [m for _, m in js], n_points)
@@ -253,9 +254,15 @@ def _check_rig_and_robot(
     return desc, units
 
 
-def _planned(p: Path, robot: dict[str, Any], n: int) -> tuple[dict[int, int | None], int]:
-    """Sweep id -> planned positions (None: the tool, any number; plan.check n_points for
-    :data:`CHECK_SWEEP`), and plan.n_avg."""
+def _planned(
+    p: Path, robot: dict[str, Any], n: int, sensor: str
+) -> tuple[dict[int, int | None], int]:
+    """Sweep id -> planned positions (None: the tool, any number; plan.check and
+    plan.poses n_points for :data:`CHECK_SWEEP` and :data:`POSES_SWEEP`), and plan.n_avg.
+
+    A point-sensor session may hold a pose set (``plan.poses``) besides or instead of the
+    joint sweeps; the tool measurement is then planned only when ``plan.order`` lists it.
+    Every other session plans the tool measurement and at least one joint sweep."""
     plan = robot["plan"]
     points: dict[int, int | None] = {}
     for s in plan["sweeps"]:
@@ -266,7 +273,22 @@ def _planned(p: Path, robot: dict[str, Any], n: int) -> tuple[dict[int, int | No
                 fix="repair the recorded plan",
             )
         points[s["joint"]] = s["n_points"]
-    points[TOOL_SWEEP] = None
+    if "poses" in plan and sensor != "points":
+        raise RecordingError(
+            f"{p}: /robot/description plan.poses in a recording of sensor {sensor!r}",
+            expected="a pose set in a point-sensor session (/rig/description sensor 'points')",
+            fix="record the pose set with a point sensor, or drop plan.poses",
+        )
+    if "poses" in plan:
+        points[POSES_SWEEP] = int(plan["poses"]["n_points"])
+    if "poses" not in plan or "tool" in plan["order"]:
+        points[TOOL_SWEEP] = None
+    if not any(s > 0 for s in points) and POSES_SWEEP not in points:
+        raise RecordingError(
+            f"{p}: /robot/description plan measures no joint sweep and no pose set",
+            expected="plan.sweeps with at least one sweep, or plan.poses",
+            fix="repair the recorded plan",
+        )
     if "check" in plan:
         points[CHECK_SWEEP] = int(plan["check"]["n_points"])
     order = [sweep_id(o) for o in plan["order"]]

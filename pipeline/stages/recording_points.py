@@ -2,8 +2,9 @@
 
 What one message's schema cannot check, refused with one line naming the key: a key
 ``(sweep, step, target)`` recorded twice, a sweep or step the plan does not have, a
-target id the plan does not list for its sweep (``plan.sweeps[].targets``;
-``plan.tool_target`` for the tool sweep, whose only target it is), ``sigma_cm``
+target id the plan does not list for its sweep (``plan.sweeps[].targets``,
+``plan.poses.targets``; ``plan.tool_target`` for the tool sweep, whose only target it
+is), a pose set of several targets without its ``plan.tool_target``, ``sigma_cm``
 together with ``cov_cm2``, a covariance that is not symmetric positive definite, a
 quaternion that is not of unit length. Pairing with the joint states is the caller's.
 """
@@ -17,7 +18,7 @@ import numpy as np
 
 from pipeline.errors import RecordingError
 from pipeline.stages.recording_keys import KEY_FIX, key_text, message_keys, refuse_duplicates
-from pipeline.sweeps import TOOL_SWEEP, sweep_name
+from pipeline.sweeps import POSES_SWEEP, TOOL_SWEEP, sweep_name
 
 TOPIC = "/points"
 #: A recorded covariance may be asymmetric by this fraction of its largest entry: the
@@ -96,26 +97,39 @@ def read_points(
 def _refuse_unplanned_targets(
     p: Path, sweep: np.ndarray, step: np.ndarray, target: np.ndarray, plan: dict[str, Any]
 ) -> None:
-    """Targets of a joint sweep within its ``targets`` (when listed); the tool sweep
-    measures ``tool_target`` (when given), else exactly one target."""
+    """Targets of a joint sweep within its ``targets`` and of the pose set within
+    ``plan.poses.targets`` (when listed); the tool sweep measures ``tool_target`` (when
+    given), else exactly one target, and a pose set of several targets needs
+    ``tool_target`` among them (which of its points is the tool)."""
     allowed: dict[int, list[str]] = {
         int(s["joint"]): list(s["targets"]) for s in plan["sweeps"] if "targets" in s
     }
+    if "targets" in plan.get("poses", {}):
+        allowed[POSES_SWEEP] = list(plan["poses"]["targets"])
     if "tool_target" in plan:
         allowed[TOOL_SWEEP] = [str(plan["tool_target"])]
-    else:
-        tool_ids = sorted(set(target[sweep == TOOL_SWEEP].tolist()))
-        if len(tool_ids) > 1:
+    for s, what in ((TOOL_SWEEP, "sweep tool measures"), (POSES_SWEEP, "the pose set measures")):
+        measured = sorted(set(target[sweep == s].tolist()))
+        if "tool_target" not in plan and len(measured) > 1:
             raise RecordingError(
-                f"{p}: {TOPIC} sweep tool measures {len(tool_ids)} targets "
-                f"({', '.join(tool_ids)}) and plan.tool_target does not say which is the tool",
-                expected="one target in sweep tool, or plan.tool_target",
+                f"{p}: {TOPIC} {what} {len(measured)} targets ({', '.join(measured)}) and "
+                "plan.tool_target does not say which is the tool",
+                expected="one target there, or plan.tool_target",
                 fix="record plan.tool_target in /robot/description",
+            )
+        tool = plan.get("tool_target")
+        if tool is not None and s == POSES_SWEEP and measured and tool not in measured:
+            raise RecordingError(
+                f"{p}: {TOPIC} the pose set never measures plan.tool_target {plan['tool_target']}",
+                expected=f"the tool target among the pose set's targets ({', '.join(measured)})",
+                fix="record the tool target at every pose, or name it in plan.tool_target",
             )
     for k in range(len(sweep)):
         ids = allowed.get(int(sweep[k]))
         if ids is not None and target[k] not in ids:
-            where = "plan.tool_target" if sweep[k] == TOOL_SWEEP else "its plan.sweeps targets"
+            where = {TOOL_SWEEP: "plan.tool_target", POSES_SWEEP: "plan.poses targets"}.get(
+                int(sweep[k]), "its plan.sweeps targets"
+            )
             raise RecordingError(
                 f"{p}: {TOPIC} {key_text(sweep[k], step[k], target=target[k])} names a target "
                 f"that sweep {sweep_name(sweep[k])} does not plan",

@@ -32,7 +32,7 @@ import pyarrow as pa
 from pipeline.errors import StageError
 from pipeline.optim.lm import LOSSES
 from pipeline.stages.base import Stage, check_param
-from pipeline.stages.session import session_sensor
+from pipeline.stages.session import session_plan, session_sensor
 
 META_KEY = b"armsig.refine"
 LEVELS = ("auto", "points", "ranges")
@@ -135,7 +135,11 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             fix="--param refine.level=auto",
         )
     sp = session_problem(inputs, params.loss, params.f_scale, level, params.speed_knot_s)
-    sol = solve(sp.problem, sp.x0)
+    identifiability: dict[str, Any] = {}
+    if "poses" in session_plan(inputs["session"]):
+        sol, identifiability = _fit_pose_set(sp, inputs["positions"])
+    else:
+        sol = solve(sp.problem, sp.x0)
     chi2_recorded = recorded_chi2(sp.problem, sol)
     units, factor = _boundary(sp.units)
     cov = sol.covariance * np.outer(factor, factor)
@@ -155,6 +159,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "f_scale": params.f_scale,
         "rows_down_weighted": sol.down_weighted,
     }
+    if identifiability:
+        summary["identifiability"] = identifiability
     rows = {
         "group": list(sp.groups),
         "name": list(sp.names),
@@ -165,6 +171,29 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "covariance": [row for row in cov],
     }
     return _table(rows, summary)
+
+
+def _fit_pose_set(sp: Any, positions: pa.Table) -> tuple[Any, dict[str, Any]]:
+    """The fit of a session with a pose set, the parameters its data cannot identify held
+    at the start (:func:`pipeline.refine.identifiability.fit_identifiable`), and the
+    analysis as the summary records it."""
+    from pipeline.refine.identifiability import fit_identifiable, summary
+    from pipeline.stages.positions import recorded_sigma_cm
+    from pipeline.sweeps import POSES_SWEEP
+
+    keys = sp.problem.block.keys
+    sweep = keys.column("sweep").to_numpy()
+    n_poses = len(set(keys.column("step").to_numpy()[sweep == POSES_SWEEP].tolist()))
+    stated = recorded_sigma_cm(positions) is not None
+    sol, ident = fit_identifiable(sp.problem, sp.x0, sp.units, stated, keys.num_rows)
+    return sol, summary(ident, sp.names, n_poses, keys.num_rows)
+
+
+def held_parameters(refine: pa.Table) -> np.ndarray:
+    """Per row of a ``refine`` table, whether the fit held it at its start (not
+    identifiable: the summary's ``identifiability.held``)."""
+    held = {h["name"] for h in refine_summary(refine).get("identifiability", {}).get("held", [])}
+    return np.array([n in held for n in refine.column("name").to_pylist()], bool)
 
 
 STAGE = Stage(

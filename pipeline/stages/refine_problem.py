@@ -120,6 +120,7 @@ def model_for_keys(
     plan = session_plan(session)
     shared = plan.get("sweeps_measure_tool", False) and plan.get("tool_target") is not None
     tool_target = str(plan["tool_target"]) if shared else None
+    pose_tool = plan.get("tool_target")
     q_sig = chain_from_frames(frames, pris).joint_offsets
     sweep = keys.column("sweep").to_numpy().astype(np.int64)
     step = keys.column("step").to_numpy().astype(np.int64)
@@ -129,7 +130,8 @@ def model_for_keys(
         q = readings_at(joints, int(s), step[sel], n, pris)
         theta[sel] = joints_to_internal(q, pris) - q_sig
     target = keys.column("target").to_pylist()
-    return chain_model(sweep, target, theta, matrices_from_columns(frames)[:n], pris, tool_target)
+    F = matrices_from_columns(frames)[:n]
+    return chain_model(sweep, target, theta, F, pris, tool_target, pose_tool)
 
 
 def session_problem(
@@ -154,7 +156,8 @@ def session_problem(
         block = points = point_block(inputs["positions"], session_geometry(session))
         measured, usable = points.measured, points.keys
     sweep = usable.column("sweep").to_numpy()
-    check_coverage(sweep, robot.n_joints, robot.prismatic, "positions")
+    if "poses" not in session_plan(session):  # a pose set: its identifiability decides
+        check_coverage(sweep, robot.n_joints, robot.prismatic, "positions")
     model = model_for_keys(block.keys, session, inputs["joints"], inputs["frames"])
     res = joints_to_internal(robot.encoder_resolution, robot.prismatic)
     return chain_problem(model, block, measured, loss, f_scale, res**2 / 12.0)
