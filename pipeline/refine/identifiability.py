@@ -200,17 +200,18 @@ def fit_identifiable(
     ``x0`` (module docstring); a problem with fewer residuals than
     :data:`COORDINATES_PER_PARAMETER` per identifiable parameter is refused."""
     r, J = residuals_and_jacobian(problem, x0)
-    start = analyse(J, units, noise_stated, n_points)
-    need = COORDINATES_PER_PARAMETER * start.rank
-    if len(r) < need:
+    n = J.shape[1]
+    need = COORDINATES_PER_PARAMETER * n
+    if len(r) < need:  # before the analysis: with so few rows every rank is the data's
         raise StageError(
             f"refine: {n_points} measured points ({len(r)} coordinates) cannot identify the "
-            f"{start.rank} parameters the chain needs",
+            f"{n} parameters of the chain",
             expected=f"at least {need} coordinates ({COORDINATES_PER_PARAMETER} per parameter): "
-            f"{poses_needed(start.rank)} poses of one target",
+            f"{poses_needed(n)} poses of one target",
             got=f"{len(r)}",
             fix="measure more poses, spread over the joint ranges",
         )
+    start = analyse(J, units, noise_stated, n_points)
     solution = solve(replace(problem, held=start.held), x0)
     r, J = residuals_and_jacobian(problem, solution.x)
     final = analyse(J, units, noise_stated, n_points, start.held)
