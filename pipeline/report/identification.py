@@ -20,10 +20,11 @@ import numpy as np
 from pipeline.atomic import write_text_atomic
 from pipeline.errors import StageError
 from pipeline.report import figures
+from pipeline.report.pose_set import pose_set_section
 from pipeline.report.validation import validation_section
-from pipeline.stages.recording import CHECK_SWEEP
+from pipeline.stages.recording import CHECK_SWEEP, POSES_SWEEP
 from pipeline.stages.runner import identification_names, stage_path
-from pipeline.stages.session import session_robot, session_sensor
+from pipeline.stages.session import session_plan, session_robot, session_sensor
 from pipeline.stages.tables import read_provenance, read_table
 
 Row = dict[str, Any]
@@ -74,18 +75,29 @@ def _load(sdir: Path) -> tuple[dict[str, list[Row]], dict[str, dict[str, Any]], 
     return rows, {n: read_provenance(p) for n, p in paths.items()}, robot
 
 
+def _pose_tables(sdir: Path) -> dict[str, Any] | None:
+    """The tables of the pose-set section when the session has a pose set, else None."""
+    session = read_table(stage_path(sdir, "session"))
+    if "poses" not in session_plan(session):
+        return None
+    names = ("session", "positions", "joints", "frames", "refine")
+    return {n: read_table(stage_path(sdir, n)) for n in names}
+
+
 def _summary(name: str, t: dict[str, list[Row]], robot: Any, mode: str) -> str:
     pos, feats = t["positions"], t["features"]
     sweeps = sorted({r["sweep"] for r in pos if r["sweep"] > 0})
     configs = {(r["sweep"], r["step"]) for r in pos}
     probe = sum(s == 0 for s, _ in configs)
     check = sum(s == CHECK_SWEEP for s, _ in configs)
+    poses = sum(s == POSES_SWEEP for s, _ in configs)
     total = {k: sum(r[k] for r in pos) for k in ("n_samples", "n_dropped", "n_rejected", "n_used")}
     warned = [f for f in feats if f["warnings"]]
     text = (
         f"Session **{name}** ({mode}) identifies the arm signature of a {robot.name} with "
         f"{robot.n_joints} joints from {len(configs) - check} configurations ({len(sweeps)} "
-        f"joint sweeps, {probe} tool-probe configuration(s)) "
+        f"joint sweeps, {probe} tool-probe configuration(s)"
+        + (f", {poses} poses of a pose set) " if poses else ") ")
     )
     if "compensate" in t:
         text += (
@@ -274,7 +286,9 @@ def _point_quality_section(pos: list[Row]) -> str:
 
 
 def _sweep_label(s: int) -> str:
-    return {0: "tool probe", CHECK_SWEEP: "validation (check)"}.get(s, f"joint {s}")
+    return {0: "tool probe", CHECK_SWEEP: "validation (check)", POSES_SWEEP: "pose set"}.get(
+        s, f"joint {s}"
+    )
 
 
 def _quality_section(tri: list[Row], comp: list[Row]) -> str:
@@ -348,16 +362,8 @@ def _verdict_parts(sdir: Path, prov: dict[str, dict[str, Any]], out: Path) -> li
     return [verdict_section(read_table(stage_path(sdir, "verdict")).to_pylist()[0], fig)]
 
 
-def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -> Path:
-    """Write ``report/report.md`` and its PNG figures for an identified session.
-
-    ``audit`` is :meth:`pipeline.rig.audit.AuditResult.to_dict` output, reported when given.
-    Raises :class:`StageError` when a stage output is missing. Returns the report path.
-    """
-    sdir = Path(session_dir)
-    t, prov, robot = _load(sdir)
-    out = sdir / "report"
-    out.mkdir(parents=True, exist_ok=True)
+def _sweep_sections(t: dict[str, list[Row]], robot: Any, out: Path) -> list[str]:
+    """The joint sweeps' sections (Tables 6-4, 6-5, Figures 6-11 to 6-13) and figures."""
     res = figures.joint_residuals(t["residuals"], robot)
     panels = figures.Panels(len(res))  # one figure, drawn three times
     figs = {"residuals": figures.residuals_vs_q(res, out / "residuals.png", panels)}
@@ -368,17 +374,35 @@ def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -
         figs["hist_radial"] = figures.residual_histograms(
             res, "radial", out / "hist_radial.png", panels
         )
-    name, mode = sdir.resolve().name, t["session"][0]["mode"]
-    parts = [
-        f"# Arm signature identification: {name}\n\nRobot **{robot.name}**, mode **{mode}**.",
-        *_verdict_parts(sdir, prov, out),
-        _summary(name, t, robot, mode),
-        _dh_section(t["dh"], robot),
-        _smodel_section(t["smodel"], t["frames"], robot),
+    return [
         _features_section(t["features"], robot),
         _expected_section(t["features"], robot),
         _variance_section(res),
         _figures_section(figs),
+    ]
+
+
+def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -> Path:
+    """Write ``report/report.md`` and its PNG figures for an identified session.
+
+    ``audit`` is :meth:`pipeline.rig.audit.AuditResult.to_dict` output, reported when given.
+    Raises :class:`StageError` when a stage output is missing. Returns the report path.
+    """
+    sdir = Path(session_dir)
+    t, prov, robot = _load(sdir)
+    out = sdir / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    name, mode = sdir.resolve().name, t["session"][0]["mode"]
+    pose_tables = _pose_tables(sdir)
+    sweeps = _sweep_sections(t, robot, out) if t["features"] else []
+    parts = [
+        f"# Arm signature identification: {name}\n\nRobot **{robot.name}**, mode **{mode}**.",
+        *_verdict_parts(sdir, prov, out),
+        _summary(name, t, robot, mode),
+        *([] if pose_tables is None else [pose_set_section(pose_tables, out, markdown_table)]),
+        _dh_section(t["dh"], robot),
+        _smodel_section(t["smodel"], t["frames"], robot),
+        *sweeps,
         _quality_section(t["positions"], t["compensate"])
         if "compensate" in t
         else _point_quality_section(t["positions"]),

@@ -12,7 +12,7 @@ from pipeline.evaluation.validation import position_errors
 
 ROLE_TEXT = {
     "check": "validation configurations (not used by the fit)",
-    "fit": "fit data (the tool measurement and the sweeps' end-effector points)",
+    "fit": "fit data (the tool measurement, the sweeps' end-effector points, the pose set)",
 }
 
 

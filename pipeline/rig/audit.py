@@ -14,6 +14,7 @@ sessions audited/predicted was 1.31 at the flange and 1.01 at the tool point).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -93,10 +94,8 @@ def _array(value: Any, shape: tuple[int, ...], field: str) -> np.ndarray:
 
 
 def true_chain(truth: dict[str, Any]) -> SerialChain:
-    """The true robot of ``rig-truth.json`` (sensor frame, encoder readings in rad / cm),
-    its tool the true tool point (``true_tool_in_last_link_cm``, a translation of the
-    last link frame): the point the identification measured, where the signature's
-    accuracy is claimed and predicted (stage ``uncertainty``)."""
+    """The true robot of ``rig-truth.json`` (sensor frame, encoder readings in rad / cm)
+    to its flange (no tool)."""
     tk = truth.get("true_kinematics")
     if not isinstance(tk, dict):
         raise ArmsigError(
@@ -117,10 +116,15 @@ def true_chain(truth: dict[str, Any]) -> SerialChain:
         links=_array(tk.get("links"), (n, 4, 4), "true_kinematics.links"),
         prismatic=np.array([t == "prismatic" for t in types]),
         base=_array(tk.get("base"), (4, 4), "true_kinematics.base"),
-        tool=trans(
-            *_array(truth.get("true_tool_in_last_link_cm"), (3,), "true_tool_in_last_link_cm")
-        ),
     )
+
+
+def true_tool_chain(truth: dict[str, Any]) -> SerialChain:
+    """:func:`true_chain` with its tool the true tool point (``true_tool_in_last_link_cm``,
+    a translation of the last link frame): the point the identification measured, where
+    the signature's accuracy is claimed and predicted (stage ``uncertainty``)."""
+    tip = _array(truth.get("true_tool_in_last_link_cm"), (3,), "true_tool_in_last_link_cm")
+    return dataclasses.replace(true_chain(truth), tool=trans(*tip))
 
 
 def _aligned_errors(T_true: np.ndarray, T_model: np.ndarray) -> ModelError:
@@ -155,7 +159,7 @@ def _truth_and_robot(sdir: Path, configurations: int) -> tuple[SerialChain, Any]
         raise ArmsigError(
             f"{sdir}: not identified yet", fix=f"run `pipeline identify {sdir}` first"
         )
-    truth = true_chain(read_truth(truth_path))
+    truth = true_tool_chain(read_truth(truth_path))
     robot = session_robot(read_table(stage_path(sdir, "session")))
     if truth.n_joints != robot.n_joints:
         raise ArmsigError(

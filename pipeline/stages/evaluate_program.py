@@ -27,7 +27,7 @@ from pipeline.kinematics.chain import SerialChain
 from pipeline.kinematics.transforms import trans
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.evaluate_teach import joint_columns, joints_from_columns
-from pipeline.stages.frames import readings_at
+from pipeline.stages.frames import readings_at, tool_point_rows
 from pipeline.stages.positions import positions, sweep_rows, sweep_targets
 from pipeline.stages.session import session_plan, session_robot
 from pipeline.units import joints_to_boundary, joints_to_internal
@@ -49,7 +49,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         DesignModel(robot, tool),
         SignatureModel(
             sig,
-            flange_angle(sig.chain, *_last_sweep(inputs["joints"], inputs["positions"], sig.chain)),
+            flange_angle(sig.chain, *_last_link_points(inputs, sig.chain)),
         ),
     )
     teach = inputs["evaluate_teach"]
@@ -103,12 +103,18 @@ STAGE = Stage(
 )
 
 
-def _last_sweep(
-    joints: pa.Table, pos: pa.Table, chain: SerialChain
+def _last_link_points(
+    inputs: Mapping[str, Any], chain: SerialChain
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Joint values (m, n) deg / cm and positions (m, 3) cm of the last sweep's first target
-    (paired by ``(sweep, step)``), for :func:`~pipeline.evaluation.controllers.flange_angle`."""
+    """Joint values (m, n) deg / cm and positions (m, 3) cm of a target on the last link,
+    for :func:`~pipeline.evaluation.controllers.flange_angle`: the last sweep's first
+    target (paired by ``(sweep, step)``), or, in a session without it (a pose set), every
+    measurement of the tool point (:func:`~pipeline.stages.frames.tool_point_rows`)."""
     n = chain.n_joints
-    rows = sweep_rows(pos, n, sweep_targets(pos, n)[0])
+    joints, pos = inputs["joints"], inputs["positions"]
+    targets = sweep_targets(pos, n)
+    if not targets:
+        return tool_point_rows(inputs, n, chain.prismatic)
+    rows = sweep_rows(pos, n, targets[0])
     steps = rows.column("step").to_numpy().astype(np.int64)
     return readings_at(joints, n, steps, n, chain.prismatic), positions(rows)

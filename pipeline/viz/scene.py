@@ -15,7 +15,6 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from pipeline.errors import StageError
 from pipeline.kinematics.chain import link_frames
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.signature.file import Signature
@@ -99,14 +98,14 @@ def _feature_entity(f: dict[str, object], label: str, rgba: fg.RGBA) -> fg.Json:
 
 
 def feature_messages(sig: Signature, features: pa.Table) -> list[VizMessage]:
-    """One SceneUpdate with every joint's fitted feature, joined by ``joint``."""
+    """One SceneUpdate with every joint's fitted feature, joined by ``joint``: every joint
+    of a sweep session; the swept joints of a session with a pose set (none, some or all:
+    a pose set's joints have no circle of their own)."""
     rows = {int(r["joint"]): r for r in features.to_pylist()}
     entities = []
     for i, j in enumerate(sig.robot.joints, start=1):
-        if i not in rows:
-            raise StageError(
-                f"stages/features.arrow: no row for joint {i}", fix="run `pipeline identify`"
-            )
+        if i not in rows:  # the features stage refuses a sweep session without one
+            continue
         rgba = PALETTE[(i - 1) % len(PALETTE)]
         entities.append(_feature_entity(rows[i], f"joint {i} {j.name}", rgba))
     return [VizMessage(FEATURES_TOPIC, "foxglove.SceneUpdate", fg.scene_update(entities))]
