@@ -1,6 +1,16 @@
 """`make bench`: every benchmark, printed; never asserted in tests."""
 
-from bench import evaluate, fleet, identify, ik, kinematics, montecarlo, peers, simulate
+from bench import (
+    evaluate,
+    fleet,
+    identify,
+    ik,
+    kinematics,
+    montecarlo,
+    peers,
+    pose_sets,
+    simulate,
+)
 
 if __name__ == "__main__":
     kinematics.main()
@@ -13,6 +23,8 @@ if __name__ == "__main__":
     simulate.main()
     print()
     identify.main()
+    print()
+    pose_sets.main()
     print()
     evaluate.main()
     print()

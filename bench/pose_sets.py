@@ -1,0 +1,82 @@
+"""Identify time of pose-set sessions (issue 26): a simulated UR10 of 1,000 random poses,
+and the real UR10 of ../shared/realdata/ur10_ipa (Series C, 2,773 poses) when present.
+
+Printed per session: the CPU of the whole cold ``pipeline identify`` (child process:
+interpreter, imports, stages, signature; no report) and the seconds of the fit itself
+(stages ``frames``: the design start, and ``refine``: the whole-chain fit, from ``--json``;
+one thread, so wall ~ CPU on a quiet machine). Issue 26's goal: under 2 s of CPU for the
+fit. The machines are shared: the median of ``BENCH_RUNS`` runs.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from bench.identify import _clear, _run
+
+ROOT = Path(__file__).resolve().parent.parent
+RUNS = int(os.environ.get("BENCH_RUNS", "5"))
+UR10 = ROOT / "examples" / "ur10_ipa" / "ur10.toml"
+REAL = (
+    ROOT.parent / "shared" / "realdata" / "ur10_ipa" / "Series_C" / "measurements_random_poses.csv"
+)
+REAL_MAP = ROOT / "examples" / "ur10_ipa" / "series_c.toml"
+FIT = ("frames", "refine")
+
+
+def _fit_seconds(exe: str, d: Path) -> float:
+    _clear(d)
+    out = subprocess.run(
+        [exe, "identify", str(d), "--no-report", "--json"],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
+    return sum(r["seconds"] for r in json.loads(out.stdout)["stages"] if r["name"] in FIT)
+
+
+def _measure(exe: str, d: Path, label: str) -> None:
+    cpu = []
+    fit = []
+    for _ in range(RUNS):
+        _clear(d)
+        cpu.append(_run([exe, "identify", str(d), "--no-report"])[1])
+        fit.append(_fit_seconds(exe, d))
+    print(
+        f"{label:44s} identify CPU {statistics.median(cpu):6.2f} s   "
+        f"fit (frames + refine) {statistics.median(fit):5.2f} s   (goal < 2 s)"
+    )
+
+
+def main() -> None:
+    exe = str(Path(sys.executable).parent / "pipeline")
+    print(f"pose sets (issue 26), median of {RUNS} cold runs")
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp) / "ur10_1000"
+        subprocess.run(
+            [exe, "simulate", str(d), "--robot", str(UR10), "--sensor", "tracker",
+             "--poses", "1000", "--no-sweeps"],
+            check=True, capture_output=True,
+        )  # fmt: skip
+        _measure(exe, d, "UR10 simulated, 1,000 poses, tracker noise")
+        if not (REAL.is_file() and REAL_MAP.is_file()):
+            why = "no ../shared/realdata" if not REAL.is_file() else f"no {REAL_MAP.name}"
+            print(f"{'UR10 real, Series C (2,773 poses)':44s} skipped: {why}")
+            return
+        r = Path(tmp) / "ur10_c"
+        subprocess.run(
+            [exe, "import", str(REAL), "--format", "table", "--robot", str(UR10),
+             "--map", str(REAL_MAP), str(r)],
+            check=True, capture_output=True,
+        )  # fmt: skip
+        _measure(exe, r, "UR10 real, Series C (2,773 poses)")
+
+
+if __name__ == "__main__":
+    main()
