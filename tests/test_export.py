@@ -27,7 +27,8 @@ from pipeline.signature.session import load_session_signature
 from pipeline.units import joints_to_internal
 
 REPO = Path(__file__).resolve().parents[1]
-ROBOTS = ("robot3", "stanford", "scara")
+#: ur10_poses: a UR10 identified from a pose set alone (issue 26), from the design start.
+ROBOTS = ("robot3", "stanford", "scara", "ur10_poses")
 CONFIGURATIONS = 1000
 TOL_M = 1e-9  # issue 16: 1e-9 m in position
 TOL_ROT = 1e-9  # and 1e-9 in orientation (rotation matrix entries)
@@ -46,6 +47,12 @@ def sessions(tmp_path_factory: pytest.TempPathFactory, robot3_identified: Path) 
         simulate_session(d, opts)
         identify(d, report=False)
         out[robot] = d
+    d = tmp_path_factory.mktemp("export") / "ur10_poses"
+    ur10 = str(REPO / "examples" / "ur10_ipa" / "ur10.toml")
+    opts = SimulationOptions(robot=ur10, seed=1, sensor="tracker", poses=40, sweeps=False)
+    simulate_session(d, opts)
+    identify(d, report=False)
+    out["ur10_poses"] = d
     return out
 
 
