@@ -105,6 +105,10 @@ def simulate(
             help="Record the joint sweeps and the tool measurement (--no-sweeps: poses only)."
         ),
     ] = True,
+    plan: Annotated[
+        str,
+        typer.Option(help="Tracker: record the poses of this pose plan (`pipeline plan`)."),
+    ] = "",
     force: ForceRecording = False,
 ) -> None:
     """Record a simulated session: recording.mcap plus rig-truth.json."""
@@ -130,6 +134,7 @@ def simulate(
         check=check,
         poses=poses,
         sweeps=sweeps,
+        plan_file=plan,
     )
     path = simulate_session(folder, opts, force=force)
     typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")
@@ -155,3 +160,53 @@ def import_(
         f"wrote {out.recording}: {len(out.rows.where)} configurations "
         f"({n_check} for validation), tool from {out.tool.note}"
     )
+
+
+@commands.command("plan")
+def plan_(
+    out: Annotated[str, typer.Argument(help="The pose plan to write (CSV of joint readings).")],
+    robot: Annotated[str, typer.Option(help="Built-in robot name or description .toml.")],
+    poses: Annotated[int, typer.Option(min=1, help="Poses to plan (at most).")] = 50,
+    target_rms_mm: Annotated[
+        float | None,
+        typer.Option(help="Stop at the first plan whose predicted RMS tool error meets this."),
+    ] = None,
+    sigma_mm: Annotated[
+        float | None,
+        typer.Option(help="Point noise per coordinate (default: the tracker's law, docs/rig.md)."),
+    ] = None,
+    candidates: Annotated[int, typer.Option(min=1, help="Random candidate poses.")] = 10_000,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of the candidates.")] = 0,
+    json_out: Annotated[
+        bool, typer.Option("--json", help="Print the plan's numbers as JSON.")
+    ] = False,
+    force: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
+) -> None:
+    """Plan a pose set: the poses that give the smallest predicted tool error (docs/plan.md)."""
+    from pipeline.cli.output import print_json
+    from pipeline.planning import plan_poses, write_plan
+    from pipeline.robots import get_robot
+
+    rob = get_robot(robot)
+    target = None if target_rms_mm is None else target_rms_mm / 10.0
+    sigma = None if sigma_mm is None else sigma_mm / 10.0
+    result = plan_poses(rob, poses, target, sigma, candidates, seed)
+    path = write_plan(out, rob, result, force)
+    if json_out:
+        print_json({"path": str(path), **result.to_dict()})
+        return
+    typer.echo(
+        f"wrote {path}: {len(result.q)} poses, predicted RMS tool error "
+        f"{result.rms_cm * 10:.3g} mm (95 % {result.p95_cm * 10:.3g} mm) over the workspace; "
+        f"as many random poses: {result.random_rms_cm * 10:.3g} mm"
+    )
+    if target is not None and result.rms_cm > target:
+        typer.echo(
+            f"warning: {poses} poses predict {result.rms_cm * 10:.3g} mm, above the target "
+            f"{target_rms_mm:g} mm; plan more poses (--poses)",
+            err=True,
+        )
+    if result.unidentified:
+        typer.echo(
+            "warning: not identifiable from this plan: " + ", ".join(result.unidentified), err=True
+        )

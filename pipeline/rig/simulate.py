@@ -28,6 +28,7 @@ from pipeline.rig.plan import (
     target_positions,
     tool_positions,
 )
+from pipeline.rig.pose_file import read_pose_plan
 from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
 from pipeline.rig.resettle import resettle
 from pipeline.rig.true_robot import ErrorSigmas, draw_true_robot
@@ -71,6 +72,7 @@ class SimulationOptions:
     check: int = 0  # tracker: validation configurations (sweep "check")
     poses: int = 0  # tracker: random whole-arm configurations identified (sweep "poses")
     sweeps: bool = True  # joint sweeps and the tool measurement (False: a pose set only)
+    plan_file: str = ""  # tracker: a pose plan (pipeline plan) recorded as the pose set
 
 
 def _check(opts: SimulationOptions) -> None:
@@ -114,7 +116,7 @@ def _options_for_truth(opts: SimulationOptions) -> dict[str, object]:
     """The options as rig-truth.json records them; ``resettle_counts`` only when set, so
     that sessions simulated without it keep their bytes."""
     out = {**asdict(opts), "faults": list(opts.faults)}
-    for key, default in (("resettle_counts", 0), ("poses", 0), ("sweeps", True)):
+    for key, default in (("resettle_counts", 0), ("poses", 0), ("sweeps", True), ("plan_file", "")):
         if out[key] == default:
             del out[key]
     return out
@@ -125,7 +127,15 @@ def _check_tracker(opts: SimulationOptions) -> None:
         raise ArmsigError(
             f"unknown sensor {opts.sensor!r}", expected=", ".join(SENSORS), fix="--sensor tracker"
         )
-    point_only = opts.targets != 1 or opts.nest_on_axis or opts.check or opts.poses
+    point_only = (
+        opts.targets != 1 or opts.nest_on_axis or opts.check or opts.poses or opts.plan_file
+    )
+    if opts.plan_file and opts.poses:
+        raise ArmsigError(
+            "--plan and --poses both give the pose set",
+            expected="one of them: the poses of a plan file, or N random poses",
+            fix="drop --poses (the plan file says how many)",
+        )
     if opts.sensor == "sonic" and (point_only or not opts.sweeps):
         raise ArmsigError(
             "--targets, --nest-on-axis, --check, --poses and --no-sweeps need a point sensor",
@@ -140,7 +150,7 @@ def _check_tracker(opts: SimulationOptions) -> None:
             "--poses 0 to 100000",
             got=f"--targets {opts.targets}, --check {opts.check}, --poses {opts.poses}",
         )
-    if not opts.sweeps and opts.poses == 0:
+    if not opts.sweeps and opts.poses == 0 and not opts.plan_file:
         raise ArmsigError(
             "--no-sweeps leaves nothing to identify",
             expected="joint sweeps, or a pose set (--poses N)",
@@ -241,8 +251,9 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     plan = session_plan(
         robot, geometry_recorded, sensor_from_base, opts.points, opts.repeats, opts.max_sweep_deg
     )
-    if opts.poses:  # the tool reflector off the flange axis, where the poses can see it turn
-        tool = np.array(plan.tool_local_cm) + np.array(tracker.POSE_TOOL_OFFSET_CM)
+    q_plan = read_pose_plan(Path(opts.plan_file), robot) if opts.plan_file else None
+    if opts.poses or q_plan is not None:  # the tool reflector off the flange axis
+        tool = tracker.pose_tool_local(plan.tool_local_cm)
         plan = replace(plan, tool_local_cm=(float(tool[0]), float(tool[1]), float(tool[2])))
     pris = robot.prismatic
     res = robot.encoder_resolution
@@ -284,10 +295,10 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             rng_check,
         )  # fmt: skip
         commands += [("check", k, q) for k, q in enumerate(q_check)]
-        if opts.poses:  # a sixth and seventh stream: sessions without poses keep their bytes
+        if opts.poses or q_plan is not None:  # a sixth and seventh stream: others keep their bytes
             rng_poses, rng_nest = rng.spawn(2)
             nests["poses"] = tracker.nest_locals(tool_true, opts.targets, False, rng_nest, fixture)
-            q_poses = tracker.check_configurations(
+            q_poses = q_plan if q_plan is not None else tracker.check_configurations(
                 opts.poses, robot.limits, true.chain, sensor_from_base, tool_true, geometry_true,
                 rng_poses,
             )  # fmt: skip
@@ -488,12 +499,13 @@ def _record_points(
             rows.append((k, tid, target_positions(true.chain, sensor_from_base, qi[k], j, local)))
     p_true = np.array([r[2] for r in rows]).reshape(-1, 3)
     p_meas, sigma = tracker.measure(p_true, rng, opts.noiseless)
+    n_poses = sum(c[0] == "poses" for c in commands)
     messages = [
         Message("/rig/description", T0_NS, tracker.rig_description()),
         _robot_message(
             robot,
             plan.signature_q,
-            tracker.plan_dict(plan, opts.targets, opts.check, opts.poses, opts.sweeps),
+            tracker.plan_dict(plan, opts.targets, opts.check, n_poses, opts.sweeps),
         ),
     ]
     for k, (sweep_id, step, _) in enumerate(commands):

@@ -41,6 +41,14 @@ SIGMA_B_CM_PER_M = 0.0003
 #: direction, so the tool's orientation would not be identifiable from positions
 #: (issue 26). 5 cm: the arm of a usual SMR tool adapter.
 POSE_TOOL_OFFSET_CM = (5.0, 0.0, 0.0)
+
+
+def pose_tool_local(probe_cm: tuple[float, float, float]) -> np.ndarray:
+    """The tool reflector of a session with a pose set: the planned probe tip ``probe_cm``
+    moved by :data:`POSE_TOOL_OFFSET_CM` (last D-H frame, cm)."""
+    return np.array(probe_cm, float) + np.array(POSE_TOOL_OFFSET_CM)
+
+
 #: Check configurations drawn per wanted one before giving up (most are visible).
 _CHECK_DRAWS = 200
 

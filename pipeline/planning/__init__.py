@@ -1,0 +1,154 @@
+"""``pipeline plan``: how many poses, and which, for a wanted accuracy (issue 28).
+
+Before anyone books a tracker: candidates are drawn inside the joint limits with the tool
+in front of the tracker (the simulated rig's placement and visibility, as ``pipeline
+simulate --poses`` draws them), the design model predicts each candidate's information
+(:mod:`pipeline.refine.plan`: position noise of the tracker's law, or ``sigma_cm``, plus
+the encoders' rounding), and the poses that minimise the predicted RMS tool error over
+the workspace are chosen greedily, up to ``n_poses`` or until ``target_rms_cm`` is met.
+The plan is a CSV of joint readings (:mod:`pipeline.rig.pose_file`); ``pipeline simulate
+--plan`` records exactly it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.errors import ArmsigError
+from pipeline.refine.identifiability import analyse
+from pipeline.refine.kinematics import ChainModel, chain_model
+from pipeline.refine.plan import greedy_plan, predicted_rms_cm, workspace_information
+from pipeline.refine.problem import reading_tangents
+from pipeline.refine.uncertainty import model_error_maps, predict, tool_model
+from pipeline.robots.description import RobotDescription
+from pipeline.sweeps import POSES_SWEEP
+from pipeline.units import joints_to_internal
+
+#: Candidates drawn by default: 10,000 random poses cover a 6-axis workspace densely
+#: enough that a plan of 30-100 rarely needs a pose it does not hold.
+CANDIDATES = 10_000
+#: Workspace configurations the predicted error is averaged over: the audit's 1,000.
+WORKSPACE = 1000
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A chosen pose set (joint values, boundary units), its predicted RMS and 95 % tool
+    errors (cm) over the workspace, the predicted RMS of every shorter prefix, the same
+    number of uniformly random candidates for comparison, and the parameters it cannot
+    identify."""
+
+    q: np.ndarray
+    rms_cm: float
+    p95_cm: float
+    rms_by_size_cm: np.ndarray
+    random_rms_cm: float
+    unidentified: tuple[str, ...] = field(default=())
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "poses": len(self.q),
+            "predicted_rms_cm": self.rms_cm,
+            "predicted_p95_cm": self.p95_cm,
+            "random_predicted_rms_cm": self.random_rms_cm,
+            "rms_by_size_cm": self.rms_by_size_cm.tolist(),
+            "unidentified": list(self.unidentified),
+        }
+
+
+def _design_model(
+    robot: RobotDescription, sensor_from_base: np.ndarray, tool_local: np.ndarray, q: np.ndarray
+) -> tuple[ChainModel, np.ndarray]:
+    """The design model observing the tool point at joint values ``q`` (K, n, boundary),
+    its frames taken at zero readings (a gauge: any q̄ˢ predicts alike), and its ``x``."""
+    from pipeline.kinematics.chain import link_frames
+
+    n, pris = robot.n_joints, robot.prismatic
+    F = sensor_from_base @ link_frames(robot.design_chain(), np.zeros(n))
+    p0 = F[n, :3, :3] @ tool_local + F[n, :3, 3]
+    K = len(q)
+    model = chain_model(
+        np.full(K, POSES_SWEEP), ["tool"] * K, joints_to_internal(q, pris), F[:n], pris, None
+    )
+    x = np.concatenate([np.zeros(model.n_axis_params), p0])
+    return model, x
+
+
+def _whitened(
+    model: ChainModel, x: np.ndarray, robot: RobotDescription, sigma_cm: np.ndarray
+) -> np.ndarray:
+    """Whitened Jacobians (K, 3, P): position noise ``sigma_cm`` (K,) plus the readings'."""
+    res = joints_to_internal(robot.encoder_resolution, robot.prismatic)
+    g = reading_tangents(model, x)  # (K, n, 3)
+    cov = sigma_cm[:, None, None] ** 2 * np.eye(3) + np.einsum("kni,knj,n->kij", g, g, res**2 / 12)
+    W = np.linalg.inv(np.linalg.cholesky(cov))
+    return np.asarray(W @ model.position_jacobian(x))
+
+
+def plan_poses(
+    robot: RobotDescription,
+    n_poses: int,
+    target_rms_cm: float | None = None,
+    sigma_cm: float | None = None,
+    candidates: int = CANDIDATES,
+    seed: int = 0,
+) -> Plan:
+    """The plan (module docstring): ``sigma_cm`` None takes the simulated tracker's law."""
+    from pipeline.rig import tracker
+    from pipeline.rig.audit import _configurations
+    from pipeline.rig.plan import PROBE_LENGTH_CM, default_sensor_from_base
+    from pipeline.sensor.geometry import default_geometry
+
+    if not (1 <= n_poses <= candidates and 1 <= candidates <= 1_000_000):
+        raise ArmsigError(
+            "plan sizes out of range",
+            expected="1 <= poses <= candidates <= 1,000,000",
+            got=f"poses {n_poses}, candidates {candidates}",
+            fix="--poses 50 --candidates 10000",
+        )
+    placement = default_sensor_from_base(robot)
+    tool = tracker.pose_tool_local((0.0, 0.0, PROBE_LENGTH_CM))
+    rng = np.random.default_rng(seed)
+    q = tracker.check_configurations(
+        candidates, robot.limits, robot.design_chain(), placement, tool, default_geometry(), rng
+    )
+    model, x = _design_model(robot, placement, tool, q)
+    p = model.positions(x)
+    sig = tracker.sigma_cm(p) if sigma_cm is None else np.full(len(p), float(sigma_cm))
+    J = _whitened(model, x, robot, sig)
+    theta = _configurations(robot, WORKSPACE, 0)  # the audit's; q̄ˢ = 0 (the model's gauge)
+    A, B = model_error_maps(tool_model(model, theta), x)
+    M = workspace_information(B)
+    units = model.param_units
+    plan = greedy_plan(J, M, WORKSPACE, units, n_poses, target_rms_cm)
+    chosen = plan.chosen
+    ident = analyse(J[chosen].reshape(-1, J.shape[-1]), units, True, len(chosen))
+    pred = predict(A, B, plan.covariance)
+    return Plan(
+        q=q[chosen],
+        rms_cm=float(plan.rms_cm[-1]),
+        p95_cm=float(np.percentile(pred.position_aligned_cm, 95)),
+        rms_by_size_cm=plan.rms_cm,
+        random_rms_cm=predicted_rms_cm(J[: len(chosen)], M, WORKSPACE, units),
+        unidentified=tuple(model.param_names[k] for k in np.flatnonzero(ident.held)),
+    )
+
+
+def write_plan(path: str | Path, robot: RobotDescription, plan: Plan, force: bool = False) -> Path:
+    """Write ``plan`` as a pose plan file (:mod:`pipeline.rig.pose_file`); an existing file
+    is refused unless ``force``."""
+    from pipeline.atomic import check_new_file
+    from pipeline.rig.pose_file import write_pose_plan
+
+    out = Path(path)
+    check_new_file(out, "pose plan", force)
+    comment = (
+        f"armsig pose plan: {robot.name}, {len(plan.q)} poses; predicted RMS "
+        f"{plan.rms_cm:.3g} cm, 95 % {plan.p95_cm:.3g} cm over the workspace "
+        f"(as many random poses: {plan.random_rms_cm:.3g} cm)"
+    )
+    return write_pose_plan(out, robot, plan.q, comment)

@@ -1,0 +1,81 @@
+"""`pipeline plan` (issue 28): a pose set chosen for the smallest predicted tool error, the
+file a robot program reads, and `pipeline simulate --plan` recording exactly it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.errors import ArmsigError
+from pipeline.identify import identify
+from pipeline.planning import plan_poses, write_plan
+from pipeline.rig.audit import audit
+from pipeline.rig.pose_file import read_pose_plan
+from pipeline.rig.simulate import SimulationOptions, simulate_session
+from pipeline.robots import get_robot
+from pipeline.stages.frames import sweep_readings
+from pipeline.stages.runner import stage_path
+from pipeline.stages.tables import read_table
+from pipeline.sweeps import POSES_SWEEP
+
+
+@pytest.fixture(scope="module")
+def puma_plan():
+    return plan_poses(get_robot("puma560"), 24, candidates=2000)
+
+
+def test_a_plan_predicts_less_error_than_as_many_random_poses(puma_plan) -> None:
+    assert len(puma_plan.q) == 24
+    assert puma_plan.rms_cm < 0.85 * puma_plan.random_rms_cm
+    assert np.all(np.diff(puma_plan.rms_by_size_cm) <= 1e-15)  # each pose helps
+    assert puma_plan.unidentified == ()
+    lim = get_robot("puma560").limits
+    assert ((puma_plan.q >= lim[:, 0]) & (puma_plan.q <= lim[:, 1])).all()
+
+
+def test_a_target_stops_the_plan_at_the_first_size_that_meets_it() -> None:
+    robot = get_robot("puma560")
+    full = plan_poses(robot, 40, candidates=1000)
+    target = float(full.rms_by_size_cm[29])
+    short = plan_poses(robot, 40, target_rms_cm=target, candidates=1000)
+    assert len(short.q) == 30 and short.rms_cm <= target
+
+
+def test_simulate_records_exactly_the_plan_and_identifies_it(tmp_path, puma_plan) -> None:
+    robot = get_robot("puma560")
+    f = write_plan(tmp_path / "plan.csv", robot, puma_plan)
+    assert np.allclose(read_pose_plan(f, robot), puma_plan.q, atol=1e-6)
+    with pytest.raises(ArmsigError, match="already exists"):
+        write_plan(f, robot, puma_plan)
+    d = tmp_path / "s"
+    opts = SimulationOptions(sensor="tracker", sweeps=False, plan_file=str(f), noiseless=True)
+    simulate_session(d, opts)
+    identify(d, report=False)
+    _, q = sweep_readings(read_table(stage_path(d, "joints")), POSES_SWEEP, 6, robot.prismatic)
+    assert np.allclose(q, puma_plan.q, atol=1e-6)
+    assert audit(d, configurations=200).signature.max_position_cm <= 1e-6
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("step,a,b\n0,1,2\n", "columns do not match"),
+        ("step,waist_deg,shoulder_deg,elbow_deg,wrist_roll_deg,wrist_bend_deg,flange_deg\n"
+         "0,0,0,0,0,400,0\n", "wrist_bend outside its limits"),
+        ("step,waist_deg,shoulder_deg,elbow_deg,wrist_roll_deg,wrist_bend_deg,flange_deg\n"
+         "1,0,0,0,0,0,0\n", "steps are not 0, 1, 2"),
+        ("step,waist_deg,shoulder_deg,elbow_deg,wrist_roll_deg,wrist_bend_deg,flange_deg\n"
+         "0,0,x,0,0,0,0\n", "not a number"),
+    ],
+)  # fmt: skip
+def test_a_plan_file_that_does_not_fit_the_robot_is_refused(tmp_path, text, match) -> None:
+    f = tmp_path / "plan.csv"
+    f.write_text(text)
+    with pytest.raises(ArmsigError, match=match):
+        read_pose_plan(f, get_robot("puma560"))
+
+
+def test_plan_and_poses_together_are_refused(tmp_path) -> None:
+    opts = SimulationOptions(sensor="tracker", poses=5, plan_file=str(tmp_path / "p.csv"))
+    with pytest.raises(ArmsigError, match="--plan and --poses"):
+        simulate_session(tmp_path / "s", opts)
