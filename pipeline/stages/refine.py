@@ -82,10 +82,11 @@ def refined_x(refine: pa.Table) -> np.ndarray:
 def resolved_level(params: Params, sensor: str) -> str:
     """The measurement level a session is refined at: ``auto`` is ``ranges`` for sonic
     sessions (every raw range, the sensor calibrated in the fit), ``points`` for point
-    sensors. The range model's speed of sound is a function of the cycles' log times, so
-    a recording whose log times do not follow its measurement order is refused with one
-    line at that level (:func:`pipeline.sensor.range_rows.check_cycle_order`; issue 13:
-    log times never change a signature silently)."""
+    sensors. The range model's speed of sound is a function of the cycles' measurement
+    times (their values), so a recording whose times run back behind the measurement order
+    by more than a clock's jitter is refused with one line at that level
+    (:func:`pipeline.sensor.range_rows.check_cycle_order`; issue 13: times never change a
+    signature silently); log times are never read."""
     if params.level != "auto":
         return params.level
     return "ranges" if sensor == "sonic" else "points"
