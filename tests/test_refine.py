@@ -63,6 +63,20 @@ def test_noiseless_sonic_session_refines_exactly(
     assert audit(d, configurations=200).signature.max_position_cm <= 1e-6
 
 
+def test_noiseless_session_in_drifting_air_identifies_exactly_and_passes(
+    tmp_path_factory,
+) -> None:
+    """Issue 33: a speed of sound exactly linear in height (Appendix E's model) drifting
+    with periods of 8, 18 and 45 minutes. Before: the 120 s speed spline could not follow
+    it (2.8e-4 cm on this session; CHECK). The knots chosen from the rods: 6.6e-9 cm."""
+    d = _identified(tmp_path_factory, seed=3, noiseless=True, air="drifting")
+    summary = _summary(d)
+    assert summary["status"] == "converged" and summary["speed_knot_spacing_s"] <= 15.0
+    assert audit(d, configurations=200).signature.max_position_cm <= 1e-6
+    verdict = json.loads((d / "signature.json").read_text())["refinement"]["verdict"]
+    assert verdict["verdict"] == "PASS", verdict["line"]
+
+
 def _thesis_and_refined(d: Path) -> tuple[float, float]:
     run(d, overrides=OFF)
     thesis = audit(d, configurations=500).signature.rms_position_cm

@@ -81,20 +81,19 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.refine.holdout import check_configurations, kfold
     from pipeline.refine.solve import refit
     from pipeline.stages.positions import positions as xyz_of
-    from pipeline.stages.refine import internal_factors, refine_summary, refined_x
+    from pipeline.stages.refine import (
+        internal_factors,
+        problem_params,
+        refine_summary,
+        refined_x,
+    )
     from pipeline.stages.refine_problem import rows_at, session_problem
 
     refine = inputs["refine"]
     if refine.num_rows == 0:
         return _table([], [], [], None)
     summ = refine_summary(refine)
-    sp = session_problem(
-        inputs,
-        summ.get("loss", "soft_l1"),
-        summ.get("f_scale", 3.0),
-        summ.get("level", "points"),
-        summ.get("speed_knot_s", 120.0),
-    )
+    sp = session_problem(inputs, **problem_params(summ))
     scale = float(summ.get("noise_scale", 1.0)) ** 2
     model = sp.problem.model
     n_kin = model.n_params
@@ -182,7 +181,8 @@ def _table(sweep: list[Any], step: list[Any], target: list[Any], held: Any) -> p
 #: The sonic session's stage: the raw ranges too (level ``ranges`` rebuilds its problem).
 STAGE = Stage(
     "holdout",
-    2,  # 2: the folds' normal equations by the solver's structured products
+    3,  # 2: the folds' normal equations by the solver's structured products;
+    # 3: the problem rebuilt with every refine.* parameter (speed_knot_s crashed it)
     ("session", "refine", "positions", "joints", "frames", "ranges"),
     Params(),
     compute,
