@@ -182,7 +182,8 @@ def _table(sweep: list[Any], step: list[Any], target: list[Any], held: Any) -> p
 STAGE = Stage(
     "holdout",
     3,  # 2: the folds' normal equations by the solver's structured products;
-    # 3: the problem rebuilt with every refine.* parameter (speed_knot_s crashed it)
+    # 3: the problem rebuilt with every refine.* parameter (speed_knot_s crashed it), and
+    # single-cycle sonic positions' covariances from the range noise law (issue 33)
     ("session", "refine", "positions", "joints", "frames", "ranges"),
     Params(),
     compute,

@@ -185,7 +185,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 STAGE = Stage(
     "refine",
     4,  # 3: the rods' speed spline fit on its normal equations (linear in the samples);
-    # 4: the speed spline's knots chosen from the rods, every parameter in the summary
+    # 4: the speed spline's knots chosen from the rods, every parameter in the summary,
+    # single-cycle sonic positions weighed by the range noise law (level points)
     ("session", "joints", "positions", "frames", "ranges"),
     Params(),
     compute,
