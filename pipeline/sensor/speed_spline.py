@@ -172,4 +172,4 @@ class TimeSpline:
         BtB = np.bincount(pairs, (val[:, :, None] * val[:, None, :]).ravel(), n * n)
         Btv = np.bincount(idx.ravel(), (val * (v - mean)[:, None]).ravel(), n)
         coef, *_ = np.linalg.lstsq(BtB.reshape(n, n), Btv, rcond=None)
-        return np.asarray(coef + mean, float), BtB.reshape(n, n)
+        return np.asarray(coef + mean, float), np.asarray(BtB.reshape(n, n), float)
