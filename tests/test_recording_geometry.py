@@ -78,6 +78,10 @@ def _bad(what: str):
         rods[[0, 1]] = rods[[1, 0]]
     elif what == "rod_not_level":
         rods[1] = rods[1] + 2.0 * g.up
+    elif what == "rod_off_line":  # level, but sparker 1 off the line from B to sparker 2
+        rods[0] = rods[0] + 2.0 * np.cross(g.up, rods[1] - mics[1]) / np.linalg.norm(
+            rods[1] - mics[1]
+        )
     elif what == "rod_wrong_length":
         rods[3] = rods[2] + (rods[3] - rods[2]) * 1.01
     elif what == "rod_at_other_microphone":
@@ -93,10 +97,12 @@ def _bad(what: str):
         ("collinear_microphones", "triangle"),
         ("wall_not_facing_z", "does not face"),
         ("d_level_with_b", "same height"),
-        ("rod_swapped", "sparkers 1 and 2"),
-        ("rod_not_level", "sparkers 1 and 2"),
-        ("rod_wrong_length", "sparkers 3 and 4"),
-        ("rod_at_other_microphone", "sparkers 1 and 2"),
+        # issue 33: each message names the rule of (E.1) that the rod breaks
+        ("rod_swapped", "sparkers 1 and 2 .*: sparker 1 must be the near one"),
+        ("rod_not_level", "sparkers 1 and 2 .*: the rod must be level with microphone B"),
+        ("rod_off_line", "sparkers 1 and 2 .*: sparker 1 must be on the line from microphone B"),
+        ("rod_wrong_length", "sparkers 3 and 4 .*: sparkers 3 and 4 must be rod_length_cm apart"),
+        ("rod_at_other_microphone", "sparkers 1 and 2 .*: the rod must be level with microphone B"),
         ("empty_window", "empty range window"),
     ],
 )

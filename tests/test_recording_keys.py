@@ -77,20 +77,71 @@ def test_log_times_never_change_the_signature(
 
 
 @pytest.mark.parametrize("how", ["reversed", "permuted"])
-def test_range_log_times_are_refused_at_the_range_level_and_ignored_at_points(
+def test_range_times_out_of_the_measurement_order_are_refused_at_the_range_level(
     session: Path, signature_points: dict, tmp_path: Path, how: str
 ) -> None:
-    """At the range level the cycles' log times are measurements (the speed of sound in
-    time): retimed cycles are refused with one line, never a silently moved signature
-    (before the check: 0.107 cm). From triangulated positions they change nothing."""
+    """At the range level the cycles' times are measurements (the speed of sound in time):
+    a clock that runs back by minutes is refused with one line, never a silently moved
+    signature (before the check: 0.107 cm). From triangulated positions they change
+    nothing."""
     raw, _ = read_raw(session / "recording.mcap")
     write_raw(tmp_path / "recording.mcap", _retimed(raw, RANGES, how))
     with pytest.raises(StageError) as err:
         identify(tmp_path, report=False)
-    assert "log times do not follow the measurement order" in str(err.value)
+    assert "times do not follow the measurement order" in str(err.value)
     assert "\n" not in str(err.value) and "refine.level=points" in str(err.value)
     assert not (tmp_path / "signature.json").exists()
     assert _signature(tmp_path, POINTS_LEVEL) == signature_points  # bit for bit
+
+
+def _out_of_order(raw: list[Raw], time: str) -> int:
+    """How many cycles a recording holds at an earlier ``time`` than the cycle measured
+    before them (plan order: the session's sweeps 6..1, then the tool)."""
+    rank = {6: 0, 5: 1, 4: 2, 3: 3, 2: 4, 1: 5, "tool": 6}
+    cycles = sorted(
+        (rank[m.payload["sweep"]], m.payload["step"], m.payload["repeat"], getattr(m, time))
+        for m in raw
+        if m.topic == RANGES
+    )
+    t = np.array([c[3] for c in cycles])
+    return int((np.diff(t) < 0).sum())
+
+
+def test_log_time_jitter_gives_the_signature_bit_for_bit(
+    signature: dict, tmp_path_factory, tmp_path: Path
+) -> None:
+    """Issue 33: the rig logging each message up to 1 s after it measured it (cycles out
+    of measurement order in the file and in log time; the measurement time is the MCAP
+    publish_time) gives the ordered recording's signature bit for bit. Before: refused
+    ("the /sonic/ranges log times do not follow the measurement order")."""
+    jittered = small_session(tmp_path_factory, log_jitter_s=1.0)
+    raw, _ = read_raw(jittered / "recording.mcap")
+    assert _out_of_order(raw, "log_time") > 10  # the jitter is there (20 of 144 cycles)
+    shutil.copy(jittered / "recording.mcap", tmp_path)
+    assert _signature(tmp_path) == signature  # bit for bit
+
+
+def test_measurement_times_with_a_jitter_identify(session: Path, tmp_path: Path) -> None:
+    """A rig that stamps each cycle when its logger writes it (publish time = log time),
+    up to 1 s late: cycles out of order are identified, their times used as values (before:
+    refused from 60 ms of disorder on). The signature moves far less than its error."""
+    raw, _ = read_raw(session / "recording.mcap")
+    rng = np.random.default_rng(33)
+    late = [
+        Raw(m.topic, m.log_time + int(rng.uniform(0.0, 1e9)), m.data) if m.topic == RANGES else m
+        for m in raw
+    ]
+    assert _out_of_order(late, "log_time") > 10
+    write_raw(tmp_path / "recording.mcap", late)  # publish_time = log_time
+    identify(tmp_path, report=False)
+    with_jitter = json.loads((tmp_path / "signature.json").read_text())
+    ordered = tmp_path / "ordered"
+    ordered.mkdir()
+    shutil.copy(session / "recording.mcap", ordered)
+    identify(ordered, report=False)
+    doc = json.loads((ordered / "signature.json").read_text())
+    moved = np.abs(np.array(with_jitter["smodel"]["links"]) - np.array(doc["smodel"]["links"]))
+    assert with_jitter["model"] == "refined" and moved.max() < 1e-3, moved.max()
 
 
 def _first(raw: list[Raw], topic: str, **key) -> int:

@@ -35,6 +35,11 @@ def _identified(factory, **options) -> Path:
     return d
 
 
+def _verdict(d: Path) -> str:
+    line = read_table(stage_path(d, "verdict")).column("line")[0].as_py()
+    return line if not line.startswith("PASS") else "PASS"
+
+
 def _summary(d: Path) -> dict:
     return refine_summary(read_table(stage_path(d, "refine")))
 
@@ -47,6 +52,7 @@ def test_noiseless_tracker_sessions_refine_exactly(tmp_path_factory, robot: str)
     assert _summary(d)["status"] == "converged"
     assert json.loads((d / "signature.json").read_text())["model"] == "refined"
     assert audit(d, configurations=200).signature.max_position_cm <= 1e-6
+    assert _verdict(d) == "PASS"  # issue 33: CHECK before the verdict's floor
 
 
 @pytest.mark.parametrize(
@@ -61,6 +67,21 @@ def test_noiseless_sonic_session_refines_exactly(
     run(d, overrides={"refine": {"level": level}})
     assert _summary(d)["level"] == level and _summary(d)["status"] == "converged"
     assert audit(d, configurations=200).signature.max_position_cm <= 1e-6
+    assert _verdict(d) == "PASS"  # issue 33: CHECK before the verdict's floor
+
+
+def test_noiseless_session_in_drifting_air_identifies_exactly_and_passes(
+    tmp_path_factory,
+) -> None:
+    """Issue 33: a speed of sound exactly linear in height (Appendix E's model) drifting
+    with periods of 8, 18 and 45 minutes. Before: the 120 s speed spline could not follow
+    it (2.8e-4 cm on this session; CHECK). The knots chosen from the rods: 6.6e-9 cm."""
+    d = _identified(tmp_path_factory, seed=3, noiseless=True, air="drifting")
+    summary = _summary(d)
+    assert summary["status"] == "converged" and summary["speed_knot_spacing_s"] <= 15.0
+    assert audit(d, configurations=200).signature.max_position_cm <= 1e-6
+    verdict = json.loads((d / "signature.json").read_text())["refinement"]["verdict"]
+    assert verdict["verdict"] == "PASS", verdict["line"]
 
 
 def _thesis_and_refined(d: Path) -> tuple[float, float]:

@@ -62,6 +62,45 @@ def test_each_rule_fires(change: dict[str, object], level: str, words: str) -> N
         assert v.line.startswith(level) and words in v.line
 
 
+def test_a_noiseless_session_passes_above_the_floor() -> None:
+    """Issue 33: a noiseless session's fitted noise scales every σ and prediction to ~0;
+    its 7.7e-6 cm "bias" at 14.7σ and held-out 8.4e-14 cm against a prediction of 0 cm
+    read CHECK before the floor. The same numbers 1,000× larger still do."""
+    noiseless = dataclasses.replace(
+        GOOD,
+        chi2_per_dof=1e-20,
+        holdout_rms_cm=8.4e-14,
+        holdout_expected_rms_cm=0.0,
+        biases=(SensorParameter("bias_A_cm", "cm", 7.7e-6, 7.7e-6 / 14.7),),
+    )
+    v = judge(noiseless)
+    assert v.level == PASS and v.reasons == (), v.reasons
+    assert "mic biases within 0.0001 cm" in v.line
+    louder = dataclasses.replace(
+        noiseless,
+        holdout_rms_cm=8.4e-4,
+        biases=(SensorParameter("bias_A_cm", "cm", 7.7e-3, 7.7e-3 / 14.7),),
+    )
+    assert [r.rule for r in judge(louder).findings] == ["bias_sigmas", "holdout_ratio"]
+
+
+@pytest.mark.parametrize("fault", [{"faults": ("bias",)}, {"wac_error_cm": 0.5}])
+def test_the_sensor_faults_still_read_check(tmp_path_factory, fault: dict) -> None:
+    """The floor leaves the faults of the refine acceptance (a range bias per microphone,
+    N(0, 0.05 cm); W_AC recorded 0.5 cm long) a CHECK naming the digitizer's calibration."""
+    from recording_data import small_session
+
+    from pipeline.identify import identify
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.tables import read_table
+
+    d = small_session(tmp_path_factory, seed=11, **fault)
+    identify(d, report=False)
+    v = read_table(stage_path(d, "verdict")).to_pylist()[0]
+    assert v["verdict"] == "CHECK", v["line"]
+    assert {"bias_sigmas", "mic_sigmas"} & set(v["reason_rules"]), v["reasons"]
+
+
 def test_fail_outranks_check_and_lists_every_reason() -> None:
     v = judge(dataclasses.replace(GOOD, predicted_rms_cm=0.71, improvement=0.5))
     assert v.level == FAIL and len(v.reasons) == 2 and "(+1 more)" in v.line

@@ -56,3 +56,39 @@ def test_fit_is_the_dense_least_squares(seed: int) -> None:
     assert untouched.any() and np.all(got[untouched] == v.mean())
     fit_got, fit_want = np.linalg.norm(B @ got - v), np.linalg.norm(B @ want - v)
     assert fit_got <= fit_want * (1 + 1e-9) + 1e-12
+
+
+def _drift(t: np.ndarray, period_s: float) -> np.ndarray:
+    """A relative speed drift of ±3e-4 (0.3 °F) with period ``period_s``, about 1."""
+    return 1.0 + 3e-4 * np.sin(2.0 * np.pi * t / period_s + 0.4)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_chosen_knots_keep_120_s_for_a_noisy_slow_drift(seed: int) -> None:
+    """The rods' per-cycle speed ratio (σ ≈ 1.8e-4 per cycle) of a drift of 15 min and
+    more: the 120 s spline follows it to far below the noise, and the choice keeps it
+    (the test's 0.1 % per halving, three halvings: 20 seeds)."""
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.uniform(0.0, 2500.0, 10_000))
+    v = _drift(t, rng.uniform(900.0, 2700.0)) + rng.normal(0.0, 1.8e-4, len(t))
+    assert TimeSpline.chosen(0.0, 2500.0, t, v).spacing_s == pytest.approx(2500.0 / 21)
+
+
+@pytest.mark.parametrize("period_s", [480.0, 900.0, 2700.0])
+def test_chosen_knots_follow_an_exact_drift(period_s: float) -> None:
+    """Exact samples (a noiseless session's rods) of a drift of 8 to 45 minutes: the knots
+    halve down to 15 s or less, where the spline follows an 8-minute drift to 6.4e-10 of
+    the speed (1.3e-7 cm over a 200 cm range; at 120 s: 4.3e-6, 8.7e-4 cm)."""
+    t = np.arange(0.0, 2500.0, 0.25)
+    v = _drift(t, period_s)
+    spline = TimeSpline.chosen(0.0, 2500.0, t, v)
+    assert spline.spacing_s <= 15.0
+    fitted = spline.design(t) @ spline.fit(t, v)
+    assert np.abs(fitted - v).max() < 1e-9
+    coarse = TimeSpline.over(0.0, 2500.0, 120.0)
+    assert np.abs(coarse.design(t) @ coarse.fit(t, v) - v).max() > 1e-9  # the need is real
+
+
+def test_chosen_knots_keep_120_s_for_still_air() -> None:
+    t = np.arange(0.0, 2500.0, 0.25)
+    assert TimeSpline.chosen(0.0, 2500.0, t, np.ones_like(t)).spacing_s > 100.0

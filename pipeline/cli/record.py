@@ -109,6 +109,19 @@ def simulate(
         str,
         typer.Option(help="Tracker: record the poses of this pose plan (`pipeline plan`)."),
     ] = "",
+    air: Annotated[
+        str,
+        typer.Option(
+            help="lab (temperature linear in height, one drift) or drifting (speed of sound "
+            "linear in height, drifts of 8-45 min; also when noiseless), docs/rig.md."
+        ),
+    ] = "lab",
+    log_jitter_s: Annotated[
+        float,
+        typer.Option(
+            min=0.0, max=60.0, help="Log each measurement U(0, this) s after it was measured."
+        ),
+    ] = 0.0,
     force: ForceRecording = False,
 ) -> None:
     """Record a simulated session: recording.mcap plus rig-truth.json."""
@@ -135,6 +148,8 @@ def simulate(
         poses=poses,
         sweeps=sweeps,
         plan_file=plan,
+        air=air,
+        log_jitter_s=log_jitter_s,
     )
     path = simulate_session(folder, opts, force=force)
     typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")

@@ -47,8 +47,10 @@ _BATCH = 50
 class McapContent:
     """The messages of a recording's known channels and its metadata records.
 
-    ``messages``: topic -> (log time in ns, JSON object), in file order;
-    ``metadata``: name -> key/value pairs.
+    ``messages``: topic -> (measurement time in ns, JSON object), in file order: the
+    MCAP ``publish_time`` (when the rig measured the message), or the ``log_time`` (when a
+    logger wrote it) on a channel whose publish times are not set (0), as the MCAP
+    specification allows; ``metadata``: name -> key/value pairs.
     """
 
     path: Path
@@ -74,7 +76,7 @@ def read_mcap(path: Path, channels: Mapping[str, str], fix: str) -> McapContent:
     raw, encodings, metadata = _records(path, data, fix)
     recorded = metadata.get(DIGEST_NAME)
     if recorded is not None:
-        _check_digest(path, recorded, content_digest((t, d) for t, _, d in raw))
+        _check_digest(path, recorded, content_digest((t, d) for t, _, _, d in raw))
     for topic in channels:
         if encodings.get(topic, "json") != "json":
             raise RecordingError(
@@ -84,11 +86,12 @@ def read_mcap(path: Path, channels: Mapping[str, str], fix: str) -> McapContent:
             )
     messages: dict[str, list[tuple[int, dict[str, Any]]]] = {t: [] for t in channels}
     index: dict[str, list[int]] = {t: [] for t in channels}
-    for k, (topic, log_time, payload_bytes) in enumerate(raw):
+    unset = {t for t, _, publish_time, _ in raw if publish_time == 0}
+    for k, (topic, log_time, publish_time, payload_bytes) in enumerate(raw):
         if topic in messages:  # another channel: in the digest, not read
             payload = _decode(path, topic, k, payload_bytes)
             upgrade_legacy(topic, payload)
-            messages[topic].append((log_time, payload))
+            messages[topic].append((log_time if topic in unset else publish_time, payload))
             index[topic].append(k)
     for topic, schema_name in channels.items():
         payloads = [m for _, m in messages[topic]]
@@ -109,14 +112,15 @@ def read_mcap(path: Path, channels: Mapping[str, str], fix: str) -> McapContent:
 
 def _records(
     path: Path, data: bytes, fix: str
-) -> tuple[list[tuple[str, int, bytes]], dict[str, str], dict[str, dict[str, str]]]:
-    """Messages (topic, log time, data) in file order, topic -> encoding, metadata."""
+) -> tuple[list[tuple[str, int, int, bytes]], dict[str, str], dict[str, dict[str, str]]]:
+    """Messages (topic, log time, publish time, data) in file order, topic -> encoding,
+    metadata."""
     import zstandard
     from mcap.exceptions import McapError
     from mcap.records import Channel, Chunk, DataEnd, Message, Metadata
     from mcap.stream_reader import StreamReader, breakup_chunk
 
-    raw: list[tuple[str, int, bytes]] = []
+    raw: list[tuple[str, int, int, bytes]] = []
     topics: dict[int, str] = {}
     encodings: dict[str, str] = {}
     metadata: dict[str, dict[str, str]] = {}
@@ -139,7 +143,7 @@ def _records(
                 elif isinstance(r, Message):
                     if r.channel_id not in topics:
                         raise McapError(f"message on unknown channel id {r.channel_id}")
-                    raw.append((topics[r.channel_id], r.log_time, r.data))
+                    raw.append((topics[r.channel_id], r.log_time, r.publish_time, r.data))
                 elif isinstance(r, Metadata):
                     if r.name in metadata:
                         raise McapError(f"metadata {r.name!r} written twice")

@@ -6,7 +6,8 @@ measured position, ``p`` the chain's prediction; ``∂r/∂p = L⁻¹``. Σ per 
 
 - point sensors: the recorded ``cov_*_cm2`` (full 3×3), else ``sigma_cm``² · I;
 - sonic positions (triangulated from microphones A, B, C; ``refine.level=points``, the
-  range level being the sonic default): the mean of ``n_used`` cycles of a trilateration, so
+  range level being the sonic default): the mean of ``n_used`` cycles (one or more) of a
+  trilateration, so
   ``Σ = U⁻¹ diag(σ_A², σ_B², σ_C²) U⁻ᵀ / n_used`` with ``U`` the unit vectors from the
   microphones to the position (``∂range/∂p``) and ``σ`` the range noise (7.9) with its
   0.01 cm rounding (:func:`pipeline.sensor.noise.range_sigma_cm`). Anisotropic: depth
@@ -87,7 +88,12 @@ def position_covariances(rows: PositionRows, geometry: DigitizerGeometry | None 
     var = rows.sigma_cm**2
     scatter = rows.scatter_cm
     n_used = rows.n_used
-    sonic = np.isnan(var) & ~full & (rows.n_samples > 1)
+    # Positions without a stated noise: the mean of n_used cycles. With the digitizer's
+    # geometry the range noise law gives their covariance, one cycle or many (before
+    # issue 33 a single-cycle position took the 1 cm² fill: held-out expectations 1.7 cm
+    # against 0.13 cm measured); without it only a scatter of two cycles or more does.
+    has_law = rows.n_samples >= 1 if geometry is not None else rows.n_samples > 1
+    sonic = np.isnan(var) & ~full & has_law
     with np.errstate(invalid="ignore", divide="ignore"):
         var = np.where(sonic, np.maximum(scatter**2 / n_used, RESOLUTION_VAR_CM2), var)
     if geometry is not None and sonic.any():

@@ -14,9 +14,11 @@ FAIL (do not ship):
 CHECK (look before shipping):
 - the refinement is disabled: no predicted accuracy;
 - a microphone's range bias is significant, ``|b|/σ > bias_sigmas``, or a microphone moved
-  more than ``mic_sigmas`` σ from its recorded position: the digitizer's calibration is off;
+  more than ``mic_sigmas`` σ from its recorded position, and by more than ``floor_cm``:
+  the digitizer's calibration is off;
 - χ²/dof exceeds ``chi2_check``;
-- the held-out error exceeds its prediction by more than ``holdout_ratio``;
+- the held-out error exceeds its prediction (at least ``floor_cm``) by more than
+  ``holdout_ratio``;
 - the improvement over the design model is below ``min_improvement``.
 """
 
@@ -42,7 +44,14 @@ class Thresholds:
     default Puma session predicts and 1/7 of the 0.71 cm of a corrupted run; ``chi2_check``
     2.0 (clean sessions ~1.0, a biased digitizer at point level 1.8-3.8); ``chi2_fail`` 10;
     ``bias_sigmas`` and ``mic_sigmas`` 3.6 (:data:`SENSOR_SIGMAS`); ``holdout_ratio`` 2;
-    ``min_improvement`` 1 (no better than the design)."""
+    ``min_improvement`` 1 (no better than the design); ``floor_cm`` 1e-4 cm: a range
+    bias, a microphone's move or a held-out error's excess below it is no finding,
+    however many σ it is. A noiseless session's fitted noise scales every σ and
+    prediction to ~0, so without a floor its 1e-13-1e-6 cm of rounding and model residue
+    read 14.7σ biases and held-out errors "> 2 × 0 cm" (issue 33); 1e-4 cm is a hundredth
+    of the digitizer's 0.01 cm resolution and a tenth of a tracker's ~0.001 cm, far below
+    any calibration error that matters (the bias fault: ~0.05 cm; a W_AC error of 0.5 cm
+    moves microphone A ~0.5 cm)."""
 
     max_predicted_rms_cm: float = 0.1
     chi2_check: float = 2.0
@@ -51,6 +60,7 @@ class Thresholds:
     mic_sigmas: float = SENSOR_SIGMAS
     holdout_ratio: float = 2.0
     min_improvement: float = 1.0
+    floor_cm: float = 1e-4
 
 
 @dataclass(frozen=True)
@@ -108,6 +118,11 @@ def _g(v: float) -> str:
     return f"{v:.2g}"
 
 
+def _sensor_fires(p: SensorParameter, limit: float, t: Thresholds) -> bool:
+    """A sensor parameter moved significantly (``> limit`` σ) and by more than the floor."""
+    return p.sigmas > limit and not (p.unit == "cm" and abs(p.offset) <= t.floor_cm)
+
+
 def _sensor_reasons(e: Evidence, t: Thresholds) -> list[Reason]:
     out = []
     for kind, params, rule, limit in (
@@ -115,7 +130,7 @@ def _sensor_reasons(e: Evidence, t: Thresholds) -> list[Reason]:
         ("position", e.mic_moves, "mic_sigmas", t.mic_sigmas),
     ):
         for p in params:
-            if p.sigmas > limit:
+            if _sensor_fires(p, limit, t):
                 text = (
                     f"{p.name}: {kind} {p.offset:+.3g} ± {p.sigma:.2g} {p.unit} "
                     f"({p.sigmas:.1f}σ > {limit:g}σ): the digitizer's calibration is off, "
@@ -178,13 +193,15 @@ def judge(e: Evidence, t: Thresholds = Thresholds()) -> Verdict:
         )
     found += _sensor_reasons(e, t)
     h, hx = e.holdout_rms_cm, e.holdout_expected_rms_cm
-    if h is not None and hx is not None and h > t.holdout_ratio * hx:
+    if h is not None and hx is not None and h > t.holdout_ratio * max(hx, t.floor_cm):
+        floor = f" (floor {t.floor_cm:g} cm)" if hx < t.floor_cm else ""
         fire(
             CHECK,
             "holdout_ratio",
             h / hx if hx > 0 else None,
             t.holdout_ratio,
-            f"held-out RMS error {_g(h)} cm > {t.holdout_ratio:g} × its prediction {_g(hx)} cm",
+            f"held-out RMS error {_g(h)} cm > {t.holdout_ratio:g} × its prediction "
+            f"{_g(hx)} cm{floor}",
         )
     if e.improvement is not None and e.improvement < t.min_improvement:
         fire(
@@ -216,10 +233,13 @@ def _line(level: str, e: Evidence, reasons: tuple[str, ...], t: Thresholds) -> s
         parts.append(f"χ²/dof {e.chi2_per_dof:.2f}")
     if e.biases:
         worst = max(b.sigmas for b in e.biases)
-        within = worst <= t.bias_sigmas
-        parts.append(
-            f"mic biases within {t.bias_sigmas:g}σ" if within else f"mic bias at {worst:.1f}σ"
-        )
+        within = not any(_sensor_fires(b, t.bias_sigmas, t) for b in e.biases)
+        if worst <= t.bias_sigmas:
+            parts.append(f"mic biases within {t.bias_sigmas:g}σ")
+        else:
+            parts.append(
+                f"mic biases within {t.floor_cm:g} cm" if within else f"mic bias at {worst:.1f}σ"
+            )
     text = f"{level}  " + ", ".join(parts)
     if reasons and level != PASS:
         more = f" (+{len(reasons) - 1} more)" if len(reasons) > 1 else ""

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.rig.atmosphere import Atmosphere
+from pipeline.rig.atmosphere import Atmosphere, DriftingLinearAir
 from pipeline.sensor.geometry import DigitizerGeometry
 from pipeline.sensor.noise import range_noise_sigma_cm
 
@@ -62,7 +62,7 @@ def sparker_positions(geometry: DigitizerGeometry, target_cm: np.ndarray) -> np.
 
 def digitize(
     model: DigitizerModel,
-    atmosphere: Atmosphere,
+    atmosphere: Atmosphere | DriftingLinearAir,
     target_cm: np.ndarray,
     t_s: np.ndarray,
     rng: np.random.Generator,

@@ -28,11 +28,13 @@ LIBRARY = "armsig-rig"  # fixed so that the same seed gives the same bytes
 
 @dataclass(frozen=True)
 class Message:
-    """One message: topic, time in ns, JSON-ready payload."""
+    """One message: topic, time in ns (when it was measured: the MCAP ``publish_time``),
+    JSON-ready payload, and when a logger wrote it (``log_time``; None: ``time_ns``)."""
 
     topic: str
     time_ns: int
     payload: dict[str, Any]
+    log_time_ns: int | None = None
 
 
 def write_recording(
@@ -41,7 +43,7 @@ def write_recording(
     channels: dict[str, str] = CHANNELS,
     metadata: dict[str, dict[str, str]] | None = None,
 ) -> None:
-    """Write ``messages`` (in time order) to ``path`` atomically; ``channels``: topic -> schema;
+    """Write ``messages`` (in log-time order) to ``path`` atomically; ``channels``: topic -> schema;
     ``metadata``: extra MCAP metadata records, name -> string map (e.g. ``armsig.source``)."""
     encoded = [(m, json_bytes(m.payload)) for m in messages]
     with atomic_write(path, "wb") as fh:
@@ -61,7 +63,7 @@ def write_recording(
         for msg, data in encoded:
             writer.add_message(
                 channel_id=channel_ids[msg.topic],
-                log_time=msg.time_ns,
+                log_time=msg.time_ns if msg.log_time_ns is None else msg.log_time_ns,
                 publish_time=msg.time_ns,
                 sequence=sequence[msg.topic],
                 data=data,

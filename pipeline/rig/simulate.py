@@ -19,7 +19,12 @@ from pipeline.atomic import write_text_atomic
 from pipeline.contract.channels import SENSOR_CHANNELS
 from pipeline.errors import ArmsigError
 from pipeline.rig import tracker
-from pipeline.rig.atmosphere import Atmosphere, random_atmosphere
+from pipeline.rig.atmosphere import (
+    Atmosphere,
+    DriftingLinearAir,
+    drifting_linear_air,
+    random_atmosphere,
+)
 from pipeline.rig.digitizer import DigitizerModel, digitize
 from pipeline.rig.plan import (
     MeasurementPlan,
@@ -40,6 +45,10 @@ from pipeline.units import joints_to_internal
 
 FAULTS = ("bias", "dropouts", "outliers")
 SENSORS = ("sonic", "tracker")
+#: ``lab``: temperature linear in height, one slow drift (uniform 70 °F when noiseless);
+#: ``drifting``: a speed of sound exactly linear in height drifting with periods of 8-45
+#: min (:func:`pipeline.rig.atmosphere.drifting_linear_air`), noiseless or not.
+AIRS = ("lab", "drifting")
 CYCLE_S = 0.25  # Section 6.4 / issue: about four digitize cycles per second
 SETTLE_S = 1.0  # servo settling after each move
 JOINT_SPEED = 30.0  # deg/s (or cm/s) while indexing between positions
@@ -73,6 +82,8 @@ class SimulationOptions:
     poses: int = 0  # tracker: random whole-arm configurations identified (sweep "poses")
     sweeps: bool = True  # joint sweeps and the tool measurement (False: a pose set only)
     plan_file: str = ""  # tracker: a pose plan (pipeline plan) recorded as the pose set
+    air: str = "lab"  # or "drifting" (AIRS)
+    log_jitter_s: float = 0.0  # each measurement logged U(0, this) s after it was measured
 
 
 def _check(opts: SimulationOptions) -> None:
@@ -98,6 +109,17 @@ def _check(opts: SimulationOptions) -> None:
             got=f"max_sweep_deg={opts.max_sweep_deg}, wac_error_cm={opts.wac_error_cm}",
         )
     _check_tracker(opts)
+    if opts.air not in AIRS:
+        raise ArmsigError(
+            f"unknown air {opts.air!r}", expected=" or ".join(AIRS), fix="--air drifting"
+        )
+    if not (np.isfinite(opts.log_jitter_s) and 0.0 <= opts.log_jitter_s <= 60.0):
+        raise ArmsigError(
+            "simulation option log_jitter_s out of range",
+            expected="0 to 60 s",
+            got=repr(opts.log_jitter_s),
+            fix="--log-jitter-s 1",
+        )
     if opts.points < 3 or opts.repeats < 1:
         raise ArmsigError(
             "too few measurements",
@@ -113,12 +135,16 @@ def _check(opts: SimulationOptions) -> None:
 
 
 def _options_for_truth(opts: SimulationOptions) -> dict[str, object]:
-    """The options as rig-truth.json records them; ``resettle_counts`` only when set, so
-    that sessions simulated without it keep their bytes."""
+    """The options as rig-truth.json records them; ``resettle_counts``, ``air`` and
+    ``log_jitter_s`` only when set, so that sessions simulated without them keep their
+    bytes."""
     out = {**asdict(opts), "faults": list(opts.faults)}
-    for key, default in (("resettle_counts", 0), ("poses", 0), ("sweeps", True), ("plan_file", "")):
-        if out[key] == default:
-            del out[key]
+    for name, default in (
+        ("resettle_counts", 0), ("air", "lab"), ("log_jitter_s", 0.0),
+        ("poses", 0), ("sweeps", True), ("plan_file", ""),
+    ):  # fmt: skip
+        if out[name] == default:
+            del out[name]
     return out
 
 
@@ -264,11 +290,13 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
         s.joint: np.array(s.target_local_cm) + rng_world.normal(0, fixture, 3) for s in plan.sweeps
     }
     tool_true = np.array(plan.tool_local_cm) + rng_world.normal(0, fixture, 3)
-    atmosphere = (
-        Atmosphere()
-        if opts.noiseless
-        else random_atmosphere(rng_world, h_ref_cm=float(geometry_true.height(np.zeros(3)) + 50.0))
-    )
+    h_air = float(geometry_true.height(np.zeros(3)) + 50.0)
+    if opts.air == "drifting":  # its own stream: the lab's draws stay those of the seed
+        atmosphere: Atmosphere | DriftingLinearAir = drifting_linear_air(
+            rng_world.spawn(1)[0], h_air
+        )
+    else:
+        atmosphere = Atmosphere() if opts.noiseless else random_atmosphere(rng_world, h_air)
 
     # Command list, in recording order: targets n..1, then the tool probe at q^s.
     qs = np.array(plan.signature_q)
@@ -415,7 +443,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             },
         }
     )
-    return _write(out, force, messages, truth, "sonic")
+    return _write(out, force, _logged(messages, opts), truth, "sonic")
 
 
 def _truth(
@@ -446,11 +474,27 @@ def _truth(
     }
 
 
+def _logged(messages: list[Message], opts: SimulationOptions) -> list[Message]:
+    """The messages as a logger writes them: each measurement logged ``U(0,
+    log_jitter_s)`` after it was measured (its own stream of the seed), so that with a
+    jitter of more than a cycle's 0.25 s cycles are logged out of measurement order. The
+    measurement time (``publish_time``) stays; descriptions are logged when written."""
+    if opts.log_jitter_s == 0.0:
+        return messages
+    rng = np.random.default_rng([opts.seed, 33])  # issue 33: apart from the rig's streams
+    delay = rng.uniform(0.0, opts.log_jitter_s, len(messages))
+    return [
+        m if m.topic.endswith("/description") else replace(m, log_time_ns=m.time_ns + int(d * 1e9))
+        for m, d in zip(messages, delay, strict=True)
+    ]
+
+
 def _write(
     out: Path, force: bool, messages: list[Message], truth: dict[str, Any], sensor: str
 ) -> Path:
-    """Write the recording (messages in time order) and ``rig-truth.json``."""
-    messages.sort(key=lambda m: m.time_ns)  # stable: descriptions stay first
+    """Write the recording (messages in log-time order) and ``rig-truth.json``."""
+    # stable: descriptions stay first
+    messages.sort(key=lambda m: m.time_ns if m.log_time_ns is None else m.log_time_ns)
     recording = out / "recording.mcap"
     out.mkdir(parents=True, exist_ok=True)
     # Under the session lock, like every pipeline run on the folder: no run reads a
@@ -534,4 +578,4 @@ def _record_points(
             },
         }
     )
-    return _write(out, force, messages, truth, "points")
+    return _write(out, force, _logged(messages, opts), truth, "points")

@@ -176,25 +176,53 @@ def check_geometry(g: DigitizerGeometry, source: str = "/rig/description") -> No
             fix=fix,
         )
     for near, far, mic in ((0, 1, 1), (2, 3, 3)):
-        m, p1, p2 = g.microphones[mic], g.rod_sparkers[near], g.rod_sparkers[far]
-        d1, d2 = p1 - m, p2 - m
-        along = d2 / np.linalg.norm(d2)
-        off_line = float(np.linalg.norm(d1 - (d1 @ along) * along))
-        off_level = float(np.max(np.abs(g.height(np.array([p1, p2])) - h[mic])))
-        spacing = float(np.linalg.norm(p2 - p1))
-        if not (
-            max(off_line, off_level, abs(spacing - g.rod_length_cm)) <= ROD_TOL_CM
-            and 0.0 < d1 @ along < np.linalg.norm(d2)
-        ):
+        broken = _rod_rule(g, near, far, mic)
+        if broken is not None:
+            rule, got = broken
             raise ArmsigError(
-                f"{source}: sparkers {near + 1} and {far + 1} are not on a level rod through "
-                f"microphone {MICROPHONES[mic]} (E.1)",
+                f"{source}: sparkers {near + 1} and {far + 1} break the rod rule of "
+                f"microphone {MICROPHONES[mic]} (E.1): {rule}",
                 expected=f"sparker {near + 1} nearer, sparker {far + 1} rod_length_cm "
-                f"({g.rod_length_cm:g}) farther on the level line, within {ROD_TOL_CM:g} cm",
-                got=f"{off_line:.3g} cm off the line, {off_level:.3g} cm off level, "
-                f"{spacing:.6g} cm apart",
+                f"({g.rod_length_cm:g}) farther on the level line through "
+                f"{MICROPHONES[mic]}, within {ROD_TOL_CM:g} cm",
+                got=got,
                 fix=fix,
             )
+
+
+def _rod_rule(g: DigitizerGeometry, near: int, far: int, mic: int) -> tuple[str, str] | None:
+    """The first rule of (E.1) that rod sparkers ``near``, ``far`` (0-based) of microphone
+    ``mic`` break, as (the rule, what was found); None when they keep every one."""
+    m, p1, p2 = g.microphones[mic], g.rod_sparkers[near], g.rod_sparkers[far]
+    d1, d2 = p1 - m, p2 - m
+    along = d2 / np.linalg.norm(d2)
+    off_line = float(np.linalg.norm(d1 - (d1 @ along) * along))
+    h = g.height(np.array([p1, p2]))
+    off_level = float(np.max(np.abs(h - g.height(m[None])[0])))
+    spacing = float(np.linalg.norm(p2 - p1))
+    a, b, mn = near + 1, far + 1, MICROPHONES[mic]
+    if off_level > ROD_TOL_CM:
+        return (
+            f"the rod must be level with microphone {mn}",
+            f"a sparker {off_level:.3g} cm above or below it",
+        )
+    if off_line > ROD_TOL_CM or not np.isfinite(off_line):
+        return (
+            f"sparker {a} must be on the line from microphone {mn} through sparker {b}",
+            f"{off_line:.3g} cm off it",
+        )
+    if not 0.0 < d1 @ along < np.linalg.norm(d2):
+        return (
+            f"sparker {a} must be the near one, between microphone {mn} and sparker {b}",
+            f"sparker {a} {np.linalg.norm(d1):.6g} cm from {mn}, sparker {b} "
+            f"{np.linalg.norm(d2):.6g} cm (rods numbered the other way?)",
+        )
+    if abs(spacing - g.rod_length_cm) > ROD_TOL_CM:
+        return (
+            f"sparkers {a} and {b} must be rod_length_cm apart",
+            f"{spacing:.6g} cm apart",
+        )
+    return None
 
 
 def up_direction(microphones: np.ndarray) -> np.ndarray:

@@ -93,9 +93,11 @@ class RangeModelOptions:
 
     Attributes
     ----------
-    knot_spacing_s : float
-        Most time between the knots of ``a(t)``; 120 s follows drifts with periods of
-        15 min and more ((B-2): time constants of minutes).
+    knot_spacing_s : float or None
+        Time between the knots of ``a(t)`` (at most); None: chosen from the rods' speed
+        ratios (:meth:`~pipeline.sensor.speed_spline.TimeSpline.chosen`: 120 s, halved
+        down to 15 s while the rods ask for it: a drift of 8 min and more is followed
+        exactly in a noiseless session, and a noisy session's slow drift keeps 120 s).
     mic_prior_sigma_cm : float
         Prior σ of each free microphone coordinate about the recorded one.
     bias_prior_sigma_cm : float
@@ -108,19 +110,19 @@ class RangeModelOptions:
         whole 65-75 °F of (B-5); it only keeps a knot no range reaches defined.
     """
 
-    knot_spacing_s: float = 120.0
+    knot_spacing_s: float | None = None
     mic_prior_sigma_cm: float = 1.0
     bias_prior_sigma_cm: float = 1.0
     gradient_prior_sigma_per_cm: float = 1e-5
     speed_prior_sigma: float = 0.01
 
     def __post_init__(self) -> None:
-        vals = {k: float(v) for k, v in self.__dict__.items()}
+        vals = {k: float(v) for k, v in self.__dict__.items() if v is not None}
         bad = {k: v for k, v in vals.items() if not (np.isfinite(v) and v > 0.0)}
         if bad:
             raise ArmsigError(
                 "range model options must be positive",
-                expected="knot_spacing_s and every prior σ > 0 and finite",
+                expected="knot_spacing_s (or None) and every prior σ > 0 and finite",
                 got=", ".join(f"{k}={v}" for k, v in bad.items()),
                 fix="pass positive values",
             )
@@ -389,8 +391,13 @@ def range_block(
     g0 = float(np.median(g_cycles))  # robust to a spurious rod echo
     # a(t) through the rods' f at h_ref: with h_ref midway, their mean (E.5).
     t_all = np.concatenate([rows.t_time_s, rows.r_time_s])
-    spline = TimeSpline.over(float(t_all.min()), float(t_all.max()), opts.knot_spacing_s)
-    a0 = spline.fit(rows.cycle_t_s[ok], (rows.f_b[ok] + rows.f_d[ok]) / 2.0)  # Eq. (E.5)
+    t_min, t_max = float(t_all.min()), float(t_all.max())
+    f_mid = (rows.f_b[ok] + rows.f_d[ok]) / 2.0  # Eq. (E.5)
+    if opts.knot_spacing_s is None:
+        spline = TimeSpline.chosen(t_min, t_max, rows.cycle_t_s[ok], f_mid)
+    else:
+        spline = TimeSpline.over(t_min, t_max, opts.knot_spacing_s)
+    a0 = spline.fit(rows.cycle_t_s[ok], f_mid)
     x0 = np.concatenate([geo0, np.zeros(N_BIAS), a0, [g0]])
     sigma = np.concatenate(
         [

@@ -165,19 +165,28 @@ def range_rows(ranges: pa.Table, geometry: DigitizerGeometry) -> RangeRows:
     )
 
 
-def check_cycle_order(ranges: pa.Table, order: list[int | str]) -> None:
-    """Refuse cycle times that do not follow the recorded measurement order.
+#: How far a cycle's time may run back behind a cycle measured before it (s): a logger's
+#: or a clock's jitter. The speed of sound drifts over minutes and its spline's knots are
+#: 10 s or more apart (:mod:`pipeline.sensor.speed_spline`), so 2 s of disorder moves no
+#: knot's share of the data far; a permuted or reversed clock runs back by minutes.
+CLOCK_JITTER_S = 2.0
 
-    The range model's speed of sound is a function of the cycles' times (the
-    ``/sonic/ranges`` log times). The rig measures the sweeps in ``plan.order`` and,
-    within a sweep, by step and repeat, so those times must increase along that order;
-    reversed or permuted log times would move the fitted speed of sound, and with it the
+
+def check_cycle_order(ranges: pa.Table, order: list[int | str]) -> None:
+    """Refuse cycle times that are not a clock of the recorded measurement order.
+
+    The range model's speed of sound is a function of the cycles' times (their values:
+    the ``/sonic/ranges`` measurement times, :mod:`pipeline.contract.mcap_read`). The rig
+    measures the sweeps in ``plan.order`` and, within a sweep, by step and repeat; a time
+    may run back behind the cycle before it by a jitter of up to :data:`CLOCK_JITTER_S`
+    (cycles logged out of order), and the times must advance over the session. Reversed,
+    permuted or frozen times would move the fitted speed of sound, and with it the
     signature, without a word (issue 13: log times never change a signature silently).
 
     Raises
     ------
     ArmsigError
-        One line naming the first cycle recorded before its predecessor.
+        One line naming the first cycle that runs back too far, or the frozen clock.
     """
     rank = {sweep_id(s): k for k, s in enumerate(order)}
     sweep = _column(ranges, "sweep").astype(np.int64)
@@ -188,16 +197,32 @@ def check_cycle_order(ranges: pa.Table, order: list[int | str]) -> None:
     where = np.array([rank.get(int(s), len(rank)) for s in ids], np.int64)[at.reshape(-1)]
     key = np.stack([where, step, repeat], axis=1)
     cycles, first = np.unique(key, axis=0, return_index=True)  # sorted along the order
-    dt = np.diff(t[first])
-    if (dt > 0.0).all():
-        return
-    k = int(np.argmax(~(dt > 0.0))) + 1
-    s = int(sweep[first[k]])
-    raise ArmsigError(
-        "the /sonic/ranges log times do not follow the measurement order: cycle "
-        f"(sweep {sweep_name(s)}, step {cycles[k, 1]}, repeat {cycles[k, 2]}) is logged "
-        f"at {t[first[k]]:.3f} s, not after the cycle before it ({t[first[k - 1]]:.3f} s)",
-        expected="cycle times increasing along plan.order, then step, then repeat "
-        "(the range-level refinement models the speed of sound in time)",
-        fix="re-record the session with its true log times, or --param refine.level=points",
+    tc = t[first]
+    latest = np.maximum.accumulate(tc)
+    back = np.concatenate([[0.0], latest[:-1] - tc[1:]])  # how far each runs back
+    expected = (
+        f"cycle times along plan.order, then step, then repeat, running back by at most "
+        f"{CLOCK_JITTER_S:g} s (the range-level refinement models the speed of sound in time)"
     )
+    fix = (
+        "record the rig's measurement times (MCAP publish_time, schemas/README.md), or "
+        "--param refine.level=points"
+    )
+    if (back > CLOCK_JITTER_S).any():
+        k = int(np.argmax(back > CLOCK_JITTER_S))
+        s = int(sweep[first[k]])
+        raise ArmsigError(
+            "the /sonic/ranges times do not follow the measurement order: cycle "
+            f"(sweep {sweep_name(s)}, step {cycles[k, 1]}, repeat {cycles[k, 2]}) is stamped "
+            f"at {tc[k]:.3f} s, {back[k]:.3f} s before a cycle measured before it "
+            f"({latest[k - 1]:.3f} s)",
+            expected=expected,
+            fix=fix,
+        )
+    if len(tc) > 1 and not tc[-1] - tc[0] > CLOCK_JITTER_S:
+        raise ArmsigError(
+            f"the /sonic/ranges times do not advance: {len(tc)} cycles within "
+            f"{tc[-1] - tc[0]:.3f} s from the first measured to the last",
+            expected=expected,
+            fix=fix,
+        )

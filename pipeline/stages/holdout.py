@@ -86,6 +86,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.stages.refine import (
         held_parameters,
         internal_factors,
+        problem_params,
         refine_summary,
         refined_x,
     )
@@ -95,13 +96,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     if refine.num_rows == 0:
         return _table([], [], [], None)
     summ = refine_summary(refine)
-    sp = session_problem(
-        inputs,
-        summ.get("loss", "soft_l1"),
-        summ.get("f_scale", 3.0),
-        summ.get("level", "points"),
-        summ.get("speed_knot_s", 120.0),
-    )
+    sp = session_problem(inputs, **problem_params(summ))
     sp = dataclasses.replace(
         sp, problem=dataclasses.replace(sp.problem, held=held_parameters(refine))
     )
@@ -192,7 +187,9 @@ def _table(sweep: list[Any], step: list[Any], target: list[Any], held: Any) -> p
 #: The sonic session's stage: the raw ranges too (level ``ranges`` rebuilds its problem).
 STAGE = Stage(
     "holdout",
-    2,  # 2: the folds' normal equations by the solver's structured products
+    3,  # 2: the folds' normal equations by the solver's structured products;
+    # 3: the problem rebuilt with every refine.* parameter (speed_knot_s crashed it), and
+    # single-cycle sonic positions' covariances from the range noise law (issue 33)
     ("session", "refine", "positions", "joints", "frames", "ranges"),
     Params(),
     compute,

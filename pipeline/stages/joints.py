@@ -39,4 +39,11 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     )
 
 
-STAGE = Stage("joints", 2, (RECORDING,), NoParams(), compute, "joint positions per configuration")
+STAGE = Stage(
+    "joints",
+    3,  # 3: t_s from the measurement times (MCAP publish_time), not the log times (issue 33)
+    (RECORDING,),
+    NoParams(),
+    compute,
+    "joint positions per configuration",
+)

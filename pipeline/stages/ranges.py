@@ -31,4 +31,11 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     )
 
 
-STAGE = Stage("ranges", 2, (RECORDING,), NoParams(), compute, "raw slant ranges, one row per echo")
+STAGE = Stage(
+    "ranges",
+    3,  # 3: t_s from the measurement times (MCAP publish_time), not the log times (issue 33)
+    (RECORDING,),
+    NoParams(),
+    compute,
+    "raw slant ranges, one row per echo",
+)

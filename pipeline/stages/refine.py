@@ -43,27 +43,38 @@ class Params:
     """``level``: auto (points: see :func:`resolved_level`), points, ranges (sonic);
     ``loss``/``f_scale``: the robust loss and its scale in σ of the whitened residuals
     (3: a residual beyond 3σ starts to be down-weighted); ``speed_knot_s``: knot spacing
-    of the speed-of-sound spline (level ranges)."""
+    of the speed-of-sound spline (level ranges), 0: chosen from the rods (120 s, halved
+    down to 15 s while the rods' speed ratios ask for it,
+    :meth:`pipeline.sensor.speed_spline.TimeSpline.chosen`). Every parameter is recorded
+    in the table's summary (:func:`refine_summary`); later stages rebuild the problem
+    from it (:func:`problem_params`)."""
 
     enabled: bool = True
     level: str = "auto"
     loss: str = "soft_l1"
     f_scale: float = 3.0
-    speed_knot_s: float = 120.0
+    speed_knot_s: float = 0.0
 
     def __post_init__(self) -> None:
         check_param(self, "refine", "level", self.level in LEVELS, " or ".join(LEVELS))
         check_param(self, "refine", "loss", self.loss in LOSSES, " or ".join(LOSSES))
         ok = bool(np.isfinite(self.f_scale) and self.f_scale > 0)
         check_param(self, "refine", "f_scale", ok, "> 0 and finite")
-        ok = bool(np.isfinite(self.speed_knot_s) and self.speed_knot_s > 0)
-        check_param(self, "refine", "speed_knot_s", ok, "> 0 and finite")
+        ok = bool(np.isfinite(self.speed_knot_s) and self.speed_knot_s >= 0)
+        check_param(self, "refine", "speed_knot_s", ok, ">= 0 (0: chosen from the rods), finite")
 
 
 def refine_summary(table: pa.Table) -> dict[str, Any]:
     """The solver's summary recorded with a ``refine`` table (``{}`` when absent)."""
     raw = (table.schema.metadata or {}).get(META_KEY)
     return json.loads(raw) if raw else {}
+
+
+def problem_params(summary: Mapping[str, Any]) -> dict[str, Any]:
+    """The arguments of :func:`pipeline.stages.refine_problem.session_problem` a
+    ``refine`` table was fitted with (its :func:`refine_summary`): later stages rebuild
+    the same problem from them, whatever ``refine.*`` parameters the run set."""
+    return {k: summary[k] for k in ("loss", "f_scale", "level", "speed_knot_s")}
 
 
 def internal_factors(refine: pa.Table) -> np.ndarray:
@@ -82,10 +93,11 @@ def refined_x(refine: pa.Table) -> np.ndarray:
 def resolved_level(params: Params, sensor: str) -> str:
     """The measurement level a session is refined at: ``auto`` is ``ranges`` for sonic
     sessions (every raw range, the sensor calibrated in the fit), ``points`` for point
-    sensors. The range model's speed of sound is a function of the cycles' log times, so
-    a recording whose log times do not follow its measurement order is refused with one
-    line at that level (:func:`pipeline.sensor.range_rows.check_cycle_order`; issue 13:
-    log times never change a signature silently)."""
+    sensors. The range model's speed of sound is a function of the cycles' measurement
+    times (their values), so a recording whose times run back behind the measurement order
+    by more than a clock's jitter is refused with one line at that level
+    (:func:`pipeline.sensor.range_rows.check_cycle_order`; issue 13: times never change a
+    signature silently); log times are never read."""
     if params.level != "auto":
         return params.level
     return "ranges" if sensor == "sonic" else "points"
@@ -135,6 +147,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             fix="--param refine.level=auto",
         )
     sp = session_problem(inputs, params.loss, params.f_scale, level, params.speed_knot_s)
+    spline = getattr(sp.problem.block, "spline", None)
     identifiability: dict[str, Any] = {}
     if "poses" in session_plan(inputs["session"]):
         sol, identifiability = _fit_pose_set(sp, inputs["positions"])
@@ -157,6 +170,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "chi2_recorded_sensor": chi2_recorded,
         "loss": params.loss,
         "f_scale": params.f_scale,
+        "speed_knot_s": params.speed_knot_s,
+        "speed_knot_spacing_s": None if spline is None else spline.spacing_s,
         "rows_down_weighted": sol.down_weighted,
     }
     if identifiability:
@@ -198,7 +213,9 @@ def held_parameters(refine: pa.Table) -> np.ndarray:
 
 STAGE = Stage(
     "refine",
-    3,  # 3: the rods' speed spline fit on its normal equations (linear in the samples)
+    4,  # 3: the rods' speed spline fit on its normal equations (linear in the samples);
+    # 4: the speed spline's knots chosen from the rods, every parameter in the summary,
+    # single-cycle sonic positions weighed by the range noise law (level points)
     ("session", "joints", "positions", "frames", "ranges"),
     Params(),
     compute,

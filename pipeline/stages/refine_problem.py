@@ -139,17 +139,20 @@ def session_problem(
     loss: str = "soft_l1",
     f_scale: float = 3.0,
     level: str = "points",
-    speed_knot_s: float = 120.0,
+    speed_knot_s: float = 0.0,
 ) -> SessionProblem:
     """The problem of a session at ``level`` (``inputs``: session, joints, positions, frames;
-    level ``ranges``: and ranges) (:func:`pipeline.refine.problem.chain_problem`)."""
+    level ``ranges``: and ranges, its speed spline's knots ``speed_knot_s`` apart, 0:
+    chosen from the rods) (:func:`pipeline.refine.problem.chain_problem`)."""
     session = inputs["session"]
     robot = session_robot(session)
     block: MeasurementBlock
     if level == "ranges":
         from pipeline.sensor.range_model import RangeModelOptions
 
-        block = session_range_block(inputs["ranges"], session, RangeModelOptions(speed_knot_s))
+        block = session_range_block(
+            inputs["ranges"], session, RangeModelOptions(speed_knot_s or None)
+        )
         measured = measured_at(block.keys, inputs["positions"])
         usable = block.keys.filter(pa.array(np.isfinite(measured).all(axis=1)))
     else:

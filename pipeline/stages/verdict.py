@@ -142,8 +142,9 @@ def verdict_line(session_dir: Path) -> str | None:
 
 STAGE = Stage(
     "verdict",
-    3,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
-    # 3: each reason's level, rule, number and threshold (issue 30)
+    4,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
+    # 3: each reason's level, rule, number and threshold (issue 30);
+    # 4: the floor_cm of the sensor and held-out rules (issue 33)
     ("session", "refine", "uncertainty", "holdout", "chain"),
     Params(),
     compute,
