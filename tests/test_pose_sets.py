@@ -132,3 +132,19 @@ def test_a_tool_point_on_the_last_axis_leaves_its_direction_unidentified(
     sol, ident = fit_identifiable(problem, sp.x0, sp.units, True, model.theta.shape[0])
     assert [sp.names[k] for k in np.flatnonzero(ident.held)] == ["joint6.rx", "joint6.ry"]
     assert np.abs(model.positions(sol.x) - block.measured).max() <= 1e-9
+
+
+def test_held_parameters_make_the_verdict_check_and_name_them() -> None:
+    from pipeline.refine.verdict import CHECK, PASS, Evidence, judge
+
+    clean = Evidence(refined=True, status="converged", predicted_rms_cm=0.001)
+    assert judge(clean).level == PASS
+    held = dataclasses.replace(clean, held=("joint6.rx", "joint6.ry"))
+    v = judge(held)
+    assert v.level == CHECK and v.findings[0].rule == "identified"
+    assert "joint6.rx, joint6.ry" in v.reasons[0]
+
+
+def test_noiseless_pose_sets_pass(tmp_path_factory) -> None:
+    d = _pose_session(tmp_path_factory, poses=24)
+    assert read_table(stage_path(d, "verdict")).column("verdict")[0].as_py() == "PASS"

@@ -19,7 +19,10 @@ CHECK (look before shipping):
 - χ²/dof exceeds ``chi2_check``;
 - the held-out error exceeds its prediction (at least ``floor_cm``) by more than
   ``holdout_ratio``;
-- the improvement over the design model is below ``min_improvement``.
+- the improvement over the design model is below ``min_improvement``;
+- a parameter could not be identified from the data and was held at its design value
+  (pose sets: :mod:`pipeline.refine.identifiability`): that part of the signature is the
+  design's, not a measurement.
 """
 
 from __future__ import annotations
@@ -92,6 +95,7 @@ class Evidence:
     improvement: float | None = None
     biases: tuple[SensorParameter, ...] = field(default_factory=tuple)
     mic_moves: tuple[SensorParameter, ...] = field(default_factory=tuple)
+    held: tuple[str, ...] = field(default_factory=tuple)
 
 
 @dataclass(frozen=True)
@@ -202,6 +206,15 @@ def judge(e: Evidence, t: Thresholds = Thresholds()) -> Verdict:
             t.holdout_ratio,
             f"held-out RMS error {_g(h)} cm > {t.holdout_ratio:g} × its prediction "
             f"{_g(hx)} cm{floor}",
+        )
+    if e.held:
+        fire(
+            CHECK,
+            "identified",
+            float(len(e.held)),
+            None,
+            f"{len(e.held)} parameter(s) the data cannot identify, held at the design: "
+            f"{', '.join(e.held)} (see the report's pose-set section)",
         )
     if e.improvement is not None and e.improvement < t.min_improvement:
         fire(

@@ -84,6 +84,7 @@ def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, float | Non
         improvement=None if not predicted else misfit / predicted,
         biases=_sensor(refine, "bias"),
         mic_moves=_sensor(refine, "mic"),
+        held=tuple(h["name"] for h in summ.get("identifiability", {}).get("held", [])),
     )
     numbers = {
         "predicted_rms_cm": e.predicted_rms_cm,
@@ -142,9 +143,10 @@ def verdict_line(session_dir: Path) -> str | None:
 
 STAGE = Stage(
     "verdict",
-    4,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
+    5,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
     # 3: each reason's level, rule, number and threshold (issue 30);
-    # 4: the floor_cm of the sensor and held-out rules (issue 33)
+    # 4: the floor_cm of the sensor and held-out rules (issue 33);
+    # 5: parameters held at the design (pose sets, issue 26) a CHECK
     ("session", "refine", "uncertainty", "holdout", "chain"),
     Params(),
     compute,
