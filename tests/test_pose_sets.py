@@ -148,3 +148,71 @@ def test_held_parameters_make_the_verdict_check_and_name_them() -> None:
 def test_noiseless_pose_sets_pass(tmp_path_factory) -> None:
     d = _pose_session(tmp_path_factory, poses=24)
     assert read_table(stage_path(d, "verdict")).column("verdict")[0].as_py() == "PASS"
+
+
+def _true_tool_errors(d: Path) -> tuple[float, float]:
+    """Largest tool orientation (deg) and position (cm) error of the signature against the
+    true 6-D probe frame over 300 configurations, both in the sensor frame: no alignment."""
+    from pipeline.kinematics.chain import forward_kinematics
+    from pipeline.kinematics.so3 import vector_from_rotation
+    from pipeline.rig.audit import read_truth, true_chain
+    from pipeline.stages.frames import chain_from_frames
+    from pipeline.stages.session import session_robot
+
+    truth = read_truth(d / "rig-truth.json")
+    tool = np.eye(4)
+    tool[:3, :3] = truth["true_tool_rotation_in_last_link"]
+    tool[:3, 3] = truth["true_tool_in_last_link_cm"]
+    robot = session_robot(read_table(stage_path(d, "session")))
+    lim = robot.limits
+    q = np.radians(np.random.default_rng(3).uniform(lim[:, 0], lim[:, 1], (300, 6)))
+    T = forward_kinematics(dataclasses.replace(true_chain(truth), tool=tool), q)
+    S = forward_kinematics(
+        chain_from_frames(read_table(stage_path(d, "chain")), robot.prismatic), q
+    )
+    turn = vector_from_rotation(np.swapaxes(T[:, :3, :3], 1, 2) @ S[:, :3, :3])
+    return float(np.degrees(np.linalg.norm(turn, axis=1)).max()), float(
+        np.abs(T[:, :3, 3] - S[:, :3, 3]).max()
+    )
+
+
+def test_a_noiseless_6d_pose_set_identifies_the_tool_orientation(tmp_path_factory) -> None:
+    d = _pose_session(tmp_path_factory, six_d=True)
+    names = read_table(stage_path(d, "refine")).column("name").to_pylist()
+    assert {"tool_rot.rx", "tool_rot.ry", "tool_rot.rz"} <= set(names)
+    deg, cm = _true_tool_errors(d)
+    assert deg <= 1e-7 and cm <= 1e-6
+
+
+def test_a_noisy_6d_pose_set_fits_its_orientations_at_their_noise(tmp_path_factory) -> None:
+    d = _pose_session(tmp_path_factory, six_d=True, noiseless=False, poses=50)
+    summ = _summary(d)
+    assert 0.7 <= summ["noise_scale"] ** 2 <= 1.4  # positions and orientations at their σ
+    deg, _ = _true_tool_errors(d)
+    assert deg <= 0.02  # 50 orientations of σ 0.005° each
+
+
+def test_a_measured_orientation_shows_the_last_axis_a_reflector_on_it_cannot(
+    tmp_path_factory,
+) -> None:
+    """The tool point on joint 6's axis: with the tool's orientation measured at every
+    pose, the axis's direction is identified (nothing held) and fitted exactly."""
+    from pipeline.refine.orientation import OrientationRows
+
+    d = _pose_session(tmp_path_factory)
+    inputs = {k: read_table(stage_path(d, k)) for k in ("session", "joints", "positions", "frames")}
+    sp = session_problem(inputs)
+    model = dataclasses.replace(sp.problem.model, tool_rotation=True)
+    x = np.concatenate([refined_x(read_table(stage_path(d, "refine"))), [0.3, -0.2, 0.5]])
+    F = model.frames(x)[-1]
+    x[model.point_slice(model.point_names.index("tool"))] = F[:3, 3] + F[:3, 2] * 12.0
+    K = model.theta.shape[0]
+    rows = OrientationRows(np.arange(K), model.tool_rotations(x), np.full(K, 1e-4))
+    block = dataclasses.replace(sp.problem.block, measured=model.positions(x))
+    problem = dataclasses.replace(sp.problem, model=model, block=block, orientation=rows)
+    x0 = np.concatenate([sp.x0, np.zeros(3)])
+    units = (*sp.units, "rad", "rad", "rad")
+    sol, ident = fit_identifiable(problem, x0, units, True, K)
+    assert not ident.held.any()
+    assert np.abs(model.positions(sol.x) - block.measured).max() <= 1e-9
+    assert np.abs(sol.x[model.rotation_slice] - x[model.rotation_slice]).max() <= 1e-9

@@ -60,6 +60,7 @@ CASES = {
     "non_unit_quaternion": ("not a unit quaternion", "(sweep 3, step 2, target T2)"),
     "sonic_channel": ("channel /sonic/ranges in a recording of sensor 'points'", ""),
     "untold_tool_target": ("does not say which is the tool", "sweep tool"),
+    "orientation_sigma_alone": ("orientation_sigma_deg without", "(sweep 3, step 2, target T2)"),
 }
 
 
@@ -96,6 +97,8 @@ def test_broken_point_recordings_are_refused_naming_the_key(
         _edit(raw, pt, sigma_cm=None, cov_cm2=[[1e-6, 2e-6, 0], [2e-6, 1e-6, 0], [0, 0, 1e-6]])
     elif case == "non_unit_quaternion":
         _edit(raw, pt, orientation_wxyz=[0.9, 0.1, 0.0, 0.0])
+    elif case == "orientation_sigma_alone":
+        _edit(raw, pt, orientation_sigma_deg=0.01)
     elif case == "sonic_channel":
         channels["/sonic/ranges"] = "sonic_ranges"
         ranges = [[None] * 4 for _ in range(5)]

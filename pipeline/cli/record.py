@@ -122,6 +122,12 @@ def simulate(
             min=0.0, max=60.0, help="Log each measurement U(0, this) s after it was measured."
         ),
     ] = 0.0,
+    six_d: Annotated[
+        bool,
+        typer.Option(
+            "--six-d", help="Tracker: the pose set's tool target also measures its orientation."
+        ),
+    ] = False,
     force: ForceRecording = False,
 ) -> None:
     """Record a simulated session: recording.mcap plus rig-truth.json."""
@@ -150,6 +156,7 @@ def simulate(
         plan_file=plan,
         air=air,
         log_jitter_s=log_jitter_s,
+        six_d=six_d,
     )
     path = simulate_session(folder, opts, force=force)
     typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")

@@ -51,6 +51,11 @@ class Linearization:
         For a CSR ``d_x``: rows that hold the same columns in the same order; ``rows``
         (n_g,), ``entries`` (n_g, m) their entries' positions in ``d_x.data``, ``columns``
         (m,). With it the solver forms ``XᵀWX`` group by group (m² per row, not P²).
+    d_theta : ndarray, shape (R, n_kin), optional
+        ``∂r/∂θ`` of rows that depend on the kinematic parameters other than through a
+        position (a measured tool orientation, :mod:`pipeline.refine.orientation`); zero
+        on the other rows. Their ``pos`` is the position they were measured with (so a
+        fold that holds the position out holds them out), their ``d_p`` zero.
     """
 
     r: Array
@@ -58,6 +63,7 @@ class Linearization:
     d_p: Array
     d_x: Array | sparse.csr_array
     d_x_groups: tuple[Group, ...] | None = None
+    d_theta: Array | None = None
 
 
 def dense(m: Array | sparse.sparray) -> Array:

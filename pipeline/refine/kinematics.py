@@ -31,7 +31,10 @@ Gauge freedoms and how they are fixed:
 3. encoder offsets are absorbed by ``q̄^s``, the zero of ``θ`` (the signature
    configuration defines the readings' reference, Section 4.3.3);
 4. the tool's orientation is not observable from points: it is ``S_n``'s (thesis
-   convention, ``S̄_n = S̄_{n−1}``), the tool a translation.
+   convention, ``S̄_n = S̄_{n−1}``), the tool a translation. When a 6-D sensor measured
+   the tool's orientation (``tool_rotation``), the tool is turned in ``S_n`` by
+   ``R_c = Exp(r)``, its rotation vector ``r`` three more parameters (``tool_rot.*``,
+   after the points).
 
 Parameter vector: ``x = [δ_1 … δ_n, p0_0 … p0_{m−1}]``. ``x`` with every ``δ = 0`` and
 the points from :func:`start_points` reproduces the thesis chain.
@@ -47,6 +50,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.errors import StageError
+from pipeline.kinematics.so3 import right_jacobian, rotation_from_vector
 from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans, trans_z
 from pipeline.sweeps import TOOL_SWEEP, WHOLE_ARM_SWEEPS
 
@@ -54,6 +58,9 @@ Array = npt.NDArray[np.float64]
 
 #: Names of a revolute joint's axis parameters (a prismatic joint has the first two).
 AXIS_PARAMS = ("rx", "ry", "tx", "ty")
+#: Name of the tool's rotation parameters (``tool_rot.rx, .ry, .rz``), fitted when a 6-D
+#: sensor measured the tool's orientation (issue 26).
+TOOL_ROTATION = "tool_rot"
 _AXIS_UNITS = ("rad", "rad", "cm", "cm")
 TOOL_POINT = "tool"
 
@@ -97,6 +104,7 @@ class ChainModel:
     theta: Array
     point: npt.NDArray[np.int64]
     point_names: tuple[str, ...]
+    tool_rotation: bool = False
 
     @property
     def n_joints(self) -> int:
@@ -118,7 +126,19 @@ class ChainModel:
 
     @property
     def n_params(self) -> int:
-        return self.n_axis_params + 3 * self.n_points
+        return self.n_axis_params + 3 * self.n_points + (3 if self.tool_rotation else 0)
+
+    @property
+    def rotation_slice(self) -> slice:
+        """Where the tool's rotation vector sits in ``x`` (empty without ``tool_rotation``)."""
+        start = self.n_axis_params + 3 * self.n_points
+        return slice(start, start + (3 if self.tool_rotation else 0))
+
+    def tool_rotation_matrix(self, x: npt.ArrayLike) -> Array:
+        """``R_c = Exp(r)`` (3, 3) of the tool in ``S_n`` (identity without ``tool_rotation``:
+        gauge 4, the tool has ``S_n``'s orientation)."""
+        r = np.asarray(x, float)[self.rotation_slice]
+        return rotation_from_vector(r) if self.tool_rotation else np.eye(3)
 
     @cached_property
     def param_names(self) -> tuple[str, ...]:
@@ -128,13 +148,14 @@ class ChainModel:
             for m in range(2 if self.prismatic[k] else 4)
         ]
         names += [f"{p}.{c}" for p in self.point_names for c in "xyz"]
+        names += [f"{TOOL_ROTATION}.{c}" for c in ("rx", "ry", "rz")] if self.tool_rotation else []
         return tuple(names)
 
     @cached_property
     def param_units(self) -> tuple[str, ...]:
         sizes = [2 if p else 4 for p in self.prismatic]
         units = [_AXIS_UNITS[m] for size in sizes for m in range(size)]
-        return tuple(units + ["cm"] * (3 * self.n_points))
+        return tuple(units + ["cm"] * (3 * self.n_points) + ["rad"] * (3 * self.tool_rotation))
 
     def point_slice(self, j: int) -> slice:
         """Where point ``j``'s ``p0`` sits in ``x``."""
@@ -186,7 +207,8 @@ class ChainModel:
 
     def _points_h(self, x: Array) -> Array:
         """Homogeneous ``p0`` of every observation, shape (K, 4)."""
-        p0 = x[self.n_axis_params :].reshape(self.n_points, 3)[self.point]
+        p0 = x[self.n_axis_params : self.rotation_slice.start].reshape(self.n_points, 3)
+        p0 = p0[self.point]
         return np.concatenate([p0, np.ones((len(p0), 1))], axis=1)
 
     def positions(self, x: npt.ArrayLike) -> Array:
@@ -240,13 +262,26 @@ class ChainModel:
             J[sel, :, self.point_slice(j)] = R[sel]
         return J
 
+    def tool_rotations(self, x: npt.ArrayLike) -> Array:
+        """Rotation (K, 3, 3) of the tool frame ``(Π_k A_k) · S_n · R_c`` at every
+        observation (sensor frame)."""
+        x = np.asarray(x, float)
+        F = self.frames(x)
+        A = self._motions(F)
+        R = np.broadcast_to(np.eye(3), (len(self.link), 3, 3)).copy()
+        for k in range(self.n_joints):
+            R = R @ A[:, k, :3, :3]
+        return np.asarray(R @ F[-1, :3, :3] @ self.tool_rotation_matrix(x))
+
     def tool_orientation_jacobian(self, x: npt.ArrayLike) -> Array:
         """``ω`` with ``δR = [ω]× R`` of the tool frame per parameter, shape (K, 3, n_params).
 
-        The tool frame is ``(Π_k A_k) · S_n`` (thesis convention: ``S̄_n = S̄_{n−1}``);
-        rows of observations not on link n are zero. A joint's ``δ`` enters through
-        ``Ξ = ∂A_k A_k⁻¹ = G − A_k G A_k⁻¹`` carried by the prefix's rotation, and
-        ``δ_n`` also through ``S_n`` itself (``R_Π · vee(G)``).
+        The tool frame is ``(Π_k A_k) · S_n · R_c`` (thesis convention: ``S̄_n = S̄_{n−1}``,
+        ``R_c`` = I without ``tool_rotation``); rows of observations not on link n are
+        zero. A joint's ``δ`` enters through ``Ξ = ∂A_k A_k⁻¹ = G − A_k G A_k⁻¹`` carried
+        by the prefix's rotation, and ``δ_n`` also through ``S_n`` itself
+        (``R_Π · vee(G)``); the tool's rotation vector ``r`` (``R_c = Exp(r)``) through
+        ``ω = R_tool · J_r(r)`` (right Jacobian of SO(3)).
         """
         x = np.asarray(x, float)
         S, G = self._frame_generators(x)
@@ -264,6 +299,9 @@ class ChainModel:
         a, b = self.axis_offsets[n - 1], self.axis_offsets[n]
         w_n = (pre[:, -1, None, :3, :3] @ _vee(G[n - 1, : b - a, :3, :3])[None, ..., None])[..., 0]
         W[:, :, a:b] += np.swapaxes(w_n, 1, 2)
+        if self.tool_rotation:
+            r = x[self.rotation_slice]
+            W[:, :, self.rotation_slice] = self.tool_rotations(x) @ right_jacobian(r)
         W[self.link != n] = 0.0
         return W
 
@@ -271,11 +309,13 @@ class ChainModel:
         """``S̄_0 … S̄_n`` and the tool (n + 2, 4, 4), the rows of the ``frames`` table.
 
         ``S̄_n = S̄_{n−1}``; the tool is the translation of point ``tool_point`` at
-        ``q̄^s`` in ``S̄_n``, with ``S̄_n``'s orientation (gauge 4 of the module docstring).
+        ``q̄^s`` in ``S̄_n``, with ``S̄_n``'s orientation (gauge 4 of the module docstring),
+        or turned by the fitted ``R_c`` when the tool's orientation was measured.
         """
         x = np.asarray(x, float)
         F = self.frames(x)
         tool = np.eye(4)
+        tool[:3, :3] = self.tool_rotation_matrix(x)
         R, o = F[-1, :3, :3], F[-1, :3, 3]
         tool[:3, 3] = R.T @ (x[self.point_slice(tool_point)] - o)
         return np.concatenate([F, F[-1:], tool[None]], axis=0)
@@ -306,12 +346,14 @@ def chain_model(
     prismatic: npt.NDArray[np.bool_],
     tool_target: str | None,
     pose_tool: str | None = None,
+    tool_rotation: bool = False,
 ) -> ChainModel:
     """The model of the observations (``sweep``, ``target``) (K,), started at the thesis
     frames ``frames0`` (n, 4, 4) of the joints ``prismatic`` (n,).
 
     ``theta`` (K, n): each observation's joint readings minus ``q̄^s`` (rad / cm);
-    ``tool_target``, ``pose_tool``: as in :func:`point_name`. The stage tables are read by
+    ``tool_target``, ``pose_tool``: as in :func:`point_name`; ``tool_rotation``: the tool's
+    orientation is a parameter (a 6-D sensor measured it). The stage tables are read by
     :func:`pipeline.stages.refine_problem.model_for_keys`.
     """
     n = len(prismatic)
@@ -337,6 +379,7 @@ def chain_model(
         theta=theta,
         point=np.array([index[p] for p in names], np.int64),
         point_names=point_names,
+        tool_rotation=tool_rotation,
     )
 
 

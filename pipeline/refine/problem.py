@@ -17,6 +17,7 @@ import numpy.typing as npt
 from pipeline.errors import StageError
 from pipeline.optim.block import Array, MeasurementBlock
 from pipeline.refine.kinematics import ChainModel, start_points
+from pipeline.refine.orientation import OrientationRows, start_rotation
 from pipeline.refine.points import PointBlock, with_reading_noise
 from pipeline.refine.solve import Problem
 from pipeline.sweeps import TOOL_SWEEP, sweep_name
@@ -42,6 +43,7 @@ def parameter_labels(
     """Names, units and groups of ``x = [θ_kin, x_block]`` (module docstring)."""
     names = list(model.param_names)
     groups = ["axis"] * model.n_axis_params + ["point"] * (3 * model.n_points)
+    groups += ["tool_rotation"] * (3 * model.tool_rotation)
     for name in block.param_names:
         head = name.split(".")[0].split("_")[0]
         groups.append(head if head in BLOCK_GROUPS else "sensor")
@@ -90,17 +92,23 @@ def chain_problem(
     loss: str,
     f_scale: float,
     reading_var: Array,
+    orientation: OrientationRows | None = None,
 ) -> SessionProblem:
     """The problem of ``model`` fitted to ``block`` and its start: the thesis frames
     (``δ = 0``) and the target points they imply from the ``measured`` positions (K, 3) at
     the model's keys (NaN where none). A :class:`PointBlock` weighs the encoder readings'
-    noise too, ``reading_var`` (n,) their variances (internal units: rad², cm²)."""
+    noise too, ``reading_var`` (n,) their variances (internal units: rad², cm²).
+    ``orientation``: measured tool orientations (the model then has ``tool_rotation``,
+    started at :func:`pipeline.refine.orientation.start_rotation`)."""
     p0 = start_points(model, measured)
-    if isinstance(block, PointBlock):
-        x = np.concatenate([np.zeros(model.n_axis_params), p0.ravel()])
-        block = with_reading_noise(block, reading_tangents(model, x), reading_var)
-    x0 = np.concatenate([np.zeros(model.n_axis_params), p0.ravel(), block.x0])
-    names, units, groups = parameter_labels(model, block)
-    return SessionProblem(
-        Problem(model, block, loss, f_scale), x0, model.point_names, names, units, groups
+    kin = np.concatenate(
+        [np.zeros(model.n_axis_params), p0.ravel(), np.zeros(3 * model.tool_rotation)]
     )
+    if orientation is not None:
+        kin[model.rotation_slice] = start_rotation(model, kin, orientation)
+    if isinstance(block, PointBlock):
+        block = with_reading_noise(block, reading_tangents(model, kin), reading_var)
+    x0 = np.concatenate([kin, block.x0])
+    names, units, groups = parameter_labels(model, block)
+    problem = Problem(model, block, loss, f_scale, orientation=orientation)
+    return SessionProblem(problem, x0, model.point_names, names, units, groups)

@@ -25,6 +25,7 @@ from pipeline.errors import ArmsigError
 from pipeline.optim.block import Array, Linearization, MeasurementBlock, dense
 from pipeline.optim.lm import LOSSES, Normal, levenberg_marquardt
 from pipeline.refine.kinematics import ChainModel
+from pipeline.refine.orientation import OrientationRows
 
 #: Solver tolerances: at 1e-15 (relative cost, step and gradient) a noiseless session
 #: converges to its rounding floor (audit ~1e-12 cm, well inside the 1e-6 cm acceptance);
@@ -45,7 +46,8 @@ class Problem:
     depend on no position are always kept); ``fixed_block`` holds the block's own
     parameters at their start values (the sensor as recorded); ``held`` (n_params,) bool
     holds those parameters at their start (the ones the data cannot identify:
-    :mod:`pipeline.refine.identifiability`).
+    :mod:`pipeline.refine.identifiability`); ``orientation``: measured tool orientations,
+    three rows each after the block's (:mod:`pipeline.refine.orientation`).
     """
 
     model: ChainModel
@@ -55,6 +57,7 @@ class Problem:
     keep: npt.NDArray[np.bool_] | None = None
     fixed_block: bool = False
     held: npt.NDArray[np.bool_] | None = None
+    orientation: OrientationRows | None = None
 
     @property
     def n_kin(self) -> int:
@@ -89,9 +92,34 @@ class Solution:
 
 
 def linearize(problem: Problem, x: Array) -> Linearization:
-    """The block's linearization at ``x``, on the rows ``problem.keep`` leaves in the fit."""
+    """The block's linearization at ``x`` (and the measured orientations' rows after it),
+    on the rows ``problem.keep`` leaves in the fit."""
     lin = problem.block.linearize(problem.model.positions(x[: problem.n_kin]), x[problem.n_kin :])
+    if problem.orientation is not None:
+        lin = _with_orientation(lin, problem, x)
     return lin if problem.keep is None else kept_rows(lin, problem.keep)
+
+
+def _with_orientation(lin: Linearization, problem: Problem, x: Array) -> Linearization:
+    """``lin`` and the orientation rows of ``problem`` after it (``d_theta`` of every row)."""
+    assert problem.orientation is not None
+    n_kin = problem.n_kin
+    r_o, d_o = problem.orientation.linearize(problem.model, x[:n_kin])
+    m, n_x = len(r_o), lin.d_x.shape[1]
+    zeros_x = np.zeros((m, n_x))
+    d_x = (
+        np.vstack([lin.d_x, zeros_x])
+        if isinstance(lin.d_x, np.ndarray)
+        else sparse.csr_array(sparse.vstack([lin.d_x, sparse.csr_array(zeros_x)]))
+    )
+    return Linearization(
+        r=np.concatenate([lin.r, r_o]),
+        pos=np.concatenate([lin.pos, np.repeat(problem.orientation.index, 3)]),
+        d_p=np.vstack([lin.d_p, np.zeros((m, 3))]),
+        d_x=d_x,
+        d_x_groups=lin.d_x_groups,
+        d_theta=np.vstack([np.zeros((len(lin.r), n_kin)), d_o]),
+    )
 
 
 def kept_rows(lin: Linearization, keep: npt.NDArray[np.bool_]) -> Linearization:
@@ -100,7 +128,13 @@ def kept_rows(lin: Linearization, keep: npt.NDArray[np.bool_]) -> Linearization:
     rows = np.flatnonzero((lin.pos < 0) | keep[np.maximum(lin.pos, 0)])
     if len(rows) == len(lin.r):
         return lin
-    return Linearization(r=lin.r[rows], pos=lin.pos[rows], d_p=lin.d_p[rows], d_x=lin.d_x[rows])
+    return Linearization(
+        r=lin.r[rows],
+        pos=lin.pos[rows],
+        d_p=lin.d_p[rows],
+        d_x=lin.d_x[rows],
+        d_theta=None if lin.d_theta is None else lin.d_theta[rows],
+    )
 
 
 def residuals_and_jacobian(problem: Problem, x: Array) -> tuple[Array, Array]:
@@ -111,6 +145,8 @@ def residuals_and_jacobian(problem: Problem, x: Array) -> tuple[Array, Array]:
     J = np.zeros((len(lin.r), problem.n_params))
     on = lin.pos >= 0
     J[on, : problem.n_kin] = np.einsum("ri,rij->rj", lin.d_p[on], dpdx[lin.pos[on]])
+    if lin.d_theta is not None:
+        J[:, : problem.n_kin] += lin.d_theta
     J[:, problem.n_kin :] = dense(lin.d_x)
     return lin.r, J
 
@@ -176,8 +212,16 @@ def normal_equations(problem: Problem, x: Array, lin: Linearization) -> Normal:
         A[:n_kin, :n_kin] = P.T @ (H @ P.reshape(K, 3, n_kin)).reshape(3 * K, n_kin)
         g = np.empty(n)
         g[:n_kin] = P.T @ (DtW @ lin.r)
+        if lin.d_theta is not None:  # rows of the kinematics directly (orientations)
+            T = lin.d_theta
+            A[:n_kin, :n_kin] += T.T @ (w[:, None] * T)
+            g[:n_kin] += T.T @ (w * lin.r)
         if n > n_kin:
             A[:n_kin, n_kin:] = P.T @ dense(DtW @ lin.d_x)
+            if lin.d_theta is not None:  # zero while those rows have no block derivative
+                A[:n_kin, n_kin:] += lin.d_theta.T @ dense(
+                    sparse.csr_array(lin.d_x).multiply(w[:, None])
+                )
             A[n_kin:, :n_kin] = A[:n_kin, n_kin:].T
             A[n_kin:, n_kin:] = _block_information(lin, w)
             g[n_kin:] = lin.d_x.T @ (w * lin.r)  # sparse where the block's is

@@ -18,6 +18,7 @@ import numpy as np
 from pipeline.atomic import write_text_atomic
 from pipeline.contract.channels import SENSOR_CHANNELS
 from pipeline.errors import ArmsigError
+from pipeline.kinematics.chain import link_frames
 from pipeline.rig import tracker
 from pipeline.rig.atmosphere import (
     Atmosphere,
@@ -82,6 +83,7 @@ class SimulationOptions:
     poses: int = 0  # tracker: random whole-arm configurations identified (sweep "poses")
     sweeps: bool = True  # joint sweeps and the tool measurement (False: a pose set only)
     plan_file: str = ""  # tracker: a pose plan (pipeline plan) recorded as the pose set
+    six_d: bool = False  # tracker: the pose set's tool target also measures its orientation
     air: str = "lab"  # or "drifting" (AIRS)
     log_jitter_s: float = 0.0  # each measurement logged U(0, this) s after it was measured
 
@@ -141,7 +143,7 @@ def _options_for_truth(opts: SimulationOptions) -> dict[str, object]:
     out = {**asdict(opts), "faults": list(opts.faults)}
     for name, default in (
         ("resettle_counts", 0), ("air", "lab"), ("log_jitter_s", 0.0),
-        ("poses", 0), ("sweeps", True), ("plan_file", ""),
+        ("poses", 0), ("sweeps", True), ("plan_file", ""), ("six_d", False),
     ):  # fmt: skip
         if out[name] == default:
             del out[name]
@@ -156,6 +158,12 @@ def _check_tracker(opts: SimulationOptions) -> None:
     point_only = (
         opts.targets != 1 or opts.nest_on_axis or opts.check or opts.poses or opts.plan_file
     )
+    if opts.six_d and not (opts.poses or opts.plan_file):
+        raise ArmsigError(
+            "--six-d measures the pose set's tool orientation: there is no pose set",
+            expected="--poses N or --plan FILE with --sensor tracker",
+            fix="--poses 30 --six-d",
+        )
     if opts.plan_file and opts.poses:
         raise ArmsigError(
             "--plan and --poses both give the pose set",
@@ -560,12 +568,29 @@ def _record_points(
                 joint_state(robot, sweep_id, step, q_cmd[k], q_enc[k], opts.noiseless),
             )
         )
+    tool = tracker.TOOL_TARGET
+    six_d = [m for m, (k, t, _) in enumerate(rows)
+             if opts.six_d and commands[k][0] == "poses" and t == tool]  # fmt: skip
+    R_probe = tracker.probe_rotation(rng.spawn(1)[0], opts.noiseless)
+    R_true = (
+        sensor_from_base[:3, :3]
+        @ link_frames(true.chain, qi[[rows[m][0] for m in six_d]])[:, -2, :3, :3]
+        @ R_probe
+    )
+    oriented = dict(
+        zip(
+            six_d, tracker.measure_orientation(R_true, rng.spawn(1)[0], opts.noiseless), strict=True
+        )
+    )
     for m, (k, tid, _) in enumerate(rows):
         sweep_id, step, _ = commands[k]
         t_ns = T0_NS + int(round((t_config[k] + CYCLE_S * (1 + ids.index(tid))) * 1e9))
         payload = tracker.point_message(sweep_id, step, tid, p_meas[m], sigma[m], opts.noiseless)
+        payload.update(oriented.get(m, {}))
         messages.append(Message("/points", t_ns, payload))
     truth = _truth(opts, robot, true, sensor_from_base, tool_true, target_true)
+    if opts.six_d:
+        truth["true_tool_rotation_in_last_link"] = R_probe.tolist()
     truth.update(
         {
             "true_nest_local_cm": {str(j): v.tolist() for j, v in nests.items()},

@@ -49,6 +49,14 @@ def pose_tool_local(probe_cm: tuple[float, float, float]) -> np.ndarray:
     return np.array(probe_cm, float) + np.array(POSE_TOOL_OFFSET_CM)
 
 
+#: A 6-D probe (``--six-d``, a T-Mac): the rotation vector (deg) of its frame in the last
+#: D-H frame, as mounted (any rotation: the fit must find it), and the fixture's error
+#: about it (deg) when not noiseless.
+PROBE_ROTATION_DEG = (20.0, -35.0, 10.0)
+PROBE_FIXTURE_DEG = 0.5
+#: σ per rotation-vector component of a 6-D probe's orientation (deg): half the ±0.01°
+#: of a Leica T-Mac's data sheet (its MPE taken as 2σ, as for the positions).
+ORIENTATION_SIGMA_DEG = 0.005
 #: Check configurations drawn per wanted one before giving up (most are visible).
 _CHECK_DRAWS = 200
 
@@ -160,3 +168,38 @@ def point_message(
         "z_cm": xyz[2],
         "sigma_cm": float(s),
     }
+
+
+def probe_rotation(rng: np.random.Generator, noiseless: bool) -> np.ndarray:
+    """The true rotation (3, 3) of the 6-D probe in the last D-H frame."""
+    from pipeline.kinematics.so3 import rotation_from_vector
+
+    r = np.radians(np.array(PROBE_ROTATION_DEG))
+    if not noiseless:
+        r = r + np.radians(rng.normal(0.0, PROBE_FIXTURE_DEG, 3))
+    return rotation_from_vector(r)
+
+
+def measure_orientation(
+    R: np.ndarray, rng: np.random.Generator, noiseless: bool
+) -> list[dict[str, Any]]:
+    """``/points`` fields of measured orientations ``R`` (m, 3, 3): the unit quaternion
+    (w, x, y, z; w ≥ 0) of ``R · Exp(ε)``, ``ε ~ N(0, σ²I)`` unless noiseless, and σ."""
+    from scipy.spatial.transform import Rotation
+
+    from pipeline.kinematics.so3 import rotation_from_vector
+
+    eps = (
+        np.zeros((len(R), 3))
+        if noiseless
+        else rng.normal(0.0, np.radians(ORIENTATION_SIGMA_DEG), (len(R), 3))
+    )
+    q = Rotation.from_matrix(R @ rotation_from_vector(eps)).as_quat(scalar_first=True)
+    q = q * np.where(q[:, :1] < 0, -1.0, 1.0)
+    return [
+        {
+            "orientation_wxyz": [float(v) for v in row],
+            "orientation_sigma_deg": ORIENTATION_SIGMA_DEG,
+        }
+        for row in q
+    ]

@@ -51,6 +51,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         theta=np.zeros((0, n)),
         point=empty,
         point_names=tuple(points),
+        tool_rotation="tool_rotation" in groups,
     )
     x = refined_x(refine)[: model.n_params]
     T = model.signature_frames(x, points.index(TOOL_POINT))

@@ -39,12 +39,13 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         rec.point_sigma_cm,
         rec.point_cov_cm2,
         rec.point_wxyz,
+        rec.point_orientation_sigma_deg,
     )
 
 
 STAGE = Stage(
     "positions",
-    1,
+    2,  # 2: the recorded orientation's σ (orientation_sigma_deg)
     (RECORDING,),
     NoParams(),
     compute,

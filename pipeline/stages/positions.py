@@ -68,12 +68,14 @@ def positions_table(
     sigma_cm: np.ndarray | None = None,
     cov_cm2: np.ndarray | None = None,
     wxyz: np.ndarray | None = None,
+    orientation_sigma_deg: np.ndarray | None = None,
 ) -> pa.Table:
     """The ``positions`` table, sorted by (sweep, step, target).
 
     ``xyz`` (m, 3) with NaN or rows of None for no position; ``counts``: ``n_samples``,
     ``n_dropped``, ``n_rejected``, ``n_used`` (m,); ``sigma_cm`` (m,), ``cov_cm2``
-    (m, 3, 3), ``wxyz`` (m, 4) with NaN where not recorded (None: none recorded).
+    (m, 3, 3), ``wxyz`` (m, 4), ``orientation_sigma_deg`` (m,) with NaN where not recorded
+    (None: none recorded).
     """
     m = len(sweep)
 
@@ -94,6 +96,7 @@ def positions_table(
         cols[f"cov_{name}_cm2"] = col(None if cov_cm2 is None else cov_cm2[:, i, j])
     for k, c in enumerate("wxyz"):
         cols[f"orientation_{c}"] = col(None if wxyz is None else wxyz[:, k])
+    cols["orientation_sigma_deg"] = col(orientation_sigma_deg)
     for name in ("n_samples", "n_dropped", "n_rejected", "n_used"):
         cols[name] = pa.array(counts[name], pa.int32())
     cols["scatter_cm"] = pa.array(scatter_cm, pa.float64())

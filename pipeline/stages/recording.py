@@ -86,6 +86,7 @@ class Recording:
     point_sigma_cm: np.ndarray  # (P,) isotropic std per coordinate, NaN = not recorded
     point_cov_cm2: np.ndarray  # (P, 3, 3) covariance, NaN = not recorded
     point_wxyz: np.ndarray  # (P, 4) unit quaternion of a 6-D target, NaN = not recorded
+    point_orientation_sigma_deg: np.ndarray  # (P,) its σ per rotation-vector component, NaN = none
 
 
 def read_recording(path: str | Path, sha256: str | None = None) -> Recording:

@@ -41,6 +41,7 @@ def no_points() -> dict[str, np.ndarray]:
         "point_sigma_cm": np.zeros(0),
         "point_cov_cm2": np.zeros((0, 3, 3)),
         "point_wxyz": np.zeros((0, 4)),
+        "point_orientation_sigma_deg": np.zeros(0),
     }
 
 
@@ -66,6 +67,7 @@ def read_points(
     sigma = np.full(n, np.nan)
     cov = np.full((n, 3, 3), np.nan)
     wxyz = np.full((n, 4), np.nan)
+    sigma_o = np.full(n, np.nan)
     for k, (_, m) in enumerate(msgs):
         key = key_text(sweep[k], step[k], target=target[k])
         if "sigma_cm" in m and "cov_cm2" in m:
@@ -80,6 +82,14 @@ def read_points(
             cov[k] = _checked_cov(p, key, np.array(m["cov_cm2"], float))
         if "orientation_wxyz" in m:
             wxyz[k] = _checked_quaternion(p, key, np.array(m["orientation_wxyz"], float))
+        if "orientation_sigma_deg" in m:
+            if "orientation_wxyz" not in m:
+                raise RecordingError(
+                    f"{p}: {TOPIC} {key} carries orientation_sigma_deg without orientation_wxyz",
+                    expected="the σ of a recorded orientation, beside it",
+                    fix="record orientation_wxyz, or drop orientation_sigma_deg",
+                )
+            sigma_o[k] = m["orientation_sigma_deg"]
     return {
         "point_sweep": sweep,
         "point_step": step,
@@ -91,6 +101,7 @@ def read_points(
         "point_sigma_cm": sigma,
         "point_cov_cm2": cov,
         "point_wxyz": wxyz,
+        "point_orientation_sigma_deg": sigma_o,
     }
 
 

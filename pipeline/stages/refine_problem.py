@@ -16,6 +16,7 @@ import pyarrow as pa
 from pipeline.errors import ArmsigError
 from pipeline.optim.block import Array, MeasurementBlock
 from pipeline.refine.kinematics import ChainModel, chain_model
+from pipeline.refine.orientation import OrientationRows
 from pipeline.refine.points import PointBlock, PositionRows, position_covariances
 from pipeline.refine.problem import SessionProblem, chain_problem, check_coverage
 from pipeline.sensor.geometry import DigitizerGeometry
@@ -110,11 +111,16 @@ def measured_at(keys: pa.Table, table: pa.Table) -> Array:
 
 
 def model_for_keys(
-    keys: pa.Table, session: pa.Table, joints: pa.Table, frames: pa.Table
+    keys: pa.Table,
+    session: pa.Table,
+    joints: pa.Table,
+    frames: pa.Table,
+    tool_rotation: bool = False,
 ) -> ChainModel:
     """The chain model of the observations ``keys`` (columns sweep, step, target), started
     at the thesis ``frames`` table, with each key's readings joined from ``joints`` by
-    (sweep, step) (:func:`pipeline.refine.kinematics.chain_model`)."""
+    (sweep, step) (:func:`pipeline.refine.kinematics.chain_model`); ``tool_rotation``: the
+    tool's orientation is a parameter."""
     robot = session_robot(session)
     n, pris = robot.n_joints, robot.prismatic
     plan = session_plan(session)
@@ -131,7 +137,36 @@ def model_for_keys(
         theta[sel] = joints_to_internal(q, pris) - q_sig
     target = keys.column("target").to_pylist()
     F = matrices_from_columns(frames)[:n]
-    return chain_model(sweep, target, theta, F, pris, tool_target, pose_tool)
+    return chain_model(sweep, target, theta, F, pris, tool_target, pose_tool, tool_rotation)
+
+
+def orientation_rows(
+    keys: pa.Table, table: pa.Table, plan: Mapping[str, Any]
+) -> OrientationRows | None:
+    """The measured tool orientations of a pose set: rows of the ``positions`` table of the
+    pose set's tool target with an orientation and its σ, each paired by (sweep, step,
+    target) with its position among ``keys``; None when there is none."""
+    import pyarrow.compute as pc
+
+    from pipeline.stages.frames import pose_tool_target
+    from pipeline.sweeps import POSES_SWEEP
+
+    tool = pose_tool_target(plan, table)
+    rows = table.filter(
+        pc.and_(
+            pc.equal(table.column("sweep"), POSES_SWEEP), pc.equal(table.column("target"), tool)
+        )
+    )
+    wxyz = np.stack([_column(rows, f"orientation_{c}") for c in "wxyz"], axis=1)
+    sigma = _column(rows, "orientation_sigma_deg")
+    at = rows_at(rows.select(["sweep", "step", "target"]), keys.select(["sweep", "step", "target"]))
+    ok = np.isfinite(wxyz).all(axis=1) & np.isfinite(sigma) & (at >= 0)
+    if not ok.any():
+        return None
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.from_quat(wxyz[ok], scalar_first=True).as_matrix()
+    return OrientationRows(index=at[ok], measured=R, sigma_rad=np.radians(sigma[ok]))
 
 
 def session_problem(
@@ -147,6 +182,7 @@ def session_problem(
     session = inputs["session"]
     robot = session_robot(session)
     block: MeasurementBlock
+    orientation: OrientationRows | None = None
     if level == "ranges":
         from pipeline.sensor.range_model import RangeModelOptions
 
@@ -158,9 +194,11 @@ def session_problem(
     else:
         block = points = point_block(inputs["positions"], session_geometry(session))
         measured, usable = points.measured, points.keys
+        orientation = orientation_rows(points.keys, inputs["positions"], session_plan(session))
     sweep = usable.column("sweep").to_numpy()
     if "poses" not in session_plan(session):  # a pose set: its identifiability decides
         check_coverage(sweep, robot.n_joints, robot.prismatic, "positions")
-    model = model_for_keys(block.keys, session, inputs["joints"], inputs["frames"])
+    rotation = orientation is not None
+    model = model_for_keys(block.keys, session, inputs["joints"], inputs["frames"], rotation)
     res = joints_to_internal(robot.encoder_resolution, robot.prismatic)
-    return chain_problem(model, block, measured, loss, f_scale, res**2 / 12.0)
+    return chain_problem(model, block, measured, loss, f_scale, res**2 / 12.0, orientation)

@@ -50,10 +50,11 @@ def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.
     axis = [i for i, g in enumerate(group) if g == "axis"]
     tool = [i for i, (g, s) in enumerate(zip(group, name, strict=True))
             if g == "point" and _TOOL_ROW.match(s)]  # fmt: skip
-    if len(axis) != n_axis or len(tool) != 3:
+    tool += [i for i, g in enumerate(group) if g == "tool_rotation"]  # a 6-D tool (issue 26)
+    if len(axis) != n_axis or len(tool) not in (3, 6):
         raise StageError(
             "uncertainty: the refine table does not match the session's chain",
-            expected=f"{n_axis} rows of group 'axis' and 3 of the tool point",
+            expected=f"{n_axis} rows of group 'axis', 3 of the tool point (and 3 of its rotation)",
             got=f"{len(axis)} axis rows, {len(tool)} tool rows",
             fix="`pipeline identify SESSION --force` recomputes the refinement",
         )
@@ -89,6 +90,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         theta=q - chain_from_frames(frames, pris).joint_offsets,
         point=np.zeros(m, np.int64),
         point_names=(TOOL_POINT,),
+        tool_rotation="tool_rotation" in refine.column("group").to_pylist(),
     )
     x, Sigma = kinematic_covariance(refine, model.n_axis_params)
     pred = predict_model(model, x, Sigma, params.seed)
