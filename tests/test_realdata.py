@@ -18,6 +18,7 @@ from import_data import TWO_LINK, sscanss2_text
 from pipeline.evaluate.validate import validate_against
 from pipeline.identify import identify
 from pipeline.importers import import_file
+from pipeline.stages.refine import refine_summary
 from pipeline.stages.tables import read_table
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -129,3 +130,89 @@ def test_rct_positioner_validated_on_all_poses(tmp_path: Path) -> None:
         d, REALDATA / "rct_positioner" / "positioner_kinematic_measurements.yaml", "rct"
     )
     assert every["n"] == 205 and every["mean_cm"] < 0.174, every
+
+
+UR10_DATA = REALDATA / "ur10_ipa"
+UR10_EXAMPLE = EXAMPLES / "ur10_ipa"
+needs_ur10 = pytest.mark.skipif(
+    not UR10_DATA.is_dir(), reason=f"UR10 data {UR10_DATA} is absent (issue 26)"
+)
+
+
+@pytest.fixture(scope="module")
+def ur10_c70(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Series C, a seeded 70 % identified, 30 % held out (examples/ur10_ipa)."""
+    d = tmp_path_factory.mktemp("ur10") / "c70"
+    import_file(UR10_DATA / "Series_C" / "measurements_random_poses.csv", "table",
+                UR10_EXAMPLE / "ur10.toml", d, UR10_EXAMPLE / "series_c_holdout.toml")  # fmt: skip
+    verdict = identify(d, report=False).verdict or ""
+    assert "FAIL" in verdict and "χ²/dof" in verdict, verdict  # README: the robot, not noise
+    return d
+
+
+@needs_ur10
+def test_ur10_series_c_held_out(ur10_c70: Path) -> None:
+    held = read_table(ur10_c70 / "stages" / "holdout.arrow").to_pylist()
+    assert len(held) == 832 and {r["sweep"] for r in held} == {-1}  # the 30 %: sweep check
+    rms = np.sqrt(np.mean(np.square([r["error_cm"] for r in held])))
+    assert rms <= 0.051, rms  # issue 26: ≤ 0.51 mm; measured 0.4869 mm (README)
+    check = _errors(ur10_c70, "check")
+    assert len(check) == 832 and np.sqrt(np.mean(check**2)) <= 0.051
+    summary = refine_summary(read_table(ur10_c70 / "stages" / "refine.arrow"))
+    assert summary["status"] == "converged"
+    # the T-Mac sits 0.09 mm off the flange axis: joint 6's direction is below the noise
+    held_names = {h["name"] for h in summary["identifiability"]["held"]}
+    assert held_names == {"joint6.rx", "joint6.ry"}, held_names
+
+
+@needs_ur10
+@pytest.mark.parametrize(
+    ("series", "file", "key", "bound_cm"),
+    [
+        ("b", "Series_B/measurements_joint_configurations.csv", "rms_cm", 0.16),
+        ("b", "Series_B/measurements_joint_configurations.csv", "registered_rms_cm", 0.0945),
+        ("a", "Series_A/measurements_grid.csv", "registered_rms_cm", 0.0905),
+        ("d", "Series_D/measurements_iso_cubes.csv", "registered_rms_cm", 0.086),
+    ],
+)
+def test_ur10_other_series(ur10_c70: Path, series: str, file: str, key: str, bound_cm: float):
+    """B shares C's tracker placement (as measured); A and D were measured from elsewhere
+    (base registered). Measured (README): B 1.543 mm (issue 26's goal 1.43 mm is not met),
+    registered 0.933 mm; A 0.892 mm; D 0.847 mm."""
+    r = validate_against(
+        ur10_c70, UR10_DATA / file, "table", UR10_EXAMPLE / f"series_{series}.toml"
+    )
+    assert r["target"] == "tmac" and r["rows_skipped"] == 0
+    assert r[key] <= bound_cm, r
+
+
+@needs_ur10
+def test_ur10_orientation_convention_on_the_hand_eye_file() -> None:
+    """The maps' Euler convention (intrinsic x-y-z) is the one under which the T-Mac's
+    measured orientations turn between poses as the controller's flange does: R_meas =
+    X · R_flange · Y, so R_meas,i⁻¹ R_meas,j = Y⁻¹ (R_flange,i⁻¹ R_flange,j) Y for constant
+    X, Y. Y is fitted to the rotation vectors; the other conventions leave degrees."""
+    import csv
+    import itertools
+
+    from scipy.spatial.transform import Rotation
+
+    rows = list(
+        csv.reader((UR10_DATA / "Series_C" / "calibration_handeye.csv").open(), delimiter=";")
+    )
+    head = rows[0]
+    data = np.array([[float(c.replace(",", ".")) for c in r] for r in rows[1:] if r])
+    col = {h: data[:, k] for k, h in enumerate(head)}
+    flange = Rotation.from_quat(np.c_[[col[f"flange_q{a}"] for a in "xyzw"]].T)
+    angles = np.c_[[col[f"measurement_r{a}"] for a in "xyz"]].T
+
+    def misfit(seq: str) -> float:
+        meas = Rotation.from_euler(seq, angles, degrees=True)
+        pairs = list(itertools.combinations(range(len(data)), 2))
+        a = np.array([(flange[i].inv() * flange[j]).as_rotvec() for i, j in pairs])
+        b = np.array([(meas[i].inv() * meas[j]).as_rotvec() for i, j in pairs])
+        y, _ = Rotation.align_vectors(b, a)
+        return float(np.degrees(np.sqrt(np.mean(np.sum((y.apply(a) - b) ** 2, axis=1)))))
+
+    assert misfit("XYZ") < 0.1  # measured 0.080 deg
+    assert min(misfit(s) for s in ("xyz", "ZYX", "XZY", "zxy", "YXZ")) > 5.0

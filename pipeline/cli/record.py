@@ -177,10 +177,14 @@ def import_(
     from pipeline.importers import import_file
 
     out = import_file(file, format, robot, new_session_folder(name), map, force)
-    n_check = int((out.rows.sweep < 0).sum())
+    from pipeline.sweeps import CHECK_SWEEP, POSES_SWEEP
+
+    n_check = int((out.rows.sweep == CHECK_SWEEP).sum())
+    n_poses = int((out.rows.sweep == POSES_SWEEP).sum())
+    poses = f"{n_poses} poses, " if n_poses else ""
     typer.echo(
         f"wrote {out.recording}: {len(out.rows.where)} configurations "
-        f"({n_check} for validation), tool from {out.tool.note}"
+        f"({poses}{n_check} for validation), tool from {out.tool.note}"
     )
 
 

@@ -15,9 +15,9 @@ import numpy as np
 
 from pipeline.errors import ImportFileError
 from pipeline.importers.mapping import ImportMap, load_map
-from pipeline.importers.rows import MeasuredRows, checked_rows
+from pipeline.importers.rows import LENGTH_CM, MeasuredRows, checked_rows
 from pipeline.importers.session import ToolChoice, session_messages, tool_rows
-from pipeline.importers.sweeps import home_readings, select_sweeps, tolerance
+from pipeline.importers.sweeps import home_readings, pose_set, select_sweeps, tolerance
 from pipeline.importers.write import source_metadata, write_imported
 from pipeline.robots.description import RobotDescription, load_description
 
@@ -69,7 +69,9 @@ def parse_foreign(
         from pipeline.importers.rct import read_rct
 
         rows = read_rct(path, robot)
-        if imap.select:
+        if imap.poses:
+            rows = pose_set(rows, imap)
+        elif imap.select:
             rows = select_sweeps(rows, imap, _tolerance(fmt, imap, robot))
     if not (rows.sweep > 0).any():
         return rows, np.zeros(robot.n_joints)
@@ -77,13 +79,12 @@ def parse_foreign(
 
 
 def read_foreign(
-    path: Path, fmt: str, robot: RobotDescription, map_path: Path | None
+    path: Path, fmt: str, robot: RobotDescription, imap: ImportMap
 ) -> tuple[MeasuredRows, ToolChoice]:
     """Parse and check a foreign file for a session; its rows and the tool measurement."""
-    imap = load_map(map_path) if map_path is not None else ImportMap()
-    if fmt == "rct" and not imap.select:
+    if fmt == "rct" and not imap.select and not imap.poses:
         raise ImportFileError(
-            f"{path.name}: --format rct needs [[sweeps.select]] in --map",
+            f'{path.name}: --format rct needs [[sweeps.select]] or sweep = "poses" in --map',
             expected="which rows form each joint's sweep (docs/import.md)",
             fix='e.g. joint = 2 with held = { "1" = 0.0 }',
         )
@@ -105,8 +106,12 @@ def import_file(
     src = Path(path)
     robot = load_description(robot_path)
     mp = None if map_path is None else Path(map_path)
-    rows, tool = read_foreign(src, fmt, robot, mp)
-    messages = session_messages(rows, robot, tool, f"{fmt} file {src.name} (imported)")
+    imap = load_map(mp) if mp is not None else ImportMap()
+    rows, tool = read_foreign(src, fmt, robot, imap)
+    local = None
+    if imap.tool_offset is not None:
+        local = np.array(imap.tool_offset) * LENGTH_CM[imap.length_unit]
+    messages = session_messages(rows, robot, tool, f"{fmt} file {src.name} (imported)", local)
     recording = write_imported(Path(session_dir), messages, source_metadata(src, fmt, mp), force)
     return Imported(rows, tool, robot, recording)
 

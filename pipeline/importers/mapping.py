@@ -1,23 +1,40 @@
-"""The map file (TOML) of ``pipeline import --format table|rct``: docs/import.md."""
+"""The map file (TOML) of ``pipeline import --format table|rct``: docs/import.md.
+
+A map is checked against ``schemas/import/map.json`` (fastjsonschema) before any of it
+is used: an unknown key, a value of the wrong type (``header = "false"``,
+``skip_lines = "17"``), a non-finite number or a combination the format cannot take
+is refused in one line naming the key, what was expected and what arrived.
+"""
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pipeline.errors import ImportFileError
+from pipeline.errors import ImportFileError, one_line
+from pipeline.schemas import compiled_validator
+
+SCHEMA = "import/map.json"
+#: Sweep value of a map whose rows are all configurations of the pose set.
+POSES = "poses"
+_SHOWN = 80  # characters of a bad value shown in an error
 
 
 @dataclass(frozen=True)
 class TargetColumns:
-    """One measured target: its id and its x, y, z columns (header name or 1-based number)."""
+    """One measured target: its id, its x, y, z columns (header name or 1-based number)
+    and its standard deviation columns: ``sigma`` (the same for x, y, z) or ``sigma_xyz``
+    (one per coordinate), in the map's length unit."""
 
     id: str
     x: str | int
     y: str | int
     z: str | int
+    sigma: str | int | None = None
+    sigma_xyz: tuple[str | int, str | int, str | int] | None = None
 
 
 @dataclass(frozen=True)
@@ -39,11 +56,30 @@ class SweepSelect:
 
 
 @dataclass(frozen=True)
+class OrientationColumns:
+    """Euler angles of the tool target's frame: columns, unit, scipy sequence."""
+
+    columns: tuple[str | int, str | int, str | int]
+    unit: str
+    convention: str
+
+
+@dataclass(frozen=True)
+class CheckSplit:
+    """A seeded random ``fraction`` of a pose set's rows imported as sweep ``check``."""
+
+    fraction: float
+    seed: int
+
+
+@dataclass(frozen=True)
 class ImportMap:
-    """What the columns of a table mean, and how rows form sweeps (docs/import.md)."""
+    """What the columns of a table mean, and how rows form sweeps or a pose set
+    (docs/import.md)."""
 
     path: Path | None = None
     delimiter: str | None = None
+    decimal: str = "."
     skip_rows: int = 0
     skip_lines: tuple[int, ...] = ()
     header: bool = True
@@ -54,98 +90,175 @@ class ImportMap:
     select: tuple[SweepSelect, ...] = ()
     tolerance: tuple[float, ...] | float | None = None  # deg / cm; None: encoder resolution
     home: tuple[float, ...] | None = None  # deg / cm
+    poses: bool = False  # every row a configuration of the pose set
+    tool_target: str | None = None  # None: the first target
+    tool_offset: tuple[float, float, float] | None = None  # length_unit
+    sigma: float | None = None  # length_unit, every coordinate of every point
+    orientation: OrientationColumns | None = None
+    check: CheckSplit | None = None
+
+    @property
+    def name(self) -> str:
+        """The map's file name for messages ("map" without a file)."""
+        return self.path.name if self.path else "map"
 
 
-_TOP = ("format", "delimiter", "skip_rows", "skip_lines", "header", "length_unit", "targets",
-        "joints", "sweeps")  # fmt: skip
-_SWEEPS = ("column", "select", "tolerance", "home")
-
-
-def _fail(src: str, where: str, what: str, expected: str, got: Any) -> ImportFileError:
+def _refuse(src: str, key: str, what: str, expected: str, got: Any) -> ImportFileError:
     return ImportFileError(
-        f"{src}: {where}: {what}", expected=expected, got=repr(got), fix="see docs/import.md"
+        f"{src}: {key}: {what}",
+        expected=expected,
+        got=one_line(repr(got), _SHOWN),
+        fix="correct the map (docs/import.md, schemas/import/map.json)",
     )
 
 
-def _check_keys(src: str, where: str, table: Any, allowed: tuple[str, ...]) -> dict[str, Any]:
-    if not isinstance(table, dict):
-        raise _fail(src, where, "is not a table", "a TOML table", table)
-    for key in table:
-        if key not in allowed:
-            raise _fail(src, where, f"unknown field '{key}'", ", ".join(allowed), key)
-    return table
+def _expected(rule: str, definition: dict[str, Any]) -> str:
+    """What the schema wanted, in words, from the failed rule of ``definition``."""
+    if rule == "enum":
+        return " | ".join(repr(v) for v in definition["enum"])
+    if rule == "oneOf":
+        options = definition["oneOf"]
+        return definition.get("description") or " or ".join(o.get("type", "?") for o in options)
+    if rule == "additionalProperties":
+        keys = [*definition.get("properties", {}), *definition.get("patternProperties", {})]
+        return "one of the keys " + ", ".join(keys)
+    if rule == "required":
+        return "the keys " + ", ".join(definition["required"])
+    if rule == "pattern":
+        return f"a string matching {definition['pattern']}"
+    if rule in definition:
+        return f"{rule} {definition[rule]!r}"
+    return str(definition.get("type", rule))
 
 
-def _column(src: str, where: str, v: Any) -> str | int:
-    if isinstance(v, str) or (isinstance(v, int) and not isinstance(v, bool) and v >= 1):
-        return v
-    raise _fail(src, where, "is not a column", "a header name or a 1-based column number", v)
+def _finite(src: str, key: str, value: Any) -> None:
+    """Refuse ``nan`` and ``inf`` (TOML has them, the map's numbers must be finite)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise _refuse(src, key, "is not a finite number", "a finite number", value)
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _finite(src, f"{key}.{k}" if key else str(k), v)
+    elif isinstance(value, list):
+        for k, v in enumerate(value):
+            _finite(src, f"{key}[{k}]", v)
 
 
-def _numbers(src: str, where: str, v: Any) -> tuple[float, ...]:
-    if isinstance(v, list) and all(
-        isinstance(x, int | float) and not isinstance(x, bool) for x in v
-    ):
-        return tuple(float(x) for x in v)
-    raise _fail(src, where, "is not a list of numbers", "[number, ...]", v)
+def check_map(src: str, data: Any) -> dict[str, Any]:
+    """``data`` (a parsed map) checked against the map schema; ``src`` names it in errors."""
+    from fastjsonschema import JsonSchemaValueException
+
+    _finite(src, "", data)
+    try:
+        compiled_validator(SCHEMA)(data)
+    except JsonSchemaValueException as exc:
+        name = str(exc.name)
+        key = name.removeprefix("data").removeprefix(".") or "map"
+        what = one_line(exc.message.removeprefix(name).strip(), _SHOWN)
+        expected = _expected(str(exc.rule), exc.definition or {})
+        raise _refuse(src, key, what, expected, exc.value) from None
+    _check_combinations(src, data)
+    return data  # type: ignore[no-any-return]
+
+
+def _check_combinations(src: str, data: dict[str, Any]) -> None:
+    """What one key's schema cannot say: keys that exclude or need each other."""
+    poses = data.get("sweep") == POSES
+    if poses and "sweeps" in data:
+        raise _refuse(src, "sweeps", 'is not read with sweep = "poses"',
+                      'either sweep = "poses" or a [sweeps] table', data["sweeps"])  # fmt: skip
+    for key in ("check", "tool_offset"):
+        if key in data and not poses:
+            raise _refuse(src, key, 'applies to a pose set only', 'sweep = "poses" in the map',
+                          data[key])  # fmt: skip
+    for k, j in enumerate(data.get("joints", [])):
+        if poses and j.get("unwrap"):
+            raise _refuse(src, f"joints[{k}].unwrap", "has no sweep to unwrap in a pose set",
+                          'unwrap = false with sweep = "poses"', True)  # fmt: skip
+    targets = data.get("targets", [])
+    for k, t in enumerate(targets):
+        axes = [a for a in ("sigma_x", "sigma_y", "sigma_z") if a in t]
+        if axes and len(axes) != 3:
+            raise _refuse(src, f"targets[{k}]", "names some but not all sigma_x/y/z columns",
+                          "all three of sigma_x, sigma_y, sigma_z, or none", axes)  # fmt: skip
+        if axes and "sigma" in t:
+            raise _refuse(src, f"targets[{k}]", "has both sigma and sigma_x/y/z",
+                          "one σ column, or one per axis", sorted(t))  # fmt: skip
+        if (axes or "sigma" in t) and "sigma" in data:
+            raise _refuse(src, "sigma", f"is stated and targets[{k}] has σ columns too",
+                          "one stated σ for the file, or σ columns", data["sigma"])  # fmt: skip
+    ids = [str(t.get("id", f"t{k + 1}")) for k, t in enumerate(targets)]
+    if len(set(ids)) != len(ids):
+        raise _refuse(src, "targets", "names a target id twice", "distinct ids", ids)
+    if "tool_target" in data and data["tool_target"] not in ids:
+        raise _refuse(src, "tool_target", "is not the id of a [[targets]] table",
+                      " | ".join(ids) or "a [[targets]] table", data["tool_target"])  # fmt: skip
 
 
 def load_map(path: Path) -> ImportMap:
-    """Read and check a map file; a malformed one is refused naming the field."""
+    """Read and check a map file; a malformed one is refused naming the key."""
     src = path.name
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ImportFileError(f"cannot read map {path}", got=str(exc), fix="check --map") from exc
-    except tomllib.TOMLDecodeError as exc:
+    except (OSError, UnicodeDecodeError) as exc:
         raise ImportFileError(
-            f"{src}: not valid TOML", got=str(exc), fix="see docs/import.md"
+            f"cannot read map {path}", got=one_line(str(exc)), fix="check --map"
         ) from exc
-    _check_keys(src, "map", data, _TOP)
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise ImportFileError(
+            f"{src}: not valid TOML", got=one_line(str(exc), _SHOWN), fix="see docs/import.md"
+        ) from exc
+    return map_from_dict(check_map(src, data), path)
+
+
+def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
+    """The :class:`ImportMap` of a map checked by :func:`check_map`."""
     targets = tuple(
         TargetColumns(
             str(t.get("id", f"t{k + 1}")),
-            *(_column(src, f"targets[{k}].{c}", t.get(c)) for c in "xyz"),
+            t["x"],
+            t["y"],
+            t["z"],
+            t.get("sigma"),
+            (t["sigma_x"], t["sigma_y"], t["sigma_z"]) if "sigma_x" in t else None,
         )
         for k, t in enumerate(data.get("targets", []))
-        if _check_keys(src, f"targets[{k}]", t, ("id", "x", "y", "z"))
     )
     joints = tuple(
-        JointColumn(
-            _column(src, f"joints[{k}].column", j.get("column")),
-            str(j.get("unit", "deg")),
-            bool(j.get("unwrap", False)),
-        )
-        for k, j in enumerate(data.get("joints", []))
-        if _check_keys(src, f"joints[{k}]", j, ("column", "unit", "unwrap"))
+        JointColumn(j["column"], j.get("unit", "deg"), j.get("unwrap", False))
+        for j in data.get("joints", [])
     )
-    sw = _check_keys(src, "sweeps", data.get("sweeps", {}), _SWEEPS)
-    select = []
-    for k, s in enumerate(sw.get("select", [])):
-        _check_keys(src, f"sweeps.select[{k}]", s, ("joint", "held"))
-        held = _check_keys(
-            src, f"sweeps.select[{k}].held", s.get("held", {}), tuple(s.get("held", {}))
-        )
-        try:
-            select.append(SweepSelect(int(s["joint"]), {int(j): float(v) for j, v in held.items()}))
-        except (KeyError, ValueError, TypeError):
-            raise _fail(src, f"sweeps.select[{k}]", "is malformed",
-                        "joint = N and held = { \"J\" = reading, ... }", s) from None  # fmt: skip
+    sw = data.get("sweeps", {})
+    select = tuple(
+        SweepSelect(s["joint"], {int(j): float(v) for j, v in s.get("held", {}).items()})
+        for s in sw.get("select", [])
+    )
     tol = sw.get("tolerance")
-    if tol is not None and not isinstance(tol, int | float):
-        tol = _numbers(src, "sweeps.tolerance", tol)
-    column = sw.get("column")
+    orient = data.get("orientation")
+    check = data.get("check")
     return ImportMap(
         path=path,
         delimiter=data.get("delimiter"),
+        decimal=data.get("decimal", "."),
         skip_rows=int(data.get("skip_rows", 0)),
         skip_lines=tuple(int(v) for v in data.get("skip_lines", [])),
-        header=bool(data.get("header", True)),
-        length_unit=str(data.get("length_unit", "mm")),
+        header=data.get("header", True),
+        length_unit=data.get("length_unit", "mm"),
         targets=targets,
         joints=joints,
-        sweep_column=None if column is None else _column(src, "sweeps.column", column),
-        select=tuple(select),
-        tolerance=tol if tol is None or isinstance(tol, tuple) else float(tol),
-        home=None if "home" not in sw else _numbers(src, "sweeps.home", sw["home"]),
+        sweep_column=sw.get("column"),
+        select=select,
+        tolerance=tuple(map(float, tol)) if isinstance(tol, list) else tol,
+        home=None if "home" not in sw else tuple(float(v) for v in sw["home"]),
+        poses=data.get("sweep") == POSES,
+        tool_target=data.get("tool_target"),
+        tool_offset=None if "tool_offset" not in data else tuple(data["tool_offset"]),  # type: ignore[arg-type]
+        sigma=data.get("sigma"),
+        orientation=None
+        if orient is None
+        else OrientationColumns(
+            (orient["rx"], orient["ry"], orient["rz"]),
+            orient.get("unit", "deg"),
+            orient["convention"],
+        ),
+        check=None if check is None else CheckSplit(float(check["fraction"]), int(check["seed"])),
     )

@@ -15,7 +15,7 @@ import numpy as np
 
 from pipeline.errors import ImportFileError
 from pipeline.robots.description import RobotDescription
-from pipeline.stages.recording import CHECK_SWEEP, LIMIT_MARGIN
+from pipeline.stages.recording import CHECK_SWEEP, LIMIT_MARGIN, POSES_SWEEP
 
 #: Length units of imported points and prismatic readings -> cm.
 LENGTH_CM = {"mm": 0.1, "cm": 1.0, "m": 100.0}
@@ -41,6 +41,8 @@ class MeasuredRows:
         Target id -> measured position, cm, sensor frame.
     orientation_wxyz : ndarray, shape (R, 4), optional
         Unit quaternion of a 6-D target frame (the first target), when measured.
+    sigma : dict of str to ndarray, shape (R, 3), optional
+        Target id -> standard deviation of x, y, z (cm), when the file states it.
     """
 
     source: Path
@@ -49,6 +51,7 @@ class MeasuredRows:
     q: np.ndarray
     targets: dict[str, np.ndarray]
     orientation_wxyz: np.ndarray | None = None
+    sigma: dict[str, np.ndarray] | None = None
 
     def take(self, keep: np.ndarray) -> MeasuredRows:
         """The rows ``keep`` (indices or mask), in that order."""
@@ -60,6 +63,7 @@ class MeasuredRows:
             q=self.q[idx],
             targets={t: p[idx] for t, p in self.targets.items()},
             orientation_wxyz=None if self.orientation_wxyz is None else self.orientation_wxyz[idx],
+            sigma=None if self.sigma is None else {t: s[idx] for t, s in self.sigma.items()},
         )
 
 
@@ -90,18 +94,27 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: np.ndarray) -
     """Refuse rows that would make a wrong session; ``tol`` (n,): how far a held joint
     may read from its sweep's median (deg / cm).
 
-    Refused: a non-finite value; a row measured twice (same sweep, same readings); a
-    joint without a sweep or whose sweep does not move it; a sweep in which another
-    joint moves too.
+    Refused: a non-finite value; a σ that is not positive; a row measured twice (same
+    sweep, same readings); a joint without a sweep (unless the rows are a pose set) or
+    whose sweep does not move it; a sweep in which another joint moves too.
     """
     src = rows.source.name
-    values = np.column_stack([rows.q, *rows.targets.values()])
+    extra = [] if rows.orientation_wxyz is None else [rows.orientation_wxyz]
+    sigma = [] if rows.sigma is None else list(rows.sigma.values())
+    values = np.column_stack([rows.q, *rows.targets.values(), *extra, *sigma])
     bad = np.flatnonzero(~np.isfinite(values).all(axis=1))
     if len(bad):
         raise ImportFileError(
             f"{src}: {rows.where[bad[0]]}: a value is missing or not a number (NaN)",
-            expected="finite joint readings and coordinates in every row",
+            expected="finite joint readings, coordinates, angles and σ in every row",
             fix="delete the row, or mark it as skipped in the map",
+        )
+    small = np.flatnonzero((np.column_stack(sigma) <= 0).any(axis=1)) if sigma else np.zeros(0)
+    if len(small):
+        raise ImportFileError(
+            f"{src}: {rows.where[small[0]]}: a point's σ is zero or negative",
+            expected="a positive standard deviation of every coordinate",
+            fix="correct the σ column, or state one σ for the file (map: sigma = ...)",
         )
     names = [j.name for j in robot.joints]
     q = robot.joints_from_readings(rows.q)
@@ -116,8 +129,11 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: np.ndarray) -
             expected=f"{lim[j, 0]:g} to {lim[j, 1]:g} {unit} (± {LIMIT_MARGIN:g})",
             fix="check the joint's unit and unwrap setting in the map, or the robot's limits",
         )
+    pose_set = bool((rows.sweep == POSES_SWEEP).any())
     for j in range(robot.n_joints):
         sel = np.flatnonzero(rows.sweep == j + 1)
+        if len(sel) == 0 and pose_set:
+            continue  # a pose set moves every joint: the fit says which it cannot identify
         if len(sel) == 0:
             raise ImportFileError(
                 f"{src}: joint {j + 1} ({names[j]}) never moves alone (no sweep)",
@@ -153,7 +169,7 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: np.ndarray) -
                 fix="split the rows into one sweep per joint, or raise the map's tolerance",
             )
     unknown = np.flatnonzero(
-        (rows.sweep != CHECK_SWEEP) & ~np.isin(rows.sweep, np.arange(1, robot.n_joints + 1))
+        ~np.isin(rows.sweep, [CHECK_SWEEP, POSES_SWEEP, *range(1, robot.n_joints + 1)])
     )
     if len(unknown):
         k = unknown[0]

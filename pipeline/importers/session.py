@@ -3,8 +3,11 @@
 Each joint's sweep becomes sweep ``j`` with its steps ordered by reading; the rows
 measured with every joint at home become the tool measurement (sweep ``tool``,
 signature configuration q^s = their mean reading); every other row that is in no
-sweep becomes a validation configuration (sweep ``check``). The readings are
-recorded as both commanded and encoder values: a file holds only what the joints read.
+sweep becomes a validation configuration (sweep ``check``). A pose set's rows become
+sweep ``poses`` in file order (``plan.poses``), with no tool measurement: q^s is the
+first pose's readings. The readings are recorded as both commanded and encoder values:
+a file holds only what the joints read. A point's stated σ is its ``sigma_cm`` (the
+same for x, y, z) or a diagonal ``cov_cm2``.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import numpy as np
 from pipeline.importers.rows import MeasuredRows
 from pipeline.rig.recorder import Message
 from pipeline.robots.description import RobotDescription, description_to_dict
-from pipeline.stages.recording import CHECK_SWEEP
+from pipeline.stages.recording import CHECK_SWEEP, POSES_SWEEP
 
 T0_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z: the recording carries no foreign time
 STEP_NS = 10**9  # one configuration per second, in the order they are written
@@ -38,7 +41,12 @@ def tool_rows(rows: MeasuredRows, home: np.ndarray, tol: np.ndarray) -> ToolChoi
 
     When no row is at home, the row of the last joint's sweep nearest home is the
     tool measurement and q^s its readings (home except the last joint): a warning says so.
+    A pose set has no tool measurement; q^s is the first pose's readings.
     """
+    poses = np.flatnonzero(rows.sweep == POSES_SWEEP)
+    if len(poses):
+        note = f"the pose set (fitted), q^s the readings of {rows.where[poses[0]]}"
+        return ToolChoice(np.zeros(0, np.int64), rows.q[poses[0]].copy(), note)
     at_home = np.flatnonzero((np.abs(rows.q - home) <= tol).all(axis=1))
     if len(at_home):
         return ToolChoice(at_home, rows.q[at_home].mean(axis=0), "rows with every joint at home")
@@ -54,15 +62,23 @@ def tool_rows(rows: MeasuredRows, home: np.ndarray, tol: np.ndarray) -> ToolChoi
 
 
 def session_messages(
-    rows: MeasuredRows, robot: RobotDescription, tool: ToolChoice, instrument: str
+    rows: MeasuredRows,
+    robot: RobotDescription,
+    tool: ToolChoice,
+    instrument: str,
+    tool_local_cm: np.ndarray | None = None,
 ) -> list[Message]:
-    """The recording's messages: descriptions, then joint states and points by (sweep, step)."""
+    """The recording's messages: descriptions, then joint states and points by (sweep,
+    step). ``tool_local_cm``: the design tool point in the last D-H frame (cm), else the
+    robot description's tool."""
     units = [j.unit for j in robot.joints]
     ids = list(rows.targets)
     configs: list[tuple[str | int, int, int]] = []  # (sweep name, step, row)
     sweeps: list[dict[str, Any]] = []
     for j in range(1, robot.n_joints + 1):
         sel = np.flatnonzero(rows.sweep == j)
+        if len(sel) == 0:
+            continue  # a pose set: no joint sweep
         sel = sel[np.argsort(rows.q[sel, j - 1], kind="stable")]
         configs += [(j, s, int(k)) for s, k in enumerate(sel)]
         sweeps.append(
@@ -75,16 +91,25 @@ def session_messages(
             }
         )
     configs += [("tool", s, int(k)) for s, k in enumerate(tool.rows)]
+    poses = np.flatnonzero(rows.sweep == POSES_SWEEP)
+    configs += [("poses", s, int(k)) for s, k in enumerate(poses)]
     check = np.flatnonzero(rows.sweep == CHECK_SWEEP)
     configs += [("check", s, int(k)) for s, k in enumerate(check)]
+    local = robot.tool.xyz_cm if tool_local_cm is None else tool_local_cm
     plan: dict[str, Any] = {
         "n_avg": 1,
-        "order": [*range(1, robot.n_joints + 1), "tool"] + (["check"] if len(check) else []),
+        "order": [s["joint"] for s in sweeps]
+        + (["tool"] if len(tool.rows) else [])
+        + (["poses"] if len(poses) else [])
+        + (["check"] if len(check) else []),
         "sweeps": sweeps,
-        "tool_local_cm": list(robot.tool.xyz_cm),
+        "tool_local_cm": [float(v) for v in local],
         "tool_target": ids[0],
-        "sweeps_measure_tool": True,  # every row measured every target on the end link
     }
+    if sweeps:
+        plan["sweeps_measure_tool"] = True  # every row measured every target on the end link
+    if len(poses):
+        plan["poses"] = {"n_points": len(poses), "targets": ids}
     if len(check):
         plan["check"] = {"n_points": len(check)}
     messages = [
@@ -117,5 +142,16 @@ def session_messages(
             }  # fmt: skip
             if rows.orientation_wxyz is not None and t == 0:
                 point["orientation_wxyz"] = [float(v) for v in rows.orientation_wxyz[k]]
+            if rows.sigma is not None:
+                point.update(_noise(rows.sigma[target][k]))
             messages.append(Message("/points", t_ns, point))
     return messages
+
+
+def _noise(sigma: np.ndarray) -> dict[str, Any]:
+    """A point's stated σ of x, y, z (cm): ``sigma_cm`` when they are equal, else the
+    diagonal ``cov_cm2``."""
+    if sigma[0] == sigma[1] == sigma[2]:
+        return {"sigma_cm": float(sigma[0])}
+    return {"cov_cm2": [[float(s * s) if r == c else 0.0 for c, s in enumerate(sigma)]
+                        for r in range(3)]}  # fmt: skip

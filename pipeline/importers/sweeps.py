@@ -1,6 +1,9 @@
-"""Which rows form which joint's sweep: a sweep column, ``infer``, or a selection."""
+"""Which rows form which joint's sweep (a sweep column, ``infer``, or a selection), or
+the pose set (every row, a seeded fraction of them validation configurations)."""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -8,7 +11,7 @@ from pipeline.errors import ImportFileError
 from pipeline.importers.mapping import ImportMap
 from pipeline.importers.rows import MeasuredRows
 from pipeline.robots.description import RobotDescription
-from pipeline.stages.recording import CHECK_SWEEP
+from pipeline.stages.recording import CHECK_SWEEP, POSES_SWEEP
 
 
 def tolerance(imap: ImportMap, robot: RobotDescription) -> np.ndarray:
@@ -17,6 +20,24 @@ def tolerance(imap: ImportMap, robot: RobotDescription) -> np.ndarray:
         return robot.encoder_resolution
     tol = np.broadcast_to(np.asarray(imap.tolerance, float), (robot.n_joints,)).copy()
     return tol
+
+
+def pose_set(rows: MeasuredRows, imap: ImportMap) -> MeasuredRows:
+    """Every row a configuration of the pose set; with ``[check]``, a seeded random
+    fraction of them (rounded) validation configurations instead, in file order."""
+    sweep = np.full(len(rows.where), POSES_SWEEP, np.int64)
+    if imap.check is not None:
+        n = len(sweep)
+        m = round(imap.check.fraction * n)
+        if not 0 < m < n:
+            raise ImportFileError(
+                f"{rows.source.name}: check.fraction {imap.check.fraction:g} of {n} rows "
+                f"leaves {n - m} poses and {m} validation configurations",
+                expected="at least one of each",
+                fix="change check.fraction in the map, or drop [check]",
+            )
+        sweep[np.random.default_rng(imap.check.seed).permutation(n)[:m]] = CHECK_SWEEP
+    return replace(rows, sweep=sweep)
 
 
 def infer_sweeps(rows: MeasuredRows, tol: np.ndarray) -> np.ndarray:
@@ -65,7 +86,15 @@ def select_sweeps(rows: MeasuredRows, imap: ImportMap, tol: np.ndarray) -> Measu
     """Rows of each ``[[sweeps.select]]`` form that joint's sweep (a row may serve two,
     e.g. home); every row in no sweep becomes a validation configuration (``check``)."""
     parts, used = [], np.zeros(len(rows.where), bool)
-    for sel in imap.select:
+    n = rows.q.shape[1]
+    for k, sel in enumerate(imap.select):
+        beyond = [j for j in (sel.joint, *sel.held) if j > n]
+        if beyond:
+            raise ImportFileError(
+                f"{imap.name}: sweeps.select[{k}] names joint {beyond[0]}",
+                expected=f"joints 1 to {n} of the robot",
+                fix="number the joints of the robot description, base to tip",
+            )
         ok = np.ones(len(rows.where), bool)
         for j, value in sel.held.items():
             ok &= np.abs(rows.q[:, j - 1] - value) <= tol[j - 1]
@@ -85,6 +114,11 @@ def _concat(parts: list[tuple[MeasuredRows, np.ndarray]]) -> MeasuredRows:
             [p.orientation_wxyz for p, _ in parts]  # type: ignore[misc]
         )
     )
+    sigma = (
+        None
+        if first.sigma is None
+        else {t: np.vstack([p.sigma[t] for p, _ in parts]) for t in first.sigma}  # type: ignore[index]
+    )
     return MeasuredRows(
         source=first.source,
         where=tuple(w for p, _ in parts for w in p.where),
@@ -92,6 +126,7 @@ def _concat(parts: list[tuple[MeasuredRows, np.ndarray]]) -> MeasuredRows:
         q=np.vstack([p.q for p, _ in parts]),
         targets={t: np.vstack([p.targets[t] for p, _ in parts]) for t in first.targets},
         orientation_wxyz=orient,
+        sigma=sigma,
     )
 
 
@@ -101,8 +136,7 @@ def home_readings(rows: MeasuredRows, imap: ImportMap, robot: RobotDescription) 
     if imap.home is not None:
         if len(imap.home) != robot.n_joints:
             raise ImportFileError(
-                f"{imap.path.name if imap.path else 'map'}: sweeps.home has {len(imap.home)} "
-                "values",
+                f"{imap.name}: sweeps.home has {len(imap.home)} values",
                 expected=f"{robot.n_joints} (one per joint)",
                 fix="list one reading per joint",
             )

@@ -1,23 +1,40 @@
-"""A generic delimited table of measured points and joint readings, read with a map file."""
+"""A generic delimited table of measured points and joint readings, read with a map file.
+
+The rows form joint sweeps (a sweep column, ``infer``, or ``[[sweeps.select]]``) or,
+with ``sweep = "poses"`` in the map, a pose set: every row a configuration of sweep
+``poses`` (a seeded fraction of them validation configurations, ``[check]``), no sweep
+inference. Per-point σ comes from columns or one stated value; numbers may use a
+decimal comma (``decimal = ","``)."""
 
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from pipeline.errors import ImportFileError
-from pipeline.importers.mapping import ImportMap
-from pipeline.importers.rows import LENGTH_CM, MeasuredRows, readings_in_boundary_units, unit_factor
+from pipeline.importers.mapping import ImportMap, TargetColumns
+from pipeline.importers.rows import (
+    ANGLE_DEG,
+    LENGTH_CM,
+    MeasuredRows,
+    readings_in_boundary_units,
+    unit_factor,
+)
 from pipeline.importers.sscanss2 import read_text
-from pipeline.importers.sweeps import infer_sweeps, select_sweeps, tolerance
+from pipeline.importers.sweeps import infer_sweeps, pose_set, select_sweeps, tolerance
 from pipeline.robots.description import RobotDescription
 from pipeline.stages.recording import CHECK_SWEEP
 
 FORMAT = "table"
 INFER = "infer"
+_MISSING = ("", "nan", "na", "null")
+
+#: A cell parser: (fields, 0-based column, file line, what the column is) -> number.
+Cell = Callable[[list[str], int, int, str], float]
 
 
 def _index(col: str | int, header: list[str] | None, src: str, line: int, what: str) -> int:
@@ -40,30 +57,56 @@ def _index(col: str | int, header: list[str] | None, src: str, line: int, what: 
     return header.index(col)
 
 
-def _cell(cells: list[str], k: int, src: str, line: int, what: str) -> float:
-    if k >= len(cells):
-        raise ImportFileError(
-            f"{src}: line {line}: {len(cells)} columns, no column {k + 1} ({what})",
-            expected=f"at least {k + 1} columns",
-            fix="complete the row (a missing column?) or list it in the map's skip_lines",
-        )
-    text = cells[k].strip()
-    if text == "" or text.lower() in ("nan", "na", "null"):
-        return float("nan")
+def _cell_reader(src: str, decimal: str) -> Cell:
+    """Parse a cell as a number (NaN when empty or "nan"); with a decimal comma, "0,5" is
+    one half and a cell holding a '.' (a thousands separator?) is refused."""
+
+    def cell(cells: list[str], k: int, line: int, what: str) -> float:
+        if k >= len(cells):
+            raise ImportFileError(
+                f"{src}: line {line}: {len(cells)} columns, no column {k + 1} ({what})",
+                expected=f"at least {k + 1} columns",
+                fix="complete the row (a missing column?) or list it in the map's skip_lines",
+            )
+        text = cells[k].strip()
+        if text.lower() in _MISSING:
+            return float("nan")
+        if decimal == ",":
+            if "." in text:
+                raise ImportFileError(
+                    f"{src}: line {line}: column {k + 1} ({what}) holds a '.' in a file with "
+                    "decimal commas",
+                    expected='numbers like 0,5 (map: decimal = ",")',
+                    got=repr(text),
+                    fix='remove the thousands separators, or set decimal = "." in the map',
+                )
+            text = text.replace(",", ".")
+        try:
+            return float(text)
+        except ValueError:
+            raise ImportFileError(
+                f"{src}: line {line}: column {k + 1} ({what}) is not a number",
+                got=repr(text),
+                fix="write a decimal number, or list the row in the map's skip_lines",
+            ) from None
+
+    return cell
+
+
+def _delimiter(imap: ImportMap, lines: list[str]) -> str:
+    """The map's delimiter, else guessed among , ; tab space (not ',' with decimal commas)."""
+    if imap.delimiter is not None:
+        return imap.delimiter
+    candidates = ";\t " if imap.decimal == "," else ",;\t "
     try:
-        return float(text)
-    except ValueError:
-        raise ImportFileError(
-            f"{src}: line {line}: column {k + 1} ({what}) is not a number",
-            got=repr(text),
-            fix="write a decimal number, or list the row in the map's skip_lines",
-        ) from None
+        return csv.Sniffer().sniff("\n".join(lines[:20]), delimiters=candidates).delimiter
+    except csv.Error:
+        return candidates[0]
 
 
 def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> MeasuredRows:
     """Parse the table with its map into rows (deg / cm) with their sweeps assigned."""
-    src = path.name
-    mname = imap.path.name if imap.path else "map"
+    src, mname = path.name, imap.name
     if len(imap.joints) != robot.n_joints:
         raise ImportFileError(
             f"{mname}: {len(imap.joints)} [[joints]] for {robot.n_joints} joints of {robot.name}",
@@ -76,37 +119,45 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
             fix="add a [[targets]] table (docs/import.md)",
         )  # fmt: skip
     lines = read_text(path).splitlines()[imap.skip_rows :]
-    delimiter = imap.delimiter
-    if delimiter is None:
-        try:
-            delimiter = csv.Sniffer().sniff("\n".join(lines[:20]), delimiters=",;\t ").delimiter
-        except csv.Error:
-            delimiter = ","
-    reader = csv.reader(lines, delimiter=delimiter, skipinitialspace=True)
+    reader = csv.reader(lines, delimiter=_delimiter(imap, lines), skipinitialspace=True)
     header: list[str] | None = None
-    header_line = imap.skip_rows + 1
+    hl = imap.skip_rows + 1  # the header's line
     if imap.header:
         header = [h.strip() for h in next(reader, [])]
     length = unit_factor(imap.length_unit, LENGTH_CM, "length", f"{mname}: length_unit")
-    cols = {
-        t.id: [_index(c, header, src, header_line, f"target {t.id} {a}")
-               for c, a in zip((t.x, t.y, t.z), "xyz", strict=True)]
-        for t in imap.targets
-    }  # fmt: skip
-    jcols = [_index(j.column, header, src, header_line, f"joint {k + 1}")
+    # the tool target first: its id is plan.tool_target, its orientation the recorded one
+    targets = sorted(imap.targets, key=lambda t: t.id != (imap.tool_target or imap.targets[0].id))
+    cols = {t.id: [_index(c, header, src, hl, f"target {t.id} {a}")
+                   for c, a in zip((t.x, t.y, t.z), "xyz", strict=True)]
+            for t in targets}  # fmt: skip
+    scols = {t.id: [_index(c, header, src, hl, f"target {t.id} σ {a}")
+                    for c, a in zip(_sigma_columns(t), "xyz", strict=True)]
+             for t in targets if t.sigma is not None or t.sigma_xyz is not None}  # fmt: skip
+    jcols = [_index(j.column, header, src, hl, f"joint {k + 1}")
              for k, j in enumerate(imap.joints)]  # fmt: skip
+    ocols = []
+    if imap.orientation is not None:
+        names = ("rx", "ry", "rz")
+        ocols = [_index(c, header, src, hl, f"orientation {a}")
+                 for c, a in zip(imap.orientation.columns, names, strict=True)]  # fmt: skip
     scol = None
     if imap.sweep_column not in (None, INFER):
-        scol = _index(imap.sweep_column, header, src, header_line, "sweep")  # type: ignore[arg-type]
-    where, q, pts, sweep = [], [], {t: [] for t in cols}, []  # type: ignore[var-annotated]
+        scol = _index(imap.sweep_column, header, src, hl, "sweep")  # type: ignore[arg-type]
+    cell = _cell_reader(src, imap.decimal)
+    where, q, sweep, angles = [], [], [], []  # type: ignore[var-annotated]
+    pts = {t: [] for t in cols}  # type: ignore[var-annotated]
+    sig = {t: [] for t in scols}  # type: ignore[var-annotated]
     for fields in reader:
         line = reader.line_num + imap.skip_rows
         if not any(f.strip() for f in fields) or line in imap.skip_lines:
             continue
         where.append(f"line {line}")
-        q.append([_cell(fields, k, src, line, f"joint {j + 1}") for j, k in enumerate(jcols)])
+        q.append([cell(fields, k, line, f"joint {j + 1}") for j, k in enumerate(jcols)])
         for t, c in cols.items():
-            pts[t].append([_cell(fields, k, src, line, f"target {t}") * length for k in c])
+            pts[t].append([cell(fields, k, line, f"target {t}") * length for k in c])
+        for t, c in scols.items():
+            sig[t].append([cell(fields, k, line, f"target {t} σ") * length for k in c])
+        angles.append([cell(fields, k, line, "orientation") for k in ocols])
         if scol is not None:
             sweep.append(_sweep_cell(fields, scol, src, line, robot.n_joints))
     if not where:
@@ -116,7 +167,11 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
     rows = MeasuredRows(
         path, tuple(where), np.array(sweep or [0] * len(where), np.int64), qq,
         {t: np.array(v, float) for t, v in pts.items()},
+        orientation_wxyz=_quaternions(np.array(angles, float), imap),
+        sigma=_sigmas(rows_sigma=sig, ids=list(cols), n=len(where), imap=imap, length=length),
     )  # fmt: skip
+    if imap.poses:
+        return pose_set(rows, imap)
     tol = tolerance(imap, robot)
     if imap.select:
         return select_sweeps(rows, imap, tol)
@@ -130,6 +185,41 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
             )
         rows = replace(rows, sweep=infer_sweeps(rows, tol))  # a wrap is a change: it infers
     return _unwrapped(rows, imap, robot)
+
+
+def _sigma_columns(t: TargetColumns) -> tuple[str | int, str | int, str | int]:
+    """The σ columns of x, y, z: one per axis, or the one σ column three times."""
+    if t.sigma_xyz is not None:
+        return t.sigma_xyz
+    assert t.sigma is not None  # the caller asks only for targets with σ columns
+    return (t.sigma, t.sigma, t.sigma)
+
+
+def _sigmas(
+    rows_sigma: dict[str, list[list[float]]], ids: list[str], n: int, imap: ImportMap, length: float
+) -> dict[str, np.ndarray] | None:
+    """Each target's σ of x, y, z (n, 3) cm: its columns, the map's stated σ, or none."""
+    if imap.sigma is not None:
+        return {t: np.full((n, 3), imap.sigma * length) for t in ids}
+    if not rows_sigma:
+        return None
+    return {t: np.array(rows_sigma[t], float) if t in rows_sigma else np.full((n, 3), np.nan)
+            for t in ids}  # fmt: skip
+
+
+def _quaternions(angles: np.ndarray, imap: ImportMap) -> np.ndarray | None:
+    """Unit quaternions (R, 4) w, x, y, z of the map's Euler angles (R, 3), or None."""
+    if imap.orientation is None:
+        return None
+    from scipy.spatial.transform import Rotation
+
+    o = imap.orientation
+    deg = np.deg2rad(angles * unit_factor(o.unit, ANGLE_DEG, "angle", f"{imap.name}: orientation"))
+    out = np.full((len(angles), 4), np.nan)
+    ok = np.isfinite(deg).all(axis=1)  # NaN angles: NaN quaternions, refused with the row
+    if ok.any():
+        out[ok] = Rotation.from_euler(o.convention, deg[ok]).as_quat()[:, [3, 0, 1, 2]]
+    return out
 
 
 def _unwrapped(rows: MeasuredRows, imap: ImportMap, robot: RobotDescription) -> MeasuredRows:

@@ -1,0 +1,222 @@
+"""`pipeline import` of a pose set (issue 26): every row a configuration of sweep `poses`,
+several targets per row, σ from columns or stated, decimal commas and other separators,
+orientation from Euler angles, a seeded split into validation configurations; bad maps and
+cells refused in one line naming the key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from import_data import POSE_REFLECTORS_MM, UR10, pose_set_map, pose_set_table
+from scipy.spatial.transform import Rotation
+from typer.testing import CliRunner
+
+from pipeline.cli import EXIT_REFUSED, app
+from pipeline.contract.channels import POINT_CHANNELS
+from pipeline.contract.mcap_read import read_mcap
+from pipeline.evaluate.validate import validate_against
+from pipeline.identify import identify
+from pipeline.importers import import_file
+from pipeline.kinematics.chain import forward_kinematics
+from pipeline.robots.description import load_description
+from pipeline.stages.tables import read_table
+from pipeline.units import joints_to_internal
+
+
+def _messages(session: Path) -> dict[str, list[dict]]:
+    content = read_mcap(session / "recording.mcap", POINT_CHANNELS, "re-import")
+    return {t: [m for _, m in msgs] for t, msgs in content.messages.items()}
+
+
+def _import(tmp: Path, *, map_text: str | None = None, **table: str) -> tuple[Path, np.ndarray]:
+    tmp.mkdir(exist_ok=True)
+    src, q = pose_set_table(tmp / "poses.csv", **table)  # type: ignore[arg-type]
+    mp = tmp / "map.toml"
+    keys = {k: v for k, v in table.items() if k in ("sep", "decimal", "unit")}
+    mp.write_text(map_text if map_text is not None else pose_set_map(**keys))
+    import_file(src, "table", UR10, tmp / "s", mp)
+    return tmp / "s", q
+
+
+@pytest.mark.parametrize(
+    ("sep", "decimal", "unit"), [(";", ",", "rad"), (",", ".", "deg"), ("\t", ",", "deg")]
+)
+def test_pose_set_plan_points_and_readings(tmp_path: Path, sep: str, decimal: str, unit: str):
+    session, q = _import(tmp_path, sep=sep, decimal=decimal, unit=unit)
+    msgs = _messages(session)
+    plan = msgs["/robot/description"][0]["plan"]
+    assert plan["poses"] == {"n_points": 40, "targets": ["tmac", "r2"]}
+    assert plan["tool_target"] == "tmac" and plan["order"] == ["poses"]
+    assert plan["sweeps"] == [] and plan["tool_local_cm"] == [0.0, 0.0, 0.0]
+    js = sorted((m["step"], m["q_encoder"]) for m in msgs["/robot/joint_state"])
+    assert {m["sweep"] for m in msgs["/robot/joint_state"]} == {"poses"}
+    np.testing.assert_allclose([v for _, v in js], q, atol=1e-9)  # file order, deg
+    robot = load_description(UR10)
+    T = forward_kinematics(robot.design_chain(), joints_to_internal(q, robot.prismatic))
+    pts = {(p["step"], p["target"]): p for p in msgs["/points"]}
+    for t, local in POSE_REFLECTORS_MM.items():
+        want = (T[:, :3, :3] @ (local / 10.0)) + T[:, :3, 3]
+        got = np.array([[pts[k, t][f"{a}_cm"] for a in "xyz"] for k in range(40)])
+        np.testing.assert_allclose(got, want, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("sigma", "want"),
+    [
+        ("axes", {"cov_cm2": [[1e-6, 0, 0], [0, 4e-6, 0], [0, 0, 9e-6]]}),
+        ("column", {"sigma_cm": 0.001}),
+        ("stated", {"sigma_cm": 0.002}),
+        ("none", {}),
+    ],
+)
+def test_point_sigma_from_columns_or_stated(tmp_path: Path, sigma: str, want: dict) -> None:
+    session, _ = _import(tmp_path, map_text=pose_set_map(sigma=sigma))
+    for p in _messages(session)["/points"]:
+        got = {k: p[k] for k in ("sigma_cm", "cov_cm2") if k in p}
+        assert got.keys() == want.keys()
+        for k, v in want.items():
+            np.testing.assert_allclose(got[k], v, rtol=1e-12, atol=1e-15)
+
+
+def test_orientation_of_the_tool_target(tmp_path: Path) -> None:
+    session, q = _import(tmp_path)
+    robot = load_description(UR10)
+    R = forward_kinematics(robot.design_chain(), joints_to_internal(q, robot.prismatic))[:, :3, :3]
+    pts = sorted((p["step"], p) for p in _messages(session)["/points"] if p["target"] == "tmac")
+    wxyz = np.array([p["orientation_wxyz"] for _, p in pts])
+    got = Rotation.from_quat(wxyz[:, [1, 2, 3, 0]]).as_matrix()
+    np.testing.assert_allclose(got, R, atol=1e-9)
+    assert not any("orientation_wxyz" in p for p in _messages(session)["/points"]
+                   if p["target"] == "r2")  # fmt: skip
+
+
+def test_tool_offset_and_seeded_check_split(tmp_path: Path) -> None:
+    extra = "tool_offset = [50.0, 0.0, 100.0]\n\n[check]\nfraction = 0.25\nseed = 7"
+    session, _ = _import(tmp_path, map_text=pose_set_map(extra=extra))
+    msgs = _messages(session)
+    plan = msgs["/robot/description"][0]["plan"]
+    assert plan["tool_local_cm"] == [5.0, 0.0, 10.0]
+    assert plan["poses"]["n_points"] == 30 and plan["check"] == {"n_points": 10}
+    assert plan["order"] == ["poses", "check"]
+    check = sorted(m["step"] for m in msgs["/robot/joint_state"] if m["sweep"] == "check")
+    assert check == list(range(10))
+    rows = [m["q_encoder"] for m in msgs["/robot/joint_state"] if m["sweep"] == "check"]
+    session2, _ = _import(tmp_path / "again", map_text=pose_set_map(extra=extra))
+    rows2 = [m["q_encoder"] for m in _messages(session2)["/robot/joint_state"]
+             if m["sweep"] == "check"]  # fmt: skip
+    assert rows == rows2  # the split is the seed's
+
+
+def test_noiseless_pose_set_identifies_and_validates(tmp_path: Path) -> None:
+    extra = "[check]\nfraction = 0.25\nseed = 7"
+    session, _ = _import(tmp_path, map_text=pose_set_map(extra=extra))
+    identify(session, report=False)
+    v = read_table(session / "stages" / "validation.arrow").to_pylist()
+    assert {r["role"] for r in v} == {"check", "fit"} and len(v) == 40
+    assert max(r["error_cm"] for r in v) <= 1e-6
+    other, _ = pose_set_table(tmp_path / "other.csv", n=25, seed=2)
+    out = validate_against(session, other, "table", tmp_path / "map.toml")
+    assert out["target"] == "tmac" and out["n"] == 25 and out["max_cm"] <= 1e-6
+
+
+#: The map's last top-level keys: a table inserted after them takes none of them.
+_TOP = 'sweep = "poses"\ntool_target = "tmac"'
+
+
+BAD_MAPS = {
+    "header not a boolean": (('sweep = "poses"', 'sweep = "poses"\nheader = "false"'),
+                             ["map.toml: header: must be boolean", "got 'false'"]),
+    "unknown key": (('sweep = "poses"', 'sweep = "poses"\nsigma_mm = 0.05'),
+                    ["map.toml: map: must not contain {'sigma_mm'}", "one of the keys"]),
+    "sweep not poses": (('sweep = "poses"', 'sweep = "pose"'),
+                        ["map.toml: sweep: must be one of ['poses']", "got 'pose'"]),
+    "sweeps with poses": ((_TOP, _TOP + '\n[sweeps]\ncolumn = "infer"'),
+                          ['map.toml: sweeps: is not read with sweep = "poses"']),
+    "σ column and σ per axis": (('sigma_x = "tmac_sx"', 'sigma = "tmac_sx"\nsigma_x = "tmac_sx"'),
+                                ["map.toml: targets[1]: has both sigma and sigma_x/y/z"]),
+    "σ of one axis only": (('sigma_y = "tmac_sy"\nsigma_z = "tmac_sz"', ""),
+                           ["targets[1]: names some but not all sigma_x/y/z columns"]),
+    "σ stated and columns": (('sweep = "poses"', 'sweep = "poses"\nsigma = 0.05'),
+                             ["map.toml: sigma: is stated and targets[0] has σ columns too"]),
+    "σ stated zero": (('sweep = "poses"', 'sweep = "poses"\nsigma = 0'),
+                      ["map.toml: sigma: must be bigger than 0"]),
+    "σ not finite": (('sweep = "poses"', 'sweep = "poses"\nsigma = nan'),
+                     ["map.toml: sigma: is not a finite number"]),
+    "unknown tool target": (('tool_target = "tmac"', 'tool_target = "t9"'),
+                            ["map.toml: tool_target: is not the id of a [[targets]] table",
+                             "expected r2 | tmac"]),
+    "check fraction 1": ((_TOP, _TOP + '\n[check]\nfraction = 1.0\nseed = 1'),
+                         ["map.toml: check.fraction: must be smaller than 1"]),
+    "check seed missing": ((_TOP, _TOP + '\n[check]\nfraction = 0.3'),
+                           ["map.toml: check: must contain ['seed']"]),
+    "check without poses": ((_TOP, 'tool_target = "tmac"\n[check]\nfraction = 0.3\nseed = 1'),
+                            ['map.toml: check: applies to a pose set only']),
+    "bad Euler sequence": (('convention = "XYZ"', 'convention = "XYx"'),
+                           ["map.toml: orientation.convention: must match pattern"]),
+    "unwrap in a pose set": (('unit = "rad"', 'unit = "rad"\nunwrap = true'),
+                             ["map.toml: joints[0].unwrap: has no sweep to unwrap"]),
+    "column number zero": (('x = "tmac_x"', "x = 0"),
+                           ["map.toml: targets[1].x: must be valid exactly by one definition",
+                            "a 1-based column number"]),
+    "held joint beyond the robot": (
+        (_TOP, 'tool_target = "tmac"\n[[sweeps.select]]\njoint = 2\nheld = { "13" = 0 }'),
+        ["map.toml: sweeps.select[0].held: must not contain {'13'}"]),
+}  # fmt: skip
+
+BAD_CELLS = {
+    "a '.' with decimal commas": (
+        lambda ls: [ls[0], ls[1].replace(",", ".", 1), *ls[2:]],
+        ["poses.csv: line 2: column 1 (joint 1) holds a '.' in a file with decimal commas"],
+    ),
+    "σ zero": (
+        lambda ls: [
+            ls[0],
+            ";".join([*ls[1].split(";")[:15], "0", *ls[1].split(";")[16:]]),
+            *ls[2:],
+        ],  # fmt: skip
+        ["poses.csv: line 2: a point's σ is zero or negative"],
+    ),
+    "missing angle": (
+        lambda ls: [*ls[:3], ";".join([*ls[3].split(";")[:-1], ""]), *ls[4:]],
+        ["poses.csv: line 4: a value is missing or not a number (NaN)"],
+    ),
+    "too few rows for the split": (
+        lambda ls: ls[:2],
+        ["poses.csv: check.fraction 0.3 of 1 rows leaves 1 poses and 0 validation"],
+    ),
+}
+
+
+def _refused(tmp: Path, map_text: str, edit=lambda ls: ls) -> str:  # type: ignore[no-untyped-def]
+    src, _ = pose_set_table(tmp / "poses.csv")
+    src.write_text("\n".join(edit(src.read_text().splitlines())) + "\n")
+    (tmp / "map.toml").write_text(map_text)
+    session = tmp / "sessions" / "s"
+    args = [str(src), "--format", "table", "--map", str(tmp / "map.toml"), "--robot", str(UR10)]
+    r = CliRunner().invoke(app, ["import", *args, str(session)])
+    assert r.exit_code == EXIT_REFUSED, (r.exit_code, r.output)
+    assert not session.exists() or not any(session.iterdir())
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "try:" in lines[0], r.stderr
+    return lines[0]
+
+
+@pytest.mark.parametrize("case", BAD_MAPS)
+def test_bad_map_one_line_naming_the_key(tmp_path: Path, case: str) -> None:
+    (old, new), fragments = BAD_MAPS[case]
+    text = pose_set_map()
+    assert old in text, old
+    line = _refused(tmp_path, text.replace(old, new, 1))
+    for f in fragments:
+        assert f in line, (f, line)
+
+
+@pytest.mark.parametrize("case", BAD_CELLS)
+def test_bad_cell_one_line_naming_the_line(tmp_path: Path, case: str) -> None:
+    edit, fragments = BAD_CELLS[case]
+    extra = "[check]\nfraction = 0.3\nseed = 1" if "split" in case else ""
+    line = _refused(tmp_path, pose_set_map(extra=extra), edit)
+    for f in fragments:
+        assert f in line, (f, line)
