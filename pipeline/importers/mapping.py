@@ -62,6 +62,7 @@ class OrientationColumns:
     columns: tuple[str | int, str | int, str | int]
     unit: str
     convention: str
+    sigma_deg: float | None = None  # stated σ per rotation-vector component
 
 
 @dataclass(frozen=True)
@@ -259,6 +260,7 @@ def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
             (orient["rx"], orient["ry"], orient["rz"]),
             orient.get("unit", "deg"),
             orient["convention"],
+            orient.get("sigma_deg"),
         ),
         check=None if check is None else CheckSplit(float(check["fraction"]), int(check["seed"])),
     )

@@ -41,6 +41,8 @@ class MeasuredRows:
         Target id -> measured position, cm, sensor frame.
     orientation_wxyz : ndarray, shape (R, 4), optional
         Unit quaternion of a 6-D target frame (the first target), when measured.
+    orientation_sigma_deg : float, optional
+        Its stated σ per rotation-vector component (deg).
     sigma : dict of str to ndarray, shape (R, 3), optional
         Target id -> standard deviation of x, y, z (cm), when the file states it.
     """
@@ -52,6 +54,7 @@ class MeasuredRows:
     targets: dict[str, np.ndarray]
     orientation_wxyz: np.ndarray | None = None
     sigma: dict[str, np.ndarray] | None = None
+    orientation_sigma_deg: float | None = None
 
     def take(self, keep: np.ndarray) -> MeasuredRows:
         """The rows ``keep`` (indices or mask), in that order."""

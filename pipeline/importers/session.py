@@ -142,6 +142,8 @@ def session_messages(
             }  # fmt: skip
             if rows.orientation_wxyz is not None and t == 0:
                 point["orientation_wxyz"] = [float(v) for v in rows.orientation_wxyz[k]]
+                if rows.orientation_sigma_deg is not None:
+                    point["orientation_sigma_deg"] = float(rows.orientation_sigma_deg)
             if rows.sigma is not None:
                 point.update(_noise(rows.sigma[target][k]))
             messages.append(Message("/points", t_ns, point))

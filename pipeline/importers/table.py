@@ -169,6 +169,7 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
         {t: np.array(v, float) for t, v in pts.items()},
         orientation_wxyz=_quaternions(np.array(angles, float), imap),
         sigma=_sigmas(rows_sigma=sig, ids=list(cols), n=len(where), imap=imap, length=length),
+        orientation_sigma_deg=None if imap.orientation is None else imap.orientation.sigma_deg,
     )  # fmt: skip
     if imap.poses:
         return pose_set(rows, imap)
