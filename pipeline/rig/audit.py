@@ -123,8 +123,9 @@ def true_tool_chain(truth: dict[str, Any]) -> SerialChain:
     """:func:`true_chain` with its tool the true tool point (``true_tool_in_last_link_cm``,
     a translation of the last link frame): the point the identification measured, where
     the signature's accuracy is claimed and predicted (stage ``uncertainty``)."""
+    chain = true_chain(truth)  # its checks first: a truth without kinematics says so
     tip = _array(truth.get("true_tool_in_last_link_cm"), (3,), "true_tool_in_last_link_cm")
-    return dataclasses.replace(true_chain(truth), tool=trans(*tip))
+    return dataclasses.replace(chain, tool=trans(*tip))
 
 
 def _aligned_errors(T_true: np.ndarray, T_model: np.ndarray) -> ModelError:
@@ -159,15 +160,16 @@ def _truth_and_robot(sdir: Path, configurations: int) -> tuple[SerialChain, Any]
         raise ArmsigError(
             f"{sdir}: not identified yet", fix=f"run `pipeline identify {sdir}` first"
         )
-    truth = true_tool_chain(read_truth(truth_path))
+    doc = read_truth(truth_path)
+    n = true_chain(doc).n_joints
     robot = session_robot(read_table(stage_path(sdir, "session")))
-    if truth.n_joints != robot.n_joints:
+    if n != robot.n_joints:
         raise ArmsigError(
-            f"{truth_path}: the true robot has {truth.n_joints} joints",
+            f"{truth_path}: the true robot has {n} joints",
             expected=f"the {robot.n_joints} joints of the session's robot {robot.name}",
             fix=_RESIMULATE,
         )
-    return truth, robot
+    return true_tool_chain(doc), robot
 
 
 def _configurations(robot: Any, configurations: int, seed: int) -> np.ndarray:
