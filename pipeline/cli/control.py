@@ -137,7 +137,13 @@ def ik(
         )
     if r.verdict_warning:
         warn(r.verdict_warning)
-    warn_outside_limits(r.outside_limits)
+    if r.status == "out_of_limits":
+        warn(
+            "no solution on the branch inside the joint limits (±360° turns and the wrist "
+            f"flip tried); outside: {', '.join(r.outside_limits)}; try: another --branch"
+        )
+    else:
+        warn_outside_limits(r.outside_limits)
     if r.branch_changed:
         warn("no solution on the requested branch; this one is on another")
     if not r.converged:

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pipeline.robots.fk import ToolPose, outside_limits
+from pipeline.robots.fk import ToolPose
 
 if TYPE_CHECKING:
     from pipeline.control.controller import Controller
@@ -94,7 +94,7 @@ class PoseSolution:
     iterations: int
     position_error_cm: float
     orientation_error_deg: float
-    outside_limits: tuple[str, ...]
+    outside_limits: tuple[str, ...]  # joints outside their limits (status out_of_limits)
     branch_changed: bool  # no solution on the requested branch: this one is on another
     tool: str
     verdict: str | None = None  # the signature's verdict (None: it has none)
@@ -125,6 +125,7 @@ def solve_pose(
     ``accept_verdict``: use a signature whose verdict is FAIL (else refused).
     """
     from pipeline.control.controller import solve_poses
+    from pipeline.control.limits import outside_names
     from pipeline.kinematics.ik import STATUS_NAMES
 
     tc = tool_controller(session, tool, accept_verdict)
@@ -142,7 +143,7 @@ def solve_pose(
         iterations=int(res.iterations[0]),
         position_error_cm=float(res.position_error_cm[0]),
         orientation_error_deg=float(np.degrees(res.orientation_error_rad[0])),
-        outside_limits=outside_limits(ctl.robot, q[0]),
+        outside_limits=outside_names(ctl.robot, res.q[:1])[0],
         branch_changed=bool(res.branch_changed is not None and res.branch_changed[0]),
         tool=tc.label,
         verdict=tc.verdict,

@@ -90,13 +90,16 @@ def solve_arrow(
     ``tool`` names the tool the poses are for, for the output's metadata (the
     controller's own tool: see :meth:`Controller.with_tool`). Columns of the input
     that carry an output's name (a file that is itself an output) are replaced.
+    ``outside_limits``: the joints outside their limits, comma-separated ("" inside;
+    a row whose status is ``out_of_limits`` has no in-limit solution on its branch).
     ``out`` is checked before the solve: an existing file is replaced only with ``force``,
     a session's measurements never (:func:`pipeline.atomic.check_new_file`). Returns a
     summary line and the number of targets not reached."""
     import pyarrow as pa
 
     from pipeline.atomic import check_new_file
-    from pipeline.kinematics.ik import STATUS_NAMES
+    from pipeline.control.limits import outside_names
+    from pipeline.kinematics.ik import STATUS_NAMES, STATUS_OUT_OF_LIMITS
     from pipeline.stages.tables import write_table
 
     table, poses, branches = read_targets(targets)
@@ -108,6 +111,7 @@ def solve_arrow(
         )
     check_new_file(out, "--out", force)
     q, res = solve_poses(controller, poses[:, :3], poses[:, 3:], branches, method, near)
+    outside = [",".join(names) for names in outside_names(controller.robot, res.q)]
     extra: dict[str, pa.Array] = {}
     for i, j in enumerate(controller.robot.joints):
         extra[f"q{i + 1}_{j.unit}"] = pa.array(q[:, i], pa.float64())
@@ -118,6 +122,7 @@ def solve_arrow(
         orientation_error_deg=pa.array(np.degrees(res.orientation_error_rad), pa.float64()),
         status=pa.array([STATUS_NAMES[int(s)] for s in res.status], pa.string()),
         branch_changed=pa.array(res.branch_changed, pa.bool_()),
+        outside_limits=pa.array(outside, pa.string()),
     )
     replaced = [c for c in table.column_names if c in extra]
     table = table.drop_columns(replaced)
@@ -126,5 +131,7 @@ def solve_arrow(
     meta = {"method": method, "signature": controller.robot.name, "tool": tool}
     write_table(Path(out), table, meta)
     failed = int((~res.converged).sum())
+    limited = int((res.status == STATUS_OUT_OF_LIMITS).sum())
     note = f" (replaced the input's {', '.join(replaced)})" if replaced else ""
-    return f"{len(q) - failed} of {len(q)} targets converged; wrote {out}{note}", failed
+    where = f" ({limited} out_of_limits: no solution inside the joint limits)" if limited else ""
+    return f"{len(q) - failed} of {len(q)} targets converged{where}; wrote {out}{note}", failed
