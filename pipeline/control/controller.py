@@ -36,7 +36,7 @@ from pipeline.kinematics.ik import (
 )
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.robots.description import RobotDescription
-from pipeline.robots.fk import ToolPose, chain_pose
+from pipeline.robots.fk import ToolPose, ToolPoses, chain_pose, chain_poses
 from pipeline.signature.file import Signature
 from pipeline.units import joints_to_internal
 
@@ -144,9 +144,16 @@ class Controller:
         """The signature tool's pose in the design base frame at joint readings ``q`` (n,),
         deg / cm: what :meth:`solve` takes back. ``design``: the design model's pose of
         the same tool (its flange times ``Y``), for comparison."""
+        return chain_pose(self.robot, self._pose_chain(design), q)
+
+    def poses(self, q: np.ndarray, design: bool = False) -> ToolPoses:
+        """:meth:`pose` of joint readings ``q`` (m, n), deg / cm, in one batch."""
+        return chain_poses(self.robot, self._pose_chain(design), q)
+
+    def _pose_chain(self, design: bool) -> SerialChain:
+        """The chain :meth:`pose` evaluates, in the design base frame."""
         X = self.sensor_from_base
-        chain = self._design_model() if design else in_frame(self.signature.chain, X)
-        return chain_pose(self.robot, chain, q)
+        return self._design_model() if design else in_frame(self.signature.chain, X)
 
     def default_branch(self):  # -> Branch
         """The Puma branch of the signature configuration."""
