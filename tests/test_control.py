@@ -297,7 +297,7 @@ def test_near_wrist_singularity_every_target_is_solved(robot3: Controller) -> No
     T = invert_transform(robot3.sensor_from_base) @ forward_kinematics(robot3.signature.chain, q)
     r = robot3.solve(T, branch=b)
     # Issue 30: next to the singularity a signature has more solutions on one branch
-    # than the solution and its wrist flip; the restarts (limits.WRIST_TURNS) find the
+    # than the solution and its wrist flip; the restarts (puma560.WRIST_TURNS) find the
     # one inside the limits for all but 3 of these 580 (their in-limit solution's basin
     # is narrower than the turns' spacing): flagged out_of_limits, none silently.
     limited = r.status == STATUS_OUT_OF_LIMITS

@@ -30,20 +30,11 @@ from pipeline.kinematics.ik import STATUS_CONVERGED, STATUS_OUT_OF_LIMITS, IKRes
 from pipeline.kinematics.ik.batch import BoolArray
 from pipeline.kinematics.transforms import Array, wrap_angle
 from pipeline.robots.description import RobotDescription
+from pipeline.robots.puma560 import NEAR_WRIST_SINGULAR, WRIST_TURNS
 from pipeline.units import joints_to_internal
 
 Limits = tuple[Array, Array, Array]
 
-#: Restarts of a solution outside the limits next to the wrist singularity: θ4 turned by
-#: each angle and θ6 by its negative (which keeps θ4 + θ6, the pose at the singularity).
-#: There a signature (whose wrist is not exactly spherical) has more solutions on one
-#: branch than the solution and its flip: measured on robot3 (580 targets within ~1° of
-#: θ5 = 0), 13 converged outside the limits with the in-limit solution 60-300° away in θ4.
-#: The real-time solver restarts from the same turns (:data:`.puma560_newton.WRIST_TURNS`).
-WRIST_TURNS = np.array([1.0, -1.0, 2.0, -2.0, 3.0, -3.0, 4.0]) * (np.pi / 4.0)
-#: |sin θ5| below which a solution outside the limits gets the :data:`WRIST_TURNS`
-#: restarts (5°); farther out the solution and its flip are the branch's only ones.
-NEAR_WRIST_SINGULAR = float(np.sin(np.deg2rad(5.0)))
 #: Configurations :func:`wrist_flip_applies` compares the flip at, and its tolerance (cm).
 FLIP_SAMPLES = 8
 FLIP_TOL_CM = 1e-9
@@ -116,7 +107,8 @@ def wrist_flip_applies(design: SerialChain) -> bool:
 
 def _restarts(q: Array) -> list[Array]:
     """The starts :func:`honour_limits` tries from solutions ``q`` (m, n) outside the limits:
-    the wrist flip, then the :data:`WRIST_TURNS` of θ4 against θ6."""
+    the wrist flip, then the :data:`~pipeline.robots.puma560.WRIST_TURNS` of θ4
+    against θ6."""
     starts = [wrist_flipped(q)]
     for turn in WRIST_TURNS:
         start = q.copy()
@@ -142,11 +134,12 @@ def honour_limits(
 
     ``chain`` and ``T`` (m, 4, 4): the model and the targets ``res`` solved (same frame);
     ``flip``: whether the wrist flip is an equivalence (:func:`wrist_flip_applies`; then
-    a solution next to the wrist singularity also gets the :data:`WRIST_TURNS`
-    restarts); ``task_axes``: those of the solve (None: the full pose); ``arm``: the
-    arm's branch flags of joints (m, n) -> (m, k), which a restart must keep (None:
-    any); ``near`` (n,) or (m, n): the start configurations, whose 2π class a restart's
-    solution takes before the shift, as the design start's (None: the solution's own).
+    a solution next to the wrist singularity also gets the
+    :data:`~pipeline.robots.puma560.WRIST_TURNS` restarts); ``task_axes``: those of the
+    solve (None: the full pose); ``arm``: the arm's branch flags of joints (m, n) ->
+    (m, k), which a restart must keep (None: any); ``near`` (n,) or (m, n): the start
+    configurations, whose 2π class a restart's solution takes before the shift, as the
+    design start's (None: the solution's own).
     The joints of ``res`` are shifted in place; a solution found by a restart
     replaces its row's joints and errors, and every restart adds its iterations.
     """

@@ -30,7 +30,6 @@ import math
 
 import numpy as np
 
-from pipeline.control.limits import NEAR_WRIST_SINGULAR, WRIST_TURNS
 from pipeline.control.puma560_start import (
     NO_START,
     _design_start,
@@ -52,6 +51,7 @@ from pipeline.kinematics.ik_compiled import (
     solve_one_target,
     workspace,
 )
+from pipeline.robots.puma560 import NEAR_WRIST_SINGULAR, WRIST_TURNS
 
 #: Kernel outcome: converged, but on another branch than requested (flagged:
 #: :attr:`pipeline.kinematics.ik.result.IKResult.branch_changed`).
@@ -63,7 +63,7 @@ OUT_OF_LIMITS, OUT_OF_LIMITS_OFF_BRANCH = 4, 5
 
 
 #: Restarts (fallback step 2, see :class:`.puma560_solver.PumaSolver`), imported from
-#: :data:`pipeline.control.limits.WRIST_TURNS`: θ4 turned by each angle and θ6 by its
+#: :data:`pipeline.robots.puma560.WRIST_TURNS`: θ4 turned by each angle and θ6 by its
 #: negative, which keeps θ4 + θ6 and so the pose at the wrist singularity. Near it (θ5
 #: within ~2°) the design start fixes θ4 + θ6 but not θ4 alone: with 0.03° of model
 #: error the signature's θ4 can lie 1-2 rad from the design's, behind a local minimum of

@@ -68,7 +68,8 @@ class PumaSolver:
     1. Newton-Raphson (5.4) from the design start, Levenberg-Marquardt steps
        where a Newton step does not descend (:mod:`pipeline.kinematics.ik_compiled`);
     2. (branch-preserving) the same from the start with θ4 and θ6 turned
-       against each other (:data:`.puma560_newton.WRIST_TURNS`), the first solution on the branch;
+       against each other (:data:`pipeline.robots.puma560.WRIST_TURNS`), the first
+       solution on the branch;
     3. (any branch, flagged) the first solution of 1-2 on another branch,
        with :attr:`~pipeline.kinematics.ik.result.IKResult.branch_changed` set;
     4. the numpy iteration of :func:`pipeline.kinematics.ik.newton.newton_raphson`
