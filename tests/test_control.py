@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 
 from pipeline.control.controller import Controller, parse_branch
+from pipeline.control.limits import outside_mask
 from pipeline.control.session import session_controller
 from pipeline.errors import ArmsigError
 from pipeline.identify import identify
 from pipeline.kinematics.chain import forward_kinematics
+from pipeline.kinematics.ik import STATUS_OUT_OF_LIMITS
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.robots import puma560
 
@@ -190,10 +192,15 @@ def test_q_near_picks_the_branch_of_each_target(robot3: Controller) -> None:
         assert ok.mean() >= 0.97 and ok[same].all()
         # Same branch and 2π class as q (joint limits wider than ±180°): q itself.
         np.testing.assert_allclose(r.q[same], q[same], atol=1e-7)
-    # Without q_near every target gets the signature configuration's branch.
+    # Without q_near every target gets the signature configuration's arm branch
+    # (shoulder, elbow); its wrist flag unless only the flipped wrist is inside the limits.
     r = robot3.solve(T)
     home = puma560.branch_of(robot3.signature.chain.joint_offsets)
-    assert np.all(puma560.branch_of(r.q) == home, axis=1).mean() >= 0.95
+    got = puma560.branch_of(r.q)
+    assert np.all(got[:, :2] == home[:2], axis=1).mean() >= 0.95
+    flipped = r.converged & (got[:, 2] != home[2])
+    assert flipped.any()  # robot3's wrist_roll limits (-110..170°) leave some only flipped
+    assert not outside_mask(r.q[flipped], robot3._limits).any()
     with pytest.raises(ArmsigError, match="bad start configuration"):
         robot3.solve(T[:3], q_near=np.zeros(5))
 
@@ -289,11 +296,18 @@ def test_near_wrist_singularity_every_target_is_solved(robot3: Controller) -> No
     q = q[np.all(puma560.branch_of(q) == [1, 1, 1], axis=1)]
     T = invert_transform(robot3.sensor_from_base) @ forward_kinematics(robot3.signature.chain, q)
     r = robot3.solve(T, branch=b)
-    assert r.converged.all()
+    # Issue 30: next to the singularity a signature has more solutions on one branch
+    # than the solution and its wrist flip; the restarts (puma560.WRIST_TURNS) find the
+    # one inside the limits for all but 3 of these 580 (their in-limit solution's basin
+    # is narrower than the turns' spacing): flagged out_of_limits, none silently.
+    limited = r.status == STATUS_OUT_OF_LIMITS
+    assert (r.converged | limited).all() and limited.sum() <= 3
+    assert not outside_mask(r.q[r.converged], robot3._limits).any()
     assert r.position_error_cm.max() <= 1e-7 and r.orientation_error_rad.max() <= 1e-10
     on = np.all(puma560.branch_of(r.q) == [1, 1, 1], axis=1)
+    on_arm = np.all(puma560.branch_of(r.q)[:, :2] == [1, 1], axis=1)
     assert r.branch_changed is not None
-    np.testing.assert_array_equal(r.branch_changed, ~on)
+    assert r.branch_changed[~on_arm].all() and not r.branch_changed[on].any()
     assert on.mean() >= 0.99
 
 
@@ -356,7 +370,7 @@ def test_compiled_kernels_allocate_nothing_per_target(robot3: Controller) -> Non
     allocation counter: a 200-target batch allocates hardly more than a 10-target one."""
     from numba.core.runtime import _nrt_python, rtsys
 
-    from pipeline.control.controller import _shift_into
+    from pipeline.control.limits import shift_into
 
     b = parse_branch("right-up-noflip")
     q, T = _targets(robot3, 3000, 11)
@@ -381,7 +395,7 @@ def test_compiled_kernels_allocate_nothing_per_target(robot3: Controller) -> Non
     # The batch comes back shifted into the joint limits (by the kernel, not the controller).
     res = robot3.solve(T, branch=b)
     shifted = res.q.copy()
-    _shift_into(shifted, *robot3._limits)
+    shift_into(shifted, *robot3._limits)
     np.testing.assert_array_equal(shifted, res.q)
 
 

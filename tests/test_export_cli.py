@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner, Result
 
-from pipeline.cli import EXIT_REFUSED, app
+from pipeline.cli import EXIT_REFUSED, EXIT_USAGE, app
 from pipeline.signature.checks import DIGEST_KEY
 from pipeline.signature.file import signature_text
 
@@ -48,9 +48,16 @@ def test_default_path_and_json_summary(session: Path) -> None:
 
 
 def test_unknown_format_and_frame(session: Path) -> None:
-    assert_one_error(invoke(str(session), "--format", "sdf"), "unknown export format", "urdf")
-    r = invoke(str(session), "--format", "urdf", "--frame", "world")
-    assert_one_error(r, "unknown export frame", "design-base")
+    """Choices are enums (issue 30 item 6): a wrong one is a usage error (exit 2) that
+    lists them, as typer's own parser words it."""
+    for args, choices in (
+        (("--format", "sdf"), "'urdf', 'dh', 'mdh', 'json'"),
+        (("--format", "urdf", "--frame", "world"), "'sensor', 'design-base'"),
+    ):
+        r = invoke(str(session), *args)
+        assert r.exit_code == EXIT_USAGE, r.output
+        lines = r.stderr.splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error: ") and choices in lines[0]
     assert not (session / "export").exists()
 
 

@@ -15,7 +15,8 @@ Only this module turns exceptions into exit codes, in one place (:class:`_Pipeli
 0   done
 1   refused input or data (an :class:`~pipeline.errors.ArmsigError`)
 2   usage error (unknown command or option, missing or malformed argument)
-3   ``ik``: a target was not reached (the joints are still printed / written)
+3   ``ik``: a target was not reached, or has no solution inside the joint limits on
+    its branch (status ``out_of_limits``; the joints are still printed / written)
 4   the signature's verdict is FAIL (docs/verdict.md): ``identify`` after writing the
     signature and the report and printing the verdict; ``export`` and ``ik`` refuse it
     unless ``--accept-verdict`` (a :class:`~pipeline.errors.VerdictFailError`)

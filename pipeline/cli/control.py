@@ -7,7 +7,15 @@ from typing import Annotated
 
 import typer
 
-from pipeline.cli.options import AcceptVerdict, JsonOption, SessionArg, finite, joint_values
+from pipeline.cli.options import (
+    AcceptVerdict,
+    JsonOption,
+    Method,
+    SessionArg,
+    choice,
+    finite,
+    joint_values,
+)
 from pipeline.cli.output import NotReached, print_json, warn, warn_outside_limits
 from pipeline.errors import ArmsigError
 
@@ -26,28 +34,74 @@ def fk(
         ),
     ],
     q: Annotated[
-        str, typer.Option("--q", help="Joint values, comma or space separated (deg / cm).")
-    ],
+        str | None, typer.Option("--q", help="Joint values, comma or space separated (deg / cm).")
+    ] = None,
+    q_file: Annotated[
+        str | None,
+        typer.Option(
+            "--q-file",
+            help="Many configurations: an Arrow IPC file (or .csv with a header) with columns "
+            "q1_deg, q2_deg, ... (cm for prismatic joints), as `ik --targets` writes.",
+        ),
+    ] = None,
+    out: Annotated[
+        str | None,
+        typer.Option(help="Arrow file for the poses of --q-file (an `ik --targets` input)."),
+    ] = None,
+    force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
     design: Annotated[
         bool, typer.Option(help="For a session: the design model's pose of the session's tool.")
     ] = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Print the tool pose at joint values Q (a session's signature or a design model).
 
     For a session: the pose of its signature's tool in the design base frame (what
     `pipeline ik SESSION --pose` takes back); with --design, the design model's pose
-    of that tool. For a robot: the pose of its design flange.
+    of that tool. For a robot: the pose of its design flange. --json prints every
+    number at full precision; --q-file takes many configurations (with --out or --json).
     """
     import numpy as np
 
-    from pipeline.control.poses import tool_pose
+    from pipeline.control.poses import poses_of_file, tool_pose
 
-    pose = tool_pose(robot, joint_values(q, "--q"), design=design)
-    with np.printoptions(precision=6, suppress=True):
-        typer.echo(f"xyz_cm  = {pose.xyz_cm}")
-        typer.echo(f"rpy_deg = {pose.rpy_deg}")
-        typer.echo("T =")
-        typer.echo(str(pose.matrix))
+    if (q is None) == (q_file is None):  # a usage error (exit 2), as a missing option
+        raise typer.BadParameter(
+            "give one of '--q' and '--q-file'", param_hint="'--q' / '--q-file'"
+        )
+    if q_file is not None:
+        if out is None and not as_json:
+            raise ArmsigError("--q-file needs --out or --json", fix="--out poses.arrow")
+        done = poses_of_file(robot, q_file, design=design, out=out, force=force)
+        if as_json:
+            print_json(done.to_dict())
+        else:
+            typer.echo(f"wrote {done.out}: {len(done.q)} poses of {done.robot}")
+        outside = sum(1 for names in done.poses.outside_limits if names)
+        if outside:
+            warn(f"{outside} configuration(s) outside joint limits (column outside_limits)")
+        return
+    if out is not None:
+        raise ArmsigError("--out is for --q-file", fix="drop --out, or give --q-file")
+    assert q is not None
+    values = joint_values(q, "--q")
+    pose = tool_pose(robot, values, design=design)
+    if as_json:
+        print_json(
+            {
+                "q": values,
+                "xyz_cm": pose.xyz_cm.tolist(),
+                "rpy_deg": pose.rpy_deg.tolist(),
+                "matrix": pose.matrix.tolist(),
+                "outside_limits": list(pose.outside_limits),
+            }
+        )
+    else:
+        with np.printoptions(precision=6, suppress=True):
+            typer.echo(f"xyz_cm  = {pose.xyz_cm}")
+            typer.echo(f"rpy_deg = {pose.rpy_deg}")
+            typer.echo("T =")
+            typer.echo(str(pose.matrix))
     warn_outside_limits(pose.outside_limits)
 
 
@@ -61,7 +115,7 @@ def ik(
     branch: Annotated[
         str | None, typer.Option(help="Puma branch, e.g. right-up-noflip (default: that of q^s).")
     ] = None,
-    method: Annotated[str, typer.Option(help="nr (Newton-Raphson) or jacobi.")] = "nr",
+    method: Annotated[Method, choice("nr (Newton-Raphson) or jacobi.")] = Method.nr,
     targets: Annotated[
         str | None, typer.Option(help="Arrow file: x_cm y_cm z_cm rx_deg ry_deg rz_deg [branch].")
     ] = None,
@@ -101,7 +155,7 @@ def ik(
             session,
             targets,
             out,
-            method=method,
+            method=method.value,
             tool=user_tool,
             near=q_near,
             force=force,
@@ -122,7 +176,7 @@ def ik(
         session,
         finite(pose, "--pose"),
         branch=branch,
-        method=method,
+        method=method.value,
         tool=user_tool,
         near=q_near,
         accept_verdict=accept_verdict,
@@ -137,7 +191,13 @@ def ik(
         )
     if r.verdict_warning:
         warn(r.verdict_warning)
-    warn_outside_limits(r.outside_limits)
+    if r.status == "out_of_limits":
+        warn(
+            "no solution on the branch inside the joint limits (±360° turns and the wrist "
+            f"flip tried); outside: {', '.join(r.outside_limits)}; try: another --branch"
+        )
+    else:
+        warn_outside_limits(r.outside_limits)
     if r.branch_changed:
         warn("no solution on the requested branch; this one is on another")
     if not r.converged:

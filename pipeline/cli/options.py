@@ -8,12 +8,51 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from enum import StrEnum
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
 from pipeline.errors import ArmsigError
+
+
+class Method(StrEnum):
+    """``ik --method``: Newton-Raphson (5.4) or Jacobi iteration (5.8)."""
+
+    nr = "nr"
+    jacobi = "jacobi"
+
+
+class ExportFormat(StrEnum):
+    """``export --format`` (docs/export.md)."""
+
+    urdf = "urdf"
+    dh = "dh"
+    mdh = "mdh"
+    json = "json"
+
+
+class ExportFrame(StrEnum):
+    """``export --frame``: the exported chain's world frame."""
+
+    sensor = "sensor"
+    design_base = "design-base"
+
+
+class Sensor(StrEnum):
+    """``simulate --sensor``."""
+
+    sonic = "sonic"
+    tracker = "tracker"
+
+
+#: Options whose value is one of an :class:`~enum.Enum`'s: any case (``--format URDF``),
+#: offered by shell completion, refused with the choices (exit 2) otherwise.
+def choice(help_text: str, *names: str) -> Any:
+    """A ``typer.Option`` taking an enum's value in any case."""
+    return typer.Option(*names, help=help_text, case_sensitive=False)
+
 
 SessionArg = Annotated[str, typer.Argument(help="Session folder, e.g. sessions/robot3.")]
 #: ``--json``: machine output on stdout (warnings and errors stay on stderr).

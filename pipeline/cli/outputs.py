@@ -6,7 +6,15 @@ from typing import Annotated
 
 import typer
 
-from pipeline.cli.options import AcceptVerdict, JsonOption, SessionArg, joint_values
+from pipeline.cli.options import (
+    AcceptVerdict,
+    ExportFormat,
+    ExportFrame,
+    JsonOption,
+    SessionArg,
+    choice,
+    joint_values,
+)
 from pipeline.cli.output import print_json, warn, warn_outside_limits
 
 commands = typer.Typer()
@@ -41,7 +49,7 @@ def viz(
 def export(
     session: SessionArg,
     format_: Annotated[
-        str, typer.Option("--format", help="urdf, dh, mdh (Craig) or json (docs/export.md).")
+        ExportFormat, choice("urdf, dh, mdh (Craig) or json (docs/export.md).", "--format")
     ],
     out: Annotated[
         str | None,
@@ -49,8 +57,8 @@ def export(
     ] = None,
     design: Annotated[bool, typer.Option(help="Export the design model instead.")] = False,
     frame: Annotated[
-        str, typer.Option(help="World frame: sensor, or design-base (via the design alignment).")
-    ] = "sensor",
+        ExportFrame, choice("World frame: sensor, or design-base (via the design alignment).")
+    ] = ExportFrame.sensor,
     force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
     accept_verdict: AcceptVerdict = False,
     as_json: JsonOption = False,
@@ -60,10 +68,10 @@ def export(
 
     r = run_export(
         session,
-        format_,
+        format_.value,
         out=out,
         design=design,
-        frame=frame,
+        frame=frame.value,
         force=force,
         accept_verdict=accept_verdict,
     )

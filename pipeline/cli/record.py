@@ -7,7 +7,14 @@ from typing import Annotated
 
 import typer
 
-from pipeline.cli.options import ForceRecording, NewSessionArg, comma_list, new_session_folder
+from pipeline.cli.options import (
+    ForceRecording,
+    NewSessionArg,
+    Sensor,
+    choice,
+    comma_list,
+    new_session_folder,
+)
 
 commands = typer.Typer()
 
@@ -78,11 +85,8 @@ def simulate(
         ),
     ] = 0,
     sensor: Annotated[
-        str,
-        typer.Option(
-            help="sonic (the sparker digitizer) or tracker (a laser tracker, docs/rig.md)."
-        ),
-    ] = "sonic",
+        Sensor, choice("sonic (the sparker digitizer) or tracker (a laser tracker, docs/rig.md).")
+    ] = Sensor.sonic,
     targets: Annotated[
         int, typer.Option(min=1, help="Tracker: reflectors per sweep in a nest, ids T1..TK.")
     ] = 1,
@@ -147,7 +151,7 @@ def simulate(
         noiseless=noiseless,
         max_sweep_deg=max_sweep_deg,
         resettle_counts=resettle_counts,
-        sensor=sensor,
+        sensor=sensor.value,
         targets=targets,
         nest_on_axis=nest_on_axis,
         check=check,

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.control.limits import honour_limits, limit_arrays, wrist_flip_applies
 from pipeline.errors import ArmsigError
 from pipeline.kinematics.chain import SerialChain, in_frame
 from pipeline.kinematics.ik import (
@@ -35,7 +36,7 @@ from pipeline.kinematics.ik import (
 )
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.robots.description import RobotDescription
-from pipeline.robots.fk import ToolPose, chain_pose
+from pipeline.robots.fk import ToolPose, ToolPoses, chain_pose, chain_poses
 from pipeline.signature.file import Signature
 from pipeline.units import joints_to_internal
 
@@ -99,7 +100,13 @@ class Controller:
     @cached_property
     def _limits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Lower and upper joint limits (rad / cm) and the 2π turn of each joint (0: prismatic)."""
-        return _limit_arrays(self.robot)
+        return limit_arrays(self.robot)
+
+    @cached_property
+    def _wrist_flips(self) -> bool:
+        """Whether the wrist flip is an equivalence of the design model
+        (:func:`pipeline.control.limits.wrist_flip_applies`)."""
+        return wrist_flip_applies(self.robot.design_chain())
 
     @cached_property
     def _design_inverses(self) -> dict[tuple[Any, bool], DesignInverse]:
@@ -137,9 +144,16 @@ class Controller:
         """The signature tool's pose in the design base frame at joint readings ``q`` (n,),
         deg / cm: what :meth:`solve` takes back. ``design``: the design model's pose of
         the same tool (its flange times ``Y``), for comparison."""
+        return chain_pose(self.robot, self._pose_chain(design), q)
+
+    def poses(self, q: np.ndarray, design: bool = False) -> ToolPoses:
+        """:meth:`pose` of joint readings ``q`` (m, n), deg / cm, in one batch."""
+        return chain_poses(self.robot, self._pose_chain(design), q)
+
+    def _pose_chain(self, design: bool) -> SerialChain:
+        """The chain :meth:`pose` evaluates, in the design base frame."""
         X = self.sensor_from_base
-        chain = self._design_model() if design else in_frame(self.signature.chain, X)
-        return chain_pose(self.robot, chain, q)
+        return self._design_model() if design else in_frame(self.signature.chain, X)
 
     def default_branch(self):  # -> Branch
         """The Puma branch of the signature configuration."""
@@ -208,8 +222,11 @@ class Controller:
             solver = self.realtime(branch)
             near = None if q_near is None else self._starts(T.shape[0], q_near)
             if method == "nr":
-                return solver.solve(T, near)  # shifted into the limits by the solver
-            return self._into_limits(solver.solve_jacobi(T, near))
+                return solver.solve(T, near)  # inside the limits by the solver (its kernel)
+            res = solver.solve_jacobi(T, near)
+            return self._into_limits(
+                res, self.signature.chain, self.sensor_from_base @ T, None, near
+            )
         if self.robot.name == "puma560" and branch is None and q_near is None:
             branch = self.default_branch()
         T_sensor = self.sensor_from_base @ T
@@ -218,7 +235,7 @@ class Controller:
             res = newton_raphson(
                 self.signature.chain, T_sensor, q0, self.resolution, record_history=record_history
             )
-            return self._into_limits(res)
+            return self._into_limits(res, self.signature.chain, T_sensor, None, q_near)
         if self.robot.name != "puma560":
             raise ArmsigError(
                 f"{self.robot.name}: Jacobi iteration needs a closed-form design inverse",
@@ -234,7 +251,7 @@ class Controller:
             self.resolution,
             record_history=record_history,
         )
-        return self._into_limits(res)
+        return self._into_limits(res, self.signature.chain, T_sensor, None, q_near)
 
     @cached_property
     def _compilable(self) -> bool:
@@ -291,9 +308,22 @@ class Controller:
         self._solvers[branch] = solver
         return solver
 
-    def _into_limits(self, res: IKResult) -> IKResult:
-        _shift_into(res.q, *self._limits)  # the solver's own array
-        return res
+    def _into_limits(
+        self,
+        res: IKResult,
+        chain: SerialChain,
+        T: np.ndarray,
+        task_axes: tuple[int, ...] | None = None,
+        q_near: np.ndarray | None = None,
+    ) -> IKResult:
+        """``res`` (joints shifted in place) inside the limits, or marked ``out_of_limits``
+        (:func:`pipeline.control.limits.honour_limits`); ``chain``, ``T``: what it solved,
+        ``q_near``: from where (None: q^s)."""
+        arm = _puma_arm if self.robot.name == "puma560" else None
+        near = self._starts(len(T), q_near)
+        return honour_limits(
+            res, chain, T, self._limits, self.resolution, self._wrist_flips, task_axes, arm, near
+        )
 
     def _solve_task_axes(
         self,
@@ -316,7 +346,16 @@ class Controller:
         res = newton_raphson(
             chain, T_base, q0, self.resolution, record_history=record_history, task_axes=axes
         )
-        return self._into_limits(res)
+        return self._into_limits(res, chain, T_base, axes, q_near)
+
+
+def _puma_arm(q: np.ndarray) -> np.ndarray:
+    """The Puma's shoulder and elbow flags (m, 2) of joints (m, 6): what a solution moved
+    into the limits keeps (:func:`pipeline.control.limits.honour_limits`)."""
+    from pipeline.robots.puma560 import branch_of
+
+    flags: np.ndarray = branch_of(q)[:, :2]
+    return flags
 
 
 #: Sample configurations :func:`task_axes_for` tests the design Jacobian at.
@@ -334,31 +373,6 @@ def task_axes_for(robot: RobotDescription) -> tuple[int, ...]:
     lim = joints_to_internal(robot.limits.T, robot.prismatic).T
     q = rng.uniform(lim[:, 0], lim[:, 1], (AXES_SAMPLES, robot.n_joints))
     return controllable_axes(robot.design_chain(), q)
-
-
-def into_limits(robot: RobotDescription, q: np.ndarray) -> np.ndarray:
-    """Revolute joints (m, n) in rad shifted by ±2π where that brings them inside the limits."""
-    out = np.array(q, float)
-    _shift_into(out, *_limit_arrays(robot))
-    return out
-
-
-def _limit_arrays(robot: RobotDescription) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Lower and upper limits (n,) in rad / cm, and the turn (n,): 2π, or 0 for prismatic joints."""
-    lower, upper = joints_to_internal(robot.limits.T, robot.prismatic)
-    return lower, upper, np.where(robot.prismatic, 0.0, 2.0 * np.pi)
-
-
-def _shift_into(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, turn: np.ndarray) -> None:
-    """:func:`into_limits` in place on ``q`` (m, n), with the limits of :func:`_limit_arrays`."""
-    outside = (q < lower) | (q > upper)
-    if not np.count_nonzero(outside):  # the common case
-        return
-    for shift in (turn, -turn):
-        moved = q + shift
-        take = outside & (moved >= lower) & (moved <= upper)
-        np.copyto(q, moved, where=take)
-        outside &= ~take
 
 
 def solve_poses(

@@ -2,7 +2,7 @@
 ``pipeline ik``, for tests and notebooks too.
 
 - :func:`tool_pose`: the tool pose at joint readings, of a session's signature or of a
-  robot's design model;
+  robot's design model; :func:`poses_of_file`: the same for a file of configurations;
 - :func:`solve_pose`: the joint readings that put a session's tool at one pose;
 - :func:`solve_targets`: an Arrow file of poses solved into an Arrow file of joints.
 
@@ -20,7 +20,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pipeline.robots.fk import ToolPose, outside_limits
+from pipeline.errors import ArmsigError
+from pipeline.robots.description import RobotDescription
+from pipeline.robots.fk import ToolPose, ToolPoses
 
 if TYPE_CHECKING:
     from pipeline.control.controller import Controller
@@ -34,14 +36,99 @@ def tool_pose(robot: str | Path, q: Sequence[float], design: bool = False) -> To
     model's pose of that tool), else a built-in robot name or a ``.toml`` description
     (the pose of its design flange).
     """
+    model = _pose_model(robot)
+    if not isinstance(model, RobotDescription):
+        return model.pose(list(q), design=design)  # type: ignore[no-any-return]
+    from pipeline.robots.fk import design_pose
+
+    return design_pose(model, list(q))
+
+
+def _pose_model(robot: str | Path) -> Any:
+    """What :func:`tool_pose` evaluates: a session's controller, else the robot description."""
     if Path(robot).is_dir():
         from pipeline.control.session import session_controller
 
-        return session_controller(robot).pose(list(q), design=design)
+        return session_controller(robot)
     from pipeline.robots import get_robot
-    from pipeline.robots.fk import design_pose
 
-    return design_pose(get_robot(str(robot)), list(q))
+    return get_robot(str(robot))
+
+
+@dataclass(frozen=True)
+class PosesFile:
+    """What :func:`poses_of_file` computed: the configurations' robot, joint readings
+    (m, n), poses, and the file written (None: none)."""
+
+    robot: str
+    joints: tuple[str, ...]
+    q: np.ndarray
+    poses: ToolPoses
+    out: str | None
+
+    def to_dict(self) -> dict[str, Any]:
+        """Every pose at full precision (``fk --q-file --json``)."""
+        p = self.poses
+        return {
+            "robot": self.robot,
+            "joints": list(self.joints),
+            "out": self.out,
+            "poses": [
+                {
+                    "q": self.q[k].tolist(),
+                    "xyz_cm": p.xyz_cm[k].tolist(),
+                    "rpy_deg": p.rpy_deg[k].tolist(),
+                    "matrix": p.matrix[k].tolist(),
+                    "outside_limits": list(p.outside_limits[k]),
+                }
+                for k in range(len(self.q))
+            ],
+        }
+
+
+def poses_of_file(
+    robot: str | Path,
+    q_file: str | Path,
+    *,
+    design: bool = False,
+    out: str | Path | None = None,
+    force: bool = False,
+) -> PosesFile:
+    """:func:`tool_pose` of every configuration of ``q_file`` (Arrow IPC or CSV, columns
+    ``q1_deg`` ... as ``ik --targets`` writes: :func:`pipeline.control.targets.read_joints`).
+
+    ``out``: an Arrow file of the input's columns plus the poses (``x_cm`` ... ``rz_deg``,
+    an ``ik --targets`` input) and ``outside_limits``, written atomically; an existing
+    file is replaced only with ``force``.
+    """
+    import pyarrow as pa
+
+    from pipeline.atomic import check_new_file
+    from pipeline.control.targets import TARGET_COLUMNS, read_joints
+    from pipeline.robots.fk import chain_poses
+    from pipeline.stages.tables import write_table
+
+    model = _pose_model(robot)
+    desc = model if isinstance(model, RobotDescription) else model.robot
+    table, q = read_joints(q_file, desc)
+    if out is not None:
+        if Path(out).resolve() == Path(q_file).resolve():
+            raise ArmsigError(f"--out {out} is the --q-file file", fix="--out poses.arrow")
+        check_new_file(out, "--out", force)
+    if isinstance(model, RobotDescription):
+        poses = chain_poses(desc, desc.design_chain(), q)
+    else:
+        poses = model.poses(q, design=design)
+    if out is not None:
+        values = np.concatenate([poses.xyz_cm, poses.rpy_deg], axis=1)
+        extra = {c: pa.array(values[:, k], pa.float64()) for k, c in enumerate(TARGET_COLUMNS)}
+        extra["outside_limits"] = pa.array([",".join(n) for n in poses.outside_limits])
+        table = table.drop_columns([c for c in table.column_names if c in extra])
+        for name, values_ in extra.items():
+            table = table.append_column(name, values_)
+        write_table(Path(out), table, {"robot": desc.name, "design": str(design)})
+    joints = tuple(j.name for j in desc.joints)
+    return PosesFile(desc.name, joints, q, poses, None if out is None else str(out))
 
 
 @dataclass(frozen=True)
@@ -94,7 +181,7 @@ class PoseSolution:
     iterations: int
     position_error_cm: float
     orientation_error_deg: float
-    outside_limits: tuple[str, ...]
+    outside_limits: tuple[str, ...]  # joints outside their limits (status out_of_limits)
     branch_changed: bool  # no solution on the requested branch: this one is on another
     tool: str
     verdict: str | None = None  # the signature's verdict (None: it has none)
@@ -125,6 +212,7 @@ def solve_pose(
     ``accept_verdict``: use a signature whose verdict is FAIL (else refused).
     """
     from pipeline.control.controller import solve_poses
+    from pipeline.control.limits import outside_names
     from pipeline.kinematics.ik import STATUS_NAMES
 
     tc = tool_controller(session, tool, accept_verdict)
@@ -142,7 +230,7 @@ def solve_pose(
         iterations=int(res.iterations[0]),
         position_error_cm=float(res.position_error_cm[0]),
         orientation_error_deg=float(np.degrees(res.orientation_error_rad[0])),
-        outside_limits=outside_limits(ctl.robot, q[0]),
+        outside_limits=outside_names(ctl.robot, res.q[:1])[0],
         branch_changed=bool(res.branch_changed is not None and res.branch_changed[0]),
         tool=tc.label,
         verdict=tc.verdict,

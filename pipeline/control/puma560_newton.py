@@ -26,14 +26,19 @@ numpy iteration from the kernel's start (:func:`pipeline.kinematics.ik.newton.fi
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from pipeline.control.puma560_start import (
     NO_START,
     _design_start,
+    _inside,
     _into_limits,
     _on_branch,
+    _same_arm,
     _to_sensor,
+    _wrap,
 )
 from pipeline.kinematics.ik_compiled import (
     FAST_CONVERGED,
@@ -41,24 +46,30 @@ from pipeline.kinematics.ik_compiled import (
     Buf,
     Work,
     _errors,
+    inline_jit,
     jit,
     solve_one_target,
     workspace,
 )
+from pipeline.robots.puma560 import NEAR_WRIST_SINGULAR, WRIST_TURNS
 
 #: Kernel outcome: converged, but on another branch than requested (flagged:
 #: :attr:`pipeline.kinematics.ik.result.IKResult.branch_changed`).
 OFF_BRANCH = 3
+#: Kernel outcomes: converged (on the requested branch, or on another: flagged as
+#: :data:`OFF_BRANCH`), but neither the solution nor its wrist flip is inside the joint
+#: limits after the ±2π shift (:mod:`pipeline.control.limits`); ``q`` holds the solution.
+OUT_OF_LIMITS, OUT_OF_LIMITS_OFF_BRANCH = 4, 5
 
 
-#: Restarts (fallback step 3, see :class:`.puma560_solver.PumaSolver`): θ4 turned by each angle and
-#: θ6 by its negative, which keeps θ4 + θ6 and so the pose at the wrist
-#: singularity. Near it (θ5 within ~2°) the design start fixes θ4 + θ6 but not
-#: θ4 alone: with 0.03° of model error the signature's θ4 can lie 1-2 rad from
-#: the design's, behind a local minimum of the residual at θ5 ≈ 0. Measured on
-#: robot3 (100,000 targets of one branch): all 73 targets the first solve left
-#: unsolved converge from one of the first four, in 4-15 iterations.
-WRIST_TURNS = np.array([1.0, -1.0, 2.0, -2.0, 3.0, -3.0, 4.0]) * (np.pi / 4.0)
+#: Restarts (fallback step 2, see :class:`.puma560_solver.PumaSolver`), imported from
+#: :data:`pipeline.robots.puma560.WRIST_TURNS`: θ4 turned by each angle and θ6 by its
+#: negative, which keeps θ4 + θ6 and so the pose at the wrist singularity. Near it (θ5
+#: within ~2°) the design start fixes θ4 + θ6 but not θ4 alone: with 0.03° of model
+#: error the signature's θ4 can lie 1-2 rad from the design's, behind a local minimum of
+#: the residual at θ5 ≈ 0. Measured on robot3 (100,000 targets of one branch): all 73
+#: targets the first solve left unsolved converge from one of the first four, in 4-15
+#: iterations. The same turns restart a solution outside the joint limits there.
 
 
 @jit
@@ -103,6 +114,49 @@ def _solve_target(
     return FAST_DEFERRED, total
 
 
+@inline_jit
+def _restart_into_limits(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf, res: Buf, limit: Buf,
+    settings: Buf, target: Buf, q_near: Buf, q: Buf, delta: Buf, spare: Buf, ws: Work,
+    info: Buf, lower: Buf, upper: Buf, turn: Buf,
+) -> None:  # fmt: skip
+    """A converged solution ``q`` outside the limits: Newton-Raphson from its wrist flip
+    ``(θ4 + π, −θ5, θ6 + π)``, then (next to the wrist singularity) from its
+    :data:`WRIST_TURNS`, the first converged one on the same arm branch inside the limits
+    once in the 2π class nearest ``q_near`` and shifted by ±2π
+    (:func:`pipeline.control.limits.honour_limits`, in numpy). None: ``q`` and δ kept,
+    ``info[0]`` set to :data:`OUT_OF_LIMITS` (or :data:`OUT_OF_LIMITS_OFF_BRANCH`);
+    ``info[1]`` counts every restart's iterations."""
+    for j in range(6):
+        spare[0, j], spare[1, j] = q[j], delta[j]
+    near_singular = abs(math.sin(spare[0, 4])) < NEAR_WRIST_SINGULAR
+    for attempt in range(WRIST_TURNS.shape[0] + 1):
+        if attempt and not near_singular:
+            break
+        for j in range(6):
+            q[j] = spare[0, j]
+        if attempt:
+            q[3] += WRIST_TURNS[attempt - 1]
+            q[5] -= WRIST_TURNS[attempt - 1]
+        else:
+            q[3] += math.pi
+            q[4] = -q[4]
+            q[5] += math.pi
+        outcome, it = solve_one_target(
+            base, links, tool, offsets, prismatic, target, q, res, limit, settings, delta, ws
+        )
+        info[1] += it
+        if outcome == FAST_CONVERGED:
+            for j in range(6):  # the 2π class nearest q_near, as the design start's
+                q[j] = q_near[j] + _wrap(q[j] - q_near[j])
+            _into_limits(q, lower, upper, turn)
+            if _inside(q, lower, upper) and _same_arm(q, spare[0]):
+                return
+    for j in range(6):
+        q[j], delta[j] = spare[0, j], spare[1, j]
+    info[0] = OUT_OF_LIMITS if info[0] == FAST_CONVERGED else OUT_OF_LIMITS_OFF_BRANCH
+
+
 @jit
 def _solve_targets(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
@@ -130,16 +184,23 @@ def _solve_realtime(
     X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf, Tw: Buf,
     spare: Buf, ws: Work, info: Buf, errors: Buf, lower: Buf, upper: Buf, turn: Buf,
 ) -> None:  # fmt: skip
-    """:func:`_solve_target` of one target, then the joint-limit shift of a converged
-    solution; ``info`` (2,) receives the outcome and the iteration count, ``errors``
-    (2,) the position (cm) and rotation (rad) error of δ."""
+    """:func:`_solve_target` of one target, then the joint limits of a converged solution
+    (:mod:`pipeline.control.limits`): shifted by ±2π, else its wrist flip polished by
+    Newton-Raphson and shifted, else :data:`OUT_OF_LIMITS` (or
+    :data:`OUT_OF_LIMITS_OFF_BRANCH`) with the solution kept; ``info`` (2,) receives
+    the outcome and the iteration count, ``errors`` (2,) the position (cm) and rotation
+    (rad) error of δ."""
     info[0], info[1] = _solve_target(
         base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
         settings, X, T_base, q_near, q0, q, delta, target, Tw, spare, ws,
     )  # fmt: skip
-    errors[0], errors[1] = _errors(delta)
     if info[0] == FAST_CONVERGED or info[0] == OFF_BRANCH:
         _into_limits(q, lower, upper, turn)
+        if not _inside(q, lower, upper):
+            _restart_into_limits(base, links, tool, offsets, prismatic, res, limit, settings,
+                                 target, q_near, q, delta, spare, ws, info, lower, upper,
+                                 turn)  # fmt: skip
+    errors[0], errors[1] = _errors(delta)
 
 
 #: :class:`.puma560_solver.PumaSolver`'s constant arrays packed into one float array, in this order

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.control.limits import honour_limits
 from pipeline.control.puma560_jacobi import J_MAX_ITER, J_NO_INVERSE, J_STALLED, _jacobi_targets
 from pipeline.control.puma560_newton import (
     _PACK_SIZES,
@@ -20,10 +21,12 @@ from pipeline.control.puma560_newton import (
     _S_TARGET,
     _S_TW,
     OFF_BRANCH,
+    OUT_OF_LIMITS,
+    OUT_OF_LIMITS_OFF_BRANCH,
     _solve_packed,
     _solve_targets,
 )
-from pipeline.control.puma560_start import NO_START, _into_limits
+from pipeline.control.puma560_start import NO_START
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.ik.batch import IntArray, _errors
 from pipeline.kinematics.ik.jacobi import DesignInverse, jacobi_iterative
@@ -31,6 +34,7 @@ from pipeline.kinematics.ik.newton import finish_deferred, ik_compilable
 from pipeline.kinematics.ik.result import (
     STATUS_CONVERGED,
     STATUS_MAX_ITER,
+    STATUS_OUT_OF_LIMITS,
     STATUS_UNREACHABLE,
     IKResult,
     _result,
@@ -64,12 +68,18 @@ class PumaSolver:
     1. Newton-Raphson (5.4) from the design start, Levenberg-Marquardt steps
        where a Newton step does not descend (:mod:`pipeline.kinematics.ik_compiled`);
     2. (branch-preserving) the same from the start with θ4 and θ6 turned
-       against each other (:data:`.puma560_newton.WRIST_TURNS`), the first solution on the branch;
+       against each other (:data:`pipeline.robots.puma560.WRIST_TURNS`), the first
+       solution on the branch;
     3. (any branch, flagged) the first solution of 1-2 on another branch,
        with :attr:`~pipeline.kinematics.ik.result.IKResult.branch_changed` set;
     4. the numpy iteration of :func:`pipeline.kinematics.ik.newton.newton_raphson`
        from the design start, which gives the status of a target it cannot
        solve either (its solution's branch flagged as in 3).
+
+    The converged solution is then put inside the joint limits
+    (:mod:`pipeline.control.limits`): shifted by ±2π, else its wrist flip
+    ``(θ4 + π, −θ5, θ6 + π)`` polished by Newton-Raphson and shifted, else the
+    status ``out_of_limits`` (not converged) with the solution kept.
 
     Parameters
     ----------
@@ -85,7 +95,7 @@ class PumaSolver:
         Encoder resolution, rad.
     limits : tuple of ndarray
         Lower and upper joint limits and the turn (2π) per joint, rad
-        (``pipeline.control._limit_arrays``).
+        (:func:`pipeline.control.limits.limit_arrays`).
     margins : tuple of float
         The design inverse's clamp margins (elbow rad, shoulder cm).
     design : SerialChain, optional
@@ -174,14 +184,18 @@ class PumaSolver:
                      one[_S_ERRORS:_S_TARGET])  # fmt: skip
 
     def solve_one(self, T_base: Array, q_near: Array | None = None) -> bool:
-        """Solve one pose (4, 4) given in the design base frame; True when converged.
+        """Solve one pose (4, 4) given in the design base frame; True when converged
+        inside the joint limits.
 
         The real-time call: no array is allocated when the kernel converges
         (all but ~1e-3 of random reachable targets); :attr:`q` then holds the
-        joints (rad, shifted into the limits by ±2π where that helps, as
-        :meth:`pipeline.control.Controller.solve`) and :attr:`info` the
-        iteration count. ``q_near`` (6,), rad (contiguous float): the 2π class
-        and, at a wrist singularity, θ4 of the start; default q^s (pass the
+        joints (rad, inside the limits: shifted by ±2π, or the wrist flipped, as
+        :meth:`pipeline.control.Controller.solve`, :mod:`pipeline.control.limits`)
+        and :attr:`info` the iteration count. False with :attr:`info` ``[0]``
+        :data:`.puma560_newton.OUT_OF_LIMITS` (or ``OUT_OF_LIMITS_OFF_BRANCH``): the
+        solution in :attr:`q` has no equivalent inside the limits; do not send it.
+        ``q_near`` (6,), rad (contiguous float): the 2π class and, at a wrist
+        singularity, θ4 of the start; default q^s (pass the
         previous solution in a trajectory). A target the kernel defers is
         finished by the numpy iteration (allocates; ~1 ms), with the same
         result as ``Controller.solve``.
@@ -191,6 +205,9 @@ class PumaSolver:
         if self.info[0] == FAST_CONVERGED or self.info[0] == OFF_BRANCH:
             self.branch_changed = self.info[0] == OFF_BRANCH
             return True
+        if self.info[0] == OUT_OF_LIMITS or self.info[0] == OUT_OF_LIMITS_OFF_BRANCH:
+            self.branch_changed = self.info[0] == OUT_OF_LIMITS_OFF_BRANCH
+            return False  # q: the solution, outside the limits
         res = self.finish(self._target[None], near[None], self.q0[None], self.q[None].copy(),
                           self.info[:1].copy(), self.info[1:].copy(), self.delta[None],
                           self.errors[None].copy())  # fmt: skip
@@ -304,12 +321,15 @@ class PumaSolver:
         """The result of kernel outputs (``errors`` (m, 2): the kernel's position and
         rotation errors): deferred targets by the numpy iteration from their start,
         targets without a start from ``near`` (the numpy design inverse's fallback),
-        so the numpy iteration reports them; those rows shifted into the limits
-        (the kernel shifts the rows it solves). Converged solutions off the
+        so the numpy iteration reports them; those rows put inside the limits as the
+        kernel puts the rows it solves (:func:`pipeline.control.limits.honour_limits`),
+        the kernel's out-of-limits rows marked so. Converged solutions off the
         requested branch are flagged (:attr:`.IKResult.branch_changed`)."""
         status = np.zeros(len(q), np.int64)
-        changed = outcome == OFF_BRANCH
-        rows = np.flatnonzero((outcome != FAST_CONVERGED) & ~changed)
+        limited = (outcome == OUT_OF_LIMITS) | (outcome == OUT_OF_LIMITS_OFF_BRANCH)
+        status[limited] = STATUS_OUT_OF_LIMITS
+        changed = (outcome == OFF_BRANCH) | (outcome == OUT_OF_LIMITS_OFF_BRANCH)
+        rows = np.flatnonzero((outcome != FAST_CONVERGED) & ~changed & ~limited)
         if rows.size:
             start = np.where((outcome[rows] == NO_START)[:, None], near[rows], q0[rows])
             max_iter, tol_p, tol_o, max_step = self.settings
@@ -321,10 +341,13 @@ class PumaSolver:
             )  # fmt: skip
             b = self.branch
             off = np.any(puma560.branch_of(res.q) != [b.shoulder, b.elbow, b.wrist], axis=-1)
-            _shift(res.q, self._limits)
+            changed[rows] = res.converged & off
+            res = honour_limits(
+                res, self.chain, T[rows], self._limits, self.resolution, True,
+                arm=lambda q: puma560.branch_of(q)[:, :2], near=near[rows],
+            )  # the kernel's limits rule, in numpy  # fmt: skip
             q[rows], iterations[rows], status[rows] = res.q, res.iterations, res.status
             errors[rows, 0], errors[rows, 1] = res.position_error_cm, res.orientation_error_rad
-            changed[rows] = res.converged & off
         return IKResult(
             q=q, converged=status == STATUS_CONVERGED, iterations=iterations,
             position_error_cm=errors[:, 0], orientation_error_rad=errors[:, 1], status=status,
@@ -339,8 +362,3 @@ def _own(arrays: tuple[Array, ...]) -> tuple[Array, ...]:
     counts bounce between the cores. Measured on robot3 (100,000 targets, two
     threads, best of 5): Newton-Raphson 447,000 -> 486,000 targets/s, Jacobi unchanged."""
     return tuple(a.copy() for a in arrays)
-
-
-def _shift(q: Array, limits: tuple[Array, ...]) -> None:
-    for row in q:
-        _into_limits(row, *limits)

@@ -1,7 +1,7 @@
 """The Puma 560 design start, compiled: the closed-form inverse of the design model
 (Appendix B.2) on one branch, pulled onto the design workspace where a pose lies
 outside it, and the small per-target kernels around it (the pose in the sensor
-frame, the branch test, the joint-limit shift). Kernels of
+frame, the branch test, the joint-limit shift and test). Kernels of
 :mod:`pipeline.control.puma560_newton` and :mod:`pipeline.control.puma560_jacobi`
 inline them; the design lengths are frozen into their machine code."""
 
@@ -139,6 +139,15 @@ def _into_limits(q: Buf, lower: Buf, upper: Buf, turn: Buf) -> None:
 
 
 @inline_jit
+def _inside(q: Buf, lower: Buf, upper: Buf) -> bool:
+    """Whether every joint of ``q`` (6,) is inside its limits."""
+    for j in range(q.shape[0]):
+        if q[j] < lower[j] or q[j] > upper[j]:
+            return False
+    return True
+
+
+@inline_jit
 def _to_sensor(X: Buf, T_base: Buf, target: Buf) -> None:
     """``target = X · T_base`` (4, 4): a pose in the design base frame in the sensor frame."""
     for r in range(4):
@@ -148,14 +157,26 @@ def _to_sensor(X: Buf, T_base: Buf, target: Buf) -> None:
 
 
 @inline_jit
-def _on_branch(q: Buf, branch: Buf) -> bool:
-    """:func:`pipeline.robots.puma560.branch_of` of ``q`` (6,) equals ``branch`` (3,)."""
+def _arm_flags(q: Buf) -> tuple[float, float]:
+    """The shoulder and elbow flags (±1) of ``q`` (6,), as
+    :func:`pipeline.robots.puma560.branch_of`."""
     s23, c23 = math.sin(q[1] + q[2]), math.cos(q[1] + q[2])
     reach = _D4 * s23 + _A3 * c23 + _A2 * math.cos(q[1])
     elbow = math.cos(q[2] + _PHI)
-    wrist = math.sin(q[4])
-    return (
-        (1.0 if reach >= 0 else -1.0) == branch[0]
-        and (1.0 if elbow >= 0 else -1.0) == branch[1]
-        and (1.0 if wrist >= 0 else -1.0) == branch[2]
-    )
+    return (1.0 if reach >= 0 else -1.0), (1.0 if elbow >= 0 else -1.0)
+
+
+@inline_jit
+def _same_arm(q: Buf, other: Buf) -> bool:
+    """``q`` and ``other`` (6,) have the same shoulder and elbow flags."""
+    s, e = _arm_flags(q)
+    s_o, e_o = _arm_flags(other)
+    return s == s_o and e == e_o
+
+
+@inline_jit
+def _on_branch(q: Buf, branch: Buf) -> bool:
+    """:func:`pipeline.robots.puma560.branch_of` of ``q`` (6,) equals ``branch`` (3,)."""
+    s, e = _arm_flags(q)
+    w = 1.0 if math.sin(q[4]) >= 0 else -1.0
+    return s == branch[0] and e == branch[1] and w == branch[2]

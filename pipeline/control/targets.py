@@ -1,4 +1,5 @@
-"""Targets from files and solutions to files: the I/O of ``pipeline ik --targets``.
+"""Targets from files and solutions to files: the I/O of ``pipeline ik --targets``, and
+the joint files of ``pipeline fk --q-file``.
 
 :mod:`pipeline.control.controller` holds the solving; this module reads and writes.
 """
@@ -12,6 +13,7 @@ import numpy as np
 
 from pipeline.control.controller import Controller, solve_poses
 from pipeline.errors import ArmsigError
+from pipeline.robots.description import RobotDescription
 
 #: Columns of an ``ik --targets`` file: the poses, in the design base frame.
 TARGET_COLUMNS = ("x_cm", "y_cm", "z_cm", "rx_deg", "ry_deg", "rz_deg")
@@ -23,47 +25,12 @@ def read_targets(path: str | Path) -> tuple[Any, np.ndarray, list[str | None] | 
     for anything else (a missing file, a column that is missing, repeated, not numeric,
     null, NaN or infinite, a branch that is not text)."""
     import pyarrow as pa
-    import pyarrow.ipc as ipc
 
     p = Path(path)
-    if not p.is_file():
-        raise ArmsigError(
-            f"--targets {p}: " + ("is a folder" if p.is_dir() else "no such file"),
-            expected="an Arrow IPC file with columns " + ", ".join(TARGET_COLUMNS),
-        )
-    try:
-        with pa.OSFile(str(p), "rb") as fh:
-            table = ipc.open_file(fh).read_all()
-    except (OSError, pa.ArrowException) as exc:
-        raise ArmsigError(f"--targets {p}: not an Arrow IPC file", got=str(exc)) from exc
-    names = table.column_names
-    repeated = sorted({c for c in names if names.count(c) > 1})
-    if repeated:
-        raise ArmsigError(f"--targets {p}: column {repeated[0]!r} appears more than once")
-    missing = [c for c in TARGET_COLUMNS if c not in names]
-    if missing:
-        raise ArmsigError(
-            f"--targets {p}: missing column(s) {', '.join(missing)}",
-            expected=", ".join(TARGET_COLUMNS),
-        )
-    poses = np.empty((table.num_rows, len(TARGET_COLUMNS)))
-    for k, name in enumerate(TARGET_COLUMNS):
-        col = table.column(name)
-        where = f"--targets {p}: column {name!r}"
-        if not (pa.types.is_integer(col.type) or pa.types.is_floating(col.type)):
-            raise ArmsigError(f"{where} is not numeric", expected="numbers", got=str(col.type))
-        if col.null_count:
-            row = col.is_null().to_pylist().index(True)
-            raise ArmsigError(f"{where} has {col.null_count} null(s), the first in row {row}")
-        poses[:, k] = col.to_numpy()
-        bad = np.flatnonzero(~np.isfinite(poses[:, k]))
-        if bad.size:
-            raise ArmsigError(
-                f"{where} has {bad.size} value(s) that are not finite, the first in row {bad[0]}",
-                got=str(poses[bad[0], k]),
-            )
+    table = _read_table(p, "--targets", TARGET_COLUMNS, csv=False)
+    poses = numeric_columns(table, TARGET_COLUMNS, f"--targets {p}")
     branches = None
-    if "branch" in names:
+    if "branch" in table.column_names:
         col = table.column("branch")
         if not (pa.types.is_string(col.type) or pa.types.is_large_string(col.type)):
             if not pa.types.is_null(col.type):
@@ -74,6 +41,89 @@ def read_targets(path: str | Path) -> tuple[Any, np.ndarray, list[str | None] | 
                 )
         branches = col.to_pylist()
     return table, poses, branches
+
+
+def joint_columns(robot: RobotDescription) -> tuple[str, ...]:
+    """The joint columns of ``ik --targets`` output and ``fk --q-file`` input:
+    ``q1_deg``, ..., ``q3_cm`` (one per joint, its boundary unit)."""
+    return tuple(f"q{i + 1}_{j.unit}" for i, j in enumerate(robot.joints))
+
+
+def read_joints(path: str | Path, robot: RobotDescription) -> tuple[Any, np.ndarray]:
+    """The table of an ``fk --q-file`` file (Arrow IPC, or CSV with a header when the name
+    ends ``.csv``) and its joint readings (m, n) (deg / cm) from the columns of
+    :func:`joint_columns` (what ``ik --targets`` writes); one-line errors as
+    :func:`read_targets`."""
+    p = Path(path)
+    names = joint_columns(robot)
+    table = _read_table(p, "--q-file", names, csv=p.suffix.lower() == ".csv")
+    if not table.num_rows:
+        raise ArmsigError(f"--q-file {p}: no rows", expected="one configuration per row")
+    return table, numeric_columns(table, names, f"--q-file {p}")
+
+
+def _read_table(p: Path, option: str, columns: tuple[str, ...], csv: bool) -> Any:
+    """The table of the Arrow IPC (or ``csv``: CSV) file ``p`` given as ``option``, with
+    ``columns`` present once each; else a one-line error."""
+    import pyarrow as pa
+
+    kind = "a CSV file with a header" if csv else "an Arrow IPC file"
+    if not p.is_file():
+        raise ArmsigError(
+            f"{option} {p}: " + ("is a folder" if p.is_dir() else "no such file"),
+            expected=f"{kind} with columns " + ", ".join(columns),
+        )
+    try:
+        if csv:
+            import pyarrow.csv as pacsv
+
+            # Only empty cells are null: "nan" is a number, refused as not finite.
+            table = pacsv.read_csv(str(p), convert_options=pacsv.ConvertOptions(null_values=[""]))
+        else:
+            import pyarrow.ipc as ipc
+
+            with pa.OSFile(str(p), "rb") as fh:
+                table = ipc.open_file(fh).read_all()
+    except (OSError, pa.ArrowException) as exc:
+        raise ArmsigError(
+            f"{option} {p}: not {kind}", got=str(exc).splitlines()[0], fix="check the file"
+        ) from exc
+    names = table.column_names
+    repeated = sorted({c for c in names if names.count(c) > 1})
+    if repeated:
+        raise ArmsigError(f"{option} {p}: column {repeated[0]!r} appears more than once")
+    missing = [c for c in columns if c not in names]
+    if missing:
+        raise ArmsigError(
+            f"{option} {p}: missing column(s) {', '.join(missing)}",
+            expected=", ".join(columns),
+            got=", ".join(names) or "no columns",
+        )
+    return table
+
+
+def numeric_columns(table: Any, columns: tuple[str, ...], where: str) -> np.ndarray:
+    """The ``columns`` of ``table`` as finite numbers (m, k); else a one-line error
+    naming ``where`` (the option and file) and the column."""
+    import pyarrow as pa
+
+    out = np.empty((table.num_rows, len(columns)))
+    for k, name in enumerate(columns):
+        col = table.column(name)
+        at = f"{where}: column {name!r}"
+        if not (pa.types.is_integer(col.type) or pa.types.is_floating(col.type)):
+            raise ArmsigError(f"{at} is not numeric", expected="numbers", got=str(col.type))
+        if col.null_count:
+            row = col.is_null().to_pylist().index(True)
+            raise ArmsigError(f"{at} has {col.null_count} null(s), the first in row {row}")
+        out[:, k] = col.to_numpy()
+        bad = np.flatnonzero(~np.isfinite(out[:, k]))
+        if bad.size:
+            raise ArmsigError(
+                f"{at} has {bad.size} value(s) that are not finite, the first in row {bad[0]}",
+                got=str(out[bad[0], k]),
+            )
+    return out
 
 
 def solve_arrow(
@@ -90,13 +140,16 @@ def solve_arrow(
     ``tool`` names the tool the poses are for, for the output's metadata (the
     controller's own tool: see :meth:`Controller.with_tool`). Columns of the input
     that carry an output's name (a file that is itself an output) are replaced.
+    ``outside_limits``: the joints outside their limits, comma-separated ("" inside;
+    a row whose status is ``out_of_limits`` has no in-limit solution on its branch).
     ``out`` is checked before the solve: an existing file is replaced only with ``force``,
     a session's measurements never (:func:`pipeline.atomic.check_new_file`). Returns a
     summary line and the number of targets not reached."""
     import pyarrow as pa
 
     from pipeline.atomic import check_new_file
-    from pipeline.kinematics.ik import STATUS_NAMES
+    from pipeline.control.limits import outside_names
+    from pipeline.kinematics.ik import STATUS_NAMES, STATUS_OUT_OF_LIMITS
     from pipeline.stages.tables import write_table
 
     table, poses, branches = read_targets(targets)
@@ -108,9 +161,10 @@ def solve_arrow(
         )
     check_new_file(out, "--out", force)
     q, res = solve_poses(controller, poses[:, :3], poses[:, 3:], branches, method, near)
+    outside = [",".join(names) for names in outside_names(controller.robot, res.q)]
     extra: dict[str, pa.Array] = {}
-    for i, j in enumerate(controller.robot.joints):
-        extra[f"q{i + 1}_{j.unit}"] = pa.array(q[:, i], pa.float64())
+    for i, name in enumerate(joint_columns(controller.robot)):
+        extra[name] = pa.array(q[:, i], pa.float64())
     extra.update(
         converged=pa.array(res.converged, pa.bool_()),
         iterations=pa.array(res.iterations, pa.int32()),
@@ -118,6 +172,7 @@ def solve_arrow(
         orientation_error_deg=pa.array(np.degrees(res.orientation_error_rad), pa.float64()),
         status=pa.array([STATUS_NAMES[int(s)] for s in res.status], pa.string()),
         branch_changed=pa.array(res.branch_changed, pa.bool_()),
+        outside_limits=pa.array(outside, pa.string()),
     )
     replaced = [c for c in table.column_names if c in extra]
     table = table.drop_columns(replaced)
@@ -126,5 +181,7 @@ def solve_arrow(
     meta = {"method": method, "signature": controller.robot.name, "tool": tool}
     write_table(Path(out), table, meta)
     failed = int((~res.converged).sum())
+    limited = int((res.status == STATUS_OUT_OF_LIMITS).sum())
     note = f" (replaced the input's {', '.join(replaced)})" if replaced else ""
-    return f"{len(q) - failed} of {len(q)} targets converged; wrote {out}{note}", failed
+    where = f" ({limited} out_of_limits: no solution inside the joint limits)" if limited else ""
+    return f"{len(q) - failed} of {len(q)} targets converged{where}; wrote {out}{note}", failed

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.control.controller import Controller, into_limits, task_axes_for
+from pipeline.control.controller import Controller, task_axes_for
+from pipeline.control.limits import into_limits
 from pipeline.evaluation.tasks import Task
 from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
 from pipeline.kinematics.ik import ALL_AXES, newton_raphson

@@ -39,6 +39,17 @@ def design_pose(robot: RobotDescription, q: list[float] | np.ndarray) -> ToolPos
     return chain_pose(robot, robot.design_chain(), q)
 
 
+@dataclass(frozen=True)
+class ToolPoses:
+    """Tool poses of a chain at ``m`` joint configurations: :class:`ToolPose`'s fields by
+    row (``matrix`` (m, 4, 4), ``xyz_cm`` and ``rpy_deg`` (m, 3), ``outside_limits`` per row)."""
+
+    matrix: np.ndarray
+    xyz_cm: np.ndarray
+    rpy_deg: np.ndarray
+    outside_limits: list[tuple[str, ...]]
+
+
 def chain_pose(
     robot: RobotDescription, chain: SerialChain, q: list[float] | np.ndarray
 ) -> ToolPose:
@@ -51,11 +62,18 @@ def chain_pose(
             expected=f"{robot.n_joints} values ({', '.join(j.name for j in robot.joints)})",
             got=f"{qq.size}",
         )
+    p = chain_poses(robot, chain, qq[None])
+    return ToolPose(p.matrix[0], p.xyz_cm[0], p.rpy_deg[0], p.outside_limits[0])
+
+
+def chain_poses(robot: RobotDescription, chain: SerialChain, q: np.ndarray) -> ToolPoses:
+    """:func:`chain_pose` of joint readings ``q`` (m, n), deg / cm, in one batch."""
+    qq = np.asarray(q, float)
     T = forward_kinematics(
         chain, joints_to_internal(robot.joints_from_readings(qq), robot.prismatic)
     )
     xyz, rpy = xyz_rpy_from_transform(T)
-    return ToolPose(T, xyz, np.rad2deg(rpy), outside_limits(robot, qq))
+    return ToolPoses(T, xyz, np.rad2deg(rpy), [outside_limits(robot, row) for row in qq])
 
 
 def outside_limits(robot: RobotDescription, q: list[float] | np.ndarray) -> tuple[str, ...]:

@@ -235,6 +235,18 @@ class Branch:
         )
 
 
+#: Restarts of a solution outside the limits next to the wrist singularity: θ4 turned by
+#: each angle and θ6 by its negative (which keeps θ4 + θ6, the pose at the singularity).
+#: There a signature (whose wrist is not exactly spherical) has more solutions on one
+#: branch than the solution and its flip: measured on robot3 (580 targets within ~1° of
+#: θ5 = 0), 13 converged outside the limits with the in-limit solution 60-300° away in θ4.
+#: The real-time solver (:mod:`pipeline.control.puma560_newton`) and
+#: :func:`pipeline.control.limits.honour_limits` restart from these turns (here, not in
+#: ``control.limits``, so that the compiled kernels' source digest covers them).
+WRIST_TURNS = np.array([1.0, -1.0, 2.0, -2.0, 3.0, -3.0, 4.0]) * (np.pi / 4.0)
+#: |sin θ5| below which a solution outside the limits gets the :data:`WRIST_TURNS`
+#: restarts (5°); farther out the solution and its flip are the branch's only ones.
+NEAR_WRIST_SINGULAR = float(np.sin(np.deg2rad(5.0)))
 #: The eight branches in the order :func:`inverse_kinematics` returns them.
 BRANCHES = tuple(Branch(s, e, w) for s in (1, -1) for e in (1, -1) for w in (1, -1))
 

@@ -49,6 +49,10 @@ Status codes (:attr:`IKResult.status`, names in :data:`STATUS_NAMES`)
         workspace (next to a singularity, rarely, a spurious minimum of a
         reachable target). For the Jacobi method also: the design inverse has
         no solution (only with ``puma_design_inverse(clamp=False)``).
+    ``STATUS_OUT_OF_LIMITS`` (4)
+        Converged, but neither the solution nor an equivalent of it on the
+        requested branch (±2π, the wrist flip) is inside the joint limits; set by
+        the controller (:mod:`pipeline.control.limits`), not by the solvers here.
 
 Modules, in the order a solve uses them
     :mod:`.batch` (validated targets, a batched chain's rows, pose errors),
@@ -74,6 +78,7 @@ from pipeline.kinematics.ik.result import (
     STATUS_CONVERGED,
     STATUS_MAX_ITER,
     STATUS_NAMES,
+    STATUS_OUT_OF_LIMITS,
     STATUS_SINGULAR,
     STATUS_UNREACHABLE,
     IKHistory,
@@ -98,6 +103,7 @@ __all__ = [
     "STATUS_CONVERGED",
     "STATUS_MAX_ITER",
     "STATUS_NAMES",
+    "STATUS_OUT_OF_LIMITS",
     "STATUS_SINGULAR",
     "STATUS_UNREACHABLE",
     "controllable_axes",

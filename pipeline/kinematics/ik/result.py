@@ -23,12 +23,16 @@ STATUS_MAX_ITER = 1
 STATUS_SINGULAR = 2
 #: No progress with sub-resolution steps (outside the workspace), or no design inverse.
 STATUS_UNREACHABLE = 3
+#: Converged, but no equivalent of the solution on the requested branch (±2π, the wrist
+#: flip) is inside the joint limits (set by :mod:`pipeline.control.limits`).
+STATUS_OUT_OF_LIMITS = 4
 #: Human-readable names of the status codes.
 STATUS_NAMES = {
     STATUS_CONVERGED: "converged",
     STATUS_MAX_ITER: "max_iter",
     STATUS_SINGULAR: "singular",
     STATUS_UNREACHABLE: "unreachable",
+    STATUS_OUT_OF_LIMITS: "out_of_limits",
 }
 
 
