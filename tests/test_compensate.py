@@ -247,3 +247,26 @@ def test_json_and_the_verdict_gate(sessions, tmp_path, monkeypatch):
     # The output as --targets: refused as input and output at once.
     with pytest.raises(ArmsigError, match="is the --targets file"):
         compensate_targets(sessions["robot3"], targets, targets, force=True)
+
+
+def test_a_user_tool_is_the_nominal_controllers_tool(sessions, tmp_path):
+    """``tool``: the poses, desired and compensated, are of that tool (the nominal
+    controller's tool data), as ``ik --tool``."""
+    from pipeline.control.poses import tool_controller
+
+    tool = [1.0, -2.0, 12.0, 0.0, 10.0, 0.0]
+    c = tool_controller(sessions["robot3"], tool).controller
+    desired, branches = reachable_targets(c, 20, seed=4)
+    targets = write_targets(tmp_path / "t.arrow", desired, branches)
+    out = tmp_path / "c.arrow"
+    done = compensate_targets(sessions["robot3"], targets, out, tool=tool)
+    assert done.tool == "flange 1 -2 12 0 10 0"
+    table = read_out(out)
+    ok = np.array([s == "converged" for s in table.column("status").to_pylist()])
+    assert ok.sum() > 15
+    q = numeric_columns(table, joint_columns(c.robot), "out")[ok]
+    comp = numeric_columns(table.filter(pa.array(ok)), TARGET_COLUMNS, "out")
+    np.testing.assert_allclose(comp[:, :3], c.poses(q, design=True).xyz_cm, atol=1e-9)
+    # Not the signature tool's compensation: the user tool is elsewhere on the flange.
+    plain = session_controller(sessions["robot3"]).poses(q, design=True).xyz_cm
+    assert np.linalg.norm(comp[:, :3] - plain, axis=1).min() > 1
