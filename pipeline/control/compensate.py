@@ -97,7 +97,7 @@ def compensate_targets(
     tc = tool_controller(session, tool, accept_verdict)
     ctl = tc.controller
     table, desired, branches = read_targets(targets)
-    check_output(out, targets, force)
+    check_output(out, targets, force, "compensated.arrow")
     q, res, solved = solved_columns(ctl, desired, branches, method)
     nominal = ctl.poses(q, design=True)  # design(q) · Y in the design base frame
     compensated = np.concatenate([nominal.xyz_cm, nominal.rpy_deg], axis=1)

@@ -127,16 +127,19 @@ def numeric_columns(table: Any, columns: tuple[str, ...], where: str) -> np.ndar
     return out
 
 
-def check_output(out: str | Path, targets: str | Path, force: bool) -> None:
-    """Refuse an ``--out`` that is the ``--targets`` file, or (unless ``force``) an existing
-    file (:func:`pipeline.atomic.check_new_file`): checked before any solving."""
+def check_output(
+    out: str | Path, targets: str | Path, force: bool, suggest: str = "joints.arrow"
+) -> None:
+    """Refuse an ``--out`` that is the ``--targets`` file (the fix suggests ``suggest``), or
+    (unless ``force``) an existing file (:func:`pipeline.atomic.check_new_file`): checked
+    before any solving."""
     from pipeline.atomic import check_new_file
 
     if Path(out).resolve() == Path(targets).resolve():
         raise ArmsigError(
             f"--out {out} is the --targets file",
             expected="an output file other than the input",
-            fix="--out joints.arrow",
+            fix=f"--out {suggest}",
         )
     check_new_file(out, "--out", force)
 
