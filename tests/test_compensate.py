@@ -12,6 +12,7 @@ import dataclasses
 import json
 import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -130,7 +131,7 @@ def read_out(path: Path) -> pa.Table:
         return ipc.open_file(fh).read_all()
 
 
-def controller_errors(session: Path, tmp_path: Path, n: int = 300) -> dict[str, dict[str, float]]:
+def controller_errors(session: Path, tmp_path: Path, n: int = 300) -> dict[str, dict[str, Any]]:
     """Landing errors of signature control, nominal control and compensated nominal control
     over ``n`` reachable targets (the targets all three reach)."""
     c = session_controller(session)
@@ -163,9 +164,10 @@ def controller_errors(session: Path, tmp_path: Path, n: int = 300) -> dict[str, 
     # Commanded the compensated pose, the nominal controller goes to the signature's joints.
     assert np.abs(q_comp[both] - q_sig[ok][both]).max() < 1e-6
     R0 = tool_rotation(c, truth)
+    statuses = {k: status.count(k) for k in sorted(set(status))}
     d = desired[ok][both]
     return {
-        "targets": {"desired": n, "compared": int(both.sum())},
+        "targets": {"desired": n, "compared": int(both.sum()), "status": statuses},
         "signature": landing_errors(c, truth, R0, q_sig[ok][both], d),
         "nominal": landing_errors(c, truth, R0, q_nom[both], d),
         "compensated": landing_errors(c, truth, R0, q_comp[both], d),
@@ -181,6 +183,17 @@ def test_compensated_nominal_control_lands_as_signature_control(sessions, robot,
         assert comp[key] <= FACTOR * sig[key], (key, comp, sig)
     # The test can fail: without compensation the nominal controller is far off.
     assert nom["rms_cm"] > 5 * comp["rms_cm"], (nom, comp)
+    # docs/compensate.md quotes these numbers.
+    row = f"| {robot} | {e['targets']['compared']} | " + " | ".join(map(_cell, (sig, nom, comp)))
+    assert row + " |" in (ROOT / "docs" / "compensate.md").read_text(encoding="utf-8"), row
+
+
+def _cell(err: dict[str, float]) -> str:
+    """A cell of docs/compensate.md's table: RMS / max, cm then degrees."""
+    return (
+        f"{err['rms_cm']:.4f} / {err['max_cm']:.4f} cm, "
+        f"{err['rms_deg']:.4f} / {err['max_deg']:.4f}°"
+    )
 
 
 def test_compensated_pose_is_the_design_pose_of_the_signature_joints(sessions, tmp_path):
