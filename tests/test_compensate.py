@@ -212,6 +212,7 @@ def test_compensated_pose_is_the_design_pose_of_the_signature_joints(sessions, t
     np.testing.assert_allclose(numeric_columns(table, DESIRED_COLUMNS, "out"), desired)
     design = c.poses(q, design=True)
     np.testing.assert_allclose(comp[:, :3], design.xyz_cm, atol=1e-9)
+    assert np.abs(comp[:, 3:] - desired[ok, 3:]).max() <= 180  # angles beside the desired
     T_comp = transform_from_xyz_rpy(comp[:, :3], np.deg2rad(comp[:, 3:]))
     dp, dth = pose_error(c.poses(q).matrix, transform_from_xyz_rpy(
         desired[ok, :3], np.deg2rad(desired[ok, 3:])))  # fmt: skip

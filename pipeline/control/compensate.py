@@ -92,7 +92,7 @@ def compensate_targets(
     """
     import pyarrow as pa
 
-    from pipeline.kinematics.transforms import pose_error, transform_from_xyz_rpy
+    from pipeline.kinematics.transforms import pose_error, transform_from_xyz_rpy, wrap_angle
 
     tc = tool_controller(session, tool, accept_verdict)
     ctl = tc.controller
@@ -100,7 +100,9 @@ def compensate_targets(
     check_output(out, targets, force, "compensated.arrow")
     q, res, solved = solved_columns(ctl, desired, branches, method)
     nominal = ctl.poses(q, design=True)  # design(q) · Y in the design base frame
-    compensated = np.concatenate([nominal.xyz_cm, nominal.rpy_deg], axis=1)
+    # Each angle within 180° of the desired one (the same rotation): columns that compare.
+    turn = np.degrees(wrap_angle(np.radians(nominal.rpy_deg - desired[:, 3:])))
+    compensated = np.concatenate([nominal.xyz_cm, desired[:, 3:] + turn], axis=1)
     T_desired = transform_from_xyz_rpy(desired[:, :3], np.deg2rad(desired[:, 3:]))
     dp, dth = pose_error(T_desired, nominal.matrix)
     dth = np.degrees(dth)
