@@ -135,3 +135,29 @@ def test_the_gate_without_a_verdict_and_on_an_older_row() -> None:
     with pytest.raises(VerdictFailError, match="did not converge.*--accept-verdict"):
         verdict_gate(v, "s", accept=False)
     assert "accepted" in (verdict_gate(v, "s", accept=True) or "")
+
+
+def test_compensate_refuses_a_fail_signature_and_warns_on_check(
+    failed: Path, checked: Path, tmp_path: Path
+) -> None:
+    import pyarrow as pa
+    import pyarrow.ipc as ipc
+
+    from pipeline.control.targets import TARGET_COLUMNS
+
+    pose = [float(v) for v in _pose(failed)[1:]]
+    table = pa.table({c: [v] for c, v in zip(TARGET_COLUMNS, pose, strict=True)})
+    targets = tmp_path / "t.arrow"
+    with ipc.new_file(str(targets), table.schema) as w:
+        w.write_table(table)
+    out = tmp_path / "c.arrow"
+    args = ["compensate", str(failed), "--targets", str(targets), "--out", str(out)]
+    r = runner.invoke(app, args)
+    assert r.exit_code == EXIT_VERDICT_FAIL and not out.exists(), r.output
+    assert "verdict is FAIL" in r.stderr and "--accept-verdict" in r.stderr
+    r = runner.invoke(app, [*args, "--accept-verdict", "--json"])
+    assert r.exit_code == 0 and out.is_file(), r.output
+    assert json.loads(r.stdout)["verdict"] == "FAIL" and "accepted" in r.stderr
+    r = runner.invoke(app, ["compensate", str(checked), "--targets", str(targets), "--out",
+                            str(tmp_path / "k.arrow")])  # fmt: skip
+    assert r.exit_code == 0 and "verdict is CHECK" in r.stderr, r.output

@@ -1,5 +1,5 @@
 """Control commands: a session's signature (or a design model) driven (fk, ik,
-ik-convergence). The work is in :mod:`pipeline.control`."""
+compensate, ik-convergence). The work is in :mod:`pipeline.control`."""
 
 from __future__ import annotations
 
@@ -201,6 +201,56 @@ def ik(
     if r.branch_changed:
         warn("no solution on the requested branch; this one is on another")
     if not r.converged:
+        raise NotReached
+
+
+@commands.command()
+def compensate(
+    session: SessionArg,
+    targets: Annotated[
+        str,
+        typer.Option(
+            help="Arrow file of desired poses: x_cm y_cm z_cm rx_deg ry_deg rz_deg [branch], "
+            "design base frame (as `ik --targets`)."
+        ),
+    ],
+    out: Annotated[str, typer.Option(help="Arrow file for the compensated poses and joints.")],
+    force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
+    tool: Annotated[
+        Pose | None,
+        typer.Option(
+            help="The nominal controller's tool x y z (cm) rx ry rz (deg, fixed axes) in the "
+            "design flange frame (default: the signature's tool)."
+        ),
+    ] = None,
+    method: Annotated[Method, choice("nr (Newton-Raphson) or jacobi.")] = Method.nr,
+    accept_verdict: AcceptVerdict = False,
+    as_json: JsonOption = False,
+) -> None:
+    """Poses to command to a controller that keeps its nominal (design) model, so that the
+    real arm reaches the desired ones (docs/compensate.md)."""
+    from pipeline.control.compensate import compensate_targets
+
+    done = compensate_targets(
+        session,
+        targets,
+        out,
+        tool=None if tool is None else finite(tool, "--tool"),
+        method=method.value,
+        force=force,
+        accept_verdict=accept_verdict,
+    )
+    if as_json:
+        print_json(done.to_dict())
+    else:
+        typer.echo(done.summary)
+        typer.echo(
+            f"largest correction {done.max_correction_cm:.4f} cm, {done.max_correction_deg:.4f} deg"
+        )
+    if done.verdict_warning:
+        warn(done.verdict_warning)
+    if done.failed:
+        warn(f"{done.failed} target(s) not reached: no compensated pose (null; column status)")
         raise NotReached
 
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from pipeline.control.controller import Controller, solve_poses
 from pipeline.errors import ArmsigError
+from pipeline.kinematics.ik import IKResult
 from pipeline.robots.description import RobotDescription
 
 #: Columns of an ``ik --targets`` file: the poses, in the design base frame.
@@ -126,6 +127,81 @@ def numeric_columns(table: Any, columns: tuple[str, ...], where: str) -> np.ndar
     return out
 
 
+def check_output(
+    out: str | Path, targets: str | Path, force: bool, suggest: str = "joints.arrow"
+) -> None:
+    """Refuse an ``--out`` that is the ``--targets`` file (the fix suggests ``suggest``), or
+    (unless ``force``) an existing file (:func:`pipeline.atomic.check_new_file`): checked
+    before any solving."""
+    from pipeline.atomic import check_new_file
+
+    if Path(out).resolve() == Path(targets).resolve():
+        raise ArmsigError(
+            f"--out {out} is the --targets file",
+            expected="an output file other than the input",
+            fix=f"--out {suggest}",
+        )
+    check_new_file(out, "--out", force)
+
+
+def solved_columns(
+    controller: Controller,
+    poses: np.ndarray,
+    branches: list[str | None] | None,
+    method: str,
+    near: np.ndarray | None = None,
+) -> tuple[np.ndarray, IKResult, dict[str, Any]]:
+    """Solve ``poses`` (m, 6) (cm, deg; design base frame) with ``controller``: the joint
+    readings (m, n) (deg / cm), the raw result, and the output columns of ``ik --targets``
+    (joints, ``converged``, ``iterations``, residuals, ``status``, ``branch_changed``,
+    ``outside_limits``) as Arrow arrays by name."""
+    import pyarrow as pa
+
+    from pipeline.control.limits import outside_names
+    from pipeline.kinematics.ik import STATUS_NAMES
+
+    q, res = solve_poses(controller, poses[:, :3], poses[:, 3:], branches, method, near)
+    outside = [",".join(names) for names in outside_names(controller.robot, res.q)]
+    extra: dict[str, Any] = {}
+    for i, name in enumerate(joint_columns(controller.robot)):
+        extra[name] = pa.array(q[:, i], pa.float64())
+    extra.update(
+        converged=pa.array(res.converged, pa.bool_()),
+        iterations=pa.array(res.iterations, pa.int32()),
+        position_error_cm=pa.array(res.position_error_cm, pa.float64()),
+        orientation_error_deg=pa.array(np.degrees(res.orientation_error_rad), pa.float64()),
+        status=pa.array([STATUS_NAMES[int(s)] for s in res.status], pa.string()),
+        branch_changed=pa.array(res.branch_changed, pa.bool_()),
+        outside_limits=pa.array(outside, pa.string()),
+    )
+    return q, res, extra
+
+
+def write_columns(table: Any, extra: dict[str, Any], out: str | Path, meta: dict[str, str]) -> str:
+    """Write ``table`` with the columns ``extra`` (by name, replacing the table's columns
+    of the same names) to ``out`` (atomically); the note on what was replaced ("" if
+    nothing)."""
+    from pipeline.stages.tables import write_table
+
+    replaced = [c for c in table.column_names if c in extra]
+    table = table.drop_columns(replaced)
+    for name, values in extra.items():
+        table = table.append_column(name, values)
+    write_table(Path(out), table, meta)
+    return f" (replaced the input's {', '.join(replaced)})" if replaced else ""
+
+
+def reached_summary(res: IKResult, out: str | Path) -> tuple[str, int]:
+    """The summary line of a solved targets file and the number of targets not reached."""
+    from pipeline.kinematics.ik import STATUS_OUT_OF_LIMITS
+
+    failed = int((~res.converged).sum())
+    limited = int((res.status == STATUS_OUT_OF_LIMITS).sum())
+    where = f" ({limited} out_of_limits: no solution inside the joint limits)" if limited else ""
+    m = len(res.converged)
+    return f"{m - failed} of {m} targets converged{where}; wrote {out}", failed
+
+
 def solve_arrow(
     controller: Controller,
     targets: str | Path,
@@ -143,45 +219,12 @@ def solve_arrow(
     ``outside_limits``: the joints outside their limits, comma-separated ("" inside;
     a row whose status is ``out_of_limits`` has no in-limit solution on its branch).
     ``out`` is checked before the solve: an existing file is replaced only with ``force``,
-    a session's measurements never (:func:`pipeline.atomic.check_new_file`). Returns a
-    summary line and the number of targets not reached."""
-    import pyarrow as pa
-
-    from pipeline.atomic import check_new_file
-    from pipeline.control.limits import outside_names
-    from pipeline.kinematics.ik import STATUS_NAMES, STATUS_OUT_OF_LIMITS
-    from pipeline.stages.tables import write_table
-
+    a session's measurements never (:func:`check_output`). Returns a summary line and the
+    number of targets not reached."""
     table, poses, branches = read_targets(targets)
-    if Path(out).resolve() == Path(targets).resolve():
-        raise ArmsigError(
-            f"--out {out} is the --targets file",
-            expected="an output file other than the input",
-            fix="--out joints.arrow",
-        )
-    check_new_file(out, "--out", force)
-    q, res = solve_poses(controller, poses[:, :3], poses[:, 3:], branches, method, near)
-    outside = [",".join(names) for names in outside_names(controller.robot, res.q)]
-    extra: dict[str, pa.Array] = {}
-    for i, name in enumerate(joint_columns(controller.robot)):
-        extra[name] = pa.array(q[:, i], pa.float64())
-    extra.update(
-        converged=pa.array(res.converged, pa.bool_()),
-        iterations=pa.array(res.iterations, pa.int32()),
-        position_error_cm=pa.array(res.position_error_cm, pa.float64()),
-        orientation_error_deg=pa.array(np.degrees(res.orientation_error_rad), pa.float64()),
-        status=pa.array([STATUS_NAMES[int(s)] for s in res.status], pa.string()),
-        branch_changed=pa.array(res.branch_changed, pa.bool_()),
-        outside_limits=pa.array(outside, pa.string()),
-    )
-    replaced = [c for c in table.column_names if c in extra]
-    table = table.drop_columns(replaced)
-    for name, values in extra.items():
-        table = table.append_column(name, values)
+    check_output(out, targets, force)
+    _, res, extra = solved_columns(controller, poses, branches, method, near)
     meta = {"method": method, "signature": controller.robot.name, "tool": tool}
-    write_table(Path(out), table, meta)
-    failed = int((~res.converged).sum())
-    limited = int((res.status == STATUS_OUT_OF_LIMITS).sum())
-    note = f" (replaced the input's {', '.join(replaced)})" if replaced else ""
-    where = f" ({limited} out_of_limits: no solution inside the joint limits)" if limited else ""
-    return f"{len(q) - failed} of {len(q)} targets converged{where}; wrote {out}{note}", failed
+    note = write_columns(table, extra, out, meta)
+    summary, failed = reached_summary(res, out)
+    return summary + note, failed
