@@ -20,7 +20,6 @@ design_flange_to_tool`` from the design flange, unless a user tool is given (as 
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.control.poses import tool_controller
+from pipeline.control.poses import RunRecord, tool_controller
 from pipeline.control.targets import (
     TARGET_COLUMNS,
     check_output,
@@ -43,7 +42,7 @@ DESIRED_COLUMNS = tuple(f"desired_{c}" for c in TARGET_COLUMNS)
 
 
 @dataclass(frozen=True)
-class CompensatedTargets:
+class CompensatedTargets(RunRecord):
     """What :func:`compensate_targets` wrote; ``summary``: its one line for people.
 
     ``max_correction_cm`` / ``max_correction_deg``: the largest change from a desired pose
@@ -59,12 +58,6 @@ class CompensatedTargets:
     summary: str
     verdict: str | None = None  # the signature's verdict (None: it has none)
     verdict_warning: str | None = None  # a CHECK, or a FAIL accepted (accept_verdict)
-
-    def to_dict(self) -> dict[str, Any]:
-        """The counts and settings (``compensate --json``)."""
-        d = dataclasses.asdict(self)
-        del d["summary"]
-        return d
 
 
 def compensate_targets(

@@ -238,9 +238,19 @@ def solve_pose(
     )
 
 
+class RunRecord:
+    """A frozen dataclass of what a targets command wrote, with ``summary`` its one line
+    for people: :meth:`to_dict` gives the rest (``--json``)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)  # type: ignore[call-overload]
+        del d["summary"]
+        return d  # type: ignore[no-any-return]
+
+
 @dataclass(frozen=True)
-class TargetsSolution:
-    """What :func:`solve_targets` wrote; ``summary``: its one line for people."""
+class TargetsSolution(RunRecord):
+    """What :func:`solve_targets` wrote (``ik --targets --json``: :meth:`to_dict`)."""
 
     targets: int
     converged: int
@@ -251,12 +261,6 @@ class TargetsSolution:
     summary: str
     verdict: str | None = None  # the signature's verdict (None: it has none)
     verdict_warning: str | None = None  # a CHECK, or a FAIL accepted (accept_verdict)
-
-    def to_dict(self) -> dict[str, Any]:
-        """The counts and settings (``ik --targets --json``)."""
-        d = dataclasses.asdict(self)
-        del d["summary"]
-        return d
 
 
 def solve_targets(
