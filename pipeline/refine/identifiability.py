@@ -110,7 +110,12 @@ def analyse(
     from scipy.linalg import qr
 
     Js = J * tolerance_scale(units)
-    _, R, piv = qr(Js, mode="economic", pivoting=True)
+    # J_s = Q₀ R₀ (blocked Householder, fast), then R₀ P = Q₁ R: the pivots and R of J_s
+    # itself (Q₀ Q₁ orthonormal), at the cost of a (P, P) pivoted QR (geqp3 on the tall
+    # J_s took 0.14 s of a 2,000-pose fit).
+    R0 = np.linalg.qr(Js, mode="r")
+    R, piv = qr(R0, mode="r", pivoting=True)
+    R = R[: min(Js.shape)]
     d = np.abs(np.diag(R)) if R.size else np.zeros(0)
     d = np.concatenate([d, np.zeros(Js.shape[1] - len(d))])  # fewer rows than parameters
     sigmas = np.zeros(Js.shape[1])
@@ -128,7 +133,9 @@ def analyse(
     # Pivoted QR is greedy: a later pivot may have fallen below a threshold only because
     # an earlier one took its share; the held set is what the greedy order leaves, the
     # usual base-parameter choice, and the rest is refitted jointly.
-    s = np.linalg.svd(Js[:, ~held], compute_uv=False) if (~held).any() else np.ones(1)
+    # The singular values of J_s's identified columns are R's (J_s P = Q R, Q orthonormal).
+    free = ~held[piv]
+    s = np.linalg.svd(R[:, free], compute_uv=False) if free.any() else np.ones(1)
     condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
     observability = float(
         np.exp(np.mean(np.log(np.maximum(s, 1e-300)))) / np.sqrt(max(n_points, 1))
@@ -222,5 +229,7 @@ def fit_identifiable(
     scale = solution.noise_scale if np.isfinite(solution.noise_scale) else 1.0
     final = analyse(J / max(scale, 1.0), units, noise_stated, n_points, start.held)
     if (final.held & ~start.held).any():  # seen at the design, not at the solution
-        solution = solve(replace(problem, held=final.held), x0)
+        warm = solution.x.copy()  # the rest from where the first fit left them
+        warm[final.held] = x0[final.held]
+        solution = solve(replace(problem, held=final.held), warm)
     return solution, replace(final, correlated=correlated_pairs(solution.covariance))
