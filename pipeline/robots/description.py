@@ -122,6 +122,17 @@ class RobotDescription:
     notes: str = ""
     coupling: Coupling | None = None
 
+    @property
+    def reach_cm(self) -> float:
+        """The design's size (cm): every D-H length |a| and |d|, a prismatic joint's
+        farthest travel and the tool's offset, summed; the base pose is left out (the
+        verdict's design alignment absorbs it). The verdict's plausibility scale."""
+        total = float(np.linalg.norm(self.tool.xyz_cm))
+        for j in self.joints:
+            travel = max(abs(j.lower), abs(j.upper)) if j.prismatic else 0.0
+            total += abs(j.dh.a_cm) + abs(j.dh.d_cm) + travel
+        return total
+
     def joints_from_readings(self, readings: np.ndarray) -> np.ndarray:
         """Joint values (..., n) of controller readings (..., n), deg / cm."""
         q = np.asarray(readings, float)
