@@ -10,6 +10,7 @@ other joint. Every row measures the same end-effector point (target ``ee``).
 from __future__ import annotations
 
 import csv
+import re
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,19 @@ def read_text(path: Path) -> str:
         ) from exc
 
 
+#: The line ends an editor (and ``csv``) knows. ``str.splitlines`` also ends a line at a
+#: form feed, a vertical tab, U+001C-U+001E, NEL, U+2028 and U+2029, which would number
+#: the lines after one differently from what the user sees (issue 32: ``skip_lines``).
+_LINE_END = re.compile(r"\r\n|\r|\n")
+
+
+def editor_lines(text: str) -> list[str]:
+    """``text``'s lines as an editor numbers them: only \\n, \\r\\n and \\r end a line
+    (line k of the file is item k - 1)."""
+    lines = _LINE_END.split(text)
+    return lines[:-1] if lines and lines[-1] == "" else lines
+
+
 def _number(text: str, src: str, line: int, col: str) -> float:
     try:
         return float(text)
@@ -52,7 +66,7 @@ def read_sscanss2(path: Path, robot: RobotDescription) -> tuple[MeasuredRows, np
     n = robot.n_joints
     where, joint, value, xyz = [], [], [], []
     home: dict[int, tuple[float, int]] = {}
-    reader = csv.reader(text.splitlines(), delimiter=delimiter)
+    reader = csv.reader(editor_lines(text), delimiter=delimiter)
     for fields in reader:
         line = reader.line_num
         cells = [f.strip() for f in fields]
