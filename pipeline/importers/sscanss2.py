@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import csv
 import re
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from pipeline.errors import ImportFileError
+from pipeline.errors import ImportFileError, one_line
 from pipeline.importers.rows import LENGTH_CM, MeasuredRows
 from pipeline.robots.description import RobotDescription
 
@@ -47,6 +49,27 @@ def editor_lines(text: str) -> list[str]:
     return lines[:-1] if lines and lines[-1] == "" else lines
 
 
+def csv_rows(
+    lines: list[str], src: str, offset: int = 0, **fmt: Any
+) -> Iterator[tuple[int, list[str]]]:
+    """``(line number, fields)`` of each record of ``lines`` (``csv.reader`` with ``fmt``;
+    numbers from ``offset`` + 1); a record csv cannot read (a field over its size limit)
+    is refused naming its line."""
+    reader = csv.reader(lines, **fmt)
+    while True:
+        try:
+            fields = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as exc:
+            raise ImportFileError(
+                f"{src}: line {reader.line_num + offset}: {one_line(str(exc), 100)}",
+                expected=f"fields of at most {csv.field_size_limit()} characters",
+                fix="check the line (a quote left open joins the lines after it), or delete it",
+            ) from None
+        yield reader.line_num + offset, fields
+
+
 def _number(text: str, src: str, line: int, col: str) -> float:
     try:
         return float(text)
@@ -66,9 +89,7 @@ def read_sscanss2(path: Path, robot: RobotDescription) -> tuple[MeasuredRows, np
     n = robot.n_joints
     where, joint, value, xyz = [], [], [], []
     home: dict[int, tuple[float, int]] = {}
-    reader = csv.reader(editor_lines(text), delimiter=delimiter)
-    for fields in reader:
-        line = reader.line_num
+    for line, fields in csv_rows(editor_lines(text), src, delimiter=delimiter):
         cells = [f.strip() for f in fields]
         if not any(cells):
             continue

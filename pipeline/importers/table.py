@@ -24,7 +24,7 @@ from pipeline.importers.rows import (
     readings_in_boundary_units,
     unit_factor,
 )
-from pipeline.importers.sscanss2 import editor_lines, read_text
+from pipeline.importers.sscanss2 import csv_rows, editor_lines, read_text
 from pipeline.importers.sweeps import infer_sweeps, pose_set, select_sweeps, tolerance
 from pipeline.robots.description import RobotDescription
 from pipeline.stages.recording import CHECK_SWEEP
@@ -127,11 +127,12 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
             fix="add a [[targets]] table (docs/import.md)",
         )  # fmt: skip
     lines = editor_lines(read_text(path))[imap.skip_rows :]
-    reader = csv.reader(lines, delimiter=_delimiter(imap, lines), skipinitialspace=True)
+    reader = csv_rows(lines, src, imap.skip_rows, delimiter=_delimiter(imap, lines),
+                      skipinitialspace=True)  # fmt: skip
     header: list[str] | None = None
     hl = imap.skip_rows + 1  # the header's line
     if imap.header:
-        header = [h.strip() for h in next(reader, [])]
+        header = [h.strip() for h in next(reader, (hl, []))[1]]
     length = unit_factor(imap.length_unit, LENGTH_CM, "length", f"{mname}: length_unit")
     # the tool target first: its id is plan.tool_target, its orientation the recorded one
     targets = sorted(imap.targets, key=lambda t: t.id != (imap.tool_target or imap.targets[0].id))
@@ -155,8 +156,7 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
     where, q, sweep, angles = [], [], [], []  # type: ignore[var-annotated]
     pts = {t: [] for t in cols}  # type: ignore[var-annotated]
     sig = {t: [] for t in scols}  # type: ignore[var-annotated]
-    for fields in reader:
-        line = reader.line_num + imap.skip_rows
+    for line, fields in reader:
         if not any(f.strip() for f in fields) or line in imap.skip_lines:
             continue
         where.append(f"line {line}")

@@ -1,8 +1,12 @@
-"""YAML read strictly: PyYAML's safe loader that refuses a key given twice in a mapping.
+"""YAML read strictly: PyYAML's safe loader that refuses a key given twice in a mapping,
+any alias and nesting deeper than :data:`MAX_DEPTH`.
 
 A repeated key would otherwise replace the earlier value silently (robot_cal_tools' time
-keys: a measurement lost, issue 32). Refusals are one line naming the file, the line and
-the key; the document itself is never formatted into the message.
+keys: a measurement lost); aliases let a few hundred bytes expand to billions of values
+(a "billion laughs" hung ``import`` while memory grew), and deep nesting ends in a
+RecursionError (issue 32). Measurement files need neither. Refusals are one line naming
+the file, the line and what was found; the document itself is never formatted into the
+message.
 """
 
 from __future__ import annotations
@@ -15,6 +19,9 @@ from pipeline.errors import ImportFileError, one_line
 
 #: Characters of PyYAML's own parse error shown in a refusal.
 _SHOWN = 200
+#: Deepest nesting of sequences and mappings taken: robot_cal_tools' entries nest 3 deep
+#: (entry, pose, value); Python's recursion limit (1,000 frames) is far above 64.
+MAX_DEPTH = 64
 
 
 class _Refused(Exception):
@@ -26,6 +33,24 @@ class _Refused(Exception):
 
 
 class _StrictLoader(yaml.SafeLoader):
+    _depth = 0
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node | None:
+        if self.check_event(yaml.AliasEvent):  # type: ignore[no-untyped-call]
+            mark = self.peek_event().start_mark  # type: ignore[no-untyped-call]
+            raise _Refused("an alias (*name)", mark, "plain values: aliases are not read",
+                           "write the values out in full")  # fmt: skip
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                mark = self.peek_event().start_mark  # type: ignore[no-untyped-call]
+                raise _Refused(f"nested deeper than {MAX_DEPTH} levels", mark,
+                               f"at most {MAX_DEPTH} nested sequences and mappings",
+                               "check the file: a measurement file nests a few levels")  # fmt: skip
+            return super().compose_node(parent, index)  # type: ignore[no-untyped-call,no-any-return]
+        finally:
+            self._depth -= 1
+
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
         seen: set[Any] = set()
         for key_node, _ in node.value:

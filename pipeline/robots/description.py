@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pipeline.errors import RobotDescriptionError
+from pipeline.errors import RobotDescriptionError, one_line
 
 if TYPE_CHECKING:  # the kinematics are imported where a chain or pose is built
     from pipeline.kinematics.chain import SerialChain
@@ -418,12 +418,13 @@ def load_description(path: str | Path) -> RobotDescription:
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
-    except OSError as exc:
+    except (OSError, UnicodeDecodeError) as exc:
         raise RobotDescriptionError(
-            f"cannot read robot description {p}", got=str(exc), fix="check the path"
-        ) from exc
+            f"cannot read robot description {p}", got=one_line(str(exc), 200),
+            fix="check the path; the file must be UTF-8 text",
+        ) from exc  # fmt: skip
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RobotDescriptionError(f"{p}: not valid TOML", got=str(exc)) from exc
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:  # RecursionError: nested deep
+        raise RobotDescriptionError(f"{p}: not valid TOML", got=one_line(str(exc), 200)) from exc
     return description_from_dict(data, source=str(p))
