@@ -127,3 +127,12 @@ def test_full_disk_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     r = CliRunner().invoke(app, ["import", str(src), "--format", "sscanss2", "--robot",
                                  str(TWO_LINK), str(tmp_path / "s")])  # fmt: skip
     _refusal(r, str(tmp_path / "s" / "recording.mcap"), "No space left on device")
+
+
+@pytest.mark.parametrize("index", ["nan", "-1e400", "inf", "1.5", "3"])
+def test_sscanss2_joint_index_that_is_no_joint(tmp_path: Path, index: str) -> None:
+    src = tmp_path / "j.txt"
+    src.write_text(f"1\t1\t2\t3\t0\trevolute\t0\n{index}\t1\t2\t3\t10\trevolute\t0\n")
+    r = CliRunner().invoke(app, ["import", str(src), "--format", "sscanss2", "--robot",
+                                 str(TWO_LINK), str(tmp_path / "s")])  # fmt: skip
+    _refusal(r, "j.txt: line 2: joint index", "names no joint")

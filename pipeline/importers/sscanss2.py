@@ -100,7 +100,7 @@ def read_sscanss2(path: Path, robot: RobotDescription) -> tuple[MeasuredRows, np
                 fix="complete the row (a missing column?) or delete it",
             )
         j = _number(cells[0], src, line, COLUMNS[0])
-        if j != int(j) or not 1 <= j <= n:
+        if not (1 <= j <= n and j == int(j)):  # NaN and ±inf first: int() refuses them
             raise ImportFileError(
                 f"{src}: line {line}: joint index {cells[0]} names no joint of {robot.name}",
                 expected=f"1 to {n}",
