@@ -6,6 +6,10 @@ Every message says what was expected, what arrived, and what to try. Only
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+
 
 def one_line(text: str, limit: int | None = None) -> str:
     """``text`` with every run of whitespace (newlines too) as one space, cut to ``limit``
@@ -69,3 +73,16 @@ class VerdictFailError(ArmsigError):
     """A signature's verdict is FAIL (docs/verdict.md): ``identify`` raises it after its
     output is complete, ``export`` and ``ik`` before using the signature (unless
     ``--accept-verdict``). The command line exits 4."""
+
+
+@contextlib.contextmanager
+def os_errors_refused(path: str | Path, fix: str) -> Iterator[None]:
+    """Turn an :class:`OSError` inside the block (no space, permission, a name too long, a
+    folder where a file was expected) into one line naming the path (the error's own, else
+    ``path``) and the cause, with ``fix``."""
+    try:
+        yield
+    except OSError as exc:
+        where = exc.filename if exc.filename is not None else path
+        cause = exc.strerror or one_line(str(exc), 200) or type(exc).__name__
+        raise ArmsigError(f"{where}: {cause}", fix=fix) from exc

@@ -256,11 +256,15 @@ def test_ik_unwritable_out_is_refused_before_the_solve(
     session: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     import pipeline.control.controller
+    import pipeline.control.targets  # holds its own name of solve_poses: patched too
 
     def no_solve(*args: object, **kwargs: object) -> None:
         raise AssertionError("solved before --out was checked")
 
+    # both names, and targets imported before: imported while only the controller's name
+    # was patched, targets kept no_solve for the rest of the worker's tests
     monkeypatch.setattr(pipeline.control.controller, "solve_poses", no_solve)
+    monkeypatch.setattr(pipeline.control.targets, "solve_poses", no_solve)
     t = str(targets(tmp_path))
     (tmp_path / "file").write_text("")
     for out, fragment in (

@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.errors import ArmsigError
+from pipeline.errors import ArmsigError, os_errors_refused
 from pipeline.evaluation.validation import error_distances, model_points, position_errors
-from pipeline.importers import parse_foreign
+from pipeline.importers import OS_FIX, parse_foreign
 from pipeline.importers.mapping import ImportMap, load_map
 from pipeline.signature.file import FILE_NAME
 from pipeline.signature.session import load_session_signature
@@ -23,9 +23,10 @@ def validate_against(
     """The signature of ``session_dir`` against every row of a second foreign file
     (parsed in memory, never written into the session): its first target vs the model."""
     sdir = Path(session_dir)
-    sig = load_session_signature(sdir / FILE_NAME)
-    imap = ImportMap() if map_path is None else load_map(Path(map_path))
-    rows, _ = parse_foreign(Path(path), fmt, sig.robot, imap)
+    with os_errors_refused(path, OS_FIX):
+        sig = load_session_signature(sdir / FILE_NAME)
+        imap = ImportMap() if map_path is None else load_map(Path(map_path))
+        rows, _ = parse_foreign(Path(path), fmt, sig.robot, imap)
     target = next(iter(rows.targets))
     measured = rows.targets[target]
     ok = np.isfinite(rows.q).all(axis=1) & np.isfinite(measured).all(axis=1)

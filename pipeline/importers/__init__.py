@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import ImportFileError
+from pipeline.errors import ImportFileError, os_errors_refused
 from pipeline.importers.mapping import ImportMap, load_map
 from pipeline.importers.rows import LENGTH_CM, MeasuredRows, checked_rows
 from pipeline.importers.session import ToolChoice, session_messages, tool_rows
@@ -22,6 +22,8 @@ from pipeline.importers.write import source_metadata, write_imported
 from pipeline.robots.description import RobotDescription, load_description
 
 FORMATS = ("sscanss2", "table", "rct")
+#: What to try after an OSError of import or validate (:func:`~pipeline.errors.os_errors_refused`).
+OS_FIX = "check the path (a name of at most 255 bytes), its permissions and the free space"
 
 
 @dataclass(frozen=True)
@@ -104,16 +106,20 @@ def import_file(
 ) -> Imported:
     """Convert ``path`` into ``session_dir/recording.mcap`` (a point session)."""
     src = Path(path)
-    robot = load_description(robot_path)
-    mp = None if map_path is None else Path(map_path)
-    imap = load_map(mp) if mp is not None else ImportMap()
-    rows, tool = read_foreign(src, fmt, robot, imap)
-    local = None
-    if imap.tool_offset is not None:
-        local = np.array(imap.tool_offset) * LENGTH_CM[imap.length_unit]
-    messages = session_messages(rows, robot, tool, f"{fmt} file {src.name} (imported)", local)
-    recording = write_imported(Path(session_dir), messages, source_metadata(src, fmt, mp), force)
+    with os_errors_refused(Path(session_dir) / "recording.mcap", OS_FIX):
+        robot = load_description(robot_path)
+        mp = None if map_path is None else Path(map_path)
+        imap = load_map(mp) if mp is not None else ImportMap()
+        rows, tool = read_foreign(src, fmt, robot, imap)
+        local = None
+        if imap.tool_offset is not None:
+            local = np.array(imap.tool_offset) * LENGTH_CM[imap.length_unit]
+        note = f"{fmt} file {src.name} (imported)"
+        messages = session_messages(rows, robot, tool, note, local)
+        recording = write_imported(
+            Path(session_dir), messages, source_metadata(src, fmt, mp), force
+        )
     return Imported(rows, tool, robot, recording)
 
 
-__all__ = ["FORMATS", "Imported", "import_file", "parse_foreign", "read_foreign"]
+__all__ = ["FORMATS", "OS_FIX", "Imported", "import_file", "parse_foreign", "read_foreign"]

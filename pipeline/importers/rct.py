@@ -12,11 +12,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from pipeline.errors import ImportFileError
 from pipeline.importers.rows import ANGLE_DEG, LENGTH_CM, MeasuredRows
 from pipeline.importers.sscanss2 import read_text
+from pipeline.importers.yamlfile import load_yaml
 from pipeline.robots.description import RobotDescription
 from pipeline.stages.recording import CHECK_SWEEP
 
@@ -65,10 +65,7 @@ def read_rct(path: Path, robot: RobotDescription) -> MeasuredRows:
                 expected="revolute joints (robot_cal_tools' target_joints are in rad)",
                 fix="use a robot description with revolute joints",
             )
-    try:
-        data = yaml.safe_load(read_text(path))
-    except yaml.YAMLError as exc:
-        raise ImportFileError(f"{src}: not valid YAML", got=str(exc)[:200]) from exc
+    data = load_yaml(read_text(path), src)
     if not isinstance(data, dict) or not data:
         raise ImportFileError(
             f"{src}: no entries", expected="a mapping of time keys to {pose, target_joints}"

@@ -135,7 +135,7 @@ def session_messages(
                 {"sweep": sweep, "step": step, "q_commanded": q, "q_encoder": q, "units": units},
             )
         )
-        for t, target in enumerate(ids):
+        for t, target in enumerate(ids[:1] if sweep == "tool" else ids):  # plan.tool_target
             x, y, z = (float(v) for v in rows.targets[target][k])
             point: dict[str, Any] = {
                 "sweep": sweep, "step": step, "target": target, "x_cm": x, "y_cm": y, "z_cm": z

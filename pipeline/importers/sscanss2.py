@@ -10,11 +10,14 @@ other joint. Every row measures the same end-effector point (target ``ee``).
 from __future__ import annotations
 
 import csv
+import re
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from pipeline.errors import ImportFileError
+from pipeline.errors import ImportFileError, one_line
 from pipeline.importers.rows import LENGTH_CM, MeasuredRows
 from pipeline.robots.description import RobotDescription
 
@@ -31,6 +34,40 @@ def read_text(path: Path) -> str:
         raise ImportFileError(
             f"cannot read {path}", got=str(exc), fix="check the path and that it is a text file"
         ) from exc
+
+
+#: The line ends an editor (and ``csv``) knows. ``str.splitlines`` also ends a line at a
+#: form feed, a vertical tab, U+001C-U+001E, NEL, U+2028 and U+2029, which would number
+#: the lines after one differently from what the user sees (issue 32: ``skip_lines``).
+_LINE_END = re.compile(r"\r\n|\r|\n")
+
+
+def editor_lines(text: str) -> list[str]:
+    """``text``'s lines as an editor numbers them: only \\n, \\r\\n and \\r end a line
+    (line k of the file is item k - 1)."""
+    lines = _LINE_END.split(text)
+    return lines[:-1] if lines and lines[-1] == "" else lines
+
+
+def csv_rows(
+    lines: list[str], src: str, offset: int = 0, **fmt: Any
+) -> Iterator[tuple[int, list[str]]]:
+    """``(line number, fields)`` of each record of ``lines`` (``csv.reader`` with ``fmt``;
+    numbers from ``offset`` + 1); a record csv cannot read (a field over its size limit)
+    is refused naming its line."""
+    reader = csv.reader(lines, **fmt)
+    while True:
+        try:
+            fields = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as exc:
+            raise ImportFileError(
+                f"{src}: line {reader.line_num + offset}: {one_line(str(exc), 100)}",
+                expected=f"fields of at most {csv.field_size_limit()} characters",
+                fix="check the line (a quote left open joins the lines after it), or delete it",
+            ) from None
+        yield reader.line_num + offset, fields
 
 
 def _number(text: str, src: str, line: int, col: str) -> float:
@@ -52,9 +89,7 @@ def read_sscanss2(path: Path, robot: RobotDescription) -> tuple[MeasuredRows, np
     n = robot.n_joints
     where, joint, value, xyz = [], [], [], []
     home: dict[int, tuple[float, int]] = {}
-    reader = csv.reader(text.splitlines(), delimiter=delimiter)
-    for fields in reader:
-        line = reader.line_num
+    for line, fields in csv_rows(editor_lines(text), src, delimiter=delimiter):
         cells = [f.strip() for f in fields]
         if not any(cells):
             continue
@@ -65,7 +100,7 @@ def read_sscanss2(path: Path, robot: RobotDescription) -> tuple[MeasuredRows, np
                 fix="complete the row (a missing column?) or delete it",
             )
         j = _number(cells[0], src, line, COLUMNS[0])
-        if j != int(j) or not 1 <= j <= n:
+        if not (1 <= j <= n and j == int(j)):  # NaN and ±inf first: int() refuses them
             raise ImportFileError(
                 f"{src}: line {line}: joint index {cells[0]} names no joint of {robot.name}",
                 expected=f"1 to {n}",

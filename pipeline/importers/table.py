@@ -24,7 +24,7 @@ from pipeline.importers.rows import (
     readings_in_boundary_units,
     unit_factor,
 )
-from pipeline.importers.sscanss2 import read_text
+from pipeline.importers.sscanss2 import csv_rows, editor_lines, read_text
 from pipeline.importers.sweeps import infer_sweeps, pose_set, select_sweeps, tolerance
 from pipeline.robots.description import RobotDescription
 from pipeline.stages.recording import CHECK_SWEEP
@@ -54,7 +54,15 @@ def _index(col: str | int, header: list[str] | None, src: str, line: int, what: 
             got=", ".join(header) if header else "no header",
             fix="correct the column name in the map, or add the column to the file",
         )
-    return header.index(col)
+    at = [k + 1 for k, h in enumerate(header) if h == col]
+    if len(at) > 1:
+        raise ImportFileError(
+            f"{src}: line {line}: column {col!r} ({what}) appears {len(at)} times in the header "
+            f"(columns {', '.join(map(str, at[:-1]))} and {at[-1]})",
+            expected="a column name the header holds once",
+            fix=f"name the column by its number in the map (e.g. {at[-1]}), or rename it",
+        )
+    return at[0] - 1
 
 
 def _cell_reader(src: str, decimal: str) -> Cell:
@@ -118,12 +126,13 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
             f"{mname}: no [[targets]]", expected="x, y, z columns of at least one target",
             fix="add a [[targets]] table (docs/import.md)",
         )  # fmt: skip
-    lines = read_text(path).splitlines()[imap.skip_rows :]
-    reader = csv.reader(lines, delimiter=_delimiter(imap, lines), skipinitialspace=True)
+    lines = editor_lines(read_text(path))[imap.skip_rows :]
+    reader = csv_rows(lines, src, imap.skip_rows, delimiter=_delimiter(imap, lines),
+                      skipinitialspace=True)  # fmt: skip
     header: list[str] | None = None
     hl = imap.skip_rows + 1  # the header's line
     if imap.header:
-        header = [h.strip() for h in next(reader, [])]
+        header = [h.strip() for h in next(reader, (hl, []))[1]]
     length = unit_factor(imap.length_unit, LENGTH_CM, "length", f"{mname}: length_unit")
     # the tool target first: its id is plan.tool_target, its orientation the recorded one
     targets = sorted(imap.targets, key=lambda t: t.id != (imap.tool_target or imap.targets[0].id))
@@ -147,8 +156,7 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
     where, q, sweep, angles = [], [], [], []  # type: ignore[var-annotated]
     pts = {t: [] for t in cols}  # type: ignore[var-annotated]
     sig = {t: [] for t in scols}  # type: ignore[var-annotated]
-    for fields in reader:
-        line = reader.line_num + imap.skip_rows
+    for line, fields in reader:
         if not any(f.strip() for f in fields) or line in imap.skip_lines:
             continue
         where.append(f"line {line}")

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
+from pipeline.atomic import TEMP_SUFFIX
 from pipeline.contract.channels import POINT_CHANNELS
 from pipeline.contract.digest import file_sha256
+from pipeline.errors import ImportFileError, RecordingError
 from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
 from pipeline.stages.lock import session_lock
+from pipeline.stages.recording import read_recording
 
 #: MCAP metadata record naming the foreign file a recording was converted from.
 SOURCE_METADATA = "armsig.source"
@@ -27,11 +31,25 @@ def write_imported(
     session_dir: Path, messages: list[Message], source: dict[str, str], force: bool
 ) -> Path:
     """Write the recording atomically (temp file + rename) under the session lock; an
-    existing recording is refused unless ``force``. Returns the recording's path."""
+    existing recording is refused unless ``force``. The temp file is read back with
+    identify's reader first: a recording identify would refuse (points beyond the
+    contract's ±1,000 m, ...) is refused here, and nothing is left. Returns its path."""
     refuse_existing_recording(session_dir, force, "the imported one")
     session_dir.mkdir(parents=True, exist_ok=True)
     recording = session_dir / "recording.mcap"
     with session_lock(session_dir):
         refuse_existing_recording(session_dir, force, "the imported one")
-        write_recording(recording, messages, POINT_CHANNELS, {SOURCE_METADATA: source})
+        staged = session_dir / f".{recording.name}.import{TEMP_SUFFIX}"  # debris if killed
+        write_recording(staged, messages, POINT_CHANNELS, {SOURCE_METADATA: source})
+        try:
+            read_recording(staged)  # identify's reader: the schemas and the session contract
+        except RecordingError as exc:
+            staged.unlink(missing_ok=True)
+            what = exc.what.removeprefix(f"{staged.resolve()}: ").removeprefix(f"{staged}: ")
+            raise ImportFileError(
+                f"{source['file']}: identify would refuse this recording: {what}",
+                got=exc.got,
+                fix="check the map's length_unit (mm declared as m?), columns and target ids",
+            ) from None
+        os.replace(staged, recording)
     return recording

@@ -18,6 +18,7 @@ _NUMBERS = (
     ("holdout_rms_cm", "held-out RMS position error (cm)", ".4f"),
     ("holdout_expected_rms_cm", "its prediction (cm)", ".4f"),
     ("design_misfit_rms_cm", "design model vs signature, RMS after alignment (cm)", ".4f"),
+    ("design_reach_cm", "the design's reach, the scale of that misfit (cm)", ".4g"),
     ("improvement", "improvement over the design model (×)", ".3g"),
     ("chi2_per_dof", "χ²/dof, sensor self-calibrated", ".3f"),
     ("chi2_recorded_per_dof", "χ²/dof, sensor as recorded", ".3f"),

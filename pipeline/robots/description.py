@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pipeline.errors import RobotDescriptionError
+from pipeline.errors import RobotDescriptionError, one_line
 
 if TYPE_CHECKING:  # the kinematics are imported where a chain or pose is built
     from pipeline.kinematics.chain import SerialChain
@@ -121,6 +121,17 @@ class RobotDescription:
     tool: Pose = Pose()
     notes: str = ""
     coupling: Coupling | None = None
+
+    @property
+    def reach_cm(self) -> float:
+        """The design's size (cm): every D-H length |a| and |d|, a prismatic joint's
+        farthest travel and the tool's offset, summed; the base pose is left out (the
+        verdict's design alignment absorbs it). The verdict's plausibility scale."""
+        total = float(np.linalg.norm(self.tool.xyz_cm))
+        for j in self.joints:
+            travel = max(abs(j.lower), abs(j.upper)) if j.prismatic else 0.0
+            total += abs(j.dh.a_cm) + abs(j.dh.d_cm) + travel
+        return total
 
     def joints_from_readings(self, readings: np.ndarray) -> np.ndarray:
         """Joint values (..., n) of controller readings (..., n), deg / cm."""
@@ -407,12 +418,13 @@ def load_description(path: str | Path) -> RobotDescription:
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
-    except OSError as exc:
+    except (OSError, UnicodeDecodeError) as exc:
         raise RobotDescriptionError(
-            f"cannot read robot description {p}", got=str(exc), fix="check the path"
-        ) from exc
+            f"cannot read robot description {p}", got=one_line(str(exc), 200),
+            fix="check the path; the file must be UTF-8 text",
+        ) from exc  # fmt: skip
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RobotDescriptionError(f"{p}: not valid TOML", got=str(exc)) from exc
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:  # RecursionError: nested deep
+        raise RobotDescriptionError(f"{p}: not valid TOML", got=one_line(str(exc), 200)) from exc
     return description_from_dict(data, source=str(p))

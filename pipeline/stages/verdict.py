@@ -26,7 +26,7 @@ from pipeline.stages.base import Stage, check_param
 NUMBERS = (
     "predicted_rms_cm", "predicted_p95_cm", "predicted_max95_cm", "holdout_rms_cm",
     "holdout_expected_rms_cm", "design_misfit_rms_cm", "improvement", "chi2_per_dof",
-    "chi2_recorded_per_dof", "max_bias_sigmas", "max_mic_sigmas",
+    "chi2_recorded_per_dof", "max_bias_sigmas", "max_mic_sigmas", "design_reach_cm",
 )  # fmt: skip
 
 
@@ -85,6 +85,8 @@ def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, float | Non
         biases=_sensor(refine, "bias"),
         mic_moves=_sensor(refine, "mic"),
         held=tuple(h["name"] for h in summ.get("identifiability", {}).get("held", [])),
+        design_misfit_cm=misfit,
+        reach_cm=robot.reach_cm,
     )
     numbers = {
         "predicted_rms_cm": e.predicted_rms_cm,
@@ -98,6 +100,7 @@ def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, float | Non
         "chi2_recorded_per_dof": e.chi2_recorded_per_dof,
         "max_bias_sigmas": max((b.sigmas for b in e.biases), default=None),
         "max_mic_sigmas": max((b.sigmas for b in e.mic_moves), default=None),
+        "design_reach_cm": e.reach_cm,
     }
     return e, numbers
 
@@ -143,10 +146,11 @@ def verdict_line(session_dir: Path) -> str | None:
 
 STAGE = Stage(
     "verdict",
-    5,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
+    6,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
     # 3: each reason's level, rule, number and threshold (issue 30);
     # 4: the floor_cm of the sensor and held-out rules (issue 33);
-    # 5: parameters held at the design (pose sets, issue 26) a CHECK
+    # 5: parameters held at the design (pose sets, issue 26) a CHECK;
+    # 6: a signature implausibly far from the design a FAIL, design_reach_cm (issue 32)
     ("session", "refine", "uncertainty", "holdout", "chain"),
     Params(),
     compute,
