@@ -458,3 +458,13 @@ def test_simulate_refuses_a_locked_session(tmp_path: Path) -> None:
     with locked_elsewhere(d), pytest.raises(SessionLockedError):
         simulate_session(d, SimulationOptions(seed=3, points=12, repeats=1), force=True)
     assert (d / "recording.mcap").read_bytes() == before
+
+
+@pytest.mark.parametrize("name", ["", ".", "..", "x/..", "sessions/.."])
+def test_a_session_name_of_no_folder_of_its_own_is_refused(
+    name: str, tmp_path, monkeypatch
+) -> None:
+    """Regression (issue 32): NAME '' or '..' wrote into sessions/ or the current folder."""
+    monkeypatch.chdir(tmp_path)
+    assert_one_error(invoke("simulate", name, "--points", "5"), EXIT_REFUSED, repr(name))
+    assert list(tmp_path.iterdir()) == []

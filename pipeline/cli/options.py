@@ -74,7 +74,15 @@ ForceRecording = Annotated[
 
 
 def new_session_folder(name: str) -> Path:
-    """``sessions/NAME`` for a bare name, else the folder path ``name``."""
+    """``sessions/NAME`` for a bare name, else the folder path ``name``; a name that is
+    empty or names no folder of its own (``.``, ``..``: sessions/ itself, the current
+    folder or its parent) is refused in one line."""
+    if Path(name).name in ("", ".", ".."):
+        raise ArmsigError(
+            f"session name {name!r} names no session folder of its own",
+            expected="a name (sessions/NAME) or a folder path ending in a new folder's name",
+            fix="pipeline simulate demo (or a path such as runs/demo)",
+        )
     return Path(name) if ("/" in name or Path(name).is_absolute()) else Path("sessions") / name
 
 

@@ -178,6 +178,7 @@ def import_(
     force: ForceRecording = False,
 ) -> None:
     """Convert a file of measured points into a point session (recording.mcap)."""
+    from pipeline.cli.output import warn
     from pipeline.importers import import_file
 
     out = import_file(file, format, robot, new_session_folder(name), map, force)
@@ -190,6 +191,8 @@ def import_(
         f"wrote {out.recording}: {len(out.rows.where)} configurations "
         f"({poses}{n_check} for validation), tool from {out.tool.note}"
     )
+    if out.tool.warning:
+        warn(out.tool.warning)
 
 
 @commands.command("plan")

@@ -12,7 +12,6 @@ same for x, y, z) or a diagonal ``cov_cm2``.
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,13 +33,15 @@ class ToolChoice:
     rows: np.ndarray  # (m,) row indices
     signature_q: np.ndarray  # (n,)
     note: str  # how they were chosen, for the user
+    warning: str | None = None  # one line for the user when the choice is a fallback
 
 
 def tool_rows(rows: MeasuredRows, home: np.ndarray, tol: np.ndarray) -> ToolChoice:
     """The rows where every joint reads home (within ``tol``); q^s = their mean reading.
 
     When no row is at home, the row of the last joint's sweep nearest home is the
-    tool measurement and q^s its readings (home except the last joint): a warning says so.
+    tool measurement and q^s its readings (home except the last joint): its ``warning``
+    says so (the command prints it as one line).
     A pose set has no tool measurement; q^s is the first pose's readings.
     """
     poses = np.flatnonzero(rows.sweep == POSES_SWEEP)
@@ -57,8 +58,7 @@ def tool_rows(rows: MeasuredRows, home: np.ndarray, tol: np.ndarray) -> ToolChoi
         f"no row has every joint at home; the tool is the point of {rows.where[k]} "
         f"(joint {n} at {rows.q[k, -1]:g} instead of {home[-1]:g}), and q^s its readings"
     )
-    warnings.warn(f"{rows.source.name}: {note}", stacklevel=2)
-    return ToolChoice(np.array([k]), rows.q[k].copy(), note)
+    return ToolChoice(np.array([k]), rows.q[k].copy(), note, f"{rows.source.name}: {note}")
 
 
 def session_messages(
