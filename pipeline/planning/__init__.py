@@ -99,7 +99,6 @@ def plan_poses(
 ) -> Plan:
     """The plan (module docstring): ``sigma_cm`` None takes the simulated tracker's law."""
     from pipeline.rig import tracker
-    from pipeline.rig.audit import _configurations
     from pipeline.rig.plan import PROBE_LENGTH_CM, default_sensor_from_base
     from pipeline.sensor.geometry import default_geometry
 
@@ -120,7 +119,7 @@ def plan_poses(
     p = model.positions(x)
     sig = tracker.sigma_cm(p) if sigma_cm is None else np.full(len(p), float(sigma_cm))
     J = _whitened(model, x, robot, sig)
-    theta = _configurations(robot, WORKSPACE, 0)  # the audit's; q̄ˢ = 0 (the model's gauge)
+    theta = robot.random_configurations(WORKSPACE, 0)  # the audit's; q̄ˢ = 0 (the gauge)
     A, B = model_error_maps(tool_model(model, theta), x)
     M = workspace_information(B)
     units = model.param_units

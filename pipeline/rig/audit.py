@@ -31,7 +31,6 @@ from pipeline.stages.frames import chain_from_frames
 from pipeline.stages.runner import stage_path
 from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_table
-from pipeline.units import joints_to_internal
 
 #: Most random configurations: 1e5 keep the (m, n, 4, 4) stacks of the audit near 100 MB.
 MAX_CONFIGURATIONS = 100_000
@@ -172,15 +171,6 @@ def _truth_and_robot(sdir: Path, configurations: int) -> tuple[SerialChain, Any]
     return true_tool_chain(doc), robot
 
 
-def _configurations(robot: Any, configurations: int, seed: int) -> np.ndarray:
-    """The audit's random configurations (configurations, n), internal units."""
-    rng = np.random.default_rng(seed)
-    lim = robot.limits
-    return joints_to_internal(
-        rng.uniform(lim[:, 0], lim[:, 1], (configurations, robot.n_joints)), robot.prismatic
-    )
-
-
 def table_errors(
     session_dir: str | Path,
     tables: tuple[str, ...] = ("frames", "chain"),
@@ -193,7 +183,7 @@ def table_errors(
     two."""
     sdir = Path(session_dir)
     truth, robot = _truth_and_robot(sdir, configurations)
-    q = _configurations(robot, configurations, seed)
+    q = robot.random_configurations(configurations, seed)
     T_true = forward_kinematics(truth, q)
     return {
         t: _aligned_errors(
@@ -211,7 +201,7 @@ def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) ->
     ``configurations`` (1 to :data:`MAX_CONFIGURATIONS`) random configurations."""
     sdir = Path(session_dir)
     truth, robot = _truth_and_robot(sdir, configurations)
-    q = _configurations(robot, configurations, seed)
+    q = robot.random_configurations(configurations, seed)
     T_true = forward_kinematics(truth, q)
     sig = chain_from_frames(read_table(stage_path(sdir, "chain")), robot.prismatic)
     return AuditResult(

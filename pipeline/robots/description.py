@@ -162,6 +162,16 @@ class RobotDescription:
         """Encoder resolution in boundary units (deg / cm), shape (n,)."""
         return np.array([j.encoder_resolution for j in self.joints], float)
 
+    def random_configurations(self, m: int, seed: int) -> np.ndarray:
+        """``m`` joint values (m, n) drawn uniformly within the limits by a generator seeded
+        with ``seed``, internal units (rad / cm): the configurations the audit, the
+        predicted accuracy, the design alignment and the pose planner average over."""
+        from pipeline.units import joints_to_internal
+
+        lim = self.limits
+        q = np.random.default_rng(seed).uniform(lim[:, 0], lim[:, 1], (m, self.n_joints))
+        return np.asarray(joints_to_internal(q, self.prismatic), float)
+
     def design_chain(self) -> SerialChain:
         """The design model as a :class:`SerialChain` (radians, cm)."""
         from pipeline.kinematics.chain import chain_from_dh

@@ -15,7 +15,6 @@ import numpy as np
 from pipeline.kinematics.alignment import fit_alignment
 from pipeline.kinematics.chain import forward_kinematics
 from pipeline.kinematics.transforms import pose_error
-from pipeline.units import joints_to_internal
 
 if TYPE_CHECKING:
     from pipeline.kinematics.chain import SerialChain
@@ -44,11 +43,7 @@ def chain_alignment(
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Base ``X`` and tool ``Y`` with ``F_a(q) ≈ X · F_b(q) · Y`` over random configurations
     of ``robot`` (fixed seed), and the RMS position misfit (cm) that remains."""
-    rng = np.random.default_rng(0)  # fixed: the same signature gives the same file
-    lim = robot.limits
-    q = joints_to_internal(
-        rng.uniform(lim[:, 0], lim[:, 1], (samples, robot.n_joints)), robot.prismatic
-    )
+    q = robot.random_configurations(samples, 0)  # fixed: the same signature, the same file
     T_a = forward_kinematics(chain_a, q)
     T_b = forward_kinematics(chain_b, q)
     X, Y = fit_alignment(T_a, T_b)

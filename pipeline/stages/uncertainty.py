@@ -71,7 +71,6 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.refine.kinematics import TOOL_POINT, ChainModel
     from pipeline.refine.uncertainty import predict_model, tool_poses
     from pipeline.stages.frames import chain_from_frames, matrices_from_columns
-    from pipeline.units import joints_to_internal
 
     refine = inputs["refine"]
     if refine.num_rows == 0:  # refinement disabled: no covariance
@@ -79,9 +78,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     robot = session_robot(inputs["session"])
     n, pris = robot.n_joints, robot.prismatic
     frames = inputs["frames"]
-    rng = np.random.default_rng(params.seed)
-    lim = robot.limits
-    q = joints_to_internal(rng.uniform(lim[:, 0], lim[:, 1], (params.configurations, n)), pris)
+    q = robot.random_configurations(params.configurations, params.seed)
     m = len(q)
     model = ChainModel(
         frames0=matrices_from_columns(frames)[:n],
