@@ -177,15 +177,22 @@ def tool_points_of_sweeps(
     plan = session_plan(inputs["session"])
     if not plan.get("sweeps_measure_tool", False):
         return np.zeros((0, n)), np.zeros((0, 3))
-    qs, ps = [], []
-    for i in range(1, n + 1):
-        rows = sweep_rows(inputs["positions"], i, plan.get("tool_target"))
-        p = positions(rows)
-        ok = ~np.isnan(p).any(axis=1)
-        steps = rows.column("step").to_numpy().astype(np.int64)[ok]
-        qs.append(readings_at(inputs["joints"], i, steps, n, pris))
-        ps.append(p[ok])
-    return np.vstack(qs), np.vstack(ps)
+    parts = [usable_points(inputs, i, plan.get("tool_target"), n, pris) for i in range(1, n + 1)]
+    return np.vstack([q for q, _ in parts]), np.vstack([p for _, p in parts])
+
+
+def usable_points(
+    inputs: Mapping[str, Any], sweep: int, target: str | None, n: int, pris: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Readings (K, n, boundary units) and positions (K, 3) of the usable measurements of
+    ``target`` (every target when None) in ``sweep``, each joined to its joint state by
+    (sweep, step)."""
+    rows = sweep_rows(inputs["positions"], sweep, target)
+    p = positions(rows)
+    ok = ~np.isnan(p).any(axis=1)
+    steps = rows.column("step").to_numpy().astype(np.int64)[ok]
+    q = readings_at(inputs["joints"], sweep, steps, n, pris) if ok.any() else np.zeros((0, n))
+    return q, p[ok]
 
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
@@ -260,20 +267,9 @@ def tool_point_rows(
     of the tool point in the tool sweep and the pose set, each joined to its joint state by
     (sweep, step)."""
     plan = session_plan(inputs["session"])
-    qs, ps = [], []
-    for sweep, target in (
-        (TOOL_SWEEP, None),
-        (POSES_SWEEP, pose_tool_target(plan, inputs["positions"])),
-    ):
-        rows = sweep_rows(inputs["positions"], sweep, target)
-        p = positions(rows)
-        ok = ~np.isnan(p).any(axis=1)
-        steps = rows.column("step").to_numpy().astype(np.int64)[ok]
-        qs.append(
-            readings_at(inputs["joints"], sweep, steps, n, pris) if ok.any() else np.zeros((0, n))
-        )
-        ps.append(p[ok])
-    return np.vstack(qs), np.vstack(ps)
+    tool = usable_points(inputs, TOOL_SWEEP, None, n, pris)
+    poses = usable_points(inputs, POSES_SWEEP, pose_tool_target(plan, inputs["positions"]), n, pris)
+    return np.vstack([tool[0], poses[0]]), np.vstack([tool[1], poses[1]])
 
 
 def _design_start_table(inputs: Mapping[str, Any], robot: Any) -> pa.Table:
