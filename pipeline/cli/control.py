@@ -16,7 +16,7 @@ from pipeline.cli.options import (
     finite,
     joint_values,
 )
-from pipeline.cli.output import NotReached, print_json, warn, warn_outside_limits
+from pipeline.cli.output import NotReached, print_json, report, warn, warn_outside_limits
 from pipeline.errors import ArmsigError
 
 commands = typer.Typer()
@@ -161,12 +161,7 @@ def ik(
             force=force,
             accept_verdict=accept_verdict,
         )
-        if as_json:
-            print_json(done.to_dict())
-        else:
-            typer.echo(done.summary)
-        if done.verdict_warning:
-            warn(done.verdict_warning)
+        report(done, as_json, done.summary)
         if done.failed:
             raise NotReached
         return
@@ -181,16 +176,13 @@ def ik(
         near=q_near,
         accept_verdict=accept_verdict,
     )
-    if as_json:
-        print_json(r.to_dict())
-    else:
-        typer.echo("q = " + "  ".join(f"{v:.4f} {u}" for v, u in zip(r.q, r.units, strict=True)))
-        typer.echo(
-            f"{r.status} after {r.iterations} iterations; "
-            f"residual {r.position_error_cm:.2e} cm, {r.orientation_error_deg:.2e} deg"
-        )
-    if r.verdict_warning:
-        warn(r.verdict_warning)
+    report(
+        r,
+        as_json,
+        "q = " + "  ".join(f"{v:.4f} {u}" for v, u in zip(r.q, r.units, strict=True)),
+        f"{r.status} after {r.iterations} iterations; "
+        f"residual {r.position_error_cm:.2e} cm, {r.orientation_error_deg:.2e} deg",
+    )
     if r.status == "out_of_limits":
         warn(
             "no solution on the branch inside the joint limits (±360° turns and the wrist "
@@ -240,15 +232,12 @@ def compensate(
         force=force,
         accept_verdict=accept_verdict,
     )
-    if as_json:
-        print_json(done.to_dict())
-    else:
-        typer.echo(done.summary)
-        typer.echo(
-            f"largest correction {done.max_correction_cm:.4f} cm, {done.max_correction_deg:.4f} deg"
-        )
-    if done.verdict_warning:
-        warn(done.verdict_warning)
+    report(
+        done,
+        as_json,
+        done.summary,
+        f"largest correction {done.max_correction_cm:.4f} cm, {done.max_correction_deg:.4f} deg",
+    )
     if done.failed:
         warn(f"{done.failed} target(s) not reached: no compensated pose (null; column status)")
         raise NotReached

@@ -28,6 +28,18 @@ def warn(text: str) -> None:
     typer.echo(f"warning: {text}", err=True)
 
 
+def report(result: Any, as_json: bool, *lines: str) -> None:
+    """What a command that uses a signature did: ``result.to_dict()`` as JSON (``--json``)
+    or ``lines`` for people, then the signature's verdict warning when it has one."""
+    if as_json:
+        print_json(result.to_dict())
+    else:
+        for line in lines:
+            typer.echo(line)
+    if result.verdict_warning:
+        warn(result.verdict_warning)
+
+
 def warn_outside_limits(names: list[str] | tuple[str, ...]) -> None:
     """The warning for joint values outside their limits (nothing when there are none)."""
     if names:

@@ -15,7 +15,7 @@ from pipeline.cli.options import (
     choice,
     joint_values,
 )
-from pipeline.cli.output import print_json, warn, warn_outside_limits
+from pipeline.cli.output import report, warn_outside_limits
 
 commands = typer.Typer()
 
@@ -75,13 +75,10 @@ def export(
         force=force,
         accept_verdict=accept_verdict,
     )
-    if as_json:
-        print_json(r.to_dict())
-    else:
-        typer.echo(
-            f"wrote {r.path} ({r.model}, {r.frame} frame); reproduces the chain at "
-            f"{r.configurations} configurations to {r.max_position_error_m:.1e} m, "
-            f"{r.max_orientation_error_rad:.1e} rad"
-        )
-    if r.verdict_warning:
-        warn(r.verdict_warning)
+    report(
+        r,
+        as_json,
+        f"wrote {r.path} ({r.model}, {r.frame} frame); reproduces the chain at "
+        f"{r.configurations} configurations to {r.max_position_error_m:.1e} m, "
+        f"{r.max_orientation_error_rad:.1e} rad",
+    )
