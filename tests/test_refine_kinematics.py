@@ -106,3 +106,45 @@ def test_zero_moves_give_the_start_frames_exactly() -> None:
     assert m.n_axis_params == 4 + 2 + 4
     assert m.param_names[4:6] == ("joint2.rx", "joint2.ry")
     assert len(m.param_names) == len(m.param_units) == m.n_params
+
+
+@pytest.mark.parametrize("prismatic", CASES)
+def test_nongeometric_terms_move_the_joints_and_their_jacobian_matches(
+    prismatic: list[bool],
+) -> None:
+    """With terms, the positions are the rigid model's at θ + Φβ, and the columns of β
+    (position and tool orientation) match central differences (issue 27)."""
+    from dataclasses import replace
+
+    from pipeline.kinematics.nongeometric import Terms
+
+    rng = np.random.default_rng(5)
+    rigid = _model(rng, prismatic)
+    n = rigid.n_joints
+    terms = Terms(compliance=((1, 2), (2, 2)), harmonic=((1, "cos"), (1, "sin"), (n, "sin")))
+    Phi = rng.normal(0.0, 1.0, (len(rigid.link), n, terms.size))
+    m = replace(rigid, terms=terms)
+    m.__dict__["regressor"] = Phi  # a random regressor: the model is linear in it
+    assert m.n_params == rigid.n_params + terms.size
+    assert m.param_names[-terms.size :] == terms.names
+    x = rng.normal(0.0, 0.05, m.n_params)
+    x[m.n_axis_params : m.beta_slice.start] = rng.uniform(-80.0, 80.0, 3 * m.n_points)
+    beta = x[m.beta_slice]
+    moved = replace(rigid, theta=rigid.theta + Phi @ beta)
+    np.testing.assert_allclose(m.positions(x), moved.positions(x[: rigid.n_params]), atol=1e-12)
+    np.testing.assert_allclose(
+        m.tool_rotations(x), moved.tool_rotations(x[: rigid.n_params]), atol=1e-14
+    )
+    J, W = m.position_jacobian(x), m.tool_orientation_jacobian(x)
+    R = m.tool_rotations(x)
+    h = 1e-6
+    for i in range(m.n_params):
+        e = np.zeros(m.n_params)
+        e[i] = h
+        dp = (m.positions(x + e) - m.positions(x - e)) / (2 * h)
+        np.testing.assert_allclose(J[:, :, i], dp, atol=1e-6 * (1 + np.abs(dp).max()))
+        dR = m.tool_rotations(x + e) - m.tool_rotations(x - e)
+        w = _vee(dR / (2 * h) @ np.swapaxes(R, 1, 2))
+        w[m.link != n] = 0.0
+        np.testing.assert_allclose(W[:, :, i], w, atol=1e-7)
+    assert np.abs(J[:, :, m.beta_slice]).max() > 1.0

@@ -132,6 +132,24 @@ def simulate(
             "--six-d", help="Tracker: the pose set's tool target also measures its orientation."
         ),
     ] = False,
+    compliance: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            max=10.0,
+            help="The true robot's joints deflect under gravity: RMS flange displacement "
+            "over the joint ranges, mm (a UR10's ~0.3; docs/nongeometric.md).",
+        ),
+    ] = 0.0,
+    joint_harmonics: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            max=1.0,
+            help="The true robot's joint-angle errors: first harmonic of each joint's own "
+            "angle, RMS amplitude in deg (encoders and gears: ~0.005-0.02).",
+        ),
+    ] = 0.0,
     force: ForceRecording = False,
 ) -> None:
     """Record a simulated session: recording.mcap plus rig-truth.json."""
@@ -161,6 +179,8 @@ def simulate(
         air=air,
         log_jitter_s=log_jitter_s,
         six_d=six_d,
+        compliance_mm=compliance,
+        harmonic_deg=joint_harmonics,
     )
     path = simulate_session(folder, opts, force=force)
     typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")

@@ -33,7 +33,8 @@ def validate_against(
     if not ok.any():
         raise ArmsigError(f"{Path(path).name}: no row with finite readings and coordinates")
     q = sig.robot.joints_from_readings(rows.q[ok])
-    raw, reg = error_distances(model_points(sig.chain, q, sig.prismatic), measured[ok])
+    model = model_points(sig.chain, q, sig.prismatic, sig.nongeometric)
+    raw, reg = error_distances(model, measured[ok])
     return {
         "session": str(sdir),
         "file": Path(path).name,

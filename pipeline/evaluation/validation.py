@@ -19,6 +19,7 @@ import numpy as np
 
 from pipeline.kinematics.alignment import register_rigid
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
+from pipeline.kinematics.nongeometric import NonGeometric
 from pipeline.units import joints_to_internal
 
 
@@ -60,6 +61,15 @@ def position_errors(raw: np.ndarray, registered: np.ndarray | None) -> PositionE
     return PositionErrors(len(raw), *stats(raw), *reg)
 
 
-def model_points(chain: SerialChain, q: np.ndarray, prismatic: np.ndarray) -> np.ndarray:
-    """The chain's tool point (m, 3) cm at joint values ``q`` (m, n) deg / cm."""
-    return forward_kinematics(chain, joints_to_internal(q, prismatic))[:, :3, 3]
+def model_points(
+    chain: SerialChain,
+    q: np.ndarray,
+    prismatic: np.ndarray,
+    nongeometric: NonGeometric | None = None,
+) -> np.ndarray:
+    """The chain's tool point (m, 3) cm at joint values ``q`` (m, n) deg / cm, the joints
+    where the ``nongeometric`` terms put them when the signature has them."""
+    qi = joints_to_internal(q, prismatic)
+    if nongeometric is not None:
+        qi = nongeometric.effective(qi)
+    return forward_kinematics(chain, qi)[:, :3, 3]

@@ -47,6 +47,9 @@ from pipeline.refine.solve import Problem, Solution, residuals_and_jacobian, sol
 #: (issue 26: off by up to 1 cm and 1° in every parameter).
 TOLERANCE_RAD = np.radians(1.0)
 TOLERANCE_CM = 1.0
+#: A compliance coefficient's (rad per cm of lever, issue 27): 1° of deflection at a 1 m
+#: lever, ten times a UR10's largest.
+TOLERANCE_RAD_PER_CM = TOLERANCE_RAD / 100.0
 #: Relative pivot below which a parameter is structurally invisible: the QR of an exactly
 #: rank-deficient Jacobian leaves pivots at round-off, ~1e-15 of the first (measured on
 #: a Puma tool point on joint 6's axis: 6e-15); a seen parameter is above 1e-6.
@@ -92,8 +95,9 @@ class Identifiability:
 
 
 def tolerance_scale(units: tuple[str, ...]) -> Array:
-    """The tolerance of each parameter by its internal unit (rad, cm; others 1)."""
-    return np.array([TOLERANCE_RAD if u == "rad" else TOLERANCE_CM for u in units])
+    """The tolerance of each parameter by its internal unit (rad, rad/cm, cm; others 1)."""
+    by_unit = {"rad": TOLERANCE_RAD, "rad/cm": TOLERANCE_RAD_PER_CM}
+    return np.array([by_unit.get(u, TOLERANCE_CM) for u in units])
 
 
 def analyse(
@@ -110,6 +114,9 @@ def analyse(
     from scipy.linalg import qr
 
     Js = J * tolerance_scale(units)
+    if held_before is not None:  # held already: out of the QR, so that the exact partner
+        # of a held parameter (two lumped masses on one joint's axis) is not held too
+        Js = np.where(held_before, 0.0, Js)
     # J_s = Q₀ R₀ (blocked Householder, fast), then R₀ P = Q₁ R: the pivots and R of J_s
     # itself (Q₀ Q₁ orthonormal), at the cost of a (P, P) pivoted QR (geqp3 on the tall
     # J_s took 0.14 s of a 2,000-pose fit).
@@ -191,7 +198,15 @@ def summary(
         "n_poses": n_poses,
         "n_points": n_points,
         "poses_needed": poses_needed(ident.rank),
-        "tolerance": {"deg": float(np.degrees(TOLERANCE_RAD)), "cm": TOLERANCE_CM},
+        "tolerance": {
+            "deg": float(np.degrees(TOLERANCE_RAD)),
+            "cm": TOLERANCE_CM,
+            **(
+                {"deg/cm": float(np.degrees(TOLERANCE_RAD_PER_CM))}
+                if any(n.startswith("compliance.") for n in names)
+                else {}
+            ),
+        },
     }
 
 

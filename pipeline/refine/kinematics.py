@@ -36,8 +36,14 @@ Gauge freedoms and how they are fixed:
    ``R_c = Exp(r)``, its rotation vector ``r`` three more parameters (``tool_rot.*``,
    after the points).
 
-Parameter vector: ``x = [δ_1 … δ_n, p0_0 … p0_{m−1}]``. ``x`` with every ``δ = 0`` and
-the points from :func:`start_points` reproduces the thesis chain.
+Parameter vector: ``x = [δ_1 … δ_n, p0_0 … p0_{m−1}, r, β]``. ``x`` with every ``δ = 0``
+and the points from :func:`start_points` reproduces the thesis chain.
+
+Non-geometric terms (issue 27, :mod:`pipeline.kinematics.nongeometric`): the joints sit at
+``θ + Φ β`` instead of ``θ``, ``Φ`` (K, n, m) each observation's regressor at its readings
+(a function of the readings alone), ``β`` their coefficients, the last parameters.
+``∂p/∂β = Σ_j ∂p/∂θ_j Φ_j``, ``∂p/∂θ_j = (Π_{i<j} A_i) Ĝ_j (Π_{i≥j} A_i p0)`` with
+``Ĝ_j = S_j G_z S_j⁻¹`` the joint's own generator.
 """
 
 from __future__ import annotations
@@ -50,6 +56,8 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.errors import StageError
+from pipeline.kinematics.chain import SerialChain
+from pipeline.kinematics.nongeometric import Terms, regressor
 from pipeline.kinematics.so3 import right_jacobian, rotation_from_vector
 from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans, trans_z
 from pipeline.sweeps import TOOL_SWEEP, WHOLE_ARM_SWEEPS
@@ -69,6 +77,11 @@ _GX = np.zeros((4, 4))
 _GX[1, 2], _GX[2, 1] = -1.0, 1.0
 _GY = np.zeros((4, 4))
 _GY[0, 2], _GY[2, 0] = 1.0, -1.0
+# d/dθ Rot_z(θ) = Rot_z(θ) · _GZ; d/dθ Trans_z(θ) = Trans_z(θ) · _GT.
+_GZ = np.zeros((4, 4))
+_GZ[0, 1], _GZ[1, 0] = -1.0, 1.0
+_GT = np.zeros((4, 4))
+_GT[2, 3] = 1.0
 
 
 def _vee(W: Array) -> Array:
@@ -96,6 +109,10 @@ class ChainModel:
         Index of the point ``p0`` each observation sees.
     point_names : tuple of str
         One name per point (``tool`` or ``sweep<j>/<target>``).
+    terms : Terms
+        The non-geometric terms fitted (empty: none); their regressor ``Φ`` (module
+        docstring) is the design chain's ``design`` at the readings ``θ + q̄^s``,
+        ``reading_zero`` = ``q̄^s`` (:attr:`regressor`).
     """
 
     frames0: Array
@@ -105,6 +122,18 @@ class ChainModel:
     point: npt.NDArray[np.int64]
     point_names: tuple[str, ...]
     tool_rotation: bool = False
+    terms: Terms = Terms()
+    design: SerialChain | None = None
+    reading_zero: Array | None = None
+
+    @cached_property
+    def regressor(self) -> Array:
+        """``Φ`` (K, n, terms.size) at every observation's readings."""
+        if not self.terms:
+            return np.zeros((*self.theta.shape, 0))
+        if self.design is None or self.reading_zero is None:
+            raise ValueError("non-geometric terms need the design chain and q̄^s")
+        return regressor(self.terms, self.design, self.theta + self.reading_zero)
 
     @property
     def n_joints(self) -> int:
@@ -126,7 +155,20 @@ class ChainModel:
 
     @property
     def n_params(self) -> int:
-        return self.n_axis_params + 3 * self.n_points + (3 if self.tool_rotation else 0)
+        return self.beta_slice.stop
+
+    @property
+    def beta_slice(self) -> slice:
+        """Where the non-geometric coefficients ``β`` sit in ``x`` (the last parameters)."""
+        start = self.n_axis_params + 3 * self.n_points + (3 if self.tool_rotation else 0)
+        return slice(start, start + self.terms.size)
+
+    def joint_values(self, x: npt.ArrayLike) -> Array:
+        """``θ + Φ β`` (K, n): where the joints sit (``θ`` without non-geometric terms)."""
+        if not self.terms:
+            return self.theta
+        beta = np.asarray(x, float)[self.beta_slice]
+        return np.asarray(self.theta + self.regressor @ beta, float)
 
     @property
     def rotation_slice(self) -> slice:
@@ -149,13 +191,14 @@ class ChainModel:
         ]
         names += [f"{p}.{c}" for p in self.point_names for c in "xyz"]
         names += [f"{TOOL_ROTATION}.{c}" for c in ("rx", "ry", "rz")] if self.tool_rotation else []
-        return tuple(names)
+        return (*names, *self.terms.names)
 
     @cached_property
     def param_units(self) -> tuple[str, ...]:
         sizes = [2 if p else 4 for p in self.prismatic]
         units = [_AXIS_UNITS[m] for size in sizes for m in range(size)]
-        return tuple(units + ["cm"] * (3 * self.n_points) + ["rad"] * (3 * self.tool_rotation))
+        units += ["cm"] * (3 * self.n_points) + ["rad"] * (3 * self.tool_rotation)
+        return (*units, *self.terms.units)
 
     def point_slice(self, j: int) -> slice:
         """Where point ``j``'s ``p0`` sits in ``x``."""
@@ -194,11 +237,12 @@ class ChainModel:
         )
         return S, dS @ invert_transform(S)[:, None]
 
-    def _motions(self, S: Array) -> Array:
-        """``A_k(θ_k)`` of every observation (K, n, 4, 4); exactly I on joints past its link."""
+    def _motions(self, S: Array, theta: Array) -> Array:
+        """``A_k(θ_k)`` of every observation (K, n, 4, 4) at joint values ``theta`` (K, n);
+        exactly I on joints past its link."""
         n, K = self.n_joints, len(self.link)
         M = np.where(
-            self.prismatic[None, :, None, None], trans_z(self.theta), rot_z(self.theta)
+            self.prismatic[None, :, None, None], trans_z(theta), rot_z(theta)
         )  # (K, n, 4, 4)
         A = S @ M @ invert_transform(S)
         moving = np.arange(1, n + 1)[None, :] <= self.link[:, None]
@@ -207,14 +251,15 @@ class ChainModel:
 
     def _points_h(self, x: Array) -> Array:
         """Homogeneous ``p0`` of every observation, shape (K, 4)."""
-        p0 = x[self.n_axis_params : self.rotation_slice.start].reshape(self.n_points, 3)
+        p0 = x[self.n_axis_params : self.n_axis_params + 3 * self.n_points]
+        p0 = p0.reshape(self.n_points, 3)
         p0 = p0[self.point]
         return np.concatenate([p0, np.ones((len(p0), 1))], axis=1)
 
     def positions(self, x: npt.ArrayLike) -> Array:
         """Sensor-frame position of every observation, shape (K, 3)."""
         x = np.asarray(x, float)
-        A = self._motions(self.frames(x))
+        A = self._motions(self.frames(x), self.joint_values(x))
         v = self._points_h(x)
         for k in range(self.n_joints - 1, -1, -1):
             v = (A[:, k] @ v[..., None])[..., 0]
@@ -234,6 +279,21 @@ class ChainModel:
             v = (A[:, k] @ v[..., None])[..., 0]
         return pre, suf
 
+    def _joint_generators(self, S: Array) -> Array:
+        """``Ĝ_j = S_j G S_j⁻¹`` (n, 4, 4) of every joint's own motion (``G_z`` or ``G_t``)."""
+        G = np.where(self.prismatic[:, None, None], _GT, _GZ)
+        return np.asarray(S @ G @ invert_transform(S), float)
+
+    def _joint_tangents(self, S: Array, A: Array, pre: Array, suf: Array) -> Array:
+        """``∂p/∂θ_j`` (K, 3, n) of every observation: ``(Π_{i<j} A_i) Ĝ_j (Π_{i≥j} A_i
+        p0)``, zero for joints past the observation's link."""
+        Gh = self._joint_generators(S)
+        moved = np.einsum("knij,knj->kni", A, suf)  # Π_{i≥j} A_i p0, (K, n, 4)
+        t = np.einsum("nij,knj->kni", Gh[:, :3], moved)  # (K, n, 3)
+        t = np.einsum("knij,knj->kni", pre[:, :-1, :3, :3], t)
+        t[np.arange(1, self.n_joints + 1)[None, :] > self.link[:, None]] = 0.0
+        return np.swapaxes(t, 1, 2)
+
     def position_jacobian(self, x: npt.ArrayLike) -> Array:
         """``∂p/∂x`` of every observation, shape (K, 3, n_params) (exact, analytic).
 
@@ -244,10 +304,12 @@ class ChainModel:
         """
         x = np.asarray(x, float)
         S, G = self._frame_generators(x)
-        A = self._motions(S)
+        A = self._motions(S, self.joint_values(x))
         pre, suf = self._prefix_suffix(A, self._points_h(x))
         K = len(self.link)
         J = np.zeros((K, 3, self.n_params))
+        if self.terms:
+            J[:, :, self.beta_slice] = self._joint_tangents(S, A, pre, suf) @ self.regressor
         for k in range(self.n_joints):
             a, b = self.axis_offsets[k], self.axis_offsets[k + 1]
             Gk = G[k, : b - a, :3]  # (m, 3, 4): only the rows that reach p's 3 coordinates
@@ -273,7 +335,7 @@ class ChainModel:
         observation (sensor frame)."""
         x = np.asarray(x, float)
         F = self.frames(x)
-        A = self._motions(F)
+        A = self._motions(F, self.joint_values(x))
         R = np.broadcast_to(np.eye(3), (len(self.link), 3, 3)).copy()
         for k in range(self.n_joints):
             R = R @ A[:, k, :3, :3]
@@ -291,7 +353,7 @@ class ChainModel:
         """
         x = np.asarray(x, float)
         S, G = self._frame_generators(x)
-        A = self._motions(S)
+        A = self._motions(S, self.joint_values(x))
         pre, _ = self._prefix_suffix(A, self._points_h(x))
         K, n = len(self.link), self.n_joints
         W = np.zeros((K, 3, self.n_params))
@@ -308,6 +370,10 @@ class ChainModel:
         if self.tool_rotation:
             r = x[self.rotation_slice]
             W[:, :, self.rotation_slice] = self.tool_rotations(x) @ right_jacobian(r)
+        if self.terms:  # joint j turns the tool about its axis: ω = R_{<j} · S_j's z
+            axis = np.where(self.prismatic[:, None], 0.0, S[:, :3, 2])  # (n, 3)
+            w_q = np.einsum("knij,nj->kin", pre[:, :-1, :3, :3], axis)  # (K, 3, n)
+            W[:, :, self.beta_slice] = w_q @ self.regressor
         W[self.link != n] = 0.0
         return W
 
@@ -398,7 +464,7 @@ def start_points(model: ChainModel, p_measured: npt.ArrayLike) -> Array:
     """
     p = np.asarray(p_measured, float)
     x0 = np.zeros(model.n_params)
-    A = model._motions(model.frames(x0))
+    A = model._motions(model.frames(x0), model.theta)
     P = np.broadcast_to(np.eye(4), (len(p), 4, 4)).copy()
     for k in range(model.n_joints):
         P = P @ A[:, k]

@@ -43,7 +43,7 @@ def parameter_labels(
     """Names, units and groups of ``x = [θ_kin, x_block]`` (module docstring)."""
     names = list(model.param_names)
     groups = ["axis"] * model.n_axis_params + ["point"] * (3 * model.n_points)
-    groups += ["tool_rotation"] * (3 * model.tool_rotation)
+    groups += ["tool_rotation"] * (3 * model.tool_rotation) + list(model.terms.groups)
     for name in block.param_names:
         head = name.split(".")[0].split("_")[0]
         groups.append(head if head in BLOCK_GROUPS else "sensor")
@@ -102,7 +102,11 @@ def chain_problem(
     started at :func:`pipeline.refine.orientation.start_rotation`)."""
     p0 = start_points(model, measured)
     kin = np.concatenate(
-        [np.zeros(model.n_axis_params), p0.ravel(), np.zeros(3 * model.tool_rotation)]
+        [
+            np.zeros(model.n_axis_params),
+            p0.ravel(),
+            np.zeros(3 * model.tool_rotation + model.terms.size),
+        ]
     )
     if orientation is not None:
         kin[model.rotation_slice] = start_rotation(model, kin, orientation)

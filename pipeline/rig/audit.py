@@ -127,6 +127,34 @@ def true_tool_chain(truth: dict[str, Any]) -> SerialChain:
     return dataclasses.replace(chain, tool=trans(*tip))
 
 
+def true_joint_values(truth: dict[str, Any], robot: Any, q: np.ndarray) -> np.ndarray:
+    """Where the true robot's joints sit at readings ``q`` (..., n) (rad / cm): ``q`` for
+    a rigid robot, else with its ``true_nongeometric`` terms on ``robot``'s design chain
+    (:func:`pipeline.rig.true_robot.draw_nongeometric`)."""
+    from pipeline.kinematics.nongeometric import NonGeometric, Terms
+
+    ng = truth.get("true_nongeometric")
+    if ng is None:
+        return q
+    names = ng.get("terms") if isinstance(ng, dict) else None
+    if not (isinstance(names, list) and all(isinstance(x, str) for x in names)):
+        raise ArmsigError(
+            "rig-truth.json: field 'true_nongeometric.terms' is malformed",
+            expected="a list of term names",
+            fix=_RESIMULATE,
+        )
+    beta = _array(ng.get("coefficients"), (len(names),), "true_nongeometric.coefficients")
+    try:
+        terms = Terms.from_names(names)
+    except (ValueError, IndexError) as exc:
+        raise ArmsigError(
+            "rig-truth.json: field 'true_nongeometric.terms' is malformed",
+            got=str(exc)[:80],
+            fix=_RESIMULATE,
+        ) from exc
+    return NonGeometric(terms, beta, robot.design_chain()).effective(q)
+
+
 def _aligned_errors(T_true: np.ndarray, T_model: np.ndarray) -> ModelError:
     X, Y = fit_alignment(T_true, T_model)
     dp, dth = pose_error(T_true, X @ T_model @ Y)
@@ -139,8 +167,8 @@ def _aligned_errors(T_true: np.ndarray, T_model: np.ndarray) -> ModelError:
     )
 
 
-def _truth_and_robot(sdir: Path, configurations: int) -> tuple[SerialChain, Any]:
-    """The true chain and the session's robot, after the audit's checks."""
+def _truth_and_robot(sdir: Path, configurations: int) -> tuple[SerialChain, Any, dict[str, Any]]:
+    """The true chain, the session's robot and the truth, after the audit's checks."""
     if not 1 <= configurations <= MAX_CONFIGURATIONS:
         raise ArmsigError(
             "--configurations out of range",
@@ -168,7 +196,7 @@ def _truth_and_robot(sdir: Path, configurations: int) -> tuple[SerialChain, Any]
             expected=f"the {robot.n_joints} joints of the session's robot {robot.name}",
             fix=_RESIMULATE,
         )
-    return true_tool_chain(doc), robot
+    return true_tool_chain(doc), robot, doc
 
 
 def table_errors(
@@ -182,9 +210,9 @@ def table_errors(
     the same configurations as :func:`audit`. For studies and benchmarks that compare the
     two."""
     sdir = Path(session_dir)
-    truth, robot = _truth_and_robot(sdir, configurations)
+    truth, robot, doc = _truth_and_robot(sdir, configurations)
     q = robot.random_configurations(configurations, seed)
-    T_true = forward_kinematics(truth, q)
+    T_true = forward_kinematics(truth, true_joint_values(doc, robot, q))
     return {
         t: _aligned_errors(
             T_true,
@@ -199,14 +227,18 @@ def table_errors(
 def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) -> AuditResult:
     """Compare the identified signature and the design model with the truth over
     ``configurations`` (1 to :data:`MAX_CONFIGURATIONS`) random configurations."""
+    from pipeline.stages.refine import nongeometric_model
+
     sdir = Path(session_dir)
-    truth, robot = _truth_and_robot(sdir, configurations)
+    truth, robot, doc = _truth_and_robot(sdir, configurations)
     q = robot.random_configurations(configurations, seed)
-    T_true = forward_kinematics(truth, q)
+    T_true = forward_kinematics(truth, true_joint_values(doc, robot, q))
     sig = chain_from_frames(read_table(stage_path(sdir, "chain")), robot.prismatic)
+    ng = nongeometric_model(read_table(stage_path(sdir, "refine")), robot)
+    q_sig = q if ng is None else ng.effective(q)
     return AuditResult(
         session=str(sdir),
         configurations=configurations,
-        signature=_aligned_errors(T_true, forward_kinematics(sig, q)),
+        signature=_aligned_errors(T_true, forward_kinematics(sig, q_sig)),
         design=_aligned_errors(T_true, forward_kinematics(robot.design_chain(), q)),
     )

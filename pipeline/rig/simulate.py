@@ -37,7 +37,7 @@ from pipeline.rig.plan import (
 from pipeline.rig.pose_file import read_pose_plan
 from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
 from pipeline.rig.resettle import resettle
-from pipeline.rig.true_robot import ErrorSigmas, draw_true_robot
+from pipeline.rig.true_robot import ErrorSigmas, draw_nongeometric, draw_true_robot
 from pipeline.robots import get_robot
 from pipeline.robots.description import RobotDescription, description_to_dict
 from pipeline.sensor.geometry import W_AB_CM, W_AC_CM, W_BC_CM, DigitizerGeometry, default_geometry
@@ -86,6 +86,8 @@ class SimulationOptions:
     six_d: bool = False  # tracker: the pose set's tool target also measures its orientation
     air: str = "lab"  # or "drifting" (AIRS)
     log_jitter_s: float = 0.0  # each measurement logged U(0, this) s after it was measured
+    compliance_mm: float = 0.0  # the true joints deflect under gravity (RMS flange move, mm)
+    harmonic_deg: float = 0.0  # the true joints' first-harmonic angle errors (RMS, deg)
 
 
 def _check(opts: SimulationOptions) -> None:
@@ -115,6 +117,12 @@ def _check(opts: SimulationOptions) -> None:
         raise ArmsigError(
             f"unknown air {opts.air!r}", expected=" or ".join(AIRS), fix="--air drifting"
         )
+    for name, top in (("compliance_mm", 10.0), ("harmonic_deg", 1.0)):
+        value = getattr(opts, name)
+        if not (np.isfinite(value) and 0.0 <= value <= top):
+            raise ArmsigError(
+                f"simulation option {name} out of range", expected=f"0 to {top}", got=repr(value)
+            )
     if not (np.isfinite(opts.log_jitter_s) and 0.0 <= opts.log_jitter_s <= 60.0):
         raise ArmsigError(
             "simulation option log_jitter_s out of range",
@@ -144,6 +152,7 @@ def _options_for_truth(opts: SimulationOptions) -> dict[str, object]:
     for name, default in (
         ("resettle_counts", 0), ("air", "lab"), ("log_jitter_s", 0.0),
         ("poses", 0), ("sweeps", True), ("plan_file", ""), ("six_d", False),
+        ("compliance_mm", 0.0), ("harmonic_deg", 0.0),
     ):  # fmt: skip
         if out[name] == default:
             del out[name]
@@ -279,6 +288,10 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     rng = np.random.default_rng(opts.seed)
     rng_robot, rng_world, rng_servo, rng_sensor = rng.spawn(4)
     true = draw_true_robot(robot, rng_robot, opts.sigmas)
+    true = replace(
+        true,
+        nongeometric=draw_nongeometric(robot, opts.compliance_mm, opts.harmonic_deg, opts.seed),
+    )
     geometry_true = default_geometry()
     geometry_recorded = default_geometry(W_AB_CM, W_BC_CM, W_AC_CM + opts.wac_error_cm)
     sensor_from_base = default_sensor_from_base(robot)
@@ -372,6 +385,8 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
 
     # Where the target sparker physically is at each configuration.
     qi = joints_to_internal(q_reached, pris)
+    if true.nongeometric is not None:  # where the joints sit: deflected, angle errors
+        qi = true.nongeometric.effective(qi)
     p_target = np.zeros((len(commands), 3))
     for k, (sweep_id, _, _) in enumerate(commands):
         if sweep_id in ("tool", "check", "poses"):
@@ -475,10 +490,26 @@ def _truth(
             "base": (sensor_from_base @ true.chain.base).tolist(),
             "links": true.chain.links.tolist(),
         },
+        **_nongeometric_truth(true),
         "true_tool_in_last_link_cm": tool_true.tolist(),
         "true_targets_local_cm": {str(k): v.tolist() for k, v in target_true.items()},
         "sensor_from_base": sensor_from_base.tolist(),
         "errors": true.errors,
+    }
+
+
+def _nongeometric_truth(true: Any) -> dict[str, Any]:
+    """``true_nongeometric`` of rig-truth.json (absent for a rigid robot): the terms and
+    their coefficients in internal units (rad/cm, rad)."""
+    ng = true.nongeometric
+    if ng is None:
+        return {}
+    return {
+        "true_nongeometric": {
+            "terms": list(ng.terms.names),
+            "units": list(ng.terms.units),
+            "coefficients": ng.coefficients.tolist(),
+        }
     }
 
 

@@ -21,6 +21,7 @@ from pipeline.signature.verdict import SignatureVerdict, verdict_of
 
 if TYPE_CHECKING:  # the kinematics are imported where a signature is built or loaded
     from pipeline.kinematics.chain import SerialChain
+    from pipeline.kinematics.nongeometric import NonGeometric
 
 FILE_NAME = "signature.json"
 
@@ -82,7 +83,9 @@ class Signature:
     ``chain``: the S-Model chain (sensor frame, encoder readings in rad / cm);
     ``robot``: the design robot description; ``sensor_from_design_base`` and
     ``design_flange_to_tool``: the design alignment X, Y (4, 4) of the file;
-    ``verdict``: its verdict (None: the file has none).
+    ``verdict``: its verdict (None: the file has none); ``nongeometric``: where the
+    joints sit for given readings, under gravity and with their angle errors (None: the
+    rigid signature; :mod:`pipeline.kinematics.nongeometric`).
     """
 
     robot: RobotDescription
@@ -90,6 +93,7 @@ class Signature:
     sensor_from_design_base: np.ndarray
     design_flange_to_tool: np.ndarray
     verdict: SignatureVerdict | None = None
+    nongeometric: NonGeometric | None = None
 
     @property
     def prismatic(self) -> np.ndarray:
@@ -102,6 +106,43 @@ def load_signature(path: str | Path) -> Signature:
     :func:`pipeline.signature.checks.check_document`)."""
     p = Path(path)
     return signature_from_document(read_signature_document(p), str(p))
+
+
+def nongeometric_section(model: NonGeometric | None, sigma: np.ndarray) -> dict[str, Any]:
+    """The file's ``nongeometric`` section: every term with its boundary unit, value and
+    σ (``sigma`` internal units), and what the regressor is evaluated on."""
+    from pipeline.kinematics.nongeometric import GRAVITY
+
+    assert model is not None
+    factor = np.where([u.startswith("rad") for u in model.terms.units], np.degrees(1.0), 1.0)
+    units = ["deg" + u[3:] if u.startswith("rad") else u for u in model.terms.units]
+    return {
+        "regressor": "design chain (robot_description) at the readings",
+        "gravity_in_design_base": [float(v) for v in GRAVITY],
+        "terms": [
+            {"name": n, "unit": u, "value": float(v), "sigma": float(e)}
+            for n, u, v, e in zip(
+                model.terms.names,
+                units,
+                model.coefficients * factor,
+                sigma * factor,
+                strict=True,
+            )
+        ],
+    }
+
+
+def _nongeometric_of(doc: dict[str, Any], robot: RobotDescription) -> NonGeometric | None:
+    from pipeline.kinematics.nongeometric import NonGeometric, Terms
+
+    section = doc.get("nongeometric")
+    if not section:
+        return None
+    rows = section["terms"]
+    values = np.array([r["value"] for r in rows], float)
+    values *= np.where([r["unit"].startswith("deg") for r in rows], np.radians(1.0), 1.0)
+    terms = Terms.from_names([r["name"] for r in rows])
+    return NonGeometric(terms, values, robot.design_chain())
 
 
 def signature_from_document(doc: dict[str, Any], source: str) -> Signature:
@@ -127,4 +168,5 @@ def signature_from_document(doc: dict[str, Any], source: str) -> Signature:
         np.array(al["sensor_from_design_base"], float),
         np.array(al["design_flange_to_signature_tool"], float),
         verdict_of(doc),
+        _nongeometric_of(doc, robot),
     )

@@ -23,6 +23,7 @@ from pipeline.signature.file import (
     FILE_NAME,
     Signature,
     matrix_rows,
+    nongeometric_section,
     read_signature_document,
     signature_from_document,
     signature_text,
@@ -51,7 +52,7 @@ def refinement_section(refine: pa.Table) -> dict[str, Any]:
     out["sensor_calibration"] = [
         {k: r[k] for k in ("name", "unit", "value", "sigma")}
         for r in rows
-        if r["group"] not in ("axis", "point")
+        if r["group"] not in ("axis", "point", "compliance", "harmonic")
     ]
     out["verdict"] = None
     return out
@@ -62,6 +63,7 @@ def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict
     stage tables, whose content hashes are ``hashes``."""
     from pipeline.kinematics.signature import pseudo_dh_from_chain
     from pipeline.stages.frames import chain_from_frames
+    from pipeline.stages.refine import internal_factors, nongeometric_model
     from pipeline.units import joints_to_boundary
 
     session = read_table(stage_path(session_dir, "session"))
@@ -72,6 +74,8 @@ def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict
     refinement = refinement_section(read_table(stage_path(session_dir, "refine")))
     if hashes.get("verdict") is not None:  # the stage list holds the verdict
         refinement["verdict"] = read_table(stage_path(session_dir, "verdict")).to_pylist()[0]
+    refine = read_table(stage_path(session_dir, "refine"))
+    nongeometric = nongeometric_model(refine, robot)
     pdh = pseudo_dh_from_chain(chain)
     X, Y, misfit = design_alignment(chain, robot)
     qs = joints_to_boundary(chain.joint_offsets, pris)
@@ -99,7 +103,7 @@ def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict
                     "alpha_deg": float(np.degrees(pdh.alpha[i])),
                 }
             )
-    return {
+    doc: dict[str, Any] = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "robot": robot.name,
@@ -151,6 +155,11 @@ def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict
             "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         },
     }
+    if nongeometric is not None:
+        rows = np.isin(refine.column("group").to_pylist(), ("compliance", "harmonic"))
+        sigma = refine.column("sigma").to_numpy()[rows] * internal_factors(refine)[rows]
+        doc["nongeometric"] = nongeometric_section(nongeometric, sigma)
+    return doc
 
 
 def signature_status(session_dir: Path, hashes: dict[str, str | None]) -> tuple[str, str]:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyarrow as pa
@@ -32,10 +32,16 @@ import pyarrow as pa
 from pipeline.errors import StageError
 from pipeline.optim.lm import LOSSES
 from pipeline.stages.base import Stage, check_param
-from pipeline.stages.session import session_plan, session_sensor
+from pipeline.stages.session import session_plan, session_robot, session_sensor
+
+if TYPE_CHECKING:
+    from pipeline.kinematics.nongeometric import NonGeometric
+    from pipeline.robots.description import RobotDescription
 
 META_KEY = b"armsig.refine"
 LEVELS = ("auto", "points", "ranges")
+#: ``refine.nongeometric``: which non-geometric terms the fit has (issue 27).
+NONGEOMETRIC = ("auto", "none", "compliance", "harmonic", "compliance+harmonic")
 
 
 @dataclass(frozen=True)
@@ -45,15 +51,19 @@ class Params:
     (3: a residual beyond 3σ starts to be down-weighted); ``speed_knot_s``: knot spacing
     of the speed-of-sound spline (level ranges), 0: chosen from the rods (120 s, halved
     down to 15 s while the rods' speed ratios ask for it,
-    :meth:`pipeline.sensor.speed_spline.TimeSpline.chosen`). Every parameter is recorded
-    in the table's summary (:func:`refine_summary`); later stages rebuild the problem
-    from it (:func:`problem_params`)."""
+    :meth:`pipeline.sensor.speed_spline.TimeSpline.chosen`); ``nongeometric``: the
+    non-geometric terms (:mod:`pipeline.kinematics.nongeometric`), ``auto``: joint
+    compliance under gravity for a session with a pose set, none for joint sweeps alone
+    (:func:`nongeometric_kinds`). Every parameter is recorded in the table's summary
+    (:func:`refine_summary`); later stages rebuild the problem from it
+    (:func:`problem_params`)."""
 
     enabled: bool = True
     level: str = "auto"
     loss: str = "soft_l1"
     f_scale: float = 3.0
     speed_knot_s: float = 0.0
+    nongeometric: str = "auto"
 
     def __post_init__(self) -> None:
         check_param(self, "refine", "level", self.level in LEVELS, " or ".join(LEVELS))
@@ -62,6 +72,8 @@ class Params:
         check_param(self, "refine", "f_scale", ok, "> 0 and finite")
         ok = bool(np.isfinite(self.speed_knot_s) and self.speed_knot_s >= 0)
         check_param(self, "refine", "speed_knot_s", ok, ">= 0 (0: chosen from the rods), finite")
+        ok = self.nongeometric in NONGEOMETRIC
+        check_param(self, "refine", "nongeometric", ok, " or ".join(NONGEOMETRIC))
 
 
 def refine_summary(table: pa.Table) -> dict[str, Any]:
@@ -74,7 +86,24 @@ def problem_params(summary: Mapping[str, Any]) -> dict[str, Any]:
     """The arguments of :func:`pipeline.stages.refine_problem.session_problem` a
     ``refine`` table was fitted with (its :func:`refine_summary`): later stages rebuild
     the same problem from them, whatever ``refine.*`` parameters the run set."""
-    return {k: summary[k] for k in ("loss", "f_scale", "level", "speed_knot_s")}
+    from pipeline.kinematics.nongeometric import Terms
+
+    out: dict[str, Any] = {k: summary[k] for k in ("loss", "f_scale", "level", "speed_knot_s")}
+    out["terms"] = Terms.from_names(summary.get("nongeometric", {}).get("terms", []))
+    return out
+
+
+def nongeometric_kinds(setting: str, plan: Mapping[str, Any]) -> tuple[str, ...]:
+    """The term kinds of ``refine.nongeometric`` for a session of ``plan``: ``auto`` is
+    compliance for a session with a pose set (the whole arm in many configurations: its
+    gravity torques vary), nothing for joint sweeps alone, whose held joints keep the
+    torques nearly constant (a term there would fit noise). The harmonics are never
+    automatic: a joint's first harmonic identified over part of a turn extrapolates
+    (issue 27: fitted on the UR10's Series C, whose first joint covers 128°, it tripled
+    the error on every other series)."""
+    if setting == "auto":
+        return ("compliance",) if "poses" in plan else ()
+    return () if setting == "none" else tuple(setting.split("+"))
 
 
 def internal_factors(refine: pa.Table) -> np.ndarray:
@@ -82,7 +111,7 @@ def internal_factors(refine: pa.Table) -> np.ndarray:
     one (deg -> rad; cm and ratios unchanged): values scale by it, covariances by its
     outer product."""
     unit = np.array(refine.column("unit").to_pylist())
-    return np.where(unit == "deg", np.radians(1.0), 1.0)
+    return np.where(np.isin(unit, ("deg", "deg/cm")), np.radians(1.0), 1.0)
 
 
 def refined_x(refine: pa.Table) -> np.ndarray:
@@ -104,9 +133,10 @@ def resolved_level(params: Params, sensor: str) -> str:
 
 
 def _boundary(units: tuple[str, ...]) -> tuple[list[str], np.ndarray]:
-    """Boundary units (rad -> deg) and the factor of each parameter."""
-    out = ["deg" if u == "rad" else u for u in units]
-    return out, np.array([np.degrees(1.0) if u == "rad" else 1.0 for u in units])
+    """Boundary units (rad -> deg, rad/cm -> deg/cm) and the factor of each parameter."""
+    angular = [u.startswith("rad") for u in units]
+    out = ["deg" + u[3:] if a else u for u, a in zip(units, angular, strict=True)]
+    return out, np.array([np.degrees(1.0) if a else 1.0 for a in angular])
 
 
 def _table(rows: dict[str, Any], summary: dict[str, Any]) -> pa.Table:
@@ -146,7 +176,15 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             got=f"sensor {sensor!r}",
             fix="--param refine.level=auto",
         )
-    sp = session_problem(inputs, params.loss, params.f_scale, level, params.speed_knot_s)
+    from pipeline.kinematics.nongeometric import all_terms
+
+    robot = session_robot(inputs["session"])
+    kinds = nongeometric_kinds(params.nongeometric, session_plan(inputs["session"]))
+    terms = all_terms(robot.prismatic, kinds)
+    sp = session_problem(inputs, params.loss, params.f_scale, level, params.speed_knot_s, terms)
+    dropped = params.nongeometric == "auto" and _too_few_for(sp)
+    if dropped:  # the rigid chain alone, not a refusal the rigid fit would not give
+        sp = session_problem(inputs, params.loss, params.f_scale, level, params.speed_knot_s)
     spline = getattr(sp.problem.block, "spline", None)
     identifiability: dict[str, Any] = {}
     if "poses" in session_plan(inputs["session"]):
@@ -173,9 +211,19 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "speed_knot_s": params.speed_knot_s,
         "speed_knot_spacing_s": None if spline is None else spline.spacing_s,
         "rows_down_weighted": sol.down_weighted,
+        "f_scale_used": sol.f_scale,
     }
     if identifiability:
         summary["identifiability"] = identifiability
+    if sp.problem.model.terms or dropped:
+        summary["nongeometric"] = {
+            "setting": params.nongeometric,
+            "terms": list(sp.problem.model.terms.names),
+        }
+    if dropped:
+        summary["nongeometric"]["left_out"] = (
+            "too few measured coordinates for the compliance terms (2 per parameter)"
+        )
     rows = {
         "group": list(sp.groups),
         "name": list(sp.names),
@@ -186,6 +234,18 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "covariance": [row for row in cov],
     }
     return _table(rows, summary)
+
+
+def _too_few_for(sp: Any) -> bool:
+    """Whether the non-geometric terms of ``sp`` take its parameters past what its
+    measured coordinates can identify (:data:`pipeline.refine.identifiability.
+    COORDINATES_PER_PARAMETER` each)."""
+    from pipeline.refine.identifiability import COORDINATES_PER_PARAMETER
+
+    measured = getattr(sp.problem.block, "measured", None)
+    if not sp.problem.model.terms or measured is None:
+        return False
+    return bool(3 * len(measured) < COORDINATES_PER_PARAMETER * sp.problem.n_params)
 
 
 def _fit_pose_set(sp: Any, positions: pa.Table) -> tuple[Any, dict[str, Any]]:
@@ -204,6 +264,21 @@ def _fit_pose_set(sp: Any, positions: pa.Table) -> tuple[Any, dict[str, Any]]:
     return sol, summary(ident, sp.names, n_poses, keys.num_rows)
 
 
+def nongeometric_model(refine: pa.Table, robot: RobotDescription) -> NonGeometric | None:
+    """The non-geometric terms a ``refine`` table fitted (rows of groups ``compliance``
+    and ``harmonic``) as the map from readings to where the joints sit, on ``robot``'s
+    design chain (:mod:`pipeline.kinematics.nongeometric`); None without such rows: the
+    rigid signature."""
+    from pipeline.kinematics.nongeometric import KINDS, NonGeometric, Terms
+
+    groups = np.array(refine.column("group").to_pylist(), dtype=object)
+    rows = np.isin(groups, KINDS)
+    if not rows.any():
+        return None
+    names = [str(n) for n in np.array(refine.column("name").to_pylist())[rows]]
+    return NonGeometric(Terms.from_names(names), refined_x(refine)[rows], robot.design_chain())
+
+
 def held_parameters(refine: pa.Table) -> np.ndarray:
     """Per row of a ``refine`` table, whether the fit held it at its start (not
     identifiable: the summary's ``identifiability.held``)."""
@@ -213,9 +288,11 @@ def held_parameters(refine: pa.Table) -> np.ndarray:
 
 STAGE = Stage(
     "refine",
-    4,  # 3: the rods' speed spline fit on its normal equations (linear in the samples);
+    5,  # 3: the rods' speed spline fit on its normal equations (linear in the samples);
     # 4: the speed spline's knots chosen from the rods, every parameter in the summary,
-    # single-cycle sonic positions weighed by the range noise law (level points)
+    # single-cycle sonic positions weighed by the range noise law (level points);
+    # 5: non-geometric terms (refine.nongeometric), the robust scale follows understated
+    # noise (f_scale_used)
     ("session", "joints", "positions", "frames", "ranges"),
     Params(),
     compute,

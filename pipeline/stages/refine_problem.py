@@ -7,6 +7,7 @@ dataclasses. Used by the stages ``refine`` and ``holdout``.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -14,6 +15,7 @@ import numpy.typing as npt
 import pyarrow as pa
 
 from pipeline.errors import ArmsigError
+from pipeline.kinematics.nongeometric import NO_TERMS, Terms
 from pipeline.optim.block import Array, MeasurementBlock
 from pipeline.refine.kinematics import ChainModel, chain_model
 from pipeline.refine.orientation import OrientationRows
@@ -116,11 +118,13 @@ def model_for_keys(
     joints: pa.Table,
     frames: pa.Table,
     tool_rotation: bool = False,
+    terms: Terms = NO_TERMS,
 ) -> ChainModel:
     """The chain model of the observations ``keys`` (columns sweep, step, target), started
     at the thesis ``frames`` table, with each key's readings joined from ``joints`` by
     (sweep, step) (:func:`pipeline.refine.kinematics.chain_model`); ``tool_rotation``: the
-    tool's orientation is a parameter."""
+    tool's orientation is a parameter; ``terms``: the non-geometric terms, their regressor
+    on the design chain at the readings (:mod:`pipeline.kinematics.nongeometric`)."""
     robot = session_robot(session)
     n, pris = robot.n_joints, robot.prismatic
     plan = session_plan(session)
@@ -137,7 +141,37 @@ def model_for_keys(
         theta[sel] = joints_to_internal(q, pris) - q_sig
     target = keys.column("target").to_pylist()
     F = matrices_from_columns(frames)[:n]
-    return chain_model(sweep, target, theta, F, pris, tool_target, pose_tool, tool_rotation)
+    model = chain_model(sweep, target, theta, F, pris, tool_target, pose_tool, tool_rotation)
+    if not terms:
+        return model
+    return replace(model, terms=terms, design=robot.design_chain(), reading_zero=q_sig)
+
+
+def independent_terms(terms: Terms, model: ChainModel, reach_cm: float) -> Terms:
+    """The ``terms`` that are parameters of ``model`` (built with ``terms``): per joint,
+    those whose regressor columns over the observations' readings are independent. A
+    term that is zero at every reading (a joint whose axis is along gravity feels no
+    gravity torque, a mass on a joint's own axis none about it) or a combination of the
+    others (two lumped masses at one point, a Puma's wrist centre; a link's own mass
+    about its joint against that joint's first harmonic) is a property of the design,
+    not of the data: it is no parameter. Pivoted QR (LAPACK ``geqp3``) of each joint's
+    unit-normed columns, a pivot below 1e-9 of the first dropping its column; zero: every
+    value at most 1e-9 rad, or 1e-9 of the reach ``reach_cm`` (cm) for a lever."""
+    from scipy.linalg import qr
+
+    Phi = model.regressor
+    scale = np.array([reach_cm if u == "rad/cm" else 1.0 for u in terms.units])
+    keep = np.zeros(terms.size, bool)
+    for j in range(model.n_joints):
+        cols = np.flatnonzero(np.abs(Phi[:, j, :]).max(axis=0) * scale > 1e-9)
+        if not len(cols):
+            continue
+        block = Phi[:, j, cols] / np.linalg.norm(Phi[:, j, cols], axis=0)
+        _, R, piv = qr(block, mode="economic", pivoting=True)
+        d = np.abs(np.diag(R))
+        keep[cols[piv[: len(d)][d > 1e-9 * d[0]]]] = True
+    names = [nm for nm, k in zip(terms.names, keep, strict=True) if k]
+    return Terms.from_names(names)
 
 
 def orientation_rows(
@@ -175,10 +209,12 @@ def session_problem(
     f_scale: float = 3.0,
     level: str = "points",
     speed_knot_s: float = 0.0,
+    terms: Terms = NO_TERMS,
 ) -> SessionProblem:
     """The problem of a session at ``level`` (``inputs``: session, joints, positions, frames;
     level ``ranges``: and ranges, its speed spline's knots ``speed_knot_s`` apart, 0:
-    chosen from the rods) (:func:`pipeline.refine.problem.chain_problem`)."""
+    chosen from the rods) (:func:`pipeline.refine.problem.chain_problem`), with the
+    non-geometric ``terms`` of them that are parameters (:func:`independent_terms`)."""
     session = inputs["session"]
     robot = session_robot(session)
     block: MeasurementBlock
@@ -199,6 +235,12 @@ def session_problem(
     if "poses" not in session_plan(session):  # a pose set: its identifiability decides
         check_coverage(sweep, robot.n_joints, robot.prismatic, "positions")
     rotation = orientation is not None
-    model = model_for_keys(block.keys, session, inputs["joints"], inputs["frames"], rotation)
+    model = model_for_keys(block.keys, session, inputs["joints"], inputs["frames"], rotation, terms)
+    if terms:
+        independent = independent_terms(terms, model, robot.reach_cm)
+        if independent != terms:
+            model = model_for_keys(
+                block.keys, session, inputs["joints"], inputs["frames"], rotation, independent
+            )
     res = joints_to_internal(robot.encoder_resolution, robot.prismatic)
     return chain_problem(model, block, measured, loss, f_scale, res**2 / 12.0, orientation)

@@ -24,6 +24,7 @@ from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.frames import chain_from_frames, readings_at
 from pipeline.stages.positions import positions, sweep_rows
 from pipeline.stages.recording import CHECK_SWEEP
+from pipeline.stages.refine import nongeometric_model
 from pipeline.stages.session import session_plan, session_robot
 
 ROLES = ("check", "fit")
@@ -43,6 +44,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     plan = session_plan(inputs["session"])
     n, pris = robot.n_joints, robot.prismatic
     chain = chain_from_frames(inputs["chain"], pris)
+    nongeometric = nongeometric_model(inputs["refine"], robot)
     pos = inputs["positions"]
     import pyarrow.compute as pc  # lazy: ~70 ms of import, which a warm run never needs
 
@@ -63,7 +65,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         for s in np.unique(sweep[sel]):
             at = sweep[sel] == s
             q[at] = readings_at(inputs["joints"], int(s), step[sel][at], n, pris)
-        model = model_points(chain, q, pris)
+        model = model_points(chain, q, pris, nongeometric)
         raw, reg = error_distances(model, xyz[sel])
         cols["sweep"] += sweep[sel].tolist()
         cols["step"] += step[sel].tolist()
@@ -89,8 +91,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 STAGE = Stage(
     "validation",
-    2,  # 2: from the signature chain (stage chain)
-    ("positions", "joints", "chain", "session"),
+    3,  # 2: from the signature chain (stage chain); 3: with its non-geometric terms
+    ("positions", "joints", "chain", "session", "refine"),
     NoParams(),
     compute,
     "model position error on validation (check) and fit points",

@@ -1,0 +1,172 @@
+"""The non-geometric signature: joint deflections under gravity and joint-angle errors
+periodic in the joint's own angle (the thesis's open problem, Section 8.3; issue 27).
+
+The rigid signature maps readings ``q`` to a pose, ``T(q)``. A real arm sits at
+``q + Δ(q)`` instead, with, per revolute joint ``j`` (rad):
+
+- **compliance under gravity**: the joint deflects in proportion to the gravity torque
+  about its axis from the links beyond it. Each link ``k`` is lumped into a point mass
+  ``m_k`` at the origin of its frame ``F_k`` (after joint ``k``'s motion; two such masses,
+  at both ends of a link, place its centre of mass anywhere along it), so
+  ``τ_j = g Σ_{k≥j} m_k · h_jk(q)`` with the lever
+  ``h_jk(q) = z_{j−1} · ((o_k − o_{j−1}) × ĝ)`` (cm): the moment arm of a unit weight
+  at ``o_k`` about joint ``j``'s axis (``z_{j−1}``, through ``o_{j−1}``). With the joint's
+  compliance ``c_j`` the deflection is ``Σ_k β_jk h_jk(q)``, ``β_jk = c_j g m_k``
+  (rad/cm): compliance × mass-moment, neither need be known apart;
+- **first-harmonic joint-angle errors** (an encoder's or gear's eccentricity):
+  ``a_j cos q_j + b_j sin q_j`` (rad). The constant term is the encoder offset, already
+  in the signature's ``q̄^s``.
+
+Both are linear in their coefficients, ``Δ(q) = Φ(q) β``, and the regressor ``Φ`` is
+evaluated on the **design** chain at the readings, gravity ``−z`` of the design's base
+frame: a function of the readings alone, the same in the fit, the simulator and the
+controller, so noiseless data identify ``β`` exactly. (The true levers differ from the
+design's by the geometric errors, ~1e-3 of them: ~1e-7 rad on a 1e-4 rad deflection.)
+Prismatic joints have neither term.
+
+A payload ``m_p`` at the flange adds ``c_j g m_p h_j,p(q)``; with one payload in a
+session ``c_j`` is not separable from the flange's own lumped mass (the same lever), so
+the signature predicts the pose under the payload it was measured with.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from pipeline.kinematics.chain import SerialChain, link_frames
+
+Array = npt.NDArray[np.float64]
+
+#: The term kinds, in the order of their coefficients.
+KINDS = ("compliance", "harmonic")
+#: Gravity in the design's base frame (unit vector).
+GRAVITY = np.array([0.0, 0.0, -1.0])
+
+
+@dataclass(frozen=True)
+class Terms:
+    """Which non-geometric terms a model has: compliance pairs ``(j, k)`` (joint ``j``
+    deflected by the lumped mass of link ``k ≥ j``, 1-based) and first-harmonic
+    components ``(j, "cos" | "sin")`` of joint ``j``'s angle error."""
+
+    compliance: tuple[tuple[int, int], ...] = ()
+    harmonic: tuple[tuple[int, str], ...] = ()
+
+    @property
+    def size(self) -> int:
+        return len(self.compliance) + len(self.harmonic)
+
+    def __bool__(self) -> bool:
+        return self.size > 0
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        c = [f"compliance.j{j}.link{k}" for j, k in self.compliance]
+        h = [f"harmonic.j{j}.{f}" for j, f in self.harmonic]
+        return (*c, *h)
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        """Internal units: rad per cm of lever (compliance), rad (harmonics)."""
+        return ("rad/cm",) * len(self.compliance) + ("rad",) * len(self.harmonic)
+
+    @property
+    def groups(self) -> tuple[str, ...]:
+        return ("compliance",) * len(self.compliance) + ("harmonic",) * len(self.harmonic)
+
+    @classmethod
+    def from_names(cls, names: list[str] | tuple[str, ...]) -> Terms:
+        """The terms of parameter names as :attr:`names` gives them (any order kept)."""
+        comp: list[tuple[int, int]] = []
+        harm: list[tuple[int, str]] = []
+        for name in names:
+            kind, joint, rest = name.split(".")
+            if kind == "compliance":
+                comp.append((int(joint[1:]), int(rest[len("link") :])))
+            elif kind == "harmonic" and rest in ("cos", "sin"):
+                harm.append((int(joint[1:]), rest))
+            else:
+                raise ValueError(f"not a non-geometric term: {name!r}")
+        return cls(tuple(comp), tuple(harm))
+
+
+#: A rigid model's terms: none.
+NO_TERMS = Terms()
+
+
+def all_terms(prismatic: npt.ArrayLike, kinds: tuple[str, ...]) -> Terms:
+    """Every term of ``kinds`` for joints ``prismatic`` (n,): compliance of every revolute
+    joint under every link from its own on, a harmonic on every revolute joint."""
+    pris = np.asarray(prismatic, bool)
+    n = len(pris)
+    revolute = [j for j in range(1, n + 1) if not pris[j - 1]]
+    comp = tuple((j, k) for j in revolute for k in range(j, n + 1))
+    harm = tuple((j, f) for j in revolute for f in ("cos", "sin"))
+    return Terms(comp if "compliance" in kinds else (), harm if "harmonic" in kinds else ())
+
+
+def gravity_levers(design: SerialChain, q: npt.ArrayLike) -> Array:
+    """``h[..., j−1, k−1]`` (cm) of the module docstring, shape (..., n, n): zero for
+    ``k < j`` and for prismatic ``j``. ``q`` (..., n): readings (rad / cm)."""
+    F = link_frames(design, q)  # (..., n + 2, 4, 4): F[i] has joint i+1's axis, i < n
+    n = design.n_joints
+    z = F[..., :n, :3, 2]  # joint j's axis, j = 1..n
+    o = F[..., :n, :3, 3]  # a point on it
+    masses = F[..., 1 : n + 1, :3, 3]  # o_k, k = 1..n
+    arm = masses[..., None, :, :] - o[..., :, None, :]  # (..., j, k, 3)
+    moment = np.cross(arm, GRAVITY)
+    h = np.einsum("...jkc,...jc->...jk", moment, z)
+    keep = np.triu(np.ones((n, n), bool)) & ~np.asarray(design.prismatic, bool)[:, None]
+    return np.where(keep, h, 0.0)
+
+
+def regressor(terms: Terms, design: SerialChain, q: npt.ArrayLike) -> Array:
+    """``Φ(q)`` (..., n, size): ``∂Δ_j/∂β`` of every term at readings ``q`` (..., n)."""
+    q = np.asarray(q, float)
+    n = q.shape[-1]
+    out = np.zeros((*q.shape, terms.size))
+    if terms.compliance:
+        h = gravity_levers(design, q)
+        for m, (j, k) in enumerate(terms.compliance):
+            out[..., j - 1, m] = h[..., j - 1, k - 1]
+    base = len(terms.compliance)
+    for i, (j, f) in enumerate(terms.harmonic):
+        out[..., j - 1, base + i] = (np.cos if f == "cos" else np.sin)(q[..., j - 1])
+    assert out.shape[-2] == n
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class NonGeometric:
+    """The identified non-geometric terms of a signature: ``q ↦ q + Φ(q) β``."""
+
+    terms: Terms
+    coefficients: Array  # (size,) internal units (Terms.units)
+    design: SerialChain
+
+    def deflection(self, q: npt.ArrayLike) -> Array:
+        """``Δ(q)`` (..., n), rad / cm, at readings ``q`` (..., n)."""
+        return np.asarray(regressor(self.terms, self.design, q) @ self.coefficients, float)
+
+    def effective(self, q: npt.ArrayLike) -> Array:
+        """The joint values the arm sits at, ``q + Δ(q)``, for readings ``q`` (..., n)."""
+        q = np.asarray(q, float)
+        return q + self.deflection(q)
+
+    def readings_for(self, q_eff: npt.ArrayLike, tol: float = 1e-15, max_iter: int = 50) -> Array:
+        """The readings ``q`` with ``q + Δ(q) = q_eff`` (..., n): the fixed point of
+        ``q ← q_eff − Δ(q)``, a contraction while ``|∂Δ/∂q| < 1`` (deflections of 1e-3
+        rad change by ~1e-3 per radian: ~5 iterations to rounding)."""
+        q_eff = np.asarray(q_eff, float)
+        scale = tol * max(1.0, float(np.max(np.abs(q_eff), initial=0.0)))
+        q = q_eff.copy()
+        for _ in range(max_iter):
+            nxt = q_eff - self.deflection(q)
+            step = float(np.max(np.abs(nxt - q), initial=0.0))
+            q = nxt
+            if step <= scale:
+                break
+        return q
