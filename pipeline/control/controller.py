@@ -12,6 +12,11 @@ signature's sensor frame with the base alignment stored in the signature file
 - Arms with fewer than six joints control only some pose components
   (:func:`task_axes_for`: position and rotation about the base Z for a
   SCARA-like arm); ``Controller.solve(..., task_axes=...)`` solves those.
+- A signature with non-geometric terms (issue 27, :mod:`pipeline.kinematics.
+  nongeometric`): the joints sit at ``q + Φ(q)β`` for readings ``q``. Every solver
+  finds where the joints must sit, ``q*`` (the rigid chain's inverse), and the readings
+  are the fixed point of ``q = q* − Φ(q)β`` (:meth:`NonGeometric.readings_for`);
+  :meth:`Controller.pose` predicts the deflected pose of readings.
 """
 
 from __future__ import annotations
@@ -22,7 +27,12 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.control.limits import honour_limits, limit_arrays, wrist_flip_applies
+from pipeline.control.limits import (
+    honour_limits,
+    limit_arrays,
+    outside_mask,
+    wrist_flip_applies,
+)
 from pipeline.errors import ArmsigError
 from pipeline.kinematics.chain import SerialChain, in_frame
 from pipeline.kinematics.ik import (
@@ -34,6 +44,7 @@ from pipeline.kinematics.ik import (
     jacobi_iterative,
     newton_raphson,
 )
+from pipeline.kinematics.ik.result import STATUS_CONVERGED, STATUS_OUT_OF_LIMITS
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.robots.description import RobotDescription
 from pipeline.robots.fk import ToolPose, ToolPoses, chain_pose, chain_poses
@@ -142,13 +153,28 @@ class Controller:
 
     def pose(self, q: np.ndarray | list[float], design: bool = False) -> ToolPose:
         """The signature tool's pose in the design base frame at joint readings ``q`` (n,),
-        deg / cm: what :meth:`solve` takes back. ``design``: the design model's pose of
-        the same tool (its flange times ``Y``), for comparison."""
-        return chain_pose(self.robot, self._pose_chain(design), q)
+        deg / cm (the joints where the signature's non-geometric terms put them): what
+        :meth:`solve` takes back. ``design``: the design model's pose of the same tool
+        (its flange times ``Y``), for comparison."""
+        ng = None if design else self.signature.nongeometric
+        return chain_pose(self.robot, self._pose_chain(design), q, ng)
 
     def poses(self, q: np.ndarray, design: bool = False) -> ToolPoses:
         """:meth:`pose` of joint readings ``q`` (m, n), deg / cm, in one batch."""
-        return chain_poses(self.robot, self._pose_chain(design), q)
+        ng = None if design else self.signature.nongeometric
+        return chain_poses(self.robot, self._pose_chain(design), q, ng)
+
+    def _readings(self, res: IKResult) -> IKResult:
+        """``res`` (where the joints must sit) as the readings that put them there under the
+        signature's non-geometric terms (module docstring); a reading pushed past a limit
+        by them marks its row ``out_of_limits``. ``res`` itself without terms."""
+        ng = self.signature.nongeometric
+        if ng is None:
+            return res
+        q = ng.readings_for(res.q)
+        status = res.status.copy()
+        status[res.converged & outside_mask(q, self._limits).any(axis=1)] = STATUS_OUT_OF_LIMITS
+        return replace(res, q=q, status=status, converged=status == STATUS_CONVERGED)
 
     def _pose_chain(self, design: bool) -> SerialChain:
         """The chain :meth:`pose` evaluates, in the design base frame."""
@@ -221,11 +247,11 @@ class Controller:
             # thin (cached solver and checks; q_near checked only when given).
             solver = self.realtime(branch)
             near = None if q_near is None else self._starts(T.shape[0], q_near)
-            if method == "nr":
-                return solver.solve(T, near)  # inside the limits by the solver (its kernel)
+            if method == "nr":  # inside the limits by the solver (its kernel)
+                return self._readings(solver.solve(T, near))
             res = solver.solve_jacobi(T, near)
-            return self._into_limits(
-                res, self.signature.chain, self.sensor_from_base @ T, None, near
+            return self._readings(
+                self._into_limits(res, self.signature.chain, self.sensor_from_base @ T, None, near)
             )
         if self.robot.name == "puma560" and branch is None and q_near is None:
             branch = self.default_branch()
@@ -235,7 +261,9 @@ class Controller:
             res = newton_raphson(
                 self.signature.chain, T_sensor, q0, self.resolution, record_history=record_history
             )
-            return self._into_limits(res, self.signature.chain, T_sensor, None, q_near)
+            return self._readings(
+                self._into_limits(res, self.signature.chain, T_sensor, None, q_near)
+            )
         if self.robot.name != "puma560":
             raise ArmsigError(
                 f"{self.robot.name}: Jacobi iteration needs a closed-form design inverse",
@@ -251,7 +279,7 @@ class Controller:
             self.resolution,
             record_history=record_history,
         )
-        return self._into_limits(res, self.signature.chain, T_sensor, None, q_near)
+        return self._readings(self._into_limits(res, self.signature.chain, T_sensor, None, q_near))
 
     @cached_property
     def _compilable(self) -> bool:
@@ -346,7 +374,7 @@ class Controller:
         res = newton_raphson(
             chain, T_base, q0, self.resolution, record_history=record_history, task_axes=axes
         )
-        return self._into_limits(res, chain, T_base, axes, q_near)
+        return self._readings(self._into_limits(res, chain, T_base, axes, q_near))
 
 
 def _puma_arm(q: np.ndarray) -> np.ndarray:

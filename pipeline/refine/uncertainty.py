@@ -163,7 +163,7 @@ def tool_poses(model: ChainModel, x: Array) -> tuple[Array, Array]:
     F = model.signature_frames(x, model.point_names.index(TOOL_POINT))
     n = model.n_joints
     chain = signature_chain(F[: n + 1], np.zeros(n), model.prismatic, F[n + 1])
-    T = forward_kinematics(chain, model.theta)
+    T = forward_kinematics(chain, model.joint_values(x))  # deflected by the terms, if any
     return T[:, :3, 3], T[:, :3, :3]
 
 

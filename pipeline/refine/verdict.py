@@ -12,7 +12,9 @@ FAIL (do not ship):
 - the refinement did not converge;
 - the predicted RMS tool error exceeds ``max_predicted_rms_cm``;
 - χ²/dof exceeds ``chi2_fail`` both with the sensor as recorded and after the sensor's
-  self-calibration: the measurements disagree with any chain the model can express.
+  self-calibration: the measurements disagree with any chain the model can express (for a
+  point sensor, which has no self-calibration, the line names the error the model leaves
+  out: joint compliance and angle errors unless the fit has the non-geometric terms).
 
 CHECK (look before shipping):
 - the refinement is disabled: no predicted accuracy;
@@ -106,6 +108,7 @@ class Evidence:
     held: tuple[str, ...] = field(default_factory=tuple)
     design_misfit_cm: float | None = None
     reach_cm: float | None = None
+    nongeometric: tuple[str, ...] = field(default_factory=tuple)
 
 
 @dataclass(frozen=True)
@@ -135,6 +138,22 @@ def _g(v: float) -> str:
 def _sensor_fires(p: SensorParameter, limit: float, t: Thresholds) -> bool:
     """A sensor parameter moved significantly (``> limit`` σ) and by more than the floor."""
     return p.sigmas > limit and not (p.unit == "cm" and abs(p.offset) <= t.floor_cm)
+
+
+def _unexplained(e: Evidence) -> str:
+    """What a χ² beyond ``chi2_fail`` means for the session of ``e``."""
+    if e.biases or e.mic_moves:  # the sensor was calibrated in the fit
+        return "the self-calibration cannot explain the measurements"
+    if e.nongeometric:
+        return (
+            "unmodelled error beyond the fitted non-geometric terms "
+            f"({len(e.nongeometric)}), or the measurements' noise understated"
+        )
+    return (
+        "unmodelled error, the rigid chain cannot explain the measurements (joint compliance "
+        "or angle errors: --param refine.nongeometric=compliance+harmonic, "
+        "docs/nongeometric.md), or the measurements' noise understated"
+    )
 
 
 def _sensor_reasons(e: Evidence, t: Thresholds) -> list[Reason]:
@@ -209,7 +228,7 @@ def judge(e: Evidence, t: Thresholds = Thresholds()) -> Verdict:
             c,
             t.chi2_fail,
             f"χ²/dof {c:.2f} (sensor as recorded {c0 if c0 is None else f'{c0:.2f}'}) "
-            f"> {t.chi2_fail:g}: the self-calibration cannot explain the measurements",
+            f"> {t.chi2_fail:g}: {_unexplained(e)}",
         )
     elif c is not None and c > t.chi2_check:
         fire(

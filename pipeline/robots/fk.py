@@ -9,6 +9,7 @@ import numpy as np
 
 from pipeline.errors import KinematicsError
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
+from pipeline.kinematics.nongeometric import NonGeometric
 from pipeline.kinematics.transforms import xyz_rpy_from_transform
 from pipeline.robots.description import RobotDescription
 from pipeline.units import joints_to_internal
@@ -51,10 +52,14 @@ class ToolPoses:
 
 
 def chain_pose(
-    robot: RobotDescription, chain: SerialChain, q: list[float] | np.ndarray
+    robot: RobotDescription,
+    chain: SerialChain,
+    q: list[float] | np.ndarray,
+    nongeometric: NonGeometric | None = None,
 ) -> ToolPose:
     """Forward kinematics of ``chain``, a chain of ``robot`` (same joints), at joint
-    readings ``q`` (n,) in deg (revolute) / cm (prismatic), through the robot's coupling."""
+    readings ``q`` (n,) in deg (revolute) / cm (prismatic), through the robot's coupling
+    and, given them, the ``nongeometric`` terms (where the joints sit)."""
     qq = np.asarray(q, float)
     if qq.shape != (robot.n_joints,):
         raise KinematicsError(
@@ -62,16 +67,22 @@ def chain_pose(
             expected=f"{robot.n_joints} values ({', '.join(j.name for j in robot.joints)})",
             got=f"{qq.size}",
         )
-    p = chain_poses(robot, chain, qq[None])
+    p = chain_poses(robot, chain, qq[None], nongeometric)
     return ToolPose(p.matrix[0], p.xyz_cm[0], p.rpy_deg[0], p.outside_limits[0])
 
 
-def chain_poses(robot: RobotDescription, chain: SerialChain, q: np.ndarray) -> ToolPoses:
+def chain_poses(
+    robot: RobotDescription,
+    chain: SerialChain,
+    q: np.ndarray,
+    nongeometric: NonGeometric | None = None,
+) -> ToolPoses:
     """:func:`chain_pose` of joint readings ``q`` (m, n), deg / cm, in one batch."""
     qq = np.asarray(q, float)
-    T = forward_kinematics(
-        chain, joints_to_internal(robot.joints_from_readings(qq), robot.prismatic)
-    )
+    joints = joints_to_internal(robot.joints_from_readings(qq), robot.prismatic)
+    if nongeometric is not None:
+        joints = nongeometric.effective(joints)
+    T = forward_kinematics(chain, joints)
     xyz, rpy = xyz_rpy_from_transform(T)
     return ToolPoses(T, xyz, np.rad2deg(rpy), [outside_limits(robot, row) for row in qq])
 

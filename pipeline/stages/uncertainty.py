@@ -43,8 +43,10 @@ class Params:
 
 
 def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.ndarray]:
-    """``x`` and ``Σ`` (internal units: rad, cm) of the axis parameters and the tool point,
-    rows picked from the ``refine`` table by group and name (joined by key, not position)."""
+    """``x`` and ``Σ`` (internal units: rad, cm) of the axis parameters, the tool point (and
+    rotation) and the non-geometric terms, in the order of :class:`ChainModel`'s
+    parameters, rows picked from the ``refine`` table by group and name (joined by key,
+    not position)."""
     group = refine.column("group").to_pylist()
     name = refine.column("name").to_pylist()
     axis = [i for i, g in enumerate(group) if g == "axis"]
@@ -58,7 +60,8 @@ def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.
             got=f"{len(axis)} axis rows, {len(tool)} tool rows",
             fix="`pipeline identify SESSION --force` recomputes the refinement",
         )
-    idx = np.array(axis + tool)
+    terms = [i for i, g in enumerate(group) if g in ("compliance", "harmonic")]  # issue 27
+    idx = np.array(axis + tool + terms)
     from pipeline.stages.refine import internal_factors, refined_x
 
     scale = internal_factors(refine)
@@ -68,9 +71,11 @@ def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
+    from pipeline.kinematics.nongeometric import NO_TERMS
     from pipeline.refine.kinematics import TOOL_POINT, ChainModel
     from pipeline.refine.uncertainty import predict_model, tool_poses
     from pipeline.stages.frames import chain_from_frames, matrices_from_columns
+    from pipeline.stages.refine import nongeometric_model
 
     refine = inputs["refine"]
     if refine.num_rows == 0:  # refinement disabled: no covariance
@@ -80,14 +85,19 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     frames = inputs["frames"]
     q = robot.random_configurations(params.configurations, params.seed)
     m = len(q)
+    ng = nongeometric_model(refine, robot)
+    q_sig = chain_from_frames(frames, pris).joint_offsets
     model = ChainModel(
         frames0=matrices_from_columns(frames)[:n],
         prismatic=pris,
         link=np.full(m, n, np.int64),
-        theta=q - chain_from_frames(frames, pris).joint_offsets,
+        theta=q - q_sig,
         point=np.zeros(m, np.int64),
         point_names=(TOOL_POINT,),
         tool_rotation="tool_rotation" in refine.column("group").to_pylist(),
+        terms=NO_TERMS if ng is None else ng.terms,
+        design=None if ng is None else ng.design,
+        reading_zero=q_sig,
     )
     x, Sigma = kinematic_covariance(refine, model.n_axis_params)
     pred = predict_model(model, x, Sigma, params.seed)
@@ -128,7 +138,7 @@ def summary(table: pa.Table) -> dict[str, float] | None:
 
 STAGE = Stage(
     "uncertainty",
-    1,
+    2,  # 2: the non-geometric terms' covariance and deflection in the prediction (issue 27)
     ("session", "refine", "frames"),
     Params(),
     compute,

@@ -87,6 +87,7 @@ def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, float | Non
         held=tuple(h["name"] for h in summ.get("identifiability", {}).get("held", [])),
         design_misfit_cm=misfit,
         reach_cm=robot.reach_cm,
+        nongeometric=tuple(summ.get("nongeometric", {}).get("terms", [])),
     )
     numbers = {
         "predicted_rms_cm": e.predicted_rms_cm,
@@ -146,11 +147,12 @@ def verdict_line(session_dir: Path) -> str | None:
 
 STAGE = Stage(
     "verdict",
-    6,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
+    7,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
     # 3: each reason's level, rule, number and threshold (issue 30);
     # 4: the floor_cm of the sensor and held-out rules (issue 33);
     # 5: parameters held at the design (pose sets, issue 26) a CHECK;
-    # 6: a signature implausibly far from the design a FAIL, design_reach_cm (issue 32)
+    # 6: a signature implausibly far from the design a FAIL, design_reach_cm (issue 32);
+    # 7: a point sensor's χ² beyond chi2_fail names the error the model leaves out (27)
     ("session", "refine", "uncertainty", "holdout", "chain"),
     Params(),
     compute,

@@ -1,0 +1,151 @@
+"""The non-geometric signature (issue 27): joint compliance under gravity and joint-angle
+harmonics, their reference formulas, exact identification from noiseless sessions, the
+verdict without them, and control with them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.control.session import session_controller
+from pipeline.identify import identify
+from pipeline.kinematics.chain import forward_kinematics, link_frames
+from pipeline.kinematics.nongeometric import (
+    GRAVITY,
+    NonGeometric,
+    Terms,
+    all_terms,
+    gravity_levers,
+    regressor,
+)
+from pipeline.rig.audit import audit
+from pipeline.rig.simulate import SimulationOptions, simulate_session
+from pipeline.rig.true_robot import draw_nongeometric
+from pipeline.robots.description import load_description
+from pipeline.signature.file import FILE_NAME, load_signature
+from pipeline.stages.refine import nongeometric_model, refine_summary
+from pipeline.stages.runner import stage_path
+from pipeline.stages.tables import read_table
+from pipeline.units import joints_to_boundary
+
+DATA = Path(__file__).parents[1] / "pipeline" / "robots" / "data"
+PUMA = load_description(DATA / "puma560.toml")
+UR10 = load_description(Path(__file__).parents[1] / "examples" / "ur10_ipa" / "ur10.toml")
+
+
+@pytest.mark.parametrize("robot", [PUMA, UR10], ids=["puma560", "ur10"])
+def test_levers_are_the_gravity_torques_of_unit_weights(robot) -> None:
+    """Reference: the torque of a unit weight at o_k about joint j is −∂V/∂q_j with the
+    potential V = −ĝ · o_k (central differences of the design's frames)."""
+    design = robot.design_chain()
+    q = robot.random_configurations(20, 3)
+    h = gravity_levers(design, q)
+    n, step = robot.n_joints, 1e-6
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = step
+        up, down = link_frames(design, q + e), link_frames(design, q - e)
+        height = (up[:, 1 : n + 1, :3, 3] - down[:, 1 : n + 1, :3, 3]) @ GRAVITY / (2 * step)
+        want = np.where(np.arange(1, n + 1) >= j + 1, height, 0.0)
+        np.testing.assert_allclose(h[:, j, :], want, atol=1e-6)
+
+
+def test_terms_names_round_trip_and_junk_is_refused() -> None:
+    terms = all_terms(UR10.prismatic, ("compliance", "harmonic"))
+    assert terms.size == 21 + 12 and len(terms.names) == len(terms.units) == terms.size
+    assert Terms.from_names(terms.names) == terms
+    with pytest.raises(ValueError, match="not a non-geometric term"):
+        Terms.from_names(["harmonic.j2.tan"])
+
+
+def test_readings_for_inverts_where_the_joints_sit() -> None:
+    ng = draw_nongeometric(UR10, 3.0, 0.05, seed=4)  # ten times the realistic sizes
+    assert ng is not None
+    q = UR10.random_configurations(1000, 1)
+    q_eff = ng.effective(q)
+    assert np.abs(q_eff - q).max() > 1e-4  # it moves the joints
+    np.testing.assert_allclose(ng.readings_for(q_eff), q, rtol=0, atol=1e-14)
+
+
+def test_simulated_compliance_has_the_requested_size() -> None:
+    ng = draw_nongeometric(UR10, 0.3, 0.0, seed=2)
+    assert ng is not None and not ng.terms.harmonic
+    design = UR10.design_chain()
+    q = UR10.random_configurations(500, 2)
+    move = forward_kinematics(design, ng.effective(q)) - forward_kinematics(design, q)
+    rms_mm = 10 * np.sqrt(np.mean(np.sum(move[:, :3, 3] ** 2, axis=1)))
+    assert rms_mm == pytest.approx(0.3, rel=1e-4)
+    assert draw_nongeometric(UR10, 0.0, 0.0, seed=2) is None
+
+
+def test_regressor_columns_are_the_levers_and_harmonics() -> None:
+    terms = Terms(compliance=((2, 3),), harmonic=((4, "sin"),))
+    q = UR10.random_configurations(5, 1)
+    Phi = regressor(terms, UR10.design_chain(), q)
+    np.testing.assert_array_equal(Phi[:, 1, 0], gravity_levers(UR10.design_chain(), q)[:, 1, 2])
+    np.testing.assert_array_equal(Phi[:, 3, 1], np.sin(q[:, 3]))
+    assert np.count_nonzero(Phi) == 10
+
+
+def _session(factory, nongeometric: str, **options) -> Path:
+    d = factory.mktemp("ng")
+    opts = {
+        "sensor": "tracker", "poses": 120, "sweeps": False, "noiseless": True,
+        "compliance_mm": 0.3, "harmonic_deg": 0.01, **options,
+    }  # fmt: skip
+    simulate_session(d, SimulationOptions(**opts))
+    identify(d, report=False, overrides={"refine": {"nongeometric": nongeometric}})
+    return d
+
+
+@pytest.fixture(scope="module")
+def compliant(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A noiseless Puma pose set with compliance and harmonics, fitted with both."""
+    return _session(tmp_path_factory, "compliance+harmonic")
+
+
+def test_noiseless_pose_set_with_the_terms_identifies_exactly(compliant: Path) -> None:
+    assert audit(compliant, configurations=300).signature.max_position_cm <= 1e-6
+    summary = refine_summary(read_table(stage_path(compliant, "refine")))
+    assert summary["identifiability"]["held"] == []
+    # the Puma's wrist centre is one point: links 4 and 5 (and 6 for joint 2's own
+    # harmonic) are the same lever there, not parameters of their own
+    terms = summary["nongeometric"]["terms"]
+    assert "compliance.j2.link4" not in terms and "compliance.j2.link5" in terms
+
+
+def test_mixed_sweeps_and_poses_with_the_terms_identify_exactly(tmp_path_factory) -> None:
+    d = _session(tmp_path_factory, "compliance+harmonic", sweeps=True, points=6, poses=80)
+    assert audit(d, configurations=300).signature.max_position_cm <= 1e-6
+
+
+def test_without_the_terms_the_verdict_names_unmodelled_error(tmp_path_factory) -> None:
+    d = _session(tmp_path_factory, "none", harmonic_deg=0.0)
+    result = identify(d, report=False, overrides={"refine": {"nongeometric": "none"}})
+    assert result.verdict is not None and result.verdict.startswith(f"{d.name}: FAIL")
+    assert "unmodelled error, the rigid chain cannot explain" in result.verdict
+
+
+def test_signature_file_carries_the_terms(compliant: Path) -> None:
+    sig = load_signature(compliant / FILE_NAME)
+    ng = nongeometric_model(read_table(stage_path(compliant, "refine")), PUMA)
+    assert sig.nongeometric is not None and ng is not None
+    assert sig.nongeometric.terms == ng.terms
+    np.testing.assert_allclose(sig.nongeometric.coefficients, ng.coefficients, rtol=1e-15)
+
+
+def test_ik_returns_readings_whose_deflected_pose_is_the_target(compliant: Path) -> None:
+    """Issue 27: FK with the terms of the returned readings meets 1e-6 cm of the target."""
+    ctl = session_controller(compliant)
+    assert isinstance(ctl.signature.nongeometric, NonGeometric)
+    q = PUMA.random_configurations(1000, 7)
+    target = ctl.poses(joints_to_boundary(q, PUMA.prismatic)).matrix
+    res = ctl.solve(target, q_near=q)
+    assert res.converged.mean() > 0.99
+    reached = ctl.poses(joints_to_boundary(res.q[res.converged], PUMA.prismatic)).matrix
+    err = np.linalg.norm(reached[:, :3, 3] - target[res.converged, :3, 3], axis=1)
+    assert err.max() <= 1e-6
+    rigid = ctl.poses(joints_to_boundary(q, PUMA.prismatic), design=True)  # sanity: moves
+    assert np.abs(rigid.matrix[:, :3, 3] - target[:, :3, 3]).max() > 1e-3
