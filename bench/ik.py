@@ -68,3 +68,32 @@ def main(c: Controller | None = None) -> None:
     print(f"{'Controller.solve nr, one target (median)':45s} {p50:9.0f} µs")
     # The tail: targets the compiled kernel defers to the numpy iteration (safeguard).
     print(f"{'Controller.solve nr, one target (99th pct.)':45s} {p99:9.0f} µs")
+
+    realtime_with_terms(c, T[:2000], branch)
+
+
+def realtime_with_terms(c: Controller, T: np.ndarray, branch: puma560.Branch) -> None:
+    """The real-time one-target solve with non-geometric terms against the rigid one, on
+    the same signature and targets (issue 27: within 2×). The terms: a compliance of
+    0.3 mm RMS and 0.01° joint harmonics (:func:`pipeline.rig.true_robot.
+    draw_nongeometric`) attached to robot3's signature; the solver then also finds the
+    readings that put the joints where the chain needs them (compiled fixed point).
+    Rounds interleaved, medians of the per-round means."""
+    from dataclasses import replace
+
+    from pipeline.rig.true_robot import draw_nongeometric
+
+    ng = draw_nongeometric(c.robot, 0.3, 0.01, seed=27)
+    with_terms = Controller.from_signature(replace(c.signature, nongeometric=ng))
+    solvers = {"rigid": c.realtime(branch), "with terms": with_terms.realtime(branch)}
+    means: dict[str, list[float]] = {k: [] for k in solvers}
+    for _ in range(7):
+        for name, solver in solvers.items():
+            t0 = time.perf_counter()
+            for target in T:
+                solver.solve_one(target)
+            means[name].append((time.perf_counter() - t0) / len(T))
+    rigid, terms = (float(np.median(means[k])) * 1e6 for k in ("rigid", "with terms"))
+    print(f"{'PumaSolver.solve_one, rigid (median)':45s} {rigid:9.1f} µs")
+    print(f"{'PumaSolver.solve_one, with terms (median)':45s} {terms:9.1f} µs")
+    print(f"{'  with terms / rigid (goal <= 2)':45s} {terms / rigid:9.2f}")

@@ -149,3 +149,32 @@ def test_ik_returns_readings_whose_deflected_pose_is_the_target(compliant: Path)
     assert err.max() <= 1e-6
     rigid = ctl.poses(joints_to_boundary(q, PUMA.prismatic), design=True)  # sanity: moves
     assert np.abs(rigid.matrix[:, :3, 3] - target[:, :3, 3]).max() > 1e-3
+
+
+def test_compiled_readings_agree_with_the_model() -> None:
+    from pipeline.kinematics.nongeometric_compiled import CompiledDeflection
+
+    ng = draw_nongeometric(PUMA, 0.3, 0.01, seed=5)
+    assert ng is not None
+    lim = np.radians(PUMA.limits)
+    compiled = CompiledDeflection(ng, lim[:, 0], lim[:, 1])
+    q_eff = PUMA.random_configurations(1000, 3)
+    q = q_eff.copy()
+    outside = np.zeros(len(q), bool)
+    compiled.readings_into(q, outside)
+    np.testing.assert_allclose(q, ng.readings_for(q_eff), rtol=0, atol=1e-15)
+    assert np.array_equal(outside, ((q < lim[:, 0]) | (q > lim[:, 1])).any(axis=1))
+
+
+def test_realtime_solver_returns_readings_and_batch_equals_loop(compliant: Path) -> None:
+    ctl = session_controller(compliant)
+    solver = ctl.realtime()
+    q = PUMA.random_configurations(300, 11)
+    target = ctl.poses(joints_to_boundary(q, PUMA.prismatic)).matrix
+    batch = solver.solve(target)
+    assert batch.converged.sum() > 100
+    for k in np.flatnonzero(batch.converged)[:50]:
+        assert solver.solve_one(np.ascontiguousarray(target[k]))
+        assert np.array_equal(solver.q, batch.q[k])
+        reached = ctl.pose(joints_to_boundary(solver.q, PUMA.prismatic)).matrix
+        assert np.linalg.norm(reached[:3, 3] - target[k, :3, 3]) <= 1e-6

@@ -247,8 +247,8 @@ class Controller:
             # thin (cached solver and checks; q_near checked only when given).
             solver = self.realtime(branch)
             near = None if q_near is None else self._starts(T.shape[0], q_near)
-            if method == "nr":  # inside the limits by the solver (its kernel)
-                return self._readings(solver.solve(T, near))
+            if method == "nr":  # inside the limits, the readings, by the solver (its kernel)
+                return solver.solve(T, near)
             res = solver.solve_jacobi(T, near)
             return self._readings(
                 self._into_limits(res, self.signature.chain, self.sensor_from_base @ T, None, near)
@@ -332,6 +332,7 @@ class Controller:
             (pc.PUMA_ELBOW_MARGIN_RAD, pc.PUMA_SHOULDER_MARGIN_CM),
             design=self._design_model(self.sensor_from_base),
             jacobi_margins=(pc.JACOBI_ELBOW_MARGIN_RAD, pc.JACOBI_SHOULDER_MARGIN_CM),
+            nongeometric=self.signature.nongeometric,
         )  # fmt: skip
         self._solvers[branch] = solver
         return solver

@@ -7,6 +7,8 @@ finishes the targets those defer with the numpy iterations of
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from pipeline.control.limits import honour_limits
@@ -46,6 +48,8 @@ from pipeline.kinematics.ik_compiled import (
     homogeneous,
     run_in_shares,
 )
+from pipeline.kinematics.nongeometric import NonGeometric
+from pipeline.kinematics.nongeometric_compiled import CompiledDeflection
 from pipeline.kinematics.transforms import Array, differential_motion, invert_transform
 from pipeline.robots import puma560
 from pipeline.robots.puma560 import Branch
@@ -101,6 +105,11 @@ class PumaSolver:
     design : SerialChain, optional
         The design model in the sensor frame with the signature's tool, for
         :meth:`solve_jacobi`.
+    nongeometric : NonGeometric, optional
+        The signature's non-geometric terms: :meth:`solve_one` and :meth:`solve` return
+        the readings that put the joints where the chain needs them (compiled:
+        :mod:`pipeline.kinematics.nongeometric_compiled`); a reading pushed past a
+        limit makes the target ``out_of_limits``.
     jacobi_margins : tuple of float
         The clamp margins of the design inverse inside the Jacobi iteration.
     """
@@ -121,6 +130,7 @@ class PumaSolver:
         position_tol_cm: float = 1e-7,
         orientation_tol_rad: float = 1e-10,
         max_step: float = 0.5,
+        nongeometric: NonGeometric | None = None,
     ) -> None:
         n = chain.n_joints
         if not ik_compilable(chain) or chain.prismatic.any():
@@ -182,6 +192,10 @@ class PumaSolver:
         one = np.empty(_S_END)
         self._one = (one, np.zeros(2, np.int64), one[_S_Q:_S_DELTA].reshape(1, n),
                      one[_S_ERRORS:_S_TARGET])  # fmt: skip
+        self._deflection = None if nongeometric is None else CompiledDeflection(
+            nongeometric, self._limits[0], self._limits[1]
+        )  # fmt: skip
+        self._q_row, self._outside = self.q.reshape(1, n), np.zeros(1, np.bool_)
 
     def solve_one(self, T_base: Array, q_near: Array | None = None) -> bool:
         """Solve one pose (4, 4) given in the design base frame; True when converged
@@ -204,7 +218,7 @@ class PumaSolver:
         _solve_packed(self._packed, self._prismatic, self._scratch, self.info, T_base, near)
         if self.info[0] == FAST_CONVERGED or self.info[0] == OFF_BRANCH:
             self.branch_changed = self.info[0] == OFF_BRANCH
-            return True
+            return self._to_readings()
         if self.info[0] == OUT_OF_LIMITS or self.info[0] == OUT_OF_LIMITS_OFF_BRANCH:
             self.branch_changed = self.info[0] == OUT_OF_LIMITS_OFF_BRANCH
             return False  # q: the solution, outside the limits
@@ -214,7 +228,19 @@ class PumaSolver:
         self.q[:] = res.q[0]
         self.info[1] = res.iterations[0]
         self.branch_changed = bool(res.branch_changed is not None and res.branch_changed[0])
-        return bool(res.converged[0])
+        return bool(res.converged[0]) and self._to_readings()
+
+    def _to_readings(self) -> bool:
+        """:attr:`q` (where the joints must sit) made the readings under the signature's
+        non-geometric terms, in place; False (with :attr:`info` ``[0]`` ``OUT_OF_LIMITS``)
+        when a reading left the limits. True without terms."""
+        if self._deflection is None:
+            return True
+        self._deflection.readings_into(self._q_row, self._outside)
+        if self._outside[0]:
+            self.info[0] = OUT_OF_LIMITS
+            return False
+        return True
 
     def solve(self, T_base: Array, q_near: Array | None = None) -> IKResult:
         """Solve targets (m, 4, 4) given in the design base frame from ``q_near``
@@ -236,7 +262,7 @@ class PumaSolver:
             S, info, q_one, errors_one = self._one
             _solve_packed(self._packed, self._prismatic, S, info, Tb[0], one)
             kind, count = info.tolist()
-            if kind == FAST_CONVERGED or kind == OFF_BRANCH:
+            if (kind == FAST_CONVERGED or kind == OFF_BRANCH) and self._deflection is None:
                 # The result's arrays copied from small templates: ~0.2 µs each, where
                 # np.ones(1, bool) or a comparison ufunc take ~1 µs.
                 errors = errors_one.copy()
@@ -260,7 +286,13 @@ class PumaSolver:
                            upper, turn)  # type: ignore[call-arg]  # fmt: skip
 
         run_in_shares(run, m)
-        return self.finish(T, near, q0, q, outcome, iterations, delta, errors)
+        res = self.finish(T, near, q0, q, outcome, iterations, delta, errors)
+        if self._deflection is None:
+            return res
+        outside = np.zeros(m, np.bool_)
+        self._deflection.readings_into(res.q, outside)
+        status = np.where(res.converged & outside, STATUS_OUT_OF_LIMITS, res.status)
+        return replace(res, status=status, converged=status == STATUS_CONVERGED)
 
     def solve_jacobi(self, T_base: Array, q_near: Array | None = None) -> IKResult:
         """The Jacobi iteration (5.8) of targets (m, 4, 4) in the design base frame from
