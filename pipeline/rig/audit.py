@@ -25,6 +25,7 @@ import numpy as np
 from pipeline.errors import ArmsigError
 from pipeline.kinematics.alignment import fit_alignment
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
+from pipeline.kinematics.nongeometric import NonGeometric, Terms
 from pipeline.kinematics.transforms import pose_error, trans
 from pipeline.robots.description import JOINT_TYPES
 from pipeline.stages.frames import chain_from_frames
@@ -129,13 +130,17 @@ def true_tool_chain(truth: dict[str, Any]) -> SerialChain:
 
 def true_joint_values(truth: dict[str, Any], robot: Any, q: np.ndarray) -> np.ndarray:
     """Where the true robot's joints sit at readings ``q`` (..., n) (rad / cm): ``q`` for
-    a rigid robot, else with its ``true_nongeometric`` terms on ``robot``'s design chain
-    (:func:`pipeline.rig.true_robot.draw_nongeometric`)."""
-    from pipeline.kinematics.nongeometric import NonGeometric, Terms
+    a rigid robot, else with its :func:`true_nongeometric` terms."""
+    ng = true_nongeometric(truth, robot)
+    return q if ng is None else ng.effective(q)
 
+
+def true_nongeometric(truth: dict[str, Any], robot: Any) -> NonGeometric | None:
+    """The true robot's ``true_nongeometric`` terms on ``robot``'s design chain
+    (:func:`pipeline.rig.true_robot.draw_nongeometric`); None for a rigid robot."""
     ng = truth.get("true_nongeometric")
     if ng is None:
-        return q
+        return None
     names = ng.get("terms") if isinstance(ng, dict) else None
     if not (isinstance(names, list) and all(isinstance(x, str) for x in names)):
         raise ArmsigError(
@@ -152,7 +157,7 @@ def true_joint_values(truth: dict[str, Any], robot: Any, q: np.ndarray) -> np.nd
             got=str(exc)[:80],
             fix=_RESIMULATE,
         ) from exc
-    return NonGeometric(terms, beta, robot.design_chain()).effective(q)
+    return NonGeometric(terms, beta, robot.design_chain())
 
 
 def _aligned_errors(T_true: np.ndarray, T_model: np.ndarray) -> ModelError:

@@ -36,7 +36,7 @@ from pipeline.evaluation.tasks import (
 from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
 from pipeline.kinematics.ik import ALL_AXES, newton_raphson
 from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans
-from pipeline.rig.audit import read_truth, true_chain
+from pipeline.rig.audit import read_truth, true_chain, true_nongeometric
 from pipeline.rig.plan import PROBE_LENGTH_CM
 from pipeline.rig.recorder import EVAL_CHANNELS, Message, write_recording
 from pipeline.rig.simulate import T0_NS
@@ -123,6 +123,8 @@ class SimulatedRig:
         probe[:3, :3] = c.links[-1][:3, :3].T
         probe[:3, 3] = tip
         self.chain = SerialChain(c.links, c.prismatic, base, c.tool @ probe)
+        #: Where the true joints sit for given readings (compliance, angle errors).
+        self.nongeometric = true_nongeometric(truth, self.robot)
         self.res = joints_to_internal(self.robot.encoder_resolution, self.robot.prismatic)
         rng = np.random.default_rng([seed, 6])  # issue 6's own stream
         self.rng_fixture, self.rng_servo = rng.spawn(2)
@@ -156,8 +158,9 @@ class SimulatedRig:
             q0, ok0 = design.solve(nominal, branches, q_near, task.fixture_in_base)
             res = newton_raphson(chain, targets, q0, self.res,
                                  task_axes=None if axes == ALL_AXES else axes)  # fmt: skip
-            good = ok0 & res.converged & within_limits(self.robot, res.q) & np.isnan(q[:, 0])
-            q[good] = res.q[good]
+            readings = res.q if self.nongeometric is None else self.nongeometric.readings_for(res.q)
+            good = ok0 & res.converged & within_limits(self.robot, readings) & np.isnan(q[:, 0])
+            q[good] = readings[good]
             if not np.isnan(q).any():
                 break
         if np.isnan(q).any():
@@ -183,9 +186,10 @@ class SimulatedRig:
 
     def measure(self, task: Task, controller: str, q_cmd: np.ndarray) -> list[dict[str, Any]]:
         """Instrument readings for one task's program (m, n) of one controller."""
-        E = invert_transform(self.fixture[task.name]) @ forward_kinematics(
-            self.chain, self.reach(q_cmd)
-        )
+        q = self.reach(q_cmd)
+        if self.nongeometric is not None:
+            q = self.nongeometric.effective(q)
+        E = invert_transform(self.fixture[task.name]) @ forward_kinematics(self.chain, q)
         p = E[:, :3, 3]
         exact = self.opts.exact_instruments
         head = {"task": task.name, "controller": controller, "instrument": task.instrument}
