@@ -84,6 +84,27 @@ def _pose_tables(sdir: Path) -> dict[str, Any] | None:
     return {n: read_table(stage_path(sdir, n)) for n in names}
 
 
+def _nongeometric_part(sdir: Path, robot: Any) -> list[str]:
+    """The non-geometric section (:mod:`pipeline.report.nongeometric`) when the signature
+    has such terms, with the readings of every configuration the fit used."""
+    import pyarrow.compute as pc
+
+    from pipeline.kinematics.nongeometric import KINDS
+    from pipeline.report.nongeometric import nongeometric_section
+    from pipeline.stages.frames import readings_at
+
+    refine = read_table(stage_path(sdir, "refine"))
+    if not np.isin(refine.column("group").to_pylist(), KINDS).any():
+        return []
+    joints = read_table(stage_path(sdir, "joints"))
+    fitted = joints.filter(pc.not_equal(joints.column("sweep"), CHECK_SWEEP))
+    keys = sorted(set(zip(*(fitted.column(c).to_pylist() for c in ("sweep", "step")), strict=True)))
+    n, pris = robot.n_joints, robot.prismatic
+    q = np.vstack([readings_at(joints, s, np.array([k]), n, pris) for s, k in keys])
+    holdout = read_table(stage_path(sdir, "holdout"))
+    return [nongeometric_section(refine, holdout, q, robot, markdown_table)]
+
+
 def _summary(name: str, t: dict[str, list[Row]], robot: Any, mode: str) -> str:
     pos, feats = t["positions"], t["features"]
     sweeps = sorted({r["sweep"] for r in pos if r["sweep"] > 0})
@@ -400,6 +421,7 @@ def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -
         *_verdict_parts(sdir, prov, out),
         _summary(name, t, robot, mode),
         *([] if pose_tables is None else [pose_set_section(pose_tables, out, markdown_table)]),
+        *_nongeometric_part(sdir, robot),
         _dh_section(t["dh"], robot),
         _smodel_section(t["smodel"], t["frames"], robot),
         *sweeps,

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from pipeline.kinematics.nongeometric import KINDS, Terms
 from pipeline.stages.refine import refine_summary, refined_x
 from pipeline.sweeps import POSES_SWEEP
 
@@ -39,13 +40,30 @@ def pose_residuals(tables: dict[str, pa.Table]) -> tuple[np.ndarray, np.ndarray]
     if rows.num_rows == 0:
         return np.zeros(0), np.zeros(0)
     keys = rows.select(["sweep", "step", "target"])
-    model = model_for_keys(keys, tables["session"], tables["joints"], tables["frames"])
-    x = refined_x(tables["refine"])[: model.n_params]
+    refine = tables["refine"]
+    groups = refine.column("group").to_pylist()
+    terms = Terms.from_names([n for n, g in zip(refine.column("name").to_pylist(), groups,
+                                                strict=True) if g in KINDS])  # fmt: skip
+    model = model_for_keys(keys, tables["session"], tables["joints"], tables["frames"],
+                           "tool_rotation" in groups, terms)  # fmt: skip
+    x = _model_x(refine, model.n_params - terms.size, terms.size)
     m = positions(rows)
     axis = model.frames(x)[0]  # S̄_0: joint 1's axis is its Z
     v = m - axis[:3, 3]
     reach = np.linalg.norm(v - np.outer(v @ axis[:3, 2], axis[:3, 2]), axis=1)
     return np.linalg.norm(m - model.positions(x), axis=1), reach
+
+
+def _model_x(refine: pa.Table, n_rigid: int, n_terms: int) -> np.ndarray:
+    """The chain model's ``x`` from a ``refine`` table: its first ``n_rigid`` parameters
+    (axes, points, tool rotation: the points of other targets come after the tool's in
+    the table as in the model) and the ``n_terms`` non-geometric ones, which follow the
+    sensor's in the table."""
+    x = refined_x(refine)
+    groups = np.array(refine.column("group").to_pylist())
+    terms = x[np.isin(groups, KINDS)]
+    assert len(terms) == n_terms
+    return np.concatenate([x[:n_rigid], terms])
 
 
 def residual_figure(residual: np.ndarray, reach: np.ndarray, path: Path) -> Path:

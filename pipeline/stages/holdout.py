@@ -80,9 +80,6 @@ class StepRefit:
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
-    from pipeline.refine.holdout import check_configurations, kfold
-    from pipeline.refine.solve import refit
-    from pipeline.stages.positions import positions as xyz_of
     from pipeline.stages.refine import (
         held_parameters,
         internal_factors,
@@ -90,7 +87,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         refine_summary,
         refined_x,
     )
-    from pipeline.stages.refine_problem import rows_at, session_problem
+    from pipeline.stages.refine_problem import session_problem
 
     refine = inputs["refine"]
     if refine.num_rows == 0:
@@ -100,21 +97,56 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     sp = dataclasses.replace(
         sp, problem=dataclasses.replace(sp.problem, held=held_parameters(refine))
     )
+    f = internal_factors(refine)
+    cov = np.outer(f, f) * np.array(refine.column("covariance").to_pylist(), float)
     scale = float(summ.get("noise_scale", 1.0)) ** 2
+    keys, held = _held_out(inputs, params, sp, refined_x(refine), cov, scale)
+    rigid = None
+    if sp.problem.model.terms:  # the same held-out positions without the terms (issue 27)
+        rigid = _rigid_held_out(inputs, params, summ)
+    return _table(*keys, held, rigid)
+
+
+def _rigid_held_out(inputs: Mapping[str, Any], params: Params, summ: Any) -> Any:
+    """The held-out errors of the rigid chain fitted to the same session (the fit the
+    refinement makes with ``refine.nongeometric=none``)."""
+    from pipeline.kinematics.nongeometric import NO_TERMS
+    from pipeline.stages.refine import fit_session, problem_params
+    from pipeline.stages.refine_problem import session_problem
+
+    sp = session_problem(inputs, **{**problem_params(summ), "terms": NO_TERMS})
+    sol, ident = fit_session(sp, inputs)
+    names = {h["name"] for h in ident.get("held", [])}
+    held = np.array([n in names for n in sp.names], bool)
+    sp = dataclasses.replace(sp, problem=dataclasses.replace(sp.problem, held=held))
+    scale = sol.noise_scale**2 if np.isfinite(sol.noise_scale) else 1.0
+    return _held_out(inputs, params, sp, sol.x, sol.covariance, scale)[1]
+
+
+def _held_out(
+    inputs: Mapping[str, Any], params: Params, sp: Any, x_hat: np.ndarray, cov: np.ndarray,
+    scale: float,
+) -> tuple[tuple[list[Any], list[Any], list[Any]], Any]:  # fmt: skip
+    """The held-out positions' keys (sweep, step, target) and errors of the problem ``sp``
+    fitted to ``x_hat`` with covariance ``cov`` (internal units), χ²/dof ``scale``: the
+    check configurations when the session has them, else k-fold (module docstring)."""
+    from pipeline.refine.holdout import check_configurations, kfold
+    from pipeline.refine.solve import refit
+    from pipeline.stages.positions import positions as xyz_of
+    from pipeline.stages.refine_problem import rows_at
+
     model = sp.problem.model
     n_kin = model.n_params
-    x_hat = refined_x(refine)
     pos = inputs["positions"]
     check = _check_rows(inputs, pos)
     if check is not None:
         rows, theta = check
         cov_m = scale * _covariances(inputs, rows)
-        cov = np.array(refine.column("covariance").to_pylist(), float)[:n_kin, :n_kin]
-        f = internal_factors(refine)[:n_kin]
-        cov = np.outer(f, f) * cov
-        held = check_configurations(model, theta, xyz_of(rows), cov_m, x_hat[:n_kin], cov)
-        return _table(rows.column("sweep").to_pylist(), rows.column("step").to_pylist(),
-                      rows.column("target").to_pylist(), held)  # fmt: skip
+        held = check_configurations(
+            model, theta, xyz_of(rows), cov_m, x_hat[:n_kin], cov[:n_kin, :n_kin]
+        )
+        cols = ("sweep", "step", "target")
+        return tuple(rows.column(c).to_pylist() for c in cols), held  # type: ignore[return-value]
     keys = sp.problem.block.keys
     at = rows_at(keys, pos)
     rows = pos.take(pa.array(at, mask=at < 0))  # a key without a position: a null row
@@ -130,8 +162,9 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     held = kfold(model, sweep, keys.column("step").to_numpy(), xyz_of(rows), cov_m, fold_fit,
                  params.folds)  # fmt: skip
     k = held.index
-    return _table(sweep[k].tolist(), keys.column("step").to_numpy()[k].tolist(),
-                  [keys.column("target")[int(i)].as_py() for i in k], held)  # fmt: skip
+    step = keys.column("step").to_numpy()[k].tolist()
+    target = [keys.column("target")[int(i)].as_py() for i in k]
+    return (sweep[k].tolist(), step, target), held
 
 
 def _covariances(inputs: Mapping[str, Any], rows: pa.Table) -> np.ndarray:
@@ -167,8 +200,13 @@ def _check_rows(inputs: Mapping[str, Any], pos: pa.Table) -> tuple[pa.Table, np.
     return rows, joints_to_internal(q, pris) - q_sig
 
 
-def _table(sweep: list[Any], step: list[Any], target: list[Any], held: Any) -> pa.Table:
+def _table(
+    sweep: list[Any], step: list[Any], target: list[Any], held: Any, rigid: Any = None
+) -> pa.Table:
     empty = np.zeros(0)
+    if rigid is not None and not np.array_equal(rigid.index, held.index):
+        raise ValueError("holdout: the rigid fit's held-out positions differ")  # a bug
+    rigid_error = np.full(len(sweep), np.nan) if rigid is None else rigid.error_cm
     return pa.table(
         {
             "sweep": pa.array(sweep, pa.int32()),
@@ -180,6 +218,7 @@ def _table(sweep: list[Any], step: list[Any], target: list[Any], held: Any) -> p
             "measurement_cm": pa.array(
                 empty if held is None else held.measurement_cm, pa.float64()
             ),
+            "rigid_error_cm": pa.array(rigid_error, pa.float64(), mask=np.isnan(rigid_error)),
         }
     )
 
@@ -187,9 +226,10 @@ def _table(sweep: list[Any], step: list[Any], target: list[Any], held: Any) -> p
 #: The sonic session's stage: the raw ranges too (level ``ranges`` rebuilds its problem).
 STAGE = Stage(
     "holdout",
-    3,  # 2: the folds' normal equations by the solver's structured products;
+    4,  # 2: the folds' normal equations by the solver's structured products;
     # 3: the problem rebuilt with every refine.* parameter (speed_knot_s crashed it), and
-    # single-cycle sonic positions' covariances from the range noise law (issue 33)
+    # single-cycle sonic positions' covariances from the range noise law (issue 33);
+    # 4: rigid_error_cm, the same positions held out of the rigid fit (issue 27)
     ("session", "refine", "positions", "joints", "frames", "ranges"),
     Params(),
     compute,

@@ -162,7 +162,7 @@ def _disabled(level: str) -> pa.Table:
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
-    from pipeline.refine.solve import recorded_chi2, solve
+    from pipeline.refine.solve import recorded_chi2
     from pipeline.stages.refine_problem import session_problem
 
     sensor = session_sensor(inputs["session"])
@@ -186,11 +186,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     if dropped:  # the rigid chain alone, not a refusal the rigid fit would not give
         sp = session_problem(inputs, params.loss, params.f_scale, level, params.speed_knot_s)
     spline = getattr(sp.problem.block, "spline", None)
-    identifiability: dict[str, Any] = {}
-    if "poses" in session_plan(inputs["session"]):
-        sol, identifiability = _fit_pose_set(sp, inputs["positions"])
-    else:
-        sol = solve(sp.problem, sp.x0)
+    sol, identifiability = fit_session(sp, inputs)
     chi2_recorded = recorded_chi2(sp.problem, sol)
     units, factor = _boundary(sp.units)
     cov = sol.covariance * np.outer(factor, factor)
@@ -246,6 +242,16 @@ def _too_few_for(sp: Any) -> bool:
     if not sp.problem.model.terms or measured is None:
         return False
     return bool(3 * len(measured) < COORDINATES_PER_PARAMETER * sp.problem.n_params)
+
+
+def fit_session(sp: Any, inputs: Mapping[str, Any]) -> tuple[Any, dict[str, Any]]:
+    """The solution of a session's problem ``sp`` from its start, and its identifiability
+    summary (``{}`` without a pose set: joint sweeps see every parameter)."""
+    from pipeline.refine.solve import solve
+
+    if "poses" in session_plan(inputs["session"]):
+        return _fit_pose_set(sp, inputs["positions"])
+    return solve(sp.problem, sp.x0), {}
 
 
 def _fit_pose_set(sp: Any, positions: pa.Table) -> tuple[Any, dict[str, Any]]:
