@@ -178,3 +178,40 @@ def test_realtime_solver_returns_readings_and_batch_equals_loop(compliant: Path)
         assert np.array_equal(solver.q, batch.q[k])
         reached = ctl.pose(joints_to_boundary(solver.q, PUMA.prismatic)).matrix
         assert np.linalg.norm(reached[:3, 3] - target[k, :3, 3]) <= 1e-6
+
+
+@pytest.fixture(scope="module")
+def payloads(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A noiseless Puma pose set measured with payloads of 0 and 10 kg."""
+    return _session(tmp_path_factory, "compliance+harmonic", poses=200, payloads_kg=(0.0, 10.0))
+
+
+def test_two_payloads_identify_the_payload_terms_and_predict_another(payloads: Path) -> None:
+    """Issue 27: a changed payload is predicted, not refitted (5 kg was never measured)."""
+    terms = refine_summary(read_table(stage_path(payloads, "refine")))["nongeometric"]["terms"]
+    assert {"payload.j2", "payload.j3"} <= set(terms)
+    assert audit(payloads, configurations=300).signature.max_position_cm <= 1e-6
+    at_5 = audit(payloads, configurations=300, payload_kg=5.0)
+    assert at_5.signature.max_position_cm <= 1e-6 and at_5.design.max_position_cm > 0.1
+
+
+def test_ik_under_another_payload_reaches_the_target(payloads: Path) -> None:
+    """FK with the terms at 5 kg of the readings ik returns at 5 kg meets the target."""
+    ctl = session_controller(payloads).with_payload(5.0)
+    q = PUMA.random_configurations(1000, 13)
+    target = ctl.poses(joints_to_boundary(q, PUMA.prismatic)).matrix
+    res = ctl.solve(target, q_near=q)
+    assert res.converged.mean() > 0.99
+    reached = ctl.poses(joints_to_boundary(res.q[res.converged], PUMA.prismatic)).matrix
+    assert np.linalg.norm(reached[:, :3, 3] - target[res.converged, :3, 3], axis=1).max() <= 1e-6
+    at_0 = session_controller(payloads).poses(joints_to_boundary(res.q, PUMA.prismatic))
+    assert np.abs(at_0.matrix[:, :3, 3] - target[:, :3, 3]).max() > 1e-3  # the payload matters
+
+
+def test_one_payload_cannot_predict_another(compliant: Path) -> None:
+    from pipeline.errors import ArmsigError
+
+    ctl = session_controller(compliant)
+    with pytest.raises(ArmsigError, match="cannot predict a payload of 5 kg"):
+        ctl.with_payload(5.0)
+    assert ctl.with_payload(0.0).signature.nongeometric is not None  # the one it measured

@@ -52,6 +52,13 @@ def fk(
     design: Annotated[
         bool, typer.Option(help="For a session: the design model's pose of the session's tool.")
     ] = False,
+    payload_kg: Annotated[
+        float | None,
+        typer.Option(
+            help="Payload on the flange, kg: the signature's non-geometric terms predict the "
+            "arm under it (docs/nongeometric.md#payload; default: the payload measured)."
+        ),
+    ] = None,
     as_json: JsonOption = False,
 ) -> None:
     """Print the tool pose at joint values Q (a session's signature or a design model).
@@ -85,7 +92,7 @@ def fk(
         raise ArmsigError("--out is for --q-file", fix="drop --out, or give --q-file")
     assert q is not None
     values = joint_values(q, "--q")
-    pose = tool_pose(robot, values, design=design)
+    pose = tool_pose(robot, values, design=design, payload_kg=payload_kg)
     if as_json:
         print_json(
             {
@@ -137,6 +144,13 @@ def ik(
         ),
     ] = None,
     accept_verdict: AcceptVerdict = False,
+    payload_kg: Annotated[
+        float | None,
+        typer.Option(
+            help="Payload on the flange, kg: the signature's non-geometric terms predict the "
+            "arm under it (docs/nongeometric.md#payload; default: the payload measured)."
+        ),
+    ] = None,
     as_json: JsonOption = False,
 ) -> None:
     """Joint readings that put the identified tool at a pose (signature-based control)."""
@@ -160,6 +174,7 @@ def ik(
             near=q_near,
             force=force,
             accept_verdict=accept_verdict,
+            payload_kg=payload_kg,
         )
         report(done, as_json, done.summary)
         if done.failed:
@@ -175,6 +190,7 @@ def ik(
         tool=user_tool,
         near=q_near,
         accept_verdict=accept_verdict,
+        payload_kg=payload_kg,
     )
     report(
         r,

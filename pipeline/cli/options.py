@@ -91,13 +91,14 @@ def comma_list(text: str) -> list[str]:
     return [item.strip() for item in text.split(",") if item.strip()]
 
 
-def joint_values(text: str, option: str) -> list[float]:
-    """Joint values from a comma- or space-separated option (deg / cm)."""
+def joint_values(text: str, option: str, example: str = '"0 -90 90 0 0 0"') -> list[float]:
+    """Joint values (deg / cm), or other numbers, from a comma- or space-separated option;
+    ``example``: the value its error's fix shows."""
     try:
         values = [float(v) for v in text.replace(",", " ").split()]
     except ValueError as exc:
         raise ArmsigError(
-            f"{option} must hold numbers", got=repr(text), fix=f'{option} "0 -90 90 0 0 0"'
+            f"{option} must hold numbers", got=repr(text), fix=f"{option} {example}"
         ) from exc
     return finite(values, option)
 

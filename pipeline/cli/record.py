@@ -13,6 +13,7 @@ from pipeline.cli.options import (
     Sensor,
     choice,
     comma_list,
+    joint_values,
     new_session_folder,
 )
 
@@ -150,6 +151,14 @@ def simulate(
             "angle, RMS amplitude in deg (encoders and gears: ~0.005-0.02).",
         ),
     ] = 0.0,
+    payloads: Annotated[
+        str,
+        typer.Option(
+            help="Payloads on the flange, kg, comma separated: the pose set's poses cycle "
+            "through them (recorded as joint_state payload_kg); two or more let the fit "
+            "predict a changed payload (with --compliance)."
+        ),
+    ] = "",
     force: ForceRecording = False,
 ) -> None:
     """Record a simulated session: recording.mcap plus rig-truth.json."""
@@ -181,6 +190,7 @@ def simulate(
         six_d=six_d,
         compliance_mm=compliance,
         harmonic_deg=joint_harmonics,
+        payloads_kg=tuple(joint_values(payloads, "--payloads", "0,10")),
     )
     path = simulate_session(folder, opts, force=force)
     typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")

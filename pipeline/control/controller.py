@@ -103,6 +103,21 @@ class Controller:
         sig = replace(self.signature, chain=chain, design_flange_to_tool=F_u)
         return Controller(sig, self.robot, self.sensor_from_base, F_u)
 
+    def with_payload(self, kg: float) -> Controller:
+        """The controller of the arm carrying ``kg`` on its flange: the signature's
+        non-geometric terms evaluated at that payload (:meth:`NonGeometric.with_payload`:
+        predicted when the session measured two payloads or more, else only the payload
+        it measured); a rigid signature predicts no payload (one-line refusal)."""
+        ng = self.signature.nongeometric
+        if ng is None:
+            raise ArmsigError(
+                "the signature has no non-geometric terms: it cannot predict a payload",
+                expected="a signature identified with refine.nongeometric (docs/nongeometric.md)",
+                fix="drop --payload-kg, or identify from a pose set measured with payloads",
+            )
+        sig = replace(self.signature, nongeometric=ng.with_payload(kg))
+        return Controller(sig, self.robot, self.sensor_from_base, self.flange_to_tool)
+
     @cached_property
     def resolution(self) -> np.ndarray:
         """Encoder resolution in math units (rad / cm), shape (n,)."""

@@ -28,17 +28,24 @@ if TYPE_CHECKING:
     from pipeline.control.controller import Controller
 
 
-def tool_pose(robot: str | Path, q: Sequence[float], design: bool = False) -> ToolPose:
+def tool_pose(
+    robot: str | Path, q: Sequence[float], design: bool = False, payload_kg: float | None = None
+) -> ToolPose:
     """The tool pose at joint readings ``q`` (n,), deg / cm.
 
     ``robot``: an identified session folder (the pose of its signature's tool in the
-    design base frame, what :func:`solve_pose` takes back; ``design``: the design
-    model's pose of that tool), else a built-in robot name or a ``.toml`` description
-    (the pose of its design flange).
+    design base frame, what :func:`solve_pose` takes back, under ``payload_kg`` when
+    given (:meth:`Controller.with_payload`); ``design``: the design model's pose of that
+    tool), else a built-in robot name or a ``.toml`` description (the pose of its design
+    flange).
     """
     model = _pose_model(robot)
     if not isinstance(model, RobotDescription):
+        if payload_kg is not None:
+            model = model.with_payload(payload_kg)
         return model.pose(list(q), design=design)  # type: ignore[no-any-return]
+    if payload_kg is not None:
+        raise ArmsigError("--payload-kg needs an identified session", fix="give a session folder")
     from pipeline.robots.fk import design_pose
 
     return design_pose(model, list(q))
@@ -143,14 +150,19 @@ class ToolController:
 
 
 def tool_controller(
-    session: str | Path, tool: Sequence[float] | None = None, accept_verdict: bool = False
+    session: str | Path,
+    tool: Sequence[float] | None = None,
+    accept_verdict: bool = False,
+    payload_kg: float | None = None,
 ) -> ToolController:
     """The controller of a session's signature, passed through its verdict
     (:func:`pipeline.signature.verdict.verdict_gate`: a FAIL is refused unless
     ``accept_verdict``).
 
     ``tool``: None for the signature's tool, else a user tool x y z (cm) rx ry rz (deg,
-    fixed axes) in the design flange frame (:meth:`Controller.with_tool`).
+    fixed axes) in the design flange frame (:meth:`Controller.with_tool`);
+    ``payload_kg``: the payload on the flange (:meth:`Controller.with_payload`; None: the
+    one the session measured).
     """
     from pipeline.control.controller import Controller
     from pipeline.kinematics.transforms import transform_from_xyz_rpy
@@ -162,6 +174,8 @@ def tool_controller(
     warning = verdict_gate(sig.verdict, str(session), accept_verdict)
     status = None if sig.verdict is None else sig.verdict.status
     ctl = Controller.from_signature(sig)
+    if payload_kg is not None:
+        ctl = ctl.with_payload(payload_kg)
     if tool is None:
         return ToolController(ctl, "signature", status, warning)
     t = np.asarray(tool, float)
@@ -202,6 +216,7 @@ def solve_pose(
     tool: Sequence[float] | None = None,
     near: Sequence[float] | None = None,
     accept_verdict: bool = False,
+    payload_kg: float | None = None,
 ) -> PoseSolution:
     """The joint readings that put the session's tool at ``pose``: x y z (cm) rx ry rz
     (deg, fixed axes) in the design base frame.
@@ -209,13 +224,14 @@ def solve_pose(
     ``branch``: Puma branch (default: that of ``near``, else of q^s); ``method``: ``nr``
     or ``jacobi``; ``tool``: a user tool (:func:`tool_controller`); ``near``: joint
     readings (deg / cm) to start from (:func:`pipeline.control.controller.solve_poses`);
-    ``accept_verdict``: use a signature whose verdict is FAIL (else refused).
+    ``accept_verdict``: use a signature whose verdict is FAIL (else refused);
+    ``payload_kg``: the payload on the flange (:func:`tool_controller`).
     """
     from pipeline.control.controller import solve_poses
     from pipeline.control.limits import outside_names
     from pipeline.kinematics.ik import STATUS_NAMES
 
-    tc = tool_controller(session, tool, accept_verdict)
+    tc = tool_controller(session, tool, accept_verdict, payload_kg)
     ctl = tc.controller
     p = np.asarray(pose, float)
     q_near = None if near is None else np.asarray(near, float)
@@ -273,15 +289,16 @@ def solve_targets(
     near: Sequence[float] | None = None,
     force: bool = False,
     accept_verdict: bool = False,
+    payload_kg: float | None = None,
 ) -> TargetsSolution:
     """Solve the poses of the Arrow file ``targets`` (columns
     :data:`~pipeline.control.targets.TARGET_COLUMNS`, optional ``branch``) and write
     them with their joints to ``out`` (:func:`pipeline.control.targets.solve_arrow`);
-    ``accept_verdict`` as :func:`solve_pose`."""
+    ``accept_verdict``, ``payload_kg`` as :func:`solve_pose`."""
     from pipeline.control.targets import solve_arrow
     from pipeline.stages.tables import read_table
 
-    tc = tool_controller(session, tool, accept_verdict)
+    tc = tool_controller(session, tool, accept_verdict, payload_kg)
     q_near = None if near is None else np.asarray(near, float)
     summary, failed = solve_arrow(tc.controller, targets, out, method, tc.label, q_near, force)
     n = read_table(Path(out)).num_rows

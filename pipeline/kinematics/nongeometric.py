@@ -24,24 +24,28 @@ controller, so noiseless data identify ``β`` exactly. (The true levers differ f
 design's by the geometric errors, ~1e-3 of them: ~1e-7 rad on a 1e-4 rad deflection.)
 Prismatic joints have neither term.
 
-A payload ``m_p`` at the flange adds ``c_j g m_p h_j,p(q)``; with one payload in a
-session ``c_j`` is not separable from the flange's own lumped mass (the same lever), so
-the signature predicts the pose under the payload it was measured with.
+- **payload**: a payload of mass ``m_p`` (kg) at the flange (the origin of ``F_n``) adds
+  ``γ_j m_p h_jn(q)``, ``γ_j = c_j g`` (rad per kg and cm of lever), term
+  ``payload.j<j>``. It is a parameter only when the session measured more than one
+  payload: with one, ``γ_j m_p`` is the flange's own lumped mass term (the same lever)
+  and a changed payload cannot be predicted. With it, it is: the coefficients do not
+  depend on the payload, the regressor does.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
 
+from pipeline.errors import ArmsigError
 from pipeline.kinematics.chain import SerialChain, link_frames
 
 Array = npt.NDArray[np.float64]
 
-#: The term kinds, in the order of their coefficients.
-KINDS = ("compliance", "harmonic")
+#: The term kinds, in the order of their coefficients (and the refine table's groups).
+KINDS = ("compliance", "payload", "harmonic")
 #: :meth:`NonGeometric.readings_for` stops when a step moves no reading by more than this
 #: (relative to max(1, |q|)): 1e-13 rad is 1e-11 cm at a 1 m lever, far inside the IK's
 #: 1e-7 cm, and one fixed-point iteration of five fewer.
@@ -53,15 +57,17 @@ GRAVITY = np.array([0.0, 0.0, -1.0])
 @dataclass(frozen=True)
 class Terms:
     """Which non-geometric terms a model has: compliance pairs ``(j, k)`` (joint ``j``
-    deflected by the lumped mass of link ``k ≥ j``, 1-based) and first-harmonic
-    components ``(j, "cos" | "sin")`` of joint ``j``'s angle error."""
+    deflected by the lumped mass of link ``k ≥ j``, 1-based), the joints deflected by the
+    payload, and first-harmonic components ``(j, "cos" | "sin")`` of joint ``j``'s angle
+    error."""
 
     compliance: tuple[tuple[int, int], ...] = ()
     harmonic: tuple[tuple[int, str], ...] = ()
+    payload: tuple[int, ...] = ()
 
     @property
     def size(self) -> int:
-        return len(self.compliance) + len(self.harmonic)
+        return len(self.compliance) + len(self.payload) + len(self.harmonic)
 
     def __bool__(self) -> bool:
         return self.size > 0
@@ -69,32 +75,39 @@ class Terms:
     @property
     def names(self) -> tuple[str, ...]:
         c = [f"compliance.j{j}.link{k}" for j, k in self.compliance]
+        p = [f"payload.j{j}" for j in self.payload]
         h = [f"harmonic.j{j}.{f}" for j, f in self.harmonic]
-        return (*c, *h)
+        return (*c, *p, *h)
 
     @property
     def units(self) -> tuple[str, ...]:
-        """Internal units: rad per cm of lever (compliance), rad (harmonics)."""
-        return ("rad/cm",) * len(self.compliance) + ("rad",) * len(self.harmonic)
+        """Internal units: rad per cm of lever (compliance), rad per kg and cm of lever
+        (payload), rad (harmonics)."""
+        c, p, h = len(self.compliance), len(self.payload), len(self.harmonic)
+        return ("rad/cm",) * c + ("rad/kg/cm",) * p + ("rad",) * h
 
     @property
     def groups(self) -> tuple[str, ...]:
-        return ("compliance",) * len(self.compliance) + ("harmonic",) * len(self.harmonic)
+        c, p, h = len(self.compliance), len(self.payload), len(self.harmonic)
+        return ("compliance",) * c + ("payload",) * p + ("harmonic",) * h
 
     @classmethod
     def from_names(cls, names: list[str] | tuple[str, ...]) -> Terms:
         """The terms of parameter names as :attr:`names` gives them (any order kept)."""
         comp: list[tuple[int, int]] = []
         harm: list[tuple[int, str]] = []
+        payload: list[int] = []
         for name in names:
-            kind, joint, rest = name.split(".")
-            if kind == "compliance":
-                comp.append((int(joint[1:]), int(rest[len("link") :])))
-            elif kind == "harmonic" and rest in ("cos", "sin"):
-                harm.append((int(joint[1:]), rest))
+            kind, joint, *rest = name.split(".")
+            if kind == "compliance" and len(rest) == 1 and rest[0].startswith("link"):
+                comp.append((int(joint[1:]), int(rest[0][len("link") :])))
+            elif kind == "harmonic" and rest in (["cos"], ["sin"]):
+                harm.append((int(joint[1:]), rest[0]))
+            elif kind == "payload" and not rest:
+                payload.append(int(joint[1:]))
             else:
                 raise ValueError(f"not a non-geometric term: {name!r}")
-        return cls(tuple(comp), tuple(harm))
+        return cls(tuple(comp), tuple(harm), tuple(payload))
 
 
 #: A rigid model's terms: none.
@@ -109,7 +122,11 @@ def all_terms(prismatic: npt.ArrayLike, kinds: tuple[str, ...]) -> Terms:
     revolute = [j for j in range(1, n + 1) if not pris[j - 1]]
     comp = tuple((j, k) for j in revolute for k in range(j, n + 1))
     harm = tuple((j, f) for j in revolute for f in ("cos", "sin"))
-    return Terms(comp if "compliance" in kinds else (), harm if "harmonic" in kinds else ())
+    return Terms(
+        comp if "compliance" in kinds else (),
+        harm if "harmonic" in kinds else (),
+        tuple(revolute) if "payload" in kinds else (),
+    )
 
 
 def gravity_levers(design: SerialChain, q: npt.ArrayLike) -> Array:
@@ -127,16 +144,22 @@ def gravity_levers(design: SerialChain, q: npt.ArrayLike) -> Array:
     return np.where(keep, h, 0.0)
 
 
-def regressor(terms: Terms, design: SerialChain, q: npt.ArrayLike) -> Array:
-    """``Φ(q)`` (..., n, size): ``∂Δ_j/∂β`` of every term at readings ``q`` (..., n)."""
+def regressor(
+    terms: Terms, design: SerialChain, q: npt.ArrayLike, payload_kg: npt.ArrayLike = 0.0
+) -> Array:
+    """``Φ(q)`` (..., n, size): ``∂Δ_j/∂β`` of every term at readings ``q`` (..., n) with
+    the payload ``payload_kg`` (kg; a number or one per configuration (...,))."""
     q = np.asarray(q, float)
     n = q.shape[-1]
     out = np.zeros((*q.shape, terms.size))
-    if terms.compliance:
+    if terms.compliance or terms.payload:
         h = gravity_levers(design, q)
         for m, (j, k) in enumerate(terms.compliance):
             out[..., j - 1, m] = h[..., j - 1, k - 1]
-    base = len(terms.compliance)
+        mass = np.asarray(payload_kg, float)
+        for i, j in enumerate(terms.payload):
+            out[..., j - 1, len(terms.compliance) + i] = mass * h[..., j - 1, n - 1]
+    base = len(terms.compliance) + len(terms.payload)
     for i, (j, f) in enumerate(terms.harmonic):
         out[..., j - 1, base + i] = (np.cos if f == "cos" else np.sin)(q[..., j - 1])
     assert out.shape[-2] == n
@@ -145,20 +168,45 @@ def regressor(terms: Terms, design: SerialChain, q: npt.ArrayLike) -> Array:
 
 @dataclass(frozen=True, eq=False)
 class NonGeometric:
-    """The identified non-geometric terms of a signature: ``q ↦ q + Φ(q) β``."""
+    """The identified non-geometric terms of a signature: ``q ↦ q + Φ(q) β``, under the
+    payload ``payload_kg``; ``measured_payloads_kg``: the payloads the session measured
+    (kg; which payloads the signature predicts without payload terms)."""
 
     terms: Terms
     coefficients: Array  # (size,) internal units (Terms.units)
     design: SerialChain
+    payload_kg: float = 0.0
+    measured_payloads_kg: tuple[float, ...] = ()
 
-    def deflection(self, q: npt.ArrayLike) -> Array:
-        """``Δ(q)`` (..., n), rad / cm, at readings ``q`` (..., n)."""
-        return np.asarray(regressor(self.terms, self.design, q) @ self.coefficients, float)
+    def deflection(self, q: npt.ArrayLike, payload_kg: npt.ArrayLike | None = None) -> Array:
+        """``Δ(q)`` (..., n), rad / cm, at readings ``q`` (..., n) under ``payload_kg``
+        (None: :attr:`payload_kg`; or one per configuration)."""
+        mass = self.payload_kg if payload_kg is None else payload_kg
+        Phi = regressor(self.terms, self.design, q, mass)
+        return np.asarray(Phi @ self.coefficients, float)
 
-    def effective(self, q: npt.ArrayLike) -> Array:
+    def effective(self, q: npt.ArrayLike, payload_kg: npt.ArrayLike | None = None) -> Array:
         """The joint values the arm sits at, ``q + Δ(q)``, for readings ``q`` (..., n)."""
         q = np.asarray(q, float)
-        return q + self.deflection(q)
+        return q + self.deflection(q, payload_kg)
+
+    def with_payload(self, kg: float) -> NonGeometric:
+        """The terms under a payload of ``kg``: predicted when the fit has payload terms
+        (the session measured two payloads or more), else refused unless ``kg`` is the
+        payload the session measured (one line)."""
+        if not (np.isfinite(kg) and kg >= 0):
+            raise ArmsigError("bad payload", expected="a mass >= 0 kg", got=repr(kg))
+        measured = self.measured_payloads_kg or (0.0,)
+        if not self.terms.payload and not any(abs(kg - m) <= 1e-9 for m in measured):
+            raise ArmsigError(
+                f"the signature cannot predict a payload of {kg:g} kg",
+                expected="the payload the session measured: "
+                + ", ".join(f"{m:g} kg" for m in measured),
+                got=f"{kg:g} kg",
+                fix="identify from a session measured with two payloads or more "
+                "(docs/nongeometric.md#payload)",
+            )
+        return replace(self, payload_kg=float(kg))
 
     def readings_for(
         self, q_eff: npt.ArrayLike, tol: float = READINGS_TOLERANCE, max_iter: int = 50

@@ -113,14 +113,19 @@ class CompiledDeflection:
     the joint limits ``lower``, ``upper`` (n,) its readings are checked against."""
 
     def __init__(self, model: NonGeometric, lower: Buf, upper: Buf) -> None:
-        d = model.design
+        d, t = model.design, model.terms
         n = d.n_joints
-        comp = np.array(model.terms.compliance, np.int64).reshape(-1)
-        harm = np.array([(j, f == "cos") for j, f in model.terms.harmonic], np.int64).reshape(-1)
+        # A payload term is the flange's lever (link n) times the payload: a compliance
+        # pair (j, n) of coefficient γ_j · payload_kg, in the coefficients' order.
+        pairs = [*t.compliance, *((j, n) for j in t.payload)]
+        comp = np.array(pairs, np.int64).reshape(-1)
+        harm = np.array([(j, f == "cos") for j, f in t.harmonic], np.int64).reshape(-1)
         self._ints = np.concatenate(
             [[n, len(comp) // 2, len(harm) // 2], d.prismatic.astype(np.int64), comp, harm]
         ).astype(np.int64)
-        parts = (d.base, d.links, d.joint_offsets, lower, upper, GRAVITY, model.coefficients)
+        beta = model.coefficients.copy()
+        beta[len(t.compliance) : len(t.compliance) + len(t.payload)] *= model.payload_kg
+        parts = (d.base, d.links, d.joint_offsets, lower, upper, GRAVITY, beta)
         self._consts = np.concatenate([np.asarray(a, float).ravel() for a in parts])
         self._scratch = np.empty(16 * (n + 2) + 2 * n)
 

@@ -65,9 +65,11 @@ def _score(
     measured: Array, cov_m: Array,
 ) -> tuple[Array, Array, Array]:  # fmt: skip
     """Errors, expected errors and the measurement parts of the rows ``sel``."""
+    payload = None if model.payload_kg is None else model.payload_kg[sel]
     sub = dataclasses.replace(
-        model, link=model.link[sel], theta=model.theta[sel], point=model.point[sel]
-    )
+        model, link=model.link[sel], theta=model.theta[sel], point=model.point[sel],
+        payload_kg=payload,
+    )  # fmt: skip
     J = sub.position_jacobian(x)
     fit_var = np.einsum("kip,pq,kiq->k", J, cov, J)
     meas_var = np.trace(cov_m[sel], axis1=1, axis2=2)
@@ -101,15 +103,17 @@ def kfold(
 
 
 def check_configurations(
-    model: ChainModel, theta: Array, measured: Array, cov_m: Array, x: Array, cov: Array
-) -> HeldOut:
+    model: ChainModel, theta: Array, measured: Array, cov_m: Array, x: Array, cov: Array,
+    payload_kg: Array | None = None,
+) -> HeldOut:  # fmt: skip
     """Held-out errors of the check configurations: the tool point of ``model`` at the
-    joint offsets ``theta`` (m, n) from ``q̄^s`` against ``measured`` (m, 3)."""
+    joint offsets ``theta`` (m, n) from ``q̄^s`` (under ``payload_kg`` (m,), kg, when the
+    model has non-geometric terms) against ``measured`` (m, 3)."""
     j = model.point_names.index(TOOL_POINT)
     m = len(theta)
     tool = dataclasses.replace(
         model, link=np.full(m, model.n_joints, np.int64), theta=np.asarray(theta, float),
-        point=np.full(m, j, np.int64),
+        point=np.full(m, j, np.int64), payload_kg=payload_kg,
     )  # fmt: skip
     sel = np.ones(m, bool)
     return _held_out([(np.arange(m), np.full(m, -1), *_score(tool, x, cov, sel, measured, cov_m))])

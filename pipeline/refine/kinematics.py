@@ -112,7 +112,8 @@ class ChainModel:
     terms : Terms
         The non-geometric terms fitted (empty: none); their regressor ``Φ`` (module
         docstring) is the design chain's ``design`` at the readings ``θ + q̄^s``,
-        ``reading_zero`` = ``q̄^s`` (:attr:`regressor`).
+        ``reading_zero`` = ``q̄^s``, under each observation's ``payload_kg`` (K,)
+        (:attr:`regressor`).
     """
 
     frames0: Array
@@ -125,6 +126,7 @@ class ChainModel:
     terms: Terms = Terms()
     design: SerialChain | None = None
     reading_zero: Array | None = None
+    payload_kg: Array | None = None
 
     @cached_property
     def regressor(self) -> Array:
@@ -133,7 +135,8 @@ class ChainModel:
             return np.zeros((*self.theta.shape, 0))
         if self.design is None or self.reading_zero is None:
             raise ValueError("non-geometric terms need the design chain and q̄^s")
-        return regressor(self.terms, self.design, self.theta + self.reading_zero)
+        payload = 0.0 if self.payload_kg is None else self.payload_kg
+        return regressor(self.terms, self.design, self.theta + self.reading_zero, payload)
 
     @property
     def n_joints(self) -> int:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -157,7 +157,14 @@ def true_nongeometric(truth: dict[str, Any], robot: Any) -> NonGeometric | None:
             got=str(exc)[:80],
             fix=_RESIMULATE,
         ) from exc
-    return NonGeometric(terms, beta, robot.design_chain())
+    payloads = sorted(float(p) for p in truth.get("options", {}).get("payloads_kg", []))
+    return NonGeometric(
+        terms,
+        beta,
+        robot.design_chain(),
+        payload_kg=payloads[0] if payloads else 0.0,
+        measured_payloads_kg=tuple(payloads),
+    )
 
 
 def _aligned_errors(T_true: np.ndarray, T_model: np.ndarray) -> ModelError:
@@ -229,17 +236,28 @@ def table_errors(
     }
 
 
-def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) -> AuditResult:
+def audit(
+    session_dir: str | Path,
+    configurations: int = 1000,
+    seed: int = 0,
+    payload_kg: float | None = None,
+) -> AuditResult:
     """Compare the identified signature and the design model with the truth over
-    ``configurations`` (1 to :data:`MAX_CONFIGURATIONS`) random configurations."""
+    ``configurations`` (1 to :data:`MAX_CONFIGURATIONS`) random configurations; under
+    ``payload_kg`` on the flange when given (the truth's and the signature's
+    non-geometric terms at that payload; None: the smallest the session measured)."""
     from pipeline.stages.refine import nongeometric_model
 
     sdir = Path(session_dir)
     truth, robot, doc = _truth_and_robot(sdir, configurations)
     q = robot.random_configurations(configurations, seed)
-    T_true = forward_kinematics(truth, true_joint_values(doc, robot, q))
-    sig = chain_from_frames(read_table(stage_path(sdir, "chain")), robot.prismatic)
+    true_ng = true_nongeometric(doc, robot)
     ng = nongeometric_model(read_table(stage_path(sdir, "refine")), robot)
+    if payload_kg is not None:
+        true_ng = None if true_ng is None else replace(true_ng, payload_kg=payload_kg)
+        ng = None if ng is None else ng.with_payload(payload_kg)
+    T_true = forward_kinematics(truth, q if true_ng is None else true_ng.effective(q))
+    sig = chain_from_frames(read_table(stage_path(sdir, "chain")), robot.prismatic)
     q_sig = q if ng is None else ng.effective(q)
     return AuditResult(
         session=str(sdir),

@@ -88,6 +88,7 @@ class SimulationOptions:
     log_jitter_s: float = 0.0  # each measurement logged U(0, this) s after it was measured
     compliance_mm: float = 0.0  # the true joints deflect under gravity (RMS flange move, mm)
     harmonic_deg: float = 0.0  # the true joints' first-harmonic angle errors (RMS, deg)
+    payloads_kg: tuple[float, ...] = ()  # payloads on the flange, cycled over the pose set
 
 
 def _check(opts: SimulationOptions) -> None:
@@ -116,6 +117,13 @@ def _check(opts: SimulationOptions) -> None:
     if opts.air not in AIRS:
         raise ArmsigError(
             f"unknown air {opts.air!r}", expected=" or ".join(AIRS), fix="--air drifting"
+        )
+    if not all(np.isfinite(m) and 0.0 <= m <= 1000.0 for m in opts.payloads_kg):
+        raise ArmsigError(
+            "simulation option payloads_kg out of range",
+            expected="masses from 0 to 1000 kg",
+            got=repr(list(opts.payloads_kg)),
+            fix="--payloads 0,10",
         )
     for name, top in (("compliance_mm", 10.0), ("harmonic_deg", 1.0)):
         value = getattr(opts, name)
@@ -148,11 +156,11 @@ def _options_for_truth(opts: SimulationOptions) -> dict[str, object]:
     """The options as rig-truth.json records them; ``resettle_counts``, ``air`` and
     ``log_jitter_s`` only when set, so that sessions simulated without them keep their
     bytes."""
-    out = {**asdict(opts), "faults": list(opts.faults)}
+    out = {**asdict(opts), "faults": list(opts.faults), "payloads_kg": list(opts.payloads_kg)}
     for name, default in (
         ("resettle_counts", 0), ("air", "lab"), ("log_jitter_s", 0.0),
         ("poses", 0), ("sweeps", True), ("plan_file", ""), ("six_d", False),
-        ("compliance_mm", 0.0), ("harmonic_deg", 0.0),
+        ("compliance_mm", 0.0), ("harmonic_deg", 0.0), ("payloads_kg", []),
     ):  # fmt: skip
         if out[name] == default:
             del out[name]
@@ -210,19 +218,34 @@ def _check_tracker(opts: SimulationOptions) -> None:
 
 
 def joint_state(
-    robot: Any, sweep: int | str, step: int, q_cmd: np.ndarray, q_enc: np.ndarray, exact: bool
-) -> dict[str, Any]:
+    robot: Any, sweep: int | str, step: int, q_cmd: np.ndarray, q_enc: np.ndarray, exact: bool,
+    payload_kg: float = float("nan"),
+) -> dict[str, Any]:  # fmt: skip
     """A /robot/joint_state payload: the controller's readings of joint values ``q_cmd`` and
     ``q_enc`` (deg / cm; through the inverse of the robot's coupling, if any), printed to
-    1e-6 (commanded always, encoder unless ``exact``)."""
+    1e-6 (commanded always, encoder unless ``exact``), and the payload (kg) when given."""
     cmd, enc = robot.readings_from_joints(q_cmd), robot.readings_from_joints(q_enc)
-    return {
+    out: dict[str, Any] = {
         "sweep": sweep,
         "step": step,
         "q_commanded": [round(float(v), 6) for v in cmd],
         "q_encoder": [float(v) if exact else round(float(v), 6) for v in enc],
         "units": [j.unit for j in robot.joints],
     }
+    if np.isfinite(payload_kg):
+        out["payload_kg"] = float(payload_kg)
+    return out
+
+
+def command_payloads(commands: list[Any], payloads_kg: tuple[float, ...]) -> np.ndarray:
+    """The payload (kg) on the flange at each command: the pose set's poses cycle through
+    ``payloads_kg`` (pose k: ``payloads_kg[k mod len]``), every other command has the
+    first; NaN everywhere without payloads (none recorded)."""
+    if not payloads_kg:
+        return np.full(len(commands), np.nan)
+    kg = np.array(payloads_kg, float)
+    return np.array([kg[step % len(kg)] if sweep == "poses" else kg[0]
+                     for sweep, step, _ in commands])  # fmt: skip
 
 
 def _robot_message(robot: Any, signature_q: Any, plan: dict[str, Any]) -> Message:
@@ -290,7 +313,9 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     true = draw_true_robot(robot, rng_robot, opts.sigmas)
     true = replace(
         true,
-        nongeometric=draw_nongeometric(robot, opts.compliance_mm, opts.harmonic_deg, opts.seed),
+        nongeometric=draw_nongeometric(
+            robot, opts.compliance_mm, opts.harmonic_deg, opts.seed, opts.payloads_kg
+        ),
     )
     geometry_true = default_geometry()
     geometry_recorded = default_geometry(W_AB_CM, W_BC_CM, W_AC_CM + opts.wac_error_cm)
@@ -385,8 +410,9 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
 
     # Where the target sparker physically is at each configuration.
     qi = joints_to_internal(q_reached, pris)
+    payload = command_payloads(commands, opts.payloads_kg)
     if true.nongeometric is not None:  # where the joints sit: deflected, angle errors
-        qi = true.nongeometric.effective(qi)
+        qi = true.nongeometric.effective(qi, np.nan_to_num(payload, nan=0.0))
     p_target = np.zeros((len(commands), 3))
     for k, (sweep_id, _, _) in enumerate(commands):
         if sweep_id in ("tool", "check", "poses"):
@@ -398,7 +424,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     if points:
         return _record_points(
             out, force, opts, robot, true, plan, sensor_from_base, commands, q_cmd, q_enc, qi,
-            t_config, nests, tool_true, target_true, rng_sensor,
+            t_config, nests, tool_true, target_true, rng_sensor, payload,
         )  # fmt: skip
     cyc_cfg = np.repeat(np.arange(len(commands)), opts.repeats)
     cyc_t = t_config[cyc_cfg] + np.tile(np.arange(opts.repeats) * CYCLE_S, len(commands))
@@ -429,7 +455,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             Message(
                 "/robot/joint_state",
                 t_ns,
-                joint_state(robot, sweep_id, step, q_cmd[k], q_enc[k], opts.noiseless),
+                joint_state(robot, sweep_id, step, q_cmd[k], q_enc[k], opts.noiseless, payload[k]),
             )
         )
         for r in range(opts.repeats):
@@ -562,6 +588,7 @@ def _record_points(
     tool_true: np.ndarray,
     target_true: dict[int, np.ndarray],
     rng: np.random.Generator,
+    payload: np.ndarray,
 ) -> Path:
     """The tracker's session: every nest reflector (sweeps; the tool's nest at the poses)
     or the tool target (tool, check) measured once per configuration
@@ -596,7 +623,7 @@ def _record_points(
             Message(
                 "/robot/joint_state",
                 T0_NS + int(round(t_config[k] * 1e9)),
-                joint_state(robot, sweep_id, step, q_cmd[k], q_enc[k], opts.noiseless),
+                joint_state(robot, sweep_id, step, q_cmd[k], q_enc[k], opts.noiseless, payload[k]),
             )
         )
     tool = tracker.TOOL_TARGET
@@ -616,9 +643,9 @@ def _record_points(
     for m, (k, tid, _) in enumerate(rows):
         sweep_id, step, _ = commands[k]
         t_ns = T0_NS + int(round((t_config[k] + CYCLE_S * (1 + ids.index(tid))) * 1e9))
-        payload = tracker.point_message(sweep_id, step, tid, p_meas[m], sigma[m], opts.noiseless)
-        payload.update(oriented.get(m, {}))
-        messages.append(Message("/points", t_ns, payload))
+        message = tracker.point_message(sweep_id, step, tid, p_meas[m], sigma[m], opts.noiseless)
+        message.update(oriented.get(m, {}))
+        messages.append(Message("/points", t_ns, message))
     truth = _truth(opts, robot, true, sensor_from_base, tool_true, target_true)
     if opts.six_d:
         truth["true_tool_rotation_in_last_link"] = R_probe.tolist()

@@ -48,35 +48,51 @@ class TrueRobot:
 
 
 def draw_nongeometric(
-    robot: RobotDescription, compliance_mm: float, harmonic_deg: float, seed: int
+    robot: RobotDescription,
+    compliance_mm: float,
+    harmonic_deg: float,
+    seed: int,
+    payloads_kg: tuple[float, ...] = (),
 ) -> NonGeometric | None:
     """The true non-geometric terms of a simulated robot (None when both sizes are 0),
     from their own stream of ``seed`` (the rig's other draws keep their values):
 
     - compliance: ``β_jk = s c_j m_k`` (:mod:`pipeline.kinematics.nongeometric`) with
-      joint compliances ``c_j`` and lumped masses ``m_k`` drawn uniformly in [0.5, 1.5],
-      ``s`` chosen so that the RMS displacement of the flange over 500 configurations
-      drawn within the limits is ``compliance_mm`` (a UR10's is ~0.3 mm, issue 27);
+      joint compliances ``c_j`` uniform in [0.5, 1.5] and lumped masses ``m_k`` uniform
+      in [1, 10] kg, ``s`` chosen so that the RMS displacement of the flange over 500
+      configurations drawn within the limits is ``compliance_mm`` without a payload (a
+      UR10's is ~0.3 mm, issue 27); with ``payloads_kg`` the payload terms
+      ``γ_j = s c_j`` (per kg) too, evaluated at the smallest payload by default;
     - harmonics: ``a_j, b_j ~ N(0, harmonic_deg / √2)`` per revolute joint (an RMS
       amplitude of ``harmonic_deg``: encoders and gears give ~0.005-0.02°).
     """
     kinds = ("compliance",) * (compliance_mm > 0) + ("harmonic",) * (harmonic_deg > 0)
+    kinds += ("payload",) * (compliance_mm > 0 and len(payloads_kg) > 0)
     if not kinds:
         return None
     rng = np.random.default_rng([seed, 27])  # issue 27: apart from the rig's streams
     terms = all_terms(robot.prismatic, kinds)
     design = robot.design_chain()
     n = robot.n_joints
-    c, m = rng.uniform(0.5, 1.5, n), rng.uniform(0.5, 1.5, n)
+    c, m = rng.uniform(0.5, 1.5, n), rng.uniform(1.0, 10.0, n)
     beta = np.array([c[j - 1] * m[k - 1] for j, k in terms.compliance])
+    gamma = np.array([c[j - 1] for j in terms.payload])
     if terms.compliance:
         q = robot.random_configurations(500, seed)
         unit = NonGeometric(Terms(compliance=terms.compliance), beta * 1e-9, design)
         move = forward_kinematics(design, unit.effective(q)) - forward_kinematics(design, q)
         rms = float(np.sqrt(np.mean(np.sum(move[:, :3, 3] ** 2, axis=1)))) / 1e-9  # cm
         beta *= compliance_mm / 10.0 / rms
+        gamma *= compliance_mm / 10.0 / rms
     harm = rng.normal(0.0, np.radians(harmonic_deg) / np.sqrt(2.0), len(terms.harmonic))
-    return NonGeometric(terms, np.concatenate([beta, harm]), design)
+    measured = tuple(sorted(set(float(p) for p in payloads_kg)))
+    return NonGeometric(
+        terms,
+        np.concatenate([beta, gamma, harm]),
+        design,
+        payload_kg=measured[0] if measured else 0.0,
+        measured_payloads_kg=measured,
+    )
 
 
 def _small_rigid(rng: np.random.Generator, sig: ErrorSigmas) -> np.ndarray:

@@ -119,6 +119,8 @@ def nongeometric_section(model: NonGeometric | None, sigma: np.ndarray) -> dict[
     return {
         "regressor": "design chain (robot_description) at the readings",
         "gravity_in_design_base": [float(v) for v in GRAVITY],
+        "measured_payloads_kg": list(model.measured_payloads_kg),
+        "payload_kg": model.payload_kg,
         "terms": [
             {"name": n, "unit": u, "value": float(v), "sigma": float(e)}
             for n, u, v, e in zip(
@@ -142,7 +144,8 @@ def _nongeometric_of(doc: dict[str, Any], robot: RobotDescription) -> NonGeometr
     values = np.array([r["value"] for r in rows], float)
     values *= np.where([r["unit"].startswith("deg") for r in rows], np.radians(1.0), 1.0)
     terms = Terms.from_names([r["name"] for r in rows])
-    return NonGeometric(terms, values, robot.design_chain())
+    measured = tuple(float(m) for m in section["measured_payloads_kg"])
+    return NonGeometric(terms, values, robot.design_chain(), section["payload_kg"], measured)
 
 
 def signature_from_document(doc: dict[str, Any], source: str) -> Signature:

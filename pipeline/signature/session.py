@@ -16,6 +16,7 @@ import pyarrow as pa
 from pipeline import __version__
 from pipeline.atomic import write_text_atomic
 from pipeline.errors import ArmsigError
+from pipeline.kinematics.nongeometric import KINDS
 from pipeline.robots.description import description_to_dict
 from pipeline.signature.alignment import design_alignment
 from pipeline.signature.checks import FORMAT, FORMAT_VERSION
@@ -52,7 +53,7 @@ def refinement_section(refine: pa.Table) -> dict[str, Any]:
     out["sensor_calibration"] = [
         {k: r[k] for k in ("name", "unit", "value", "sigma")}
         for r in rows
-        if r["group"] not in ("axis", "point", "compliance", "harmonic")
+        if r["group"] not in ("axis", "point", *KINDS)
     ]
     out["verdict"] = None
     return out
@@ -156,7 +157,7 @@ def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict
         },
     }
     if nongeometric is not None:
-        rows = np.isin(refine.column("group").to_pylist(), ("compliance", "harmonic"))
+        rows = np.isin(refine.column("group").to_pylist(), KINDS)
         sigma = refine.column("sigma").to_numpy()[rows] * internal_factors(refine)[rows]
         doc["nongeometric"] = nongeometric_section(nongeometric, sigma)
     return doc

@@ -133,7 +133,7 @@ def _held_out(
     from pipeline.refine.holdout import check_configurations, kfold
     from pipeline.refine.solve import refit
     from pipeline.stages.positions import positions as xyz_of
-    from pipeline.stages.refine_problem import rows_at
+    from pipeline.stages.refine_problem import payloads_at, rows_at
 
     model = sp.problem.model
     n_kin = model.n_params
@@ -142,8 +142,10 @@ def _held_out(
     if check is not None:
         rows, theta = check
         cov_m = scale * _covariances(inputs, rows)
+        sweep, step = (rows.column(c).to_numpy() for c in ("sweep", "step"))
+        payload = np.nan_to_num(payloads_at(inputs["joints"], sweep, step), nan=0.0)
         held = check_configurations(
-            model, theta, xyz_of(rows), cov_m, x_hat[:n_kin], cov[:n_kin, :n_kin]
+            model, theta, xyz_of(rows), cov_m, x_hat[:n_kin], cov[:n_kin, :n_kin], payload
         )
         cols = ("sweep", "step", "target")
         return tuple(rows.column(c).to_pylist() for c in cols), held  # type: ignore[return-value]

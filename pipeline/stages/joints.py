@@ -25,6 +25,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     is_p = np.tile(robot.prismatic, k)
     cmd = robot.joints_from_readings(rec.q_commanded).ravel()
     enc = robot.joints_from_readings(rec.q_encoder).ravel()
+    payload = rec.joint_payload_kg
     return pa.table(
         {
             "sweep": np.repeat(rec.joint_sweep, n).astype(np.int32),
@@ -35,13 +36,15 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
             "q_cmd_cm": pa.array(cmd, mask=~is_p),
             "q_cm": pa.array(enc, mask=~is_p),
             "t_s": np.repeat(rec.joint_t_s, n),
+            "payload_kg": pa.array(np.repeat(payload, n), mask=np.repeat(np.isnan(payload), n)),
         }
     )
 
 
 STAGE = Stage(
     "joints",
-    3,  # 3: t_s from the measurement times (MCAP publish_time), not the log times (issue 33)
+    4,  # 3: t_s from the measurement times (MCAP publish_time), not the log times (issue 33);
+    # 4: payload_kg (issue 27)
     (RECORDING,),
     NoParams(),
     compute,

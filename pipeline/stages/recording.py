@@ -73,6 +73,7 @@ class Recording:
     joint_t_s: np.ndarray  # (K,)
     q_commanded: np.ndarray  # (K, n) deg / cm
     q_encoder: np.ndarray  # (K, n) deg / cm
+    joint_payload_kg: np.ndarray  # (K,) kg on the flange, NaN = not recorded
     cycle_sweep: np.ndarray  # (M,) int
     cycle_step: np.ndarray  # (M,) int
     cycle_repeat: np.ndarray  # (M,) int
@@ -148,6 +149,7 @@ def _read_cached(p: Path, sha: str) -> Recording:
         "joint_t_s": np.array([(t - t0) * 1e-9 for t, _ in js]),
         "q_commanded": q_cmd,
         "q_encoder": q_enc,
+        "joint_payload_kg": np.array([m.get("payload_kg", np.nan) for _, m in js], float),
     }
     if sensor == "points":
         measured = recording_points.read_points(p, msgs["/points"], robot["plan"], n_points, t0)

@@ -110,8 +110,8 @@ def internal_factors(refine: pa.Table) -> np.ndarray:
     """Per row of a ``refine`` table, the factor from its boundary unit to the internal
     one (deg -> rad; cm and ratios unchanged): values scale by it, covariances by its
     outer product."""
-    unit = np.array(refine.column("unit").to_pylist())
-    return np.where(np.isin(unit, ("deg", "deg/cm")), np.radians(1.0), 1.0)
+    unit = refine.column("unit").to_pylist()
+    return np.array([np.radians(1.0) if u == "deg" or u.startswith("deg/") else 1.0 for u in unit])
 
 
 def refined_x(refine: pa.Table) -> np.ndarray:
@@ -177,9 +177,13 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             fix="--param refine.level=auto",
         )
     from pipeline.kinematics.nongeometric import all_terms
+    from pipeline.stages.refine_problem import measured_payloads
 
     robot = session_robot(inputs["session"])
     kinds = nongeometric_kinds(params.nongeometric, session_plan(inputs["session"]))
+    payloads = measured_payloads(inputs["joints"])
+    if "compliance" in kinds and len(payloads) > 1:  # a changed payload is then predicted
+        kinds += ("payload",)
     terms = all_terms(robot.prismatic, kinds)
     sp = session_problem(inputs, params.loss, params.f_scale, level, params.speed_knot_s, terms)
     dropped = params.nongeometric == "auto" and _too_few_for(sp)
@@ -215,6 +219,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         summary["nongeometric"] = {
             "setting": params.nongeometric,
             "terms": list(sp.problem.model.terms.names),
+            "measured_payloads_kg": list(payloads),
         }
     if dropped:
         summary["nongeometric"]["left_out"] = (
@@ -282,7 +287,14 @@ def nongeometric_model(refine: pa.Table, robot: RobotDescription) -> NonGeometri
     if not rows.any():
         return None
     names = [str(n) for n in np.array(refine.column("name").to_pylist())[rows]]
-    return NonGeometric(Terms.from_names(names), refined_x(refine)[rows], robot.design_chain())
+    payloads = refine_summary(refine).get("nongeometric", {}).get("measured_payloads_kg", [])
+    return NonGeometric(
+        Terms.from_names(names),
+        refined_x(refine)[rows],
+        robot.design_chain(),
+        payload_kg=float(payloads[0]) if payloads else 0.0,
+        measured_payloads_kg=tuple(float(m) for m in payloads),
+    )
 
 
 def held_parameters(refine: pa.Table) -> np.ndarray:

@@ -144,7 +144,28 @@ def model_for_keys(
     model = chain_model(sweep, target, theta, F, pris, tool_target, pose_tool, tool_rotation)
     if not terms:
         return model
-    return replace(model, terms=terms, design=robot.design_chain(), reading_zero=q_sig)
+    payload = np.nan_to_num(payloads_at(joints, sweep, step), nan=0.0)
+    return replace(
+        model, terms=terms, design=robot.design_chain(), reading_zero=q_sig, payload_kg=payload
+    )
+
+
+def measured_payloads(joints: pa.Table) -> tuple[float, ...]:
+    """The distinct payloads (kg, ascending) recorded with the configurations the fit uses
+    (every sweep but ``check``); empty when none was recorded."""
+    rows = joints.filter(pa.array(joints.column("sweep").to_numpy() != CHECK_SWEEP))
+    kg = rows.column("payload_kg").to_numpy(zero_copy_only=False).astype(float)
+    return tuple(float(v) for v in np.unique(kg[np.isfinite(kg)]))
+
+
+def payloads_at(joints: pa.Table, sweep: np.ndarray, step: np.ndarray) -> Array:
+    """The payload (kg) recorded with each configuration (sweep, step), joined by key from
+    the ``joints`` table; NaN where none was recorded."""
+    first = joints.filter(pa.array(joints.column("joint").to_numpy() == 1))
+    kg = first.column("payload_kg").to_numpy(zero_copy_only=False).astype(float)
+    keys = zip(first.column("sweep").to_pylist(), first.column("step").to_pylist(), strict=True)
+    at = dict(zip(keys, kg, strict=True))
+    return np.array([at.get((int(a), int(b)), np.nan) for a, b in zip(sweep, step, strict=True)])
 
 
 def independent_terms(terms: Terms, model: ChainModel, reach_cm: float) -> Terms:

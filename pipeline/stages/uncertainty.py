@@ -20,6 +20,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.errors import StageError
+from pipeline.kinematics.nongeometric import KINDS
 from pipeline.stages.base import Stage, check_param
 from pipeline.stages.session import session_robot
 
@@ -60,7 +61,7 @@ def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.
             got=f"{len(axis)} axis rows, {len(tool)} tool rows",
             fix="`pipeline identify SESSION --force` recomputes the refinement",
         )
-    terms = [i for i, g in enumerate(group) if g in ("compliance", "harmonic")]  # issue 27
+    terms = [i for i, g in enumerate(group) if g in KINDS]  # issue 27
     idx = np.array(axis + tool + terms)
     from pipeline.stages.refine import internal_factors, refined_x
 
@@ -98,6 +99,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         terms=NO_TERMS if ng is None else ng.terms,
         design=None if ng is None else ng.design,
         reading_zero=q_sig,
+        payload_kg=np.full(m, 0.0 if ng is None else ng.payload_kg),
     )
     x, Sigma = kinematic_covariance(refine, model.n_axis_params)
     pred = predict_model(model, x, Sigma, params.seed)
