@@ -96,7 +96,8 @@ def problem_params(summary: Mapping[str, Any]) -> dict[str, Any]:
 def nongeometric_kinds(setting: str, plan: Mapping[str, Any]) -> tuple[str, ...]:
     """The term kinds of ``refine.nongeometric`` for a session of ``plan``: ``auto`` is
     compliance for a session with a pose set (the whole arm in many configurations: its
-    gravity torques vary), nothing for joint sweeps alone, whose held joints keep the
+    gravity torques vary), kept only when it explains more than noise
+    (:func:`significance`), nothing for joint sweeps alone, whose held joints keep the
     torques nearly constant (a term there would fit noise). The harmonics are never
     automatic: a joint's first harmonic identified over part of a turn extrapolates
     (issue 27: fitted on the UR10's Series C, whose first joint covers 128°, it tripled
@@ -185,12 +186,20 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     if "compliance" in kinds and len(payloads) > 1:  # a changed payload is then predicted
         kinds += ("payload",)
     terms = all_terms(robot.prismatic, kinds)
-    sp = session_problem(inputs, params.loss, params.f_scale, level, params.speed_knot_s, terms)
-    dropped = params.nongeometric == "auto" and _too_few_for(sp)
-    if dropped:  # the rigid chain alone, not a refusal the rigid fit would not give
-        sp = session_problem(inputs, params.loss, params.f_scale, level, params.speed_knot_s)
-    spline = getattr(sp.problem.block, "spline", None)
+    args = (inputs, params.loss, params.f_scale, level, params.speed_knot_s)
+    sp = session_problem(*args, terms)
+    left_out: dict[str, Any] | None = None
+    if params.nongeometric == "auto" and sp.problem.model.terms and _too_few_for(sp):
+        left_out = {"why": "too few measured coordinates for them (2 per parameter)"}
+        sp = session_problem(*args)  # the rigid chain, not a refusal the rigid fit would not give
     sol, identifiability = fit_session(sp, inputs)
+    if params.nongeometric == "auto" and sp.problem.model.terms:
+        rigid = session_problem(*args)
+        sol_r, ident_r = fit_session(rigid, inputs)
+        left_out = significance(rigid.problem, sol_r, sp.problem, sol)
+        if not left_out["significant"]:  # never fitted to noise: the rigid chain
+            sp, sol, identifiability = rigid, sol_r, ident_r
+    spline = getattr(sp.problem.block, "spline", None)
     chi2_recorded = recorded_chi2(sp.problem, sol)
     units, factor = _boundary(sp.units)
     cov = sol.covariance * np.outer(factor, factor)
@@ -215,16 +224,13 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     }
     if identifiability:
         summary["identifiability"] = identifiability
-    if sp.problem.model.terms or dropped:
+    if sp.problem.model.terms or left_out:
         summary["nongeometric"] = {
             "setting": params.nongeometric,
             "terms": list(sp.problem.model.terms.names),
             "measured_payloads_kg": list(payloads),
+            **({"test": left_out} if left_out else {}),
         }
-    if dropped:
-        summary["nongeometric"]["left_out"] = (
-            "too few measured coordinates for the compliance terms (2 per parameter)"
-        )
     rows = {
         "group": list(sp.groups),
         "name": list(sp.names),
@@ -235,6 +241,43 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "covariance": [row for row in cov],
     }
     return _table(rows, summary)
+
+
+#: ``refine.nongeometric=auto`` keeps the terms when the F-test of their χ² reduction has a
+#: p-value below this: a rigid robot's noise passes it once in a thousand sessions.
+SIGNIFICANCE = 1e-3
+
+
+def significance(rigid: Any, sol_r: Any, with_terms: Any, sol_t: Any) -> dict[str, Any]:
+    """Whether the non-geometric terms of ``with_terms`` (solved: ``sol_t``) explain more
+    than noise over the rigid problem ``rigid`` (``sol_r``): the F-test of the nested
+    models on their plain sums of squared whitened residuals at the solutions,
+    ``F = ((S_r − S_t)/p) / (S_t/dof_t)`` with ``p`` the terms' identified parameters.
+    Noiseless data of a rigid robot (S_t = S_r = 0) are not significant."""
+    from scipy.stats import f as f_dist
+
+    from pipeline.refine.solve import linearize
+
+    s_r = float(np.sum(linearize(rigid, sol_r.x).r ** 2))
+    s_t = float(np.sum(linearize(with_terms, sol_t.x).r ** 2))
+    p = sol_r.dof - sol_t.dof
+    if p <= 0 or sol_t.dof <= 0:
+        return {"significant": False, "why": "no identified term"}
+    if s_r <= 1e-14 * (sol_r.dof + 1):  # residuals ~1e-7 σ: the rigid chain is exact
+        return {"significant": False, "why": "the rigid chain fits the data to rounding"}
+    with np.errstate(divide="ignore", invalid="ignore"):
+        F = (s_r - s_t) / p / (s_t / sol_t.dof)
+    p_value = float(f_dist.sf(F, p, sol_t.dof)) if np.isfinite(F) else 1.0
+    if s_t == 0.0 and s_r > 0.0:
+        p_value = 0.0  # noiseless data the terms explain exactly
+    return {
+        "significant": p_value < SIGNIFICANCE,
+        "F": float(F) if np.isfinite(F) else None,
+        "p_value": p_value,
+        "terms_identified": p,
+        "why": f"F-test of the χ² reduction, p {'<' if p_value < SIGNIFICANCE else '>='} "
+        f"{SIGNIFICANCE:g}",
+    }
 
 
 def _too_few_for(sp: Any) -> bool:
