@@ -238,3 +238,120 @@ def test_a_wrong_export_is_never_written(sessions, tmp_path, monkeypatch) -> Non
     with pytest.raises(RuntimeError, match="does not reproduce the chain"):
         export(sessions["robot3"], "urdf", out=tmp_path / "r.urdf")
     assert not (tmp_path / "r.urdf").exists()
+
+
+# Issue 27: a signature's non-geometric terms beside the exports that hold its rigid chain.
+FORMATS = ("urdf", "dh", "mdh", "json")
+SUFFIXES = {"urdf": ".urdf", "dh": ".dh.json", "mdh": ".mdh.json", "json": ".chain.json"}
+
+
+@pytest.fixture(scope="module")
+def compliant(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A noiseless PUMA pose set with joint compliance, identified (refine.nongeometric
+    auto fits compliance on a pose set), and a twin whose signature.json has the same
+    chain but no ``nongeometric`` section."""
+    from pipeline.signature.checks import DIGEST_KEY
+    from pipeline.signature.file import signature_text
+
+    d = tmp_path_factory.mktemp("export-ng") / "terms"
+    opts = SimulationOptions(
+        robot="puma560", sensor="tracker", poses=60, sweeps=False, noiseless=True,
+        compliance_mm=0.3,
+    )  # fmt: skip
+    simulate_session(d, opts)
+    identify(d, report=False)
+    rigid = shutil.copytree(d, d.parent / "rigid")
+    doc = json.loads((rigid / "signature.json").read_text())
+    assert doc.pop("nongeometric")["terms"]
+    del doc[DIGEST_KEY]
+    (rigid / "signature.json").write_text(signature_text(doc))
+    return {"terms": d, "rigid": rigid}
+
+
+def _section(session: Path) -> dict:
+    return json.loads((session / "signature.json").read_text())["nongeometric"]
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_nongeometric_terms_are_written_beside_the_rigid_export(compliant, fmt, tmp_path):
+    out = tmp_path / f"r{SUFFIXES[fmt]}"
+    r = export(compliant["terms"], fmt, out=out)
+    side = out.with_suffix(".nongeometric.json")
+    assert r.sidecar == str(side) and side.is_file()
+    section = _section(compliant["terms"])
+    n = len(section["terms"])
+    assert r.sidecar_warning is not None and "holds the rigid chain only" in r.sidecar_warning
+    assert f"{n} non-geometric terms are written beside it in {side}" in r.sidecar_warning
+    doc = json.loads(side.read_text())
+    keys = ("name", "unit", "value", "sigma")
+    assert [{k: t[k] for k in keys} for t in doc["terms"]] == section["terms"]
+    assert doc["gravity_in_design_base"] == section["gravity_in_design_base"]
+    assert doc["beside"] == out.name and doc["angle_unit"] == "deg"
+    # the export itself is the rigid chain's, byte for byte; a rigid one has no sidecar
+    rigid_out = tmp_path / "rigid" / out.name
+    rigid_out.parent.mkdir()
+    rr = export(compliant["rigid"], fmt, out=rigid_out)
+    assert rr.sidecar is None and rr.sidecar_warning is None
+    assert rigid_out.read_bytes() == out.read_bytes()
+    assert [p.name for p in rigid_out.parent.iterdir()] == [out.name]
+
+
+def test_sidecar_terms_reproduce_the_signature_joint_values(compliant, tmp_path) -> None:
+    """Applied with pipeline.kinematics.nongeometric on the sidecar's own design chain,
+    the terms as written put the joints where the signature does."""
+    from pipeline.kinematics.chain import SerialChain
+    from pipeline.kinematics.nongeometric import NonGeometric, Terms
+
+    d = compliant["terms"]
+    r = export(d, "urdf", out=tmp_path / "r.urdf")
+    doc = json.loads(Path(str(r.sidecar)).read_text())
+    sig = load_session_signature(d / "signature.json")
+    assert sig.nongeometric is not None
+    pris = np.array([j["type"] == "prismatic" for j in doc["joints"]])
+    design = SerialChain(
+        np.array(doc["design_links"]), pris, np.array(doc["design_base"]),
+        np.array(doc["design_tool"]), joints_to_internal(doc["design_joint_offsets"], pris),
+    )  # fmt: skip
+    assert {t["unit"] for t in doc["terms"]} <= {"deg/cm", "deg"}  # to rad/cm, rad
+    values = np.radians([t["value"] for t in doc["terms"]])
+    mine = NonGeometric(Terms.from_names([t["name"] for t in doc["terms"]]), values, design)
+    q = joints_to_internal(readings(sig), sig.prismatic)
+    assert np.abs(sig.nongeometric.deflection(q)).max() > 1e-6  # rad: terms that matter
+    np.testing.assert_allclose(mine.effective(q), sig.nongeometric.effective(q), rtol=0, atol=1e-12)
+
+
+def test_export_cli_warns_once_and_keeps_armsig_folder_clean(compliant, tmp_path) -> None:
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+
+    d = shutil.copytree(compliant["terms"], tmp_path / "terms")
+    r = CliRunner().invoke(app, ["export", str(d), "--format", "urdf"])
+    assert r.exit_code == 0, r.output
+    side = d / "export" / "signature.nongeometric.json"
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("warning: the URDF holds the rigid chain only")
+    assert lines[0].endswith(f"written beside it in {side}") and side.is_file()
+    # the design model is rigid: no sidecar, no warning
+    r = CliRunner().invoke(app, ["export", str(d), "--format", "urdf", "--design"])
+    assert r.exit_code == 0 and r.stderr == "", r.output
+    assert not (d / "export" / "design.nongeometric.json").exists()
+    # a rigid signature exports as before; armsig's own folder keeps no stale terms
+    rigid = shutil.copytree(compliant["rigid"], tmp_path / "rigid")
+    (rigid / "export").mkdir()
+    shutil.copy(side, rigid / "export" / side.name)
+    r = CliRunner().invoke(app, ["export", str(rigid), "--format", "urdf"])
+    assert r.exit_code == 0 and r.stderr == "", r.output
+    assert sorted(p.name for p in (rigid / "export").iterdir()) == ["signature.urdf"]
+
+
+def test_an_existing_sidecar_needs_force(compliant, tmp_path) -> None:
+    from pipeline.errors import ArmsigError
+
+    side = tmp_path / "r.nongeometric.json"
+    side.write_text("the user's file")
+    with pytest.raises(ArmsigError, match="sidecar .* already exists"):
+        export(compliant["terms"], "dh", out=tmp_path / "r.json")
+    assert side.read_text() == "the user's file" and not (tmp_path / "r.json").exists()
+    export(compliant["terms"], "dh", out=tmp_path / "r.json", force=True)
+    assert json.loads(side.read_text())["format"] == "armsig-nongeometric"

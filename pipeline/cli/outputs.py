@@ -15,7 +15,7 @@ from pipeline.cli.options import (
     choice,
     joint_values,
 )
-from pipeline.cli.output import report, warn_outside_limits
+from pipeline.cli.output import report, warn, warn_outside_limits
 
 commands = typer.Typer()
 
@@ -82,3 +82,5 @@ def export(
         f"{r.configurations} configurations to {r.max_position_error_m:.1e} m, "
         f"{r.max_orientation_error_rad:.1e} rad",
     )
+    if r.sidecar_warning:
+        warn(r.sidecar_warning)

@@ -4,7 +4,9 @@
 session's stages, builds the exported model, checks that the numbers as written reproduce
 the chain's forward kinematics at :data:`CHECK_CONFIGURATIONS` random configurations within
 the joint limits (to :data:`CHECK_POSITION_M`, :data:`CHECK_ORIENTATION_RAD`) and only then
-writes the file atomically. Formats and frames: docs/export.md.
+writes the file atomically. Every format holds the rigid chain only: a signature's
+non-geometric terms go beside it (:mod:`pipeline.export.sidecar`). Formats and frames:
+docs/export.md.
 """
 
 from __future__ import annotations
@@ -26,12 +28,13 @@ from pipeline.export.dh_table import (
     dh_table_from_chain,
     modified_from_dh,
 )
-from pipeline.export.documents import chain_document, dh_document, mdh_document
+from pipeline.export.documents import chain_document, chain_from_document, dh_document, mdh_document
+from pipeline.export.sidecar import check_sidecar, sidecar_document, sidecar_path
 from pipeline.export.urdf import M_PER_CM, chain_from_origins, urdf_text, written_origins
 from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
 from pipeline.kinematics.transforms import invert_transform, pose_error
-from pipeline.signature.file import FILE_NAME, Signature
-from pipeline.signature.session import load_session_signature
+from pipeline.signature.file import FILE_NAME, Signature, signature_from_document
+from pipeline.signature.session import load_session_document
 from pipeline.signature.verdict import verdict_gate
 from pipeline.units import joints_to_internal
 
@@ -39,6 +42,8 @@ FORMATS = ("urdf", "dh", "mdh", "json")
 FRAMES = ("sensor", "design-base")
 EXPORT_DIR = "export"
 _SUFFIX = {"urdf": ".urdf", "dh": ".dh.json", "mdh": ".mdh.json", "json": ".chain.json"}
+#: What the warning calls each format: all four hold the rigid chain only.
+_NAME = {"urdf": "URDF", "dh": "D-H table", "mdh": "modified D-H table", "json": "chain JSON"}
 
 #: The acceptance of issue 16: the export reproduces armsig's FK to 1e-9 m and 1e-9 rad
 #: (round-off of the chain products is ~1e-15 m; a wrong convention is ≥ 1e-3 m).
@@ -60,6 +65,8 @@ class ExportResult:
     max_orientation_error_rad: float
     verdict: str | None = None  # the signature's verdict (None: it has none)
     verdict_warning: str | None = None  # a CHECK, or a FAIL accepted (accept_verdict)
+    sidecar: str | None = None  # the signature's non-geometric terms, beside the file
+    sidecar_warning: str | None = None  # that the file holds the rigid chain only
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -111,12 +118,6 @@ def _mdh_from_document(doc: dict[str, Any], pris: np.ndarray) -> ModifiedDHTable
     return ModifiedDHTable(al, a, be, th, d, pris, np.array(doc["base"]), np.array(doc["tool"]))
 
 
-def _chain_from_document(doc: dict[str, Any], pris: np.ndarray) -> SerialChain:
-    q0 = joints_to_internal(doc["joint_offsets"], pris)
-    return SerialChain(np.array(doc["links"]), pris, np.array(doc["base"]),
-                       np.array(doc["tool"]), q0)  # fmt: skip
-
-
 def json_text(doc: dict[str, Any]) -> str:
     """``doc`` as JSON, one top-level key per line and one line per list item (a table row,
     a matrix)."""
@@ -149,7 +150,7 @@ def render(
     if fmt == "json":
         doc = chain_document(chain, robot, model, frame)
         text = json_text(doc)
-        return text, _chain_from_document(json.loads(text), pris)
+        return text, chain_from_document(json.loads(text), pris)
     table = dh_table_from_chain(chain)
     if fmt == "dh":
         doc = dh_document(table, robot, model, frame)
@@ -180,6 +181,10 @@ def export(
     ``out`` defaults to :func:`default_path` (armsig's own folder, rewritten every time);
     an ``out`` that exists is refused unless ``force``. A signature whose verdict is FAIL
     is refused unless ``accept_verdict`` (:func:`pipeline.signature.verdict.verdict_gate`).
+    A signature with non-geometric terms also gets the sidecar of
+    :func:`pipeline.export.sidecar.sidecar_path` (checked, and refused like ``out``), and
+    the result says so in ``sidecar_warning``; a rigid one is exported as before (and its
+    default folder loses a stale sidecar).
     """
     if fmt not in FORMATS:
         raise ArmsigError(f"unknown export format {fmt!r}", expected=", ".join(FORMATS))
@@ -191,14 +196,37 @@ def export(
         check_writable(path.parent, "export folder", folder=True)
     else:
         path = check_new_file(out, "--out", force)
-    sig = load_session_signature(sdir / FILE_NAME)
+    doc = load_session_document(sdir / FILE_NAME)
+    sig = signature_from_document(doc, str(sdir / FILE_NAME))
     warning = verdict_gate(sig.verdict, str(sdir), accept_verdict)
+    section = None if design else doc.get("nongeometric")  # the design model is rigid
+    side = sidecar_path(path)
+    if section and out is not None:  # armsig's own folder is rewritten, a user's file is not
+        check_new_file(side, "sidecar", force)
     model = "design" if design else "signature"
     chain = export_chain(sig, design, frame)
     text, written = render(sig, chain, fmt, model, frame)
-    pos, rot = _check(chain, written, random_readings(sig, CHECK_CONFIGURATIONS))
+    q = random_readings(sig, CHECK_CONFIGURATIONS)
+    pos, rot = _check(chain, written, q)
+    side_warning = None
+    if section:  # the terms first: the export never stands without them
+        side_text = json_text(sidecar_document(sig, section, path.name))
+        check_sidecar(json.loads(side_text), sig, q)
+        write_text_atomic(side, side_text)
+        side_warning = _sidecar_warning(fmt, len(section["terms"]), side)
+    elif out is None:  # no stale terms beside a rigid export in armsig's own folder
+        side.unlink(missing_ok=True)
     write_text_atomic(path, text)
     status = None if sig.verdict is None else sig.verdict.status
     return ExportResult(
-        str(path), fmt, model, frame, CHECK_CONFIGURATIONS, pos, rot, status, warning
+        str(path), fmt, model, frame, CHECK_CONFIGURATIONS, pos, rot, status, warning,
+        str(side) if section else None, side_warning,
+    )  # fmt: skip
+
+
+def _sidecar_warning(fmt: str, n: int, side: Path) -> str:
+    terms = "1 non-geometric term is" if n == 1 else f"{n} non-geometric terms are"
+    return (
+        f"the {_NAME[fmt]} holds the rigid chain only; the signature's {terms} written "
+        f"beside it in {side}"
     )

@@ -1,4 +1,5 @@
-"""JSON documents of the exports ``dh``, ``mdh`` and ``json`` (docs/export.md).
+"""JSON documents of the exports ``dh``, ``mdh`` and ``json`` (docs/export.md), and the
+chain read back from the last.
 
 Boundary units: lengths in cm, angles in degrees, the unit in every key; matrices are
 4 × 4 row-major with translations in cm. Every document states its convention.
@@ -14,7 +15,7 @@ from pipeline.export.dh_table import HAYATI_DEG, DHTable, ModifiedDHTable
 from pipeline.kinematics.chain import SerialChain
 from pipeline.robots.description import RobotDescription
 from pipeline.signature.file import matrix_rows
-from pipeline.units import joints_to_boundary
+from pipeline.units import joints_to_boundary, joints_to_internal
 
 DH_CONVENTION = (
     "A_i = Rot(z, theta_i) Trans(0, 0, d_i) Trans(a_i, 0, 0) Rot(x, alpha_i) Rot(y, beta_i); "
@@ -122,3 +123,10 @@ def chain_document(
         "links": [matrix_rows(L) for L in chain.links],
         "tool": matrix_rows(chain.tool),
     }
+
+
+def chain_from_document(doc: dict[str, Any], prismatic: np.ndarray) -> SerialChain:
+    """The chain a :func:`chain_document` (as read back) describes: for checking it."""
+    q0 = joints_to_internal(doc["joint_offsets"], prismatic)
+    return SerialChain(np.array(doc["links"]), prismatic, np.array(doc["base"]),
+                       np.array(doc["tool"]), q0)  # fmt: skip

@@ -134,18 +134,22 @@ def nongeometric_section(model: NonGeometric | None, sigma: np.ndarray) -> dict[
     }
 
 
-def _nongeometric_of(doc: dict[str, Any], robot: RobotDescription) -> NonGeometric | None:
+def nongeometric_from_section(section: dict[str, Any], design: SerialChain) -> NonGeometric:
+    """The model of a ``nongeometric`` section (its ``terms``: name, boundary unit, value)
+    whose levers are evaluated on ``design`` (the design chain, world: the design base)."""
     from pipeline.kinematics.nongeometric import NonGeometric, Terms
 
-    section = doc.get("nongeometric")
-    if not section:
-        return None
     rows = section["terms"]
     values = np.array([r["value"] for r in rows], float)
     values *= np.where([r["unit"].startswith("deg") for r in rows], np.radians(1.0), 1.0)
     terms = Terms.from_names([r["name"] for r in rows])
-    measured = tuple(float(m) for m in section["measured_payloads_kg"])
-    return NonGeometric(terms, values, robot.design_chain(), section["payload_kg"], measured)
+    measured = tuple(float(m) for m in section.get("measured_payloads_kg", ()))
+    return NonGeometric(terms, values, design, float(section.get("payload_kg", 0.0)), measured)
+
+
+def _nongeometric_of(doc: dict[str, Any], robot: RobotDescription) -> NonGeometric | None:
+    section = doc.get("nongeometric")
+    return nongeometric_from_section(section, robot.design_chain()) if section else None
 
 
 def signature_from_document(doc: dict[str, Any], source: str) -> Signature:

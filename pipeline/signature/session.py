@@ -215,10 +215,17 @@ def write_signature(
 def load_session_signature(
     path: str | Path, committed: dict[str, str | None] | None = None
 ) -> Signature:
-    """Read ``SESSION/signature.json``, refused unless it was built from the stage outputs
-    committed in ``SESSION/stages`` (e.g. after a run killed between the two) and from the
-    session's recording as it is now (e.g. after ``import --force`` or a recording copied
-    in, until ``identify`` succeeds on it).
+    """The :class:`Signature` of :func:`load_session_document`."""
+    return signature_from_document(load_session_document(path, committed), str(Path(path)))
+
+
+def load_session_document(
+    path: str | Path, committed: dict[str, str | None] | None = None
+) -> dict[str, Any]:
+    """Read ``SESSION/signature.json`` (the checked document), refused unless it was built
+    from the stage outputs committed in ``SESSION/stages`` (e.g. after a run killed between
+    the two) and from the session's recording as it is now (e.g. after ``import --force``
+    or a recording copied in, until ``identify`` succeeds on it).
 
     ``committed``: their content hashes when the caller has already checked the files
     (the stage runner, which has also hashed the recording); otherwise every stage file
@@ -240,4 +247,4 @@ def load_session_signature(
             got="no recording" if recording is None else f"sha256 {recording[:12]}…",
             fix=fix,
         )
-    return signature_from_document(doc, str(p))
+    return doc
