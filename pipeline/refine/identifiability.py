@@ -134,8 +134,8 @@ def analyse(
         low = ~held & (sigmas < MIN_SIGMAS)
         why = np.where(low, "below noise", why)
         held = held | low
-    if held_before is not None:
-        why = np.where(held_before & ~held, "at the start", why)
+    if held_before is not None:  # their columns are zero here: "structural" says nothing
+        why = np.where(held_before, "at the start", why)
         held = held | held_before
     # Pivoted QR is greedy: a later pivot may have fallen below a threshold only because
     # an earlier one took its share; the held set is what the greedy order leaves, the
@@ -217,12 +217,19 @@ def poses_needed(n_params: int, coordinates_per_pose: int = 3) -> int:
 
 
 def fit_identifiable(
-    problem: Problem, x0: Array, units: tuple[str, ...], noise_stated: bool, n_points: int
+    problem: Problem,
+    x0: Array,
+    units: tuple[str, ...],
+    noise_stated: bool,
+    n_points: int,
+    x_warm: Array | None = None,
 ) -> tuple[Solution, Identifiability]:
-    """Solve ``problem`` from ``x0`` with the parameters the data cannot identify held at
-    ``x0`` (module docstring); a problem with fewer residuals than
-    :data:`COORDINATES_PER_PARAMETER` per identifiable parameter is refused."""
-    r, J = residuals_and_jacobian(problem, x0)
+    """Solve ``problem`` from ``x0`` (or from ``x_warm``, a nearer start, when given) with
+    the parameters the data cannot identify held at ``x0`` (module docstring); a problem
+    with fewer residuals than :data:`COORDINATES_PER_PARAMETER` per identifiable parameter
+    is refused."""
+    begin = x0 if x_warm is None else np.asarray(x_warm, float)
+    r, J = residuals_and_jacobian(problem, begin)
     n = J.shape[1]
     need = COORDINATES_PER_PARAMETER * n
     if len(r) < need:  # before the analysis: with so few rows every rank is the data's
@@ -235,7 +242,9 @@ def fit_identifiable(
             fix="measure more poses, spread over the joint ranges",
         )
     start = analyse(J, units, noise_stated, n_points)
-    solution = solve(replace(problem, held=start.held), x0)
+    begin = begin.copy()
+    begin[start.held] = x0[start.held]
+    solution = solve(replace(problem, held=start.held), begin)
     r, J = residuals_and_jacobian(problem, solution.x)
     # The noise the data show, when above the stated one: a σ stated for the sensor alone
     # (a tracker's 0.008 mm) leaves out what the chain cannot model (a robot's 0.5 mm),
@@ -247,4 +256,12 @@ def fit_identifiable(
         warm = solution.x.copy()  # the rest from where the first fit left them
         warm[final.held] = x0[final.held]
         solution = solve(replace(problem, held=final.held), warm)
-    return solution, replace(final, correlated=correlated_pairs(solution.covariance))
+    # A parameter held at the start keeps the start's reason and pivot (its column is out
+    # of the solution's analysis).
+    why_start = dict(zip(np.flatnonzero(start.held), start.why, strict=True))
+    why_final = dict(zip(np.flatnonzero(final.held), final.why, strict=True))
+    why = tuple(why_start.get(k, why_final[k]) for k in np.flatnonzero(final.held))
+    sigmas = np.where(start.held, start.sigmas, final.sigmas)
+    return solution, replace(
+        final, why=why, sigmas=sigmas, correlated=correlated_pairs(solution.covariance)
+    )

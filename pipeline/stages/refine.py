@@ -192,13 +192,16 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     if params.nongeometric == "auto" and sp.problem.model.terms and _too_few_for(sp):
         left_out = {"why": "too few measured coordinates for them (2 per parameter)"}
         sp = session_problem(*args)  # the rigid chain, not a refusal the rigid fit would not give
-    sol, identifiability = fit_session(sp, inputs)
     if params.nongeometric == "auto" and sp.problem.model.terms:
+        # The rigid chain first (as before issue 27), then the terms from its solution.
         rigid = session_problem(*args)
         sol_r, ident_r = fit_session(rigid, inputs)
+        sol, identifiability = fit_session(sp, inputs, with_rigid_solution(sp, rigid, sol_r.x))
         left_out = significance(rigid.problem, sol_r, sp.problem, sol)
         if not left_out["significant"]:  # never fitted to noise: the rigid chain
             sp, sol, identifiability = rigid, sol_r, ident_r
+    else:
+        sol, identifiability = fit_session(sp, inputs)
     spline = getattr(sp.problem.block, "spline", None)
     chi2_recorded = recorded_chi2(sp.problem, sol)
     units, factor = _boundary(sp.units)
@@ -280,6 +283,17 @@ def significance(rigid: Any, sol_r: Any, with_terms: Any, sol_t: Any) -> dict[st
     }
 
 
+def with_rigid_solution(sp: Any, rigid: Any, x_rigid: np.ndarray) -> np.ndarray:
+    """The start of ``sp`` (a problem with non-geometric terms) with the parameters it
+    shares with ``rigid`` (the same session without them) at ``x_rigid``, its solution:
+    the chain's (before the terms, the last kinematic parameters) and the block's."""
+    x = np.array(sp.x0, float)
+    n_rigid, n_kin = rigid.problem.n_kin, sp.problem.n_kin
+    x[:n_rigid] = x_rigid[:n_rigid]
+    x[n_kin:] = x_rigid[n_rigid:]
+    return x
+
+
 def _too_few_for(sp: Any) -> bool:
     """Whether the non-geometric terms of ``sp`` take its parameters past what its
     measured coordinates can identify (:data:`pipeline.refine.identifiability.
@@ -292,17 +306,22 @@ def _too_few_for(sp: Any) -> bool:
     return bool(3 * len(measured) < COORDINATES_PER_PARAMETER * sp.problem.n_params)
 
 
-def fit_session(sp: Any, inputs: Mapping[str, Any]) -> tuple[Any, dict[str, Any]]:
-    """The solution of a session's problem ``sp`` from its start, and its identifiability
-    summary (``{}`` without a pose set: joint sweeps see every parameter)."""
+def fit_session(
+    sp: Any, inputs: Mapping[str, Any], x_warm: np.ndarray | None = None
+) -> tuple[Any, dict[str, Any]]:
+    """The solution of a session's problem ``sp`` from its start (or from ``x_warm``, a
+    nearer one), and its identifiability summary (``{}`` without a pose set: joint sweeps
+    see every parameter)."""
     from pipeline.refine.solve import solve
 
     if "poses" in session_plan(inputs["session"]):
-        return _fit_pose_set(sp, inputs["positions"])
-    return solve(sp.problem, sp.x0), {}
+        return _fit_pose_set(sp, inputs["positions"], x_warm)
+    return solve(sp.problem, sp.x0 if x_warm is None else x_warm), {}
 
 
-def _fit_pose_set(sp: Any, positions: pa.Table) -> tuple[Any, dict[str, Any]]:
+def _fit_pose_set(
+    sp: Any, positions: pa.Table, x_warm: np.ndarray | None = None
+) -> tuple[Any, dict[str, Any]]:
     """The fit of a session with a pose set, the parameters its data cannot identify held
     at the start (:func:`pipeline.refine.identifiability.fit_identifiable`), and the
     analysis as the summary records it."""
@@ -314,7 +333,7 @@ def _fit_pose_set(sp: Any, positions: pa.Table) -> tuple[Any, dict[str, Any]]:
     sweep = keys.column("sweep").to_numpy()
     n_poses = len(set(keys.column("step").to_numpy()[sweep == POSES_SWEEP].tolist()))
     stated = recorded_sigma_cm(positions) is not None
-    sol, ident = fit_identifiable(sp.problem, sp.x0, sp.units, stated, keys.num_rows)
+    sol, ident = fit_identifiable(sp.problem, sp.x0, sp.units, stated, keys.num_rows, x_warm)
     return sol, summary(ident, sp.names, n_poses, keys.num_rows)
 
 
