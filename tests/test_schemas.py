@@ -40,6 +40,7 @@ def _joint_states(**overrides):
         "q_cmd_cm": [None],
         "q_cm": [None],
         "t_s": [0.5],
+        "payload_kg": pa.array([None], pa.float64()),
     }
     cols.update(overrides)
     return pa.table(cols)

@@ -15,12 +15,13 @@ from pipeline.rig.simulate import SimulationOptions, simulate_session
 SMALL = {"points": 12, "repeats": 2}
 #: sha256 of recording.mcap as made before the plan was cached (main at ae2a052), seed 5;
 #: renewed when the recording embeds a changed channel schema (issue 26: the sweep
-#: 'poses' of joint_state.json), its messages unchanged (checked against 0537394: every
-#: message's topic, log time and bytes equal).
+#: 'poses' of joint_state.json; issue 27: its optional payload_kg), its messages unchanged
+#: (checked against 0537394 and bef8e5b: every message's topic, log and publish time and
+#: bytes equal).
 BEFORE = {
-    (): "60d7f20107cc526ff2235efaa9819405795991439697acf3ba95d0563a4107b8",
+    (): "9354d2deac16d9ae62d2fc6518092938a03080fea330b10badc91b0089eeffc2",
     (("noise_factor", 4.6), ("wac_error_cm", 0.5)): (
-        "bcb123877a2190131979ef5a23cb2a06fae27f0f4b8a7556a7146c19cec91343"
+        "782573987473f7263f0798a1ddddf99a5b8265fcf95b4ca8fa973160624fa402"
     ),
 }
 

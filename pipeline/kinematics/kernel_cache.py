@@ -75,6 +75,8 @@ KERNEL_SOURCES = (
     "pipeline.kinematics.ik_stall",
     "pipeline.kinematics.jacobian",
     "pipeline.kinematics.kernel_cache",
+    "pipeline.kinematics.nongeometric",
+    "pipeline.kinematics.nongeometric_compiled",
     "pipeline.kinematics.transforms",
     "pipeline.robots.puma560",
     "pipeline.control.puma560_jacobi",
