@@ -192,16 +192,12 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     if params.nongeometric == "auto" and sp.problem.model.terms and _too_few_for(sp):
         left_out = {"why": "too few measured coordinates for them (2 per parameter)"}
         sp = session_problem(*args)  # the rigid chain, not a refusal the rigid fit would not give
+    sol, identifiability = fit_session(sp, inputs)
     if params.nongeometric == "auto" and sp.problem.model.terms:
-        # The rigid chain first (as before issue 27), then the terms from its solution.
-        rigid = session_problem(*args)
-        sol_r, ident_r = fit_session(rigid, inputs)
-        sol, identifiability = fit_session(sp, inputs, with_rigid_solution(sp, rigid, sol_r.x))
-        left_out = significance(rigid.problem, sol_r, sp.problem, sol)
-        if not left_out["significant"]:  # never fitted to noise: the rigid chain
-            sp, sol, identifiability = rigid, sol_r, ident_r
-    else:
-        sol, identifiability = fit_session(sp, inputs)
+        left_out = significance(sp.problem, sol)
+        if not left_out["significant"]:  # never fitted to noise: the rigid chain, as before
+            sp = session_problem(*args)
+            sol, identifiability = fit_session(sp, inputs)
     spline = getattr(sp.problem.block, "spline", None)
     chi2_recorded = recorded_chi2(sp.problem, sol)
     units, factor = _boundary(sp.units)
@@ -251,47 +247,41 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 SIGNIFICANCE = 1e-3
 
 
-def significance(rigid: Any, sol_r: Any, with_terms: Any, sol_t: Any) -> dict[str, Any]:
-    """Whether the non-geometric terms of ``with_terms`` (solved: ``sol_t``) explain more
-    than noise over the rigid problem ``rigid`` (``sol_r``): the F-test of the nested
-    models on their plain sums of squared whitened residuals at the solutions,
-    ``F = ((S_r − S_t)/p) / (S_t/dof_t)`` with ``p`` the terms' identified parameters.
-    Noiseless data of a rigid robot (S_t = S_r = 0) are not significant."""
+def significance(problem: Any, sol: Any) -> dict[str, Any]:
+    """Whether the non-geometric terms of ``problem`` (solved: ``sol``) explain more than
+    noise: the Wald form of the F-test of the nested rigid model, ``F = β̂ᵀ Σ_β⁻¹ β̂ / p``
+    over the ``p`` identified terms, ``Σ_β`` their covariance (scaled by the fit's
+    χ²/dof, the F-test's denominator), p-value of ``F(p, dof)``. One fit, not two: the
+    rigid chain is fitted only when the terms are dropped. Terms that fit to zero (every
+    ``|β̂|`` below 1e-9 of its tolerance: noiseless data of a rigid robot) are not
+    significant."""
     from scipy.stats import f as f_dist
 
-    from pipeline.refine.solve import linearize
+    from pipeline.refine.identifiability import tolerance_scale
 
-    s_r = float(np.sum(linearize(rigid, sol_r.x).r ** 2))
-    s_t = float(np.sum(linearize(with_terms, sol_t.x).r ** 2))
-    p = sol_r.dof - sol_t.dof
-    if p <= 0 or sol_t.dof <= 0:
+    b = problem.model.beta_slice
+    beta, cov = sol.x[b], sol.covariance[b, b]
+    tol = tolerance_scale(problem.model.terms.units)
+    if (np.abs(beta) <= 1e-9 * tol).all():
+        return {"significant": False, "why": "the terms fit to zero: the rigid chain is exact"}
+    if not np.isfinite(sol.noise_scale) or sol.noise_scale == 0.0:
+        return {"significant": True, "why": "noiseless data the terms explain exactly"}
+    free = np.diag(cov) > 0
+    p = int(free.sum())
+    if p == 0 or sol.dof <= 0:
         return {"significant": False, "why": "no identified term"}
-    if s_r <= 1e-14 * (sol_r.dof + 1):  # residuals ~1e-7 σ: the rigid chain is exact
-        return {"significant": False, "why": "the rigid chain fits the data to rounding"}
-    with np.errstate(divide="ignore", invalid="ignore"):
-        F = (s_r - s_t) / p / (s_t / sol_t.dof)
-    p_value = float(f_dist.sf(F, p, sol_t.dof)) if np.isfinite(F) else 1.0
-    if s_t == 0.0 and s_r > 0.0:
-        p_value = 0.0  # noiseless data the terms explain exactly
+    bf = beta[free]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        F = float(bf @ np.linalg.pinv(cov[np.ix_(free, free)]) @ bf) / p
+    p_value = float(f_dist.sf(F, p, sol.dof)) if np.isfinite(F) else 0.0
     return {
         "significant": p_value < SIGNIFICANCE,
-        "F": float(F) if np.isfinite(F) else None,
+        "F": F if np.isfinite(F) else None,
         "p_value": p_value,
         "terms_identified": p,
-        "why": f"F-test of the χ² reduction, p {'<' if p_value < SIGNIFICANCE else '>='} "
+        "why": f"F-test (Wald) of the terms, p {'<' if p_value < SIGNIFICANCE else '>='} "
         f"{SIGNIFICANCE:g}",
     }
-
-
-def with_rigid_solution(sp: Any, rigid: Any, x_rigid: np.ndarray) -> np.ndarray:
-    """The start of ``sp`` (a problem with non-geometric terms) with the parameters it
-    shares with ``rigid`` (the same session without them) at ``x_rigid``, its solution:
-    the chain's (before the terms, the last kinematic parameters) and the block's."""
-    x = np.array(sp.x0, float)
-    n_rigid, n_kin = rigid.problem.n_kin, sp.problem.n_kin
-    x[:n_rigid] = x_rigid[:n_rigid]
-    x[n_kin:] = x_rigid[n_rigid:]
-    return x
 
 
 def _too_few_for(sp: Any) -> bool:
@@ -306,22 +296,17 @@ def _too_few_for(sp: Any) -> bool:
     return bool(3 * len(measured) < COORDINATES_PER_PARAMETER * sp.problem.n_params)
 
 
-def fit_session(
-    sp: Any, inputs: Mapping[str, Any], x_warm: np.ndarray | None = None
-) -> tuple[Any, dict[str, Any]]:
-    """The solution of a session's problem ``sp`` from its start (or from ``x_warm``, a
-    nearer one), and its identifiability summary (``{}`` without a pose set: joint sweeps
-    see every parameter)."""
+def fit_session(sp: Any, inputs: Mapping[str, Any]) -> tuple[Any, dict[str, Any]]:
+    """The solution of a session's problem ``sp`` from its start, and its identifiability
+    summary (``{}`` without a pose set: joint sweeps see every parameter)."""
     from pipeline.refine.solve import solve
 
     if "poses" in session_plan(inputs["session"]):
-        return _fit_pose_set(sp, inputs["positions"], x_warm)
-    return solve(sp.problem, sp.x0 if x_warm is None else x_warm), {}
+        return _fit_pose_set(sp, inputs["positions"])
+    return solve(sp.problem, sp.x0), {}
 
 
-def _fit_pose_set(
-    sp: Any, positions: pa.Table, x_warm: np.ndarray | None = None
-) -> tuple[Any, dict[str, Any]]:
+def _fit_pose_set(sp: Any, positions: pa.Table) -> tuple[Any, dict[str, Any]]:
     """The fit of a session with a pose set, the parameters its data cannot identify held
     at the start (:func:`pipeline.refine.identifiability.fit_identifiable`), and the
     analysis as the summary records it."""
@@ -333,7 +318,7 @@ def _fit_pose_set(
     sweep = keys.column("sweep").to_numpy()
     n_poses = len(set(keys.column("step").to_numpy()[sweep == POSES_SWEEP].tolist()))
     stated = recorded_sigma_cm(positions) is not None
-    sol, ident = fit_identifiable(sp.problem, sp.x0, sp.units, stated, keys.num_rows, x_warm)
+    sol, ident = fit_identifiable(sp.problem, sp.x0, sp.units, stated, keys.num_rows)
     return sol, summary(ident, sp.names, n_poses, keys.num_rows)
 
 
