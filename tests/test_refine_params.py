@@ -24,6 +24,7 @@ VALUES = {
     "loss": "cauchy",
     "f_scale": 2.0,
     "speed_knot_s": 30.0,
+    "nongeometric": "compliance",  # issue 27: auto leaves the terms out of a sweep session
 }
 
 
@@ -40,7 +41,9 @@ def test_each_refine_parameter_identifies_robot3(
     shutil.copytree(robot3_identified, d)
     identify(d, report=False, overrides={"refine": {name: VALUES[name]}})
     summary = refine_summary(read_table(stage_path(d, "refine")))
-    if name != "enabled":
+    if name == "nongeometric":  # the setting and the terms it fitted
+        assert summary[name]["setting"] == VALUES[name] and summary[name]["terms"]
+    elif name != "enabled":
         assert summary[name] == VALUES[name]
     doc = json.loads((d / "signature.json").read_text())
     assert doc["refinement"]["verdict"]["verdict"] in ("PASS", "CHECK")

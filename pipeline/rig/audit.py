@@ -199,6 +199,14 @@ def _truth_and_robot(sdir: Path, configurations: int) -> tuple[SerialChain, Any,
     return true_tool_chain(doc), robot, doc
 
 
+def _true_poses(sdir: Path, configurations: int, seed: int) -> tuple[np.ndarray, Any, np.ndarray]:
+    """The true tool poses (m, 4, 4) at ``configurations`` random readings of the session's
+    robot (its non-geometric terms included), the robot, and the readings (m, n)."""
+    truth, robot, doc = _truth_and_robot(sdir, configurations)
+    q = robot.random_configurations(configurations, seed)
+    return forward_kinematics(truth, true_joint_values(doc, robot, q)), robot, q
+
+
 def table_errors(
     session_dir: str | Path,
     tables: tuple[str, ...] = ("frames", "chain"),
@@ -210,35 +218,32 @@ def table_errors(
     the same configurations as :func:`audit`. For studies and benchmarks that compare the
     two."""
     sdir = Path(session_dir)
-    truth, robot, doc = _truth_and_robot(sdir, configurations)
-    q = robot.random_configurations(configurations, seed)
-    T_true = forward_kinematics(truth, true_joint_values(doc, robot, q))
-    return {
-        t: _aligned_errors(
-            T_true,
-            forward_kinematics(
-                chain_from_frames(read_table(stage_path(sdir, t)), robot.prismatic), q
-            ),
-        )
-        for t in tables
-    }
+    T_true, robot, q = _true_poses(sdir, configurations, seed)
+    return {t: _aligned_errors(T_true, _table_poses(sdir, t, robot, q)) for t in tables}
+
+
+def _table_poses(sdir: Path, table: str, robot: Any, q: np.ndarray) -> np.ndarray:
+    """Tool poses (m, 4, 4) of the chain stage table ``table`` holds at readings ``q``:
+    the signature (``chain``) with the non-geometric terms its ``refine`` table fitted
+    (:func:`pipeline.stages.refine.nongeometric_model`), the thesis S-Model (``frames``)
+    rigid, as it has none."""
+    from pipeline.stages.refine import nongeometric_model
+
+    chain = chain_from_frames(read_table(stage_path(sdir, table)), robot.prismatic)
+    ng = None
+    if table == "chain":
+        ng = nongeometric_model(read_table(stage_path(sdir, "refine")), robot)
+    return forward_kinematics(chain, q if ng is None else ng.effective(q))
 
 
 def audit(session_dir: str | Path, configurations: int = 1000, seed: int = 0) -> AuditResult:
     """Compare the identified signature and the design model with the truth over
     ``configurations`` (1 to :data:`MAX_CONFIGURATIONS`) random configurations."""
-    from pipeline.stages.refine import nongeometric_model
-
     sdir = Path(session_dir)
-    truth, robot, doc = _truth_and_robot(sdir, configurations)
-    q = robot.random_configurations(configurations, seed)
-    T_true = forward_kinematics(truth, true_joint_values(doc, robot, q))
-    sig = chain_from_frames(read_table(stage_path(sdir, "chain")), robot.prismatic)
-    ng = nongeometric_model(read_table(stage_path(sdir, "refine")), robot)
-    q_sig = q if ng is None else ng.effective(q)
+    T_true, robot, q = _true_poses(sdir, configurations, seed)
     return AuditResult(
         session=str(sdir),
         configurations=configurations,
-        signature=_aligned_errors(T_true, forward_kinematics(sig, q_sig)),
+        signature=_aligned_errors(T_true, _table_poses(sdir, "chain", robot, q)),
         design=_aligned_errors(T_true, forward_kinematics(robot.design_chain(), q)),
     )

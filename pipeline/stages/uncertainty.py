@@ -1,7 +1,8 @@
 """Stage ``uncertainty``: the refined signature's predicted tool error over the workspace.
 
-The refinement's covariance of the chain parameters (its rows of groups ``axis`` and the
-``tool`` point, the marginal of the kinematic part) propagated to the tool at
+The refinement's covariance of the chain parameters (its rows of groups ``axis``, the
+``tool`` point and the non-geometric terms, the marginal of the kinematic part) propagated
+to the tool, through the terms the signature applies (issue 27), at
 ``configurations`` random configurations within the joint limits (seeded, drawn as the
 audit draws them), raw and after what the audit's base and tool re-alignment absorbs
 (:mod:`pipeline.refine.uncertainty`, the formulas there). Zero rows when the refinement
@@ -43,14 +44,19 @@ class Params:
 
 
 def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.ndarray]:
-    """``x`` and ``Σ`` (internal units: rad, cm) of the axis parameters and the tool point,
-    rows picked from the ``refine`` table by group and name (joined by key, not position)."""
+    """``x`` and ``Σ`` (internal units: rad, cm) of the axis parameters, the tool point and
+    the non-geometric terms (in their rows' order, as
+    :func:`pipeline.stages.refine.nongeometric_model` reads them), rows picked from the
+    ``refine`` table by group and name (joined by key, not position)."""
+    from pipeline.kinematics.nongeometric import KINDS
+
     group = refine.column("group").to_pylist()
     name = refine.column("name").to_pylist()
     axis = [i for i, g in enumerate(group) if g == "axis"]
     tool = [i for i, (g, s) in enumerate(zip(group, name, strict=True))
             if g == "point" and _TOOL_ROW.match(s)]  # fmt: skip
     tool += [i for i, g in enumerate(group) if g == "tool_rotation"]  # a 6-D tool (issue 26)
+    terms = [i for i, g in enumerate(group) if g in KINDS]
     if len(axis) != n_axis or len(tool) not in (3, 6):
         raise StageError(
             "uncertainty: the refine table does not match the session's chain",
@@ -58,7 +64,7 @@ def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.
             got=f"{len(axis)} axis rows, {len(tool)} tool rows",
             fix="`pipeline identify SESSION --force` recomputes the refinement",
         )
-    idx = np.array(axis + tool)
+    idx = np.array(axis + tool + terms)
     from pipeline.stages.refine import internal_factors, refined_x
 
     scale = internal_factors(refine)
@@ -68,9 +74,11 @@ def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
+    from pipeline.kinematics.nongeometric import NO_TERMS
     from pipeline.refine.kinematics import TOOL_POINT, ChainModel
     from pipeline.refine.uncertainty import predict_model, tool_poses
     from pipeline.stages.frames import chain_from_frames, matrices_from_columns
+    from pipeline.stages.refine import nongeometric_model
 
     refine = inputs["refine"]
     if refine.num_rows == 0:  # refinement disabled: no covariance
@@ -80,14 +88,19 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     frames = inputs["frames"]
     q = robot.random_configurations(params.configurations, params.seed)
     m = len(q)
+    q_sig = chain_from_frames(frames, pris).joint_offsets
+    ng = nongeometric_model(refine, robot)
     model = ChainModel(
         frames0=matrices_from_columns(frames)[:n],
         prismatic=pris,
         link=np.full(m, n, np.int64),
-        theta=q - chain_from_frames(frames, pris).joint_offsets,
+        theta=q - q_sig,
         point=np.zeros(m, np.int64),
         point_names=(TOOL_POINT,),
         tool_rotation="tool_rotation" in refine.column("group").to_pylist(),
+        terms=NO_TERMS if ng is None else ng.terms,
+        design=robot.design_chain(),
+        reading_zero=q_sig,
     )
     x, Sigma = kinematic_covariance(refine, model.n_axis_params)
     pred = predict_model(model, x, Sigma, params.seed)
@@ -128,7 +141,7 @@ def summary(table: pa.Table) -> dict[str, float] | None:
 
 STAGE = Stage(
     "uncertainty",
-    1,
+    2,  # 2: through the non-geometric terms, their covariance included (issue 27)
     ("session", "refine", "frames"),
     Params(),
     compute,
