@@ -39,7 +39,7 @@ class Study:
     parameter : str
         Column name of the swept parameter, unit suffixed (``sigma_e_deg``).
     parameter_unit : str
-        ``cm``, ``deg`` or ``""``.
+        ``cm``, ``deg``, ``mm`` (the compliance study) or ``""``.
     values : tuple of float
         The settings.
     evaluate : Evaluate

@@ -7,6 +7,7 @@
 ``OUT/misalignment/lines.png`` Figure 7-3 (mean and 3σ band of the three lines)
 ``OUT/features/features.arrow``, ``features.png``  Section 6.6
 ``OUT/refine/rms.png``, ``gain.png``, ``calibration.png``  issue 15 (:mod:`.refine_report`)
+``OUT/compliance/fits.png``, ``calibration.png``  issue 27 (:mod:`.compliance_report`)
 
 Each table carries ``schema_name`` and ``schema_version`` in its schema metadata and
 ``armsig.package_version`` beside its other provenance, as the stage tables do.
@@ -29,6 +30,17 @@ from pipeline.stages.tables import write_table
 #: Version of the Monte-Carlo table layouts (``schema_version``); the swept parameter's
 #: column is named per study (``sigma_e_deg``, ``points``, ...), the rest is fixed.
 SCHEMA_VERSION = "1"
+#: Studies with their own indices, figures and ``montecarlo.md`` section (not the 12-vertex
+#: grid's), in the report's order: the module of each (``write_figures``, ``section``,
+#: ``HEADING``).
+OWN_REPORTS = {"refine": "refine_report", "compliance": "compliance_report"}
+
+
+def own_report(study: str) -> Any:
+    """The report module of a study of :data:`OWN_REPORTS`."""
+    import importlib
+
+    return importlib.import_module(f"pipeline.montecarlo.{OWN_REPORTS[study]}")
 
 
 def _write(path: Path, table: Any, schema_name: str, provenance: dict[str, Any]) -> None:
@@ -80,10 +92,8 @@ def write_study(out_dir: Path, res: StudyResult) -> Path:
         "montecarlo_summary",
         prov,
     )
-    if st.name == "refine":  # not the 12-vertex grid's indices: its own figures
-        from pipeline.montecarlo import refine_report
-
-        refine_report.write_figures(res, d)
+    if st.name in OWN_REPORTS:  # not the 12-vertex grid's indices: its own figures
+        own_report(st.name).write_figures(res, d)
         return d
     if st.name == "misalignment":
         _lines_figure(res, d / "lines.png")

@@ -22,6 +22,7 @@ from pipeline.montecarlo.refine_study import INDEX_NAMES, VERDICT_CODES
 from pipeline.report.figures import save_png
 from pipeline.stages.tables import read_table
 
+HEADING = "## Refinement against the S-Model (issue 15)"
 FIGURES = (
     ("rms.png", "S-Model and refined RMS tool position error vs k (mean, ±1 std band)"),
     ("gain.png", "distribution of the gain S-Model RMS / refined RMS"),
@@ -29,12 +30,12 @@ FIGURES = (
 )
 
 
-def _col(values: Array, name: str) -> Array:
-    """Index ``name`` of values (settings, robots, K): (settings, robots)."""
-    return values[..., INDEX_NAMES.index(name)]
+def column(values: Array, name: str, names: tuple[str, ...] = INDEX_NAMES) -> Array:
+    """Index ``name`` (of ``names``) of values (settings, robots, K): (settings, robots)."""
+    return values[..., names.index(name)]
 
 
-def _axes(width: float, height: float, left: float, bottom: float) -> tuple[Any, Any]:
+def one_panel(width: float, height: float, left: float, bottom: float) -> tuple[Any, Any]:
     """A one-panel figure (object-oriented matplotlib, no pyplot) and its axes."""
     from matplotlib.figure import Figure
 
@@ -43,7 +44,15 @@ def _axes(width: float, height: float, left: float, bottom: float) -> tuple[Any,
     return fig, fig.subplots()
 
 
-def _save(fig: Any, ax: Any, labels: tuple[str, str, str], path: Path, grid: str = "major") -> None:
+def diagonal(ax: Any, x: Array, y: Array) -> None:
+    """The line y = x over the range of ``x`` and ``y`` (log-log axes)."""
+    lo, hi = np.nanmin([x, y]), np.nanmax([x, y])
+    ax.loglog([lo, hi], [lo, hi], color="0.3", lw=0.8, label="y = x")
+
+
+def finish(
+    fig: Any, ax: Any, labels: tuple[str, str, str], path: Path, grid: str = "major"
+) -> None:
     """Axis labels and title (``labels``), grid and legend, then the PNG at ``path``."""
     ax.set_xlabel(labels[0])
     ax.set_ylabel(labels[1])
@@ -57,22 +66,22 @@ def write_figures(res: StudyResult, folder: Path) -> None:
     """The three figures of the study under ``folder``."""
     k = np.asarray(res.study.values, float)
     v, robots = res.values, res.values.shape[1]
-    fig, ax = _axes(6.0, 4.2, 0.13, 0.13)
+    fig, ax = one_panel(6.0, 4.2, 0.13, 0.13)
     for name, label in (("smodel_rms_cm", "S-Model (thesis)"), ("refined_rms_cm", "refined")):
-        y = _col(v, name)
+        y = column(v, name)
         m, s = y.mean(axis=1), y.std(axis=1, ddof=1)
         ax.plot(k, m, marker="o", label=label)
         ax.fill_between(k, m - s, m + s, alpha=0.25)
-    ax.plot(k, _col(v, "crb_cm").mean(axis=1), ls="--", color="0.4", label="Cramér-Rao bound")
+    ax.plot(k, column(v, "crb_cm").mean(axis=1), ls="--", color="0.4", label="Cramér-Rao bound")
     labels = (
         res.study.title,
         "RMS tool position error (cm)",
         f"refine: audited RMS error, {robots} robots",
     )
-    _save(fig, ax, labels, folder / "rms.png")
+    finish(fig, ax, labels, folder / "rms.png")
 
-    fig, ax = _axes(6.0, 4.2, 0.13, 0.13)
-    gain = _col(v, "gain")
+    fig, ax = one_panel(6.0, 4.2, 0.13, 0.13)
+    gain = column(v, "gain")
     for i, kk in enumerate(k):
         g = np.sort(gain[i])
         ax.step(g, np.arange(1, robots + 1) / robots, where="post", label=f"k = {kk:g}")
@@ -82,41 +91,43 @@ def write_figures(res: StudyResult, folder: Path) -> None:
         "fraction of robots",
         f"refine: gain distribution (CDF), {robots} robots",
     )
-    _save(fig, ax, labels, folder / "gain.png")
+    finish(fig, ax, labels, folder / "gain.png")
 
-    fig, ax = _axes(5.2, 5.0, 0.15, 0.12)
-    pred, aud = _col(v, "predicted_rms_cm"), _col(v, "refined_rms_cm")
+    fig, ax = one_panel(5.2, 5.0, 0.15, 0.12)
+    pred, aud = column(v, "predicted_rms_cm"), column(v, "refined_rms_cm")
     for i, kk in enumerate(k):
         ax.loglog(pred[i], aud[i], "o", ms=3, alpha=0.7, label=f"k = {kk:g}")
-    lo, hi = np.nanmin([pred, aud]), np.nanmax([pred, aud])
-    ax.loglog([lo, hi], [lo, hi], color="0.3", lw=0.8, label="y = x")
+    diagonal(ax, pred, aud)
     labels = (
         "predicted RMS (cm)",
         "audited RMS (cm)",
         f"refine: uncertainty calibration, {robots} robots",
     )
-    _save(fig, ax, labels, folder / "calibration.png", grid="both")
+    finish(fig, ax, labels, folder / "calibration.png", grid="both")
 
 
-def _per_robot(path: Path, parameter: str) -> tuple[Array, Array]:
-    """Settings (S,) and values (S, R, K) of the study's ``indices.arrow``, by key."""
+def per_robot(
+    path: Path, parameter: str, names: tuple[str, ...] = INDEX_NAMES
+) -> tuple[Array, Array]:
+    """Settings (S,) and values (S, R, K) of a study's ``indices.arrow`` (indices
+    ``names``), by key."""
     t = read_table(path).to_pydict()
     x = np.unique(np.asarray(t[parameter], float))
     robots = max(t["robot"]) + 1
-    v = np.full((len(x), robots, len(INDEX_NAMES)), np.nan)
+    v = np.full((len(x), robots, len(names)), np.nan)
     for s, r, name, cm, unitless in zip(
         t["setting"], t["robot"], t["index"], t["value_cm"], t["value"], strict=True
     ):
         value = cm if cm is not None else unitless
-        v[s, r, INDEX_NAMES.index(name)] = np.nan if value is None else value
+        v[s, r, names.index(name)] = np.nan if value is None else value
     return x, v
 
 
 def section(out: Path, wall_s: float) -> list[str]:
     """The study's section of ``montecarlo.md`` (figures, table, how to rerun a robot)."""
-    x, v = _per_robot(out / "refine" / "indices.arrow", "noise_factor")
+    x, v = per_robot(out / "refine" / "indices.arrow", "noise_factor")
     robots = v.shape[1]
-    sm, rf = _col(v, "smodel_rms_cm"), _col(v, "refined_rms_cm")
+    sm, rf = column(v, "smodel_rms_cm"), column(v, "refined_rms_cm")
     figures = [
         f"![refine: {caption}](refine/{name})"
         for name, caption in FIGURES
@@ -143,19 +154,19 @@ def section(out: Path, wall_s: float) -> list[str]:
     for i, k in enumerate(x):
 
         def ms(name: str, i: int = i) -> str:
-            y = _col(v, name)[i]
+            y = column(v, name)[i]
             return f"{y.mean():.4f} ± {y.std(ddof=1):.4f}"
 
-        crb, pred = _col(v, "crb_cm")[i], _col(v, "predicted_rms_cm")[i]
-        verdict = _col(v, "verdict")[i]
+        crb, pred = column(v, "crb_cm")[i], column(v, "predicted_rms_cm")[i]
+        verdict = column(v, "verdict")[i]
         lines.append(
             f"| {k:g} | {ms('smodel_rms_cm')} | {ms('refined_rms_cm')} | {ms('smodel_max_cm')} "
-            f"| {ms('refined_max_cm')} | {np.median(_col(v, 'gain')[i]):.2f} "
+            f"| {ms('refined_max_cm')} | {np.median(column(v, 'gain')[i]):.2f} "
             f"| {np.mean(rf[i] <= sm[i]):.0%} | {np.median(rf[i] / crb):.2f} "
-            f"| {np.median(rf[i] / pred):.2f} | {np.median(_col(v, 'chi2_per_dof')[i]):.2f} "
+            f"| {np.median(rf[i] / pred):.2f} | {np.median(column(v, 'chi2_per_dof')[i]):.2f} "
             f"| {np.mean(verdict == VERDICT_CODES['PASS']):.0%} |"
         )
-    seeds = _col(v, "simulate_seed")[0]
+    seeds = column(v, "simulate_seed")[0]
     lines += [
         "",
         "Mean ± std over the robots. The verdict's χ² test flags a noise law k times the",

@@ -22,7 +22,9 @@ from __future__ import annotations
 import math
 import shutil
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -114,25 +116,70 @@ def indices(acc: SessionAccuracy, sim_seed: int) -> Array:
     )  # fmt: skip
 
 
-def _session(folder: Path, opts: SimulationOptions) -> Array:
-    """Simulate, identify and audit one session in ``folder`` (deleted after); a failure
-    names the ``pipeline simulate`` options that re-record the session."""
-    from pipeline.identify import identify
+def simulate_command(opts: SimulationOptions) -> str:
+    """The ``pipeline simulate`` command that re-records a study's session of ``opts``."""
+    flags = (
+        f"--seed {opts.seed} --noise-factor {opts.noise_factor:g} --points {opts.points} "
+        f"--repeats {opts.repeats}"
+    )
+    if opts.compliance_mm:
+        flags += f" --compliance {opts.compliance_mm:g}"
+    return f"pipeline simulate NAME {flags}"
+
+
+def run_session(
+    folder: Path,
+    opts: SimulationOptions,
+    measure: Callable[[Path], Array],
+    study: str = "refine",
+    identify: str = "pipeline identify sessions/NAME",
+) -> Array:
+    """Simulate the session of ``opts`` in ``folder`` (deleted after) and return
+    ``measure(folder)``, which identifies and audits it; a failure names the commands
+    (``identify``: the study's identification) that re-record and re-identify it."""
     from pipeline.rig.simulate import simulate_session
 
     try:
         simulate_session(folder, opts)
-        identify(folder, report=False)
-        return indices(session_accuracy(folder), opts.seed)
+        return measure(folder)
     except ArmsigError as exc:
         raise ArmsigError(
-            f"refine study: a robot's session failed: {exc}",
-            fix=f"re-record it with `pipeline simulate NAME --seed {opts.seed} --noise-factor "
-            f"{opts.noise_factor:g} --points {opts.points} --repeats {opts.repeats}` and "
-            "run `pipeline identify NAME`",
+            f"{study} study: a robot's session failed: {exc}",
+            fix=f"re-record it with `{simulate_command(opts)}` and run `{identify}`",
         ) from exc
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def each_session(
+    values: tuple[float, ...],
+    seeds: list[np.random.SeedSequence],
+    session: Callable[[Path, int, float], Array],
+    n_indices: int,
+) -> Array:
+    """Indices (settings, robots, ``n_indices``) of ``session(folder, simulate seed,
+    setting)`` for every robot (its :func:`simulate_seed`) and setting, each in its own
+    folder of one temporary directory, with one BLAS thread (the module docstring)."""
+    from pipeline.stages.runner import one_blas_thread
+
+    out = np.empty((len(values), len(seeds), n_indices))
+    with (
+        one_blas_thread(),
+        tempfile.TemporaryDirectory(prefix="armsig-montecarlo-") as tmp,
+    ):
+        for r, seq in enumerate(seeds):
+            sim_seed = simulate_seed(seq)
+            for s, value in enumerate(values):
+                out[s, r] = session(Path(tmp) / f"robot{r}-setting{s}", sim_seed, float(value))
+    return out
+
+
+def _identified(folder: Path, sim_seed: int) -> Array:
+    """The indices of the session in ``folder`` identified as ``pipeline identify`` does."""
+    from pipeline.identify import identify
+
+    identify(folder, report=False)
+    return indices(session_accuracy(folder), sim_seed)
 
 
 def refine_all(
@@ -151,20 +198,12 @@ def refine_all(
     scaled, is small beside (7.9)).
     ``points`` and ``repeats``: the plan's N_i and N_avg (the defaults of ``pipeline
     simulate``; tests bind smaller ones with :func:`functools.partial`)."""
-    from pipeline.stages.runner import one_blas_thread
 
-    out = np.empty((len(values), len(seeds), len(INDEX_NAMES)))
-    with (
-        one_blas_thread(),
-        tempfile.TemporaryDirectory(prefix="armsig-refine-") as tmp,
-    ):
-        for r, seq in enumerate(seeds):
-            sim_seed = simulate_seed(seq)
-            for s, k in enumerate(values):
-                opts = SimulationOptions(
-                    seed=sim_seed, noise_factor=float(k), points=points, repeats=repeats
-                )
-                out[s, r] = _session(Path(tmp) / f"robot{r}-k{s}", opts)
+    def session(folder: Path, sim_seed: int, k: float) -> Array:
+        opts = SimulationOptions(seed=sim_seed, noise_factor=k, points=points, repeats=repeats)
+        return run_session(folder, opts, partial(_identified, sim_seed=sim_seed))
+
+    out = each_session(values, seeds, session, len(INDEX_NAMES))
     crb = INDEX_NAMES.index("crb_cm")
     factors = np.asarray(values, float)
     out[..., crb] = factors[:, None] * out[np.argmin(factors), :, crb][None, :]

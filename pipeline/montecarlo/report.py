@@ -15,6 +15,7 @@ import numpy.typing as npt
 from pipeline.atomic import write_text_atomic
 from pipeline.evaluation.grid12 import CORNER_VERTICES
 from pipeline.kinematics.transforms import Array
+from pipeline.montecarlo.output import OWN_REPORTS, own_report
 from pipeline.stages.tables import read_provenance, read_table
 
 #: Section 7.4.1: radial error std (cm) at vertices 1, 4, 5, 8 for σ_e = 0.3°.
@@ -332,10 +333,15 @@ def write_report(out_dir: Path) -> Path:
     feat = out / "features" / "features.arrow"
     if feat.is_file():
         lines.append(f"| features | – | 36 | {read_provenance(feat)['wall_s']:.1f} |")
-    refine = out / "refine" / "summary.arrow"
-    ref = read_provenance(refine) if refine.is_file() else None
-    if ref is not None:
-        lines.append(f"| refine | {ref['robots']} | {len(ref['settings'])} | {ref['wall_s']:.2f} |")
+    own = {
+        name: read_provenance(out / name / "summary.arrow")
+        for name in OWN_REPORTS
+        if (out / name / "summary.arrow").is_file()
+    }
+    for name, prov in own.items():
+        lines.append(
+            f"| {name} | {prov['robots']} | {len(prov['settings'])} | {prov['wall_s']:.2f} |"
+        )
     lines.append("")
     design = [s for s in found if s.name in ("encoder", "machining")]
     signature = [s for s in found if s.name not in ("encoder", "machining")]
@@ -349,11 +355,9 @@ def write_report(out_dir: Path) -> Path:
                 lines += _section(s, out)
     if feat.is_file():
         lines += ["## Feature accuracy (6.6)", ""] + _features_section(feat)
-    if ref is not None:
-        from pipeline.montecarlo import refine_report
-
-        lines += ["## Refinement against the S-Model (issue 15)", ""]
-        lines += refine_report.section(out, float(ref["wall_s"]))
+    for name, prov in own.items():
+        module = own_report(name)
+        lines += [module.HEADING, "", *module.section(out, float(prov["wall_s"]))]
     path = out / "montecarlo.md"
     write_text_atomic(path, "\n".join(lines) + "\n")
     return path

@@ -11,10 +11,13 @@ radius         R_nom = 30, 35, 40, 45, 50 cm                signature (7.4.5)
 misalignment   W_AC error −1 … +1 cm (11 values)            signature (7.3)
 features       sweep X, N, noise (Section 6.6)              feature fits only
 refine         k = 1, 4.6, 10 times (7.9)                   audit: S-Model, refined
+compliance     true compliance 0, 0.3 mm                    audit: rigid, with terms
 =============  ==========================================  ======================
 
 ``refine`` (issue 15) runs whole ``pipeline simulate`` + ``identify`` sessions, ~1.8 s of
-CPU per robot and setting (the thesis studies: ~0.02 s); ``--study all`` runs it last.
+CPU per robot and setting (the thesis studies: ~0.02 s); ``compliance`` (issue 27) two
+such sessions per robot, each identified twice (~5.6 s per robot); ``--study all`` runs
+them last.
 """
 
 from __future__ import annotations
@@ -47,7 +50,7 @@ def _grid_study(
 
 
 def _registry() -> dict[str, Study]:
-    from pipeline.montecarlo import control, refine_study
+    from pipeline.montecarlo import compliance_study, control, refine_study
 
     return {
         "encoder": _grid_study(
@@ -119,13 +122,26 @@ def _registry() -> dict[str, Study]:
             batch=refine_study.BATCH,
             evaluate_all=refine_study.refine_all,
         ),
+        "compliance": Study(
+            "compliance",
+            "true joint compliance: RMS flange displacement (mm)",
+            "compliance_mm",
+            "mm",
+            compliance_study.COMPLIANCE_MM,
+            compliance_study.compliance_setting,
+            index_names=compliance_study.INDEX_NAMES,
+            index_units=compliance_study.INDEX_UNITS,
+            index_signed=compliance_study.INDEX_SIGNED,
+            batch=compliance_study.BATCH,
+            evaluate_all=compliance_study.compliance_all,
+        ),
     }
 
 
 #: The thesis's swept studies in the order ``--study all`` runs them (then ``features``).
 SWEPT = ("encoder", "machining", "noise", "points", "radius", "misalignment")
 #: Studies of issues after the thesis, run by ``--study all`` after the thesis's.
-LATER = ("refine",)
+LATER = ("refine", "compliance")
 STUDY_NAMES = (*SWEPT, "features", *LATER, "all")
 
 

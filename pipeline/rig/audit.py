@@ -128,13 +128,6 @@ def true_tool_chain(truth: dict[str, Any]) -> SerialChain:
     return dataclasses.replace(chain, tool=trans(*tip))
 
 
-def true_joint_values(truth: dict[str, Any], robot: Any, q: np.ndarray) -> np.ndarray:
-    """Where the true robot's joints sit at readings ``q`` (..., n) (rad / cm): ``q`` for
-    a rigid robot, else with its :func:`true_nongeometric` terms."""
-    ng = true_nongeometric(truth, robot)
-    return q if ng is None else ng.effective(q)
-
-
 def true_nongeometric(truth: dict[str, Any], robot: Any) -> NonGeometric | None:
     """The true robot's ``true_nongeometric`` terms on ``robot``'s design chain
     (:func:`pipeline.rig.true_robot.draw_nongeometric`); None for a rigid robot."""
@@ -211,6 +204,20 @@ def _truth_and_robot(sdir: Path, configurations: int) -> tuple[SerialChain, Any,
     return true_tool_chain(doc), robot, doc
 
 
+def _true_poses(
+    sdir: Path, configurations: int, seed: int, payload_kg: float | None = None
+) -> tuple[np.ndarray, Any, np.ndarray]:
+    """The true tool poses (m, 4, 4) at ``configurations`` random readings of the session's
+    robot (its non-geometric terms included, under ``payload_kg`` when given), the robot,
+    and the readings (m, n)."""
+    truth, robot, doc = _truth_and_robot(sdir, configurations)
+    q = robot.random_configurations(configurations, seed)
+    ng = true_nongeometric(doc, robot)
+    if ng is not None and payload_kg is not None:
+        ng = replace(ng, payload_kg=payload_kg)  # the truth has every payload's terms
+    return forward_kinematics(truth, q if ng is None else ng.effective(q)), robot, q
+
+
 def table_errors(
     session_dir: str | Path,
     tables: tuple[str, ...] = ("frames", "chain"),
@@ -222,18 +229,26 @@ def table_errors(
     the same configurations as :func:`audit`. For studies and benchmarks that compare the
     two."""
     sdir = Path(session_dir)
-    truth, robot, doc = _truth_and_robot(sdir, configurations)
-    q = robot.random_configurations(configurations, seed)
-    T_true = forward_kinematics(truth, true_joint_values(doc, robot, q))
-    return {
-        t: _aligned_errors(
-            T_true,
-            forward_kinematics(
-                chain_from_frames(read_table(stage_path(sdir, t)), robot.prismatic), q
-            ),
-        )
-        for t in tables
-    }
+    T_true, robot, q = _true_poses(sdir, configurations, seed)
+    return {t: _aligned_errors(T_true, _table_poses(sdir, t, robot, q)) for t in tables}
+
+
+def _table_poses(
+    sdir: Path, table: str, robot: Any, q: np.ndarray, payload_kg: float | None = None
+) -> np.ndarray:
+    """Tool poses (m, 4, 4) of the chain stage table ``table`` holds at readings ``q``:
+    the signature (``chain``) with the non-geometric terms its ``refine`` table fitted
+    (:func:`pipeline.stages.refine.nongeometric_model`; under ``payload_kg`` when given),
+    the thesis S-Model (``frames``) rigid, as it has none."""
+    from pipeline.stages.refine import nongeometric_model
+
+    chain = chain_from_frames(read_table(stage_path(sdir, table)), robot.prismatic)
+    ng = None
+    if table == "chain":
+        ng = nongeometric_model(read_table(stage_path(sdir, "refine")), robot)
+        if ng is not None and payload_kg is not None:
+            ng = ng.with_payload(payload_kg)
+    return forward_kinematics(chain, q if ng is None else ng.effective(q))
 
 
 def audit(
@@ -246,22 +261,11 @@ def audit(
     ``configurations`` (1 to :data:`MAX_CONFIGURATIONS`) random configurations; under
     ``payload_kg`` on the flange when given (the truth's and the signature's
     non-geometric terms at that payload; None: the smallest the session measured)."""
-    from pipeline.stages.refine import nongeometric_model
-
     sdir = Path(session_dir)
-    truth, robot, doc = _truth_and_robot(sdir, configurations)
-    q = robot.random_configurations(configurations, seed)
-    true_ng = true_nongeometric(doc, robot)
-    ng = nongeometric_model(read_table(stage_path(sdir, "refine")), robot)
-    if payload_kg is not None:
-        true_ng = None if true_ng is None else replace(true_ng, payload_kg=payload_kg)
-        ng = None if ng is None else ng.with_payload(payload_kg)
-    T_true = forward_kinematics(truth, q if true_ng is None else true_ng.effective(q))
-    sig = chain_from_frames(read_table(stage_path(sdir, "chain")), robot.prismatic)
-    q_sig = q if ng is None else ng.effective(q)
+    T_true, robot, q = _true_poses(sdir, configurations, seed, payload_kg)
     return AuditResult(
         session=str(sdir),
         configurations=configurations,
-        signature=_aligned_errors(T_true, forward_kinematics(sig, q_sig)),
+        signature=_aligned_errors(T_true, _table_poses(sdir, "chain", robot, q, payload_kg)),
         design=_aligned_errors(T_true, forward_kinematics(robot.design_chain(), q)),
     )

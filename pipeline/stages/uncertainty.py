@@ -1,7 +1,8 @@
 """Stage ``uncertainty``: the refined signature's predicted tool error over the workspace.
 
-The refinement's covariance of the chain parameters (its rows of groups ``axis`` and the
-``tool`` point, the marginal of the kinematic part) propagated to the tool at
+The refinement's covariance of the chain parameters (its rows of groups ``axis``, the
+``tool`` point and the non-geometric terms, the marginal of the kinematic part) propagated
+to the tool, through the terms the signature applies (issue 27), at
 ``configurations`` random configurations within the joint limits (seeded, drawn as the
 audit draws them), raw and after what the audit's base and tool re-alignment absorbs
 (:mod:`pipeline.refine.uncertainty`, the formulas there). Zero rows when the refinement
@@ -54,6 +55,7 @@ def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.
     tool = [i for i, (g, s) in enumerate(zip(group, name, strict=True))
             if g == "point" and _TOOL_ROW.match(s)]  # fmt: skip
     tool += [i for i, g in enumerate(group) if g == "tool_rotation"]  # a 6-D tool (issue 26)
+    terms = [i for i, g in enumerate(group) if g in KINDS]
     if len(axis) != n_axis or len(tool) not in (3, 6):
         raise StageError(
             "uncertainty: the refine table does not match the session's chain",
@@ -61,7 +63,6 @@ def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.
             got=f"{len(axis)} axis rows, {len(tool)} tool rows",
             fix="`pipeline identify SESSION --force` recomputes the refinement",
         )
-    terms = [i for i, g in enumerate(group) if g in KINDS]  # issue 27
     idx = np.array(axis + tool + terms)
     from pipeline.stages.refine import internal_factors, refined_x
 
@@ -86,8 +87,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     frames = inputs["frames"]
     q = robot.random_configurations(params.configurations, params.seed)
     m = len(q)
-    ng = nongeometric_model(refine, robot)
     q_sig = chain_from_frames(frames, pris).joint_offsets
+    ng = nongeometric_model(refine, robot)
     model = ChainModel(
         frames0=matrices_from_columns(frames)[:n],
         prismatic=pris,
