@@ -217,12 +217,19 @@ def poses_needed(n_params: int, coordinates_per_pose: int = 3) -> int:
 
 
 def fit_identifiable(
-    problem: Problem, x0: Array, units: tuple[str, ...], noise_stated: bool, n_points: int
+    problem: Problem,
+    x0: Array,
+    units: tuple[str, ...],
+    noise_stated: bool,
+    n_points: int,
+    x_warm: Array | None = None,
 ) -> tuple[Solution, Identifiability]:
-    """Solve ``problem`` from ``x0`` with the parameters the data cannot identify held at
-    ``x0`` (module docstring); a problem with fewer residuals than
-    :data:`COORDINATES_PER_PARAMETER` per identifiable parameter is refused."""
-    r, J = residuals_and_jacobian(problem, x0)
+    """Solve ``problem`` from ``x0`` (or from ``x_warm``, a nearer start) with the
+    parameters the data cannot identify held at ``x0`` (module docstring); a problem with
+    fewer residuals than :data:`COORDINATES_PER_PARAMETER` per identifiable parameter is
+    refused."""
+    begin = x0 if x_warm is None else np.asarray(x_warm, float)
+    r, J = residuals_and_jacobian(problem, begin)
     n = J.shape[1]
     need = COORDINATES_PER_PARAMETER * n
     if len(r) < need:  # before the analysis: with so few rows every rank is the data's
@@ -235,7 +242,9 @@ def fit_identifiable(
             fix="measure more poses, spread over the joint ranges",
         )
     start = analyse(J, units, noise_stated, n_points)
-    solution = solve(replace(problem, held=start.held), x0)
+    begin = begin.copy()
+    begin[start.held] = x0[start.held]
+    solution = solve(replace(problem, held=start.held), begin)
     r, J = residuals_and_jacobian(problem, solution.x)
     # The noise the data show, when above the stated one: a σ stated for the sensor alone
     # (a tracker's 0.008 mm) leaves out what the chain cannot model (a robot's 0.5 mm),

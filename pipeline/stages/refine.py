@@ -53,8 +53,8 @@ class Params:
     down to 15 s while the rods' speed ratios ask for it,
     :meth:`pipeline.sensor.speed_spline.TimeSpline.chosen`); ``nongeometric``: the
     non-geometric terms (:mod:`pipeline.kinematics.nongeometric`), ``auto``: joint
-    compliance under gravity for a session with a pose set, none for joint sweeps alone
-    (:func:`nongeometric_kinds`). Every parameter is recorded in the table's summary
+    compliance under gravity when the data show it above their noise
+    (:func:`nongeometric_kinds`, :func:`significance`). Every parameter is recorded in the table's summary
     (:func:`refine_summary`); later stages rebuild the problem from it
     (:func:`problem_params`)."""
 
@@ -93,17 +93,15 @@ def problem_params(summary: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def nongeometric_kinds(setting: str, plan: Mapping[str, Any]) -> tuple[str, ...]:
-    """The term kinds of ``refine.nongeometric`` for a session of ``plan``: ``auto`` is
-    compliance for a session with a pose set (the whole arm in many configurations: its
-    gravity torques vary), kept only when it explains more than noise
-    (:func:`significance`), nothing for joint sweeps alone, whose held joints keep the
-    torques nearly constant (a term there would fit noise). The harmonics are never
+def nongeometric_kinds(setting: str) -> tuple[str, ...]:
+    """The term kinds of ``refine.nongeometric``: ``auto`` is compliance, kept only when
+    the data show it above their noise (:func:`significance`; a joint sweep sees the
+    gravity torque of the joints it moves change too). The harmonics are never
     automatic: a joint's first harmonic identified over part of a turn extrapolates
     (issue 27: fitted on the UR10's Series C, whose first joint covers 128°, it tripled
     the error on every other series)."""
     if setting == "auto":
-        return ("compliance",) if "poses" in plan else ()
+        return ("compliance",)
     return () if setting == "none" else tuple(setting.split("+"))
 
 
@@ -181,7 +179,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.stages.refine_problem import measured_payloads
 
     robot = session_robot(inputs["session"])
-    kinds = nongeometric_kinds(params.nongeometric, session_plan(inputs["session"]))
+    kinds = nongeometric_kinds(params.nongeometric)
     payloads = measured_payloads(inputs["joints"])
     if "compliance" in kinds and len(payloads) > 1:  # a changed payload is then predicted
         kinds += ("payload",)
@@ -192,12 +190,19 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     if params.nongeometric == "auto" and sp.problem.model.terms and _too_few_for(sp):
         left_out = {"why": "too few measured coordinates for them (2 per parameter)"}
         sp = session_problem(*args)  # the rigid chain, not a refusal the rigid fit would not give
-    sol, identifiability = fit_session(sp, inputs)
     if params.nongeometric == "auto" and sp.problem.model.terms:
-        left_out = significance(sp.problem, sol)
-        if not left_out["significant"]:  # never fitted to noise: the rigid chain, as before
-            sp = session_problem(*args)
-            sol, identifiability = fit_session(sp, inputs)
+        # The rigid chain first (from the design, exactly as before issue 27); the terms
+        # only when its solution shows them (never fitted to noise), from that solution.
+        rigid = session_problem(*args)
+        sol, identifiability = fit_session(rigid, inputs)
+        x_start = with_rigid_solution(sp, rigid, sol.x)
+        left_out = significance(sp.problem, x_start, sol, identifiability)
+        if left_out["significant"]:
+            sol, identifiability = fit_session(sp, inputs, x_start)
+        else:
+            sp = rigid
+    else:
+        sol, identifiability = fit_session(sp, inputs)
     spline = getattr(sp.problem.block, "spline", None)
     chi2_recorded = recorded_chi2(sp.problem, sol)
     units, factor = _boundary(sp.units)
@@ -247,41 +252,72 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 SIGNIFICANCE = 1e-3
 
 
-def significance(problem: Any, sol: Any) -> dict[str, Any]:
-    """Whether the non-geometric terms of ``problem`` (solved: ``sol``) explain more than
-    noise: the Wald form of the F-test of the nested rigid model, ``F = β̂ᵀ Σ_β⁻¹ β̂ / p``
-    over the ``p`` identified terms, ``Σ_β`` their covariance (scaled by the fit's
-    χ²/dof, the F-test's denominator), p-value of ``F(p, dof)``. One fit, not two: the
-    rigid chain is fitted only when the terms are dropped. Terms that fit to zero (every
-    ``|β̂|`` below 1e-9 of its tolerance: noiseless data of a rigid robot) are not
-    significant."""
+def significance(
+    problem: Any, x_start: np.ndarray, rigid: Any, identifiability: dict[str, Any]
+) -> dict[str, Any]:
+    """Whether the non-geometric terms of ``problem`` would explain more than noise, judged
+    at the rigid chain's solution ``rigid`` (``x_start``: that solution with the terms at
+    zero; ``identifiability``: its summary, whose held parameters stay out): the score
+    (Lagrange multiplier) test of the nested models, ``LM = gᵀ A⁻¹ g / s²`` with ``A``,
+    ``g`` the normal equations of the problem with the terms at ``x_start`` (the rigid
+    parameters' gradient is zero there, so ``g`` is the terms'), ``s²`` the rigid fit's
+    χ²/dof; ``F = LM / p`` over the ``p`` terms, p-value of ``F(p, dof − p)`` below
+    :data:`SIGNIFICANCE`. One linearization: a rigid robot costs no second fit. A rigid
+    chain that fits to rounding (noiseless data of a rigid robot) keeps no terms."""
     from scipy.stats import f as f_dist
 
-    from pipeline.refine.identifiability import tolerance_scale
+    from pipeline.optim.lm import rho
+    from pipeline.refine.solve import linearize, normal_equations
 
-    b = problem.model.beta_slice
-    beta, cov = sol.x[b], sol.covariance[b, b]
-    tol = tolerance_scale(problem.model.terms.units)
-    if (np.abs(beta) <= 1e-9 * tol).all():
-        return {"significant": False, "why": "the terms fit to zero: the rigid chain is exact"}
-    if not np.isfinite(sol.noise_scale) or sol.noise_scale == 0.0:
-        return {"significant": True, "why": "noiseless data the terms explain exactly"}
-    free = np.diag(cov) > 0
-    p = int(free.sum())
-    if p == 0 or sol.dof <= 0:
-        return {"significant": False, "why": "no identified term"}
-    bf = beta[free]
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        F = float(bf @ np.linalg.pinv(cov[np.ix_(free, free)]) @ bf) / p
-    p_value = float(f_dist.sf(F, p, sol.dof)) if np.isfinite(F) else 0.0
+    if rigid.dof <= 0:
+        return {"significant": False, "why": "no degree of freedom"}
+    lin = linearize(problem, x_start)
+    s2 = float(np.sum(lin.r**2)) / rigid.dof
+    if s2 <= 1e-14:  # residuals ~1e-7 σ: the rigid chain is exact
+        return {"significant": False, "why": "the rigid chain fits the data to rounding"}
+    w = np.ones_like(lin.r)
+    if problem.loss != "linear":  # the rigid fit's robust weights (its loss scale)
+        w = rho(problem.loss, (lin.r / rigid.f_scale) ** 2)[1]
+        s2 = float(np.sum(w * lin.r**2)) / rigid.dof
+    A, g = normal_equations(problem, x_start, lin)(w)
+    names = {h["name"] for h in identifiability.get("held", [])}
+    held = np.array([n in names for n in problem_names(problem)], bool)
+    free = ~held & (np.abs(np.diag(A)) > 0)
+    b = np.zeros(len(g), bool)
+    b[problem.model.beta_slice] = True
+    p = int((free & b).sum())
+    dof = rigid.dof - p
+    if p == 0 or dof <= 0:
+        return {"significant": False, "why": "no identifiable term"}
+    gf = g[free]
+    LM = float(gf @ np.linalg.lstsq(A[np.ix_(free, free)], gf, rcond=None)[0]) / s2
+    F = LM / p
+    p_value = float(f_dist.sf(F, p, dof))
     return {
         "significant": p_value < SIGNIFICANCE,
-        "F": F if np.isfinite(F) else None,
+        "F": F,
         "p_value": p_value,
-        "terms_identified": p,
-        "why": f"F-test (Wald) of the terms, p {'<' if p_value < SIGNIFICANCE else '>='} "
-        f"{SIGNIFICANCE:g}",
+        "terms_tested": p,
+        "why": f"score test of the terms at the rigid solution, p "
+        f"{'<' if p_value < SIGNIFICANCE else '>='} {SIGNIFICANCE:g}",
     }
+
+
+def problem_names(problem: Any) -> tuple[str, ...]:
+    """The names of ``problem``'s parameters: the chain's, then the block's."""
+    return (*problem.model.param_names, *problem.block.param_names)
+
+
+def with_rigid_solution(sp: Any, rigid: Any, x_rigid: np.ndarray) -> np.ndarray:
+    """The start of ``sp`` (a problem with non-geometric terms) with the parameters it
+    shares with ``rigid`` (the same session without them) at ``x_rigid``, its solution,
+    and the terms at zero: the chain's parameters come first (the terms are the last of
+    them), the block's after."""
+    x = np.array(sp.x0, float)
+    n_rigid, n_kin = rigid.problem.n_kin, sp.problem.n_kin
+    x[:n_rigid] = x_rigid[:n_rigid]
+    x[n_kin:] = x_rigid[n_rigid:]
+    return x
 
 
 def _too_few_for(sp: Any) -> bool:
@@ -296,17 +332,22 @@ def _too_few_for(sp: Any) -> bool:
     return bool(3 * len(measured) < COORDINATES_PER_PARAMETER * sp.problem.n_params)
 
 
-def fit_session(sp: Any, inputs: Mapping[str, Any]) -> tuple[Any, dict[str, Any]]:
-    """The solution of a session's problem ``sp`` from its start, and its identifiability
+def fit_session(
+    sp: Any, inputs: Mapping[str, Any], x_warm: np.ndarray | None = None
+) -> tuple[Any, dict[str, Any]]:
+    """The solution of a session's problem ``sp`` from its start (or from ``x_warm``, a
+    nearer one; held parameters stay at the start's values), and its identifiability
     summary (``{}`` without a pose set: joint sweeps see every parameter)."""
     from pipeline.refine.solve import solve
 
     if "poses" in session_plan(inputs["session"]):
-        return _fit_pose_set(sp, inputs["positions"])
-    return solve(sp.problem, sp.x0), {}
+        return _fit_pose_set(sp, inputs["positions"], x_warm)
+    return solve(sp.problem, sp.x0 if x_warm is None else x_warm), {}
 
 
-def _fit_pose_set(sp: Any, positions: pa.Table) -> tuple[Any, dict[str, Any]]:
+def _fit_pose_set(
+    sp: Any, positions: pa.Table, x_warm: np.ndarray | None = None
+) -> tuple[Any, dict[str, Any]]:
     """The fit of a session with a pose set, the parameters its data cannot identify held
     at the start (:func:`pipeline.refine.identifiability.fit_identifiable`), and the
     analysis as the summary records it."""
@@ -318,7 +359,7 @@ def _fit_pose_set(sp: Any, positions: pa.Table) -> tuple[Any, dict[str, Any]]:
     sweep = keys.column("sweep").to_numpy()
     n_poses = len(set(keys.column("step").to_numpy()[sweep == POSES_SWEEP].tolist()))
     stated = recorded_sigma_cm(positions) is not None
-    sol, ident = fit_identifiable(sp.problem, sp.x0, sp.units, stated, keys.num_rows)
+    sol, ident = fit_identifiable(sp.problem, sp.x0, sp.units, stated, keys.num_rows, x_warm)
     return sol, summary(ident, sp.names, n_poses, keys.num_rows)
 
 
