@@ -54,8 +54,8 @@ class Params:
     :meth:`pipeline.sensor.speed_spline.TimeSpline.chosen`); ``nongeometric``: the
     non-geometric terms (:mod:`pipeline.kinematics.nongeometric`), ``auto``: joint
     compliance under gravity when the data show it above their noise
-    (:func:`nongeometric_kinds`, :func:`significance`). Every parameter is recorded in the table's summary
-    (:func:`refine_summary`); later stages rebuild the problem from it
+    (:func:`nongeometric_kinds`, :func:`significance`). Every parameter is recorded in the
+    table's summary (:func:`refine_summary`); later stages rebuild the problem from it
     (:func:`problem_params`)."""
 
     enabled: bool = True
@@ -264,7 +264,9 @@ def significance(
     χ²/dof; ``F = LM / p`` over the ``p`` terms, p-value of ``F(p, dof − p)`` below
     :data:`SIGNIFICANCE`. One linearization: a rigid robot costs no second fit. A rigid
     chain that fits to rounding (noiseless data of a rigid robot) keeps no terms."""
-    from scipy.stats import f as f_dist
+    # The F distribution's survival function; not scipy.stats, which imports
+    # scipy.optimize and scipy.interpolate (~0.3 s of a cold run, issue 18).
+    from scipy.special import fdtrc
 
     from pipeline.optim.lm import rho
     from pipeline.refine.solve import linearize, normal_equations
@@ -292,7 +294,7 @@ def significance(
     gf = g[free]
     LM = float(gf @ np.linalg.lstsq(A[np.ix_(free, free)], gf, rcond=None)[0]) / s2
     F = LM / p
-    p_value = float(f_dist.sf(F, p, dof))
+    p_value = float(fdtrc(p, dof, F))
     return {
         "significant": p_value < SIGNIFICANCE,
         "F": F,
