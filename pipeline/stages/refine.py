@@ -176,7 +176,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             fix="--param refine.level=auto",
         )
     from pipeline.kinematics.nongeometric import all_terms
-    from pipeline.stages.refine_problem import measured_payloads
+    from pipeline.stages.refine_problem import measured_payloads, with_terms
 
     robot = session_robot(inputs["session"])
     kinds = nongeometric_kinds(params.nongeometric)
@@ -185,23 +185,25 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         kinds += ("payload",)
     terms = all_terms(robot.prismatic, kinds)
     args = (inputs, params.loss, params.f_scale, level, params.speed_knot_s)
-    sp = session_problem(*args, terms)
     left_out: dict[str, Any] | None = None
-    if params.nongeometric == "auto" and sp.problem.model.terms and _too_few_for(sp):
-        left_out = {"why": "too few measured coordinates for them (2 per parameter)"}
-        sp = session_problem(*args)  # the rigid chain, not a refusal the rigid fit would not give
-    if params.nongeometric == "auto" and sp.problem.model.terms:
+    if params.nongeometric == "auto" and terms:
         # The rigid chain first (from the design, exactly as before issue 27); the terms
         # only when its solution shows them (never fitted to noise), from that solution.
-        rigid = session_problem(*args)
-        sol, identifiability = fit_session(rigid, inputs)
-        x_start = with_rigid_solution(sp, rigid, sol.x)
-        left_out = significance(sp.problem, x_start, sol, identifiability)
-        if left_out["significant"]:
-            sol, identifiability = fit_session(sp, inputs, x_start)
+        sp = session_problem(*args)
+        sol, identifiability = fit_session(sp, inputs)
+        with_them = with_terms(sp, terms, inputs)
+        if not with_them.problem.model.terms:
+            left_out = {"significant": False, "why": "no term the readings excite"}
+        elif _too_few_for(with_them):
+            left_out = {"significant": False, "why": "too few coordinates (2 per parameter)"}
         else:
-            sp = rigid
+            x_start = with_rigid_solution(with_them, sp, sol.x)
+            left_out = significance(with_them.problem, x_start, sol, identifiability)
+            if left_out["significant"]:
+                sp = with_them
+                sol, identifiability = fit_session(sp, inputs, x_start)
     else:
+        sp = session_problem(*args, terms)
         sol, identifiability = fit_session(sp, inputs)
     spline = getattr(sp.problem.block, "spline", None)
     chi2_recorded = recorded_chi2(sp.problem, sol)

@@ -20,7 +20,12 @@ from pipeline.optim.block import Array, MeasurementBlock
 from pipeline.refine.kinematics import ChainModel, chain_model
 from pipeline.refine.orientation import OrientationRows
 from pipeline.refine.points import PointBlock, PositionRows, position_covariances
-from pipeline.refine.problem import SessionProblem, chain_problem, check_coverage
+from pipeline.refine.problem import (
+    SessionProblem,
+    chain_problem,
+    check_coverage,
+    parameter_labels,
+)
 from pipeline.sensor.geometry import DigitizerGeometry
 from pipeline.stages.frames import chain_from_frames, matrices_from_columns, readings_at
 from pipeline.stages.positions import _COV_INDEX, COV_ENTRIES, positions
@@ -265,3 +270,24 @@ def session_problem(
             )
     res = joints_to_internal(robot.encoder_resolution, robot.prismatic)
     return chain_problem(model, block, measured, loss, f_scale, res**2 / 12.0, orientation)
+
+
+def with_terms(sp: SessionProblem, terms: Terms, inputs: Mapping[str, Any]) -> SessionProblem:
+    """The rigid problem ``sp`` with the non-geometric ``terms`` that are parameters
+    (:func:`independent_terms`), their coefficients after the chain's, started at zero:
+    the same block, whose encoder-reading noise is weighed at the start, where the terms
+    are zero (:func:`session_problem` with ``terms`` builds the same problem, twice the
+    work)."""
+    robot = session_robot(inputs["session"])
+    rigid = sp.problem.model
+    keys = sp.problem.block.keys
+    args = (keys, inputs["session"], inputs["joints"], inputs["frames"], rigid.tool_rotation)
+    model = model_for_keys(*args, terms)
+    independent = independent_terms(terms, model, robot.reach_cm)
+    if independent != terms:
+        model = model_for_keys(*args, independent)
+    n = rigid.n_params
+    x0 = np.concatenate([sp.x0[:n], np.zeros(model.terms.size), sp.x0[n:]])
+    names, units, groups = parameter_labels(model, sp.problem.block)
+    problem = replace(sp.problem, model=model)
+    return SessionProblem(problem, x0, model.point_names, names, units, groups)
