@@ -223,11 +223,13 @@ def fit_identifiable(
     noise_stated: bool,
     n_points: int,
     x_warm: Array | None = None,
+    f_scale_hint: float | None = None,
 ) -> tuple[Solution, Identifiability]:
-    """Solve ``problem`` from ``x0`` (or from ``x_warm``, a nearer start) with the
-    parameters the data cannot identify held at ``x0`` (module docstring); a problem with
-    fewer residuals than :data:`COORDINATES_PER_PARAMETER` per identifiable parameter is
-    refused."""
+    """Solve ``problem`` from ``x0`` (or from ``x_warm``, a nearer start, with the robust
+    scale ``f_scale_hint`` of the fit it came from: :func:`pipeline.refine.solve.solve`)
+    with the parameters the data cannot identify held at ``x0`` (module docstring); a
+    problem with fewer residuals than :data:`COORDINATES_PER_PARAMETER` per identifiable
+    parameter is refused."""
     begin = x0 if x_warm is None else np.asarray(x_warm, float)
     r, J = residuals_and_jacobian(problem, begin)
     n = J.shape[1]
@@ -244,7 +246,7 @@ def fit_identifiable(
     start = analyse(J, units, noise_stated, n_points)
     begin = begin.copy()
     begin[start.held] = x0[start.held]
-    solution = solve(replace(problem, held=start.held), begin)
+    solution = solve(replace(problem, held=start.held), begin, f_scale_hint=f_scale_hint)
     r, J = residuals_and_jacobian(problem, solution.x)
     # The noise the data show, when above the stated one: a σ stated for the sensor alone
     # (a tracker's 0.008 mm) leaves out what the chain cannot model (a robot's 0.5 mm),
@@ -255,7 +257,7 @@ def fit_identifiable(
     if (final.held & ~start.held).any():  # seen at the design, not at the solution
         warm = solution.x.copy()  # the rest from where the first fit left them
         warm[final.held] = x0[final.held]
-        solution = solve(replace(problem, held=final.held), warm)
+        solution = solve(replace(problem, held=final.held), warm, f_scale_hint=solution.f_scale)
     # A parameter held at the start keeps the start's reason and pivot (its column is out
     # of the solution's analysis).
     why_start = dict(zip(np.flatnonzero(start.held), start.why, strict=True))

@@ -238,8 +238,16 @@ def normal_equations(problem: Problem, x: Array, lin: Linearization) -> Normal:
     return normal
 
 
-def solve(problem: Problem, x_start: Array, max_evaluations: int = MAX_EVALUATIONS) -> Solution:
-    """Fit ``problem`` from ``x_start`` (module docstring)."""
+def solve(
+    problem: Problem,
+    x_start: Array,
+    max_evaluations: int = MAX_EVALUATIONS,
+    f_scale_hint: float | None = None,
+) -> Solution:
+    """Fit ``problem`` from ``x_start`` (module docstring). ``f_scale_hint``: the robust
+    scale a fit of nearly the same problem ended with (:data:`UNDERSTATED_NOISE`): the
+    fit starts at it and is redone only when its own residuals' spread asks for a scale
+    10 % or more away (a warm refit then skips the first pass at ``problem.f_scale``)."""
     if problem.loss not in LOSSES:
         raise ArmsigError(
             f"unknown loss {problem.loss!r}", expected=", ".join(LOSSES), fix="soft_l1"
@@ -281,13 +289,14 @@ def solve(problem: Problem, x_start: Array, max_evaluations: int = MAX_EVALUATIO
             got=f"{int((~np.isfinite(r0)).sum())} of {len(r0)} residuals NaN or inf",
             fix="check the positions table; --param refine.enabled=false skips the refinement",
         )
-    f_scale = problem.f_scale
+    f_scale = problem.f_scale if f_scale_hint is None else f_scale_hint
     result = levenberg_marquardt(
         fun, x_fixed[free], problem.loss, f_scale, TOLERANCE, max_evaluations, start
     )
     spread = 1.4826 * float(np.median(np.abs(result.r))) if len(result.r) else 0.0
-    if problem.loss != "linear" and spread > UNDERSTATED_NOISE:
-        f_scale = problem.f_scale * spread
+    wanted = problem.f_scale * spread if spread > UNDERSTATED_NOISE else problem.f_scale
+    if problem.loss != "linear" and abs(wanted - f_scale) > 0.1 * f_scale:
+        f_scale = wanted
         result = levenberg_marquardt(
             fun, result.x, problem.loss, f_scale, TOLERANCE, max_evaluations
         )

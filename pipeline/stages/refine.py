@@ -201,7 +201,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             left_out = significance(with_them.problem, x_start, sol, identifiability)
             if left_out["significant"]:
                 sp = with_them
-                sol, identifiability = fit_session(sp, inputs, x_start)
+                sol, identifiability = fit_session(sp, inputs, (x_start, sol.f_scale))
     else:
         sp = session_problem(*args, terms)
         sol, identifiability = fit_session(sp, inputs)
@@ -336,22 +336,21 @@ def _too_few_for(sp: Any) -> bool:
     return bool(3 * len(measured) < COORDINATES_PER_PARAMETER * sp.problem.n_params)
 
 
-def fit_session(
-    sp: Any, inputs: Mapping[str, Any], x_warm: np.ndarray | None = None
-) -> tuple[Any, dict[str, Any]]:
-    """The solution of a session's problem ``sp`` from its start (or from ``x_warm``, a
-    nearer one; held parameters stay at the start's values), and its identifiability
-    summary (``{}`` without a pose set: joint sweeps see every parameter)."""
+def fit_session(sp: Any, inputs: Mapping[str, Any], warm: Any = None) -> tuple[Any, dict[str, Any]]:
+    """The solution of a session's problem ``sp`` from its start (or from ``warm``: a
+    nearer start and the robust scale of the fit it came from, held parameters staying
+    at the start's values), and its identifiability summary (``{}`` without a pose set:
+    joint sweeps see every parameter)."""
     from pipeline.refine.solve import solve
 
     if "poses" in session_plan(inputs["session"]):
-        return _fit_pose_set(sp, inputs["positions"], x_warm)
-    return solve(sp.problem, sp.x0 if x_warm is None else x_warm), {}
+        return _fit_pose_set(sp, inputs["positions"], warm)
+    if warm is None:
+        return solve(sp.problem, sp.x0), {}
+    return solve(sp.problem, warm[0], f_scale_hint=warm[1]), {}
 
 
-def _fit_pose_set(
-    sp: Any, positions: pa.Table, x_warm: np.ndarray | None = None
-) -> tuple[Any, dict[str, Any]]:
+def _fit_pose_set(sp: Any, positions: pa.Table, warm: Any = None) -> tuple[Any, dict[str, Any]]:
     """The fit of a session with a pose set, the parameters its data cannot identify held
     at the start (:func:`pipeline.refine.identifiability.fit_identifiable`), and the
     analysis as the summary records it."""
@@ -363,7 +362,8 @@ def _fit_pose_set(
     sweep = keys.column("sweep").to_numpy()
     n_poses = len(set(keys.column("step").to_numpy()[sweep == POSES_SWEEP].tolist()))
     stated = recorded_sigma_cm(positions) is not None
-    sol, ident = fit_identifiable(sp.problem, sp.x0, sp.units, stated, keys.num_rows, x_warm)
+    x_warm, hint = (None, None) if warm is None else warm
+    sol, ident = fit_identifiable(sp.problem, sp.x0, sp.units, stated, keys.num_rows, x_warm, hint)
     return sol, summary(ident, sp.names, n_poses, keys.num_rows)
 
 
