@@ -11,6 +11,7 @@ from pipeline.cli.options import (
     AcceptVerdict,
     JsonOption,
     Method,
+    PayloadOption,
     SessionArg,
     choice,
     finite,
@@ -52,13 +53,7 @@ def fk(
     design: Annotated[
         bool, typer.Option(help="For a session: the design model's pose of the session's tool.")
     ] = False,
-    payload_kg: Annotated[
-        float | None,
-        typer.Option(
-            help="Payload on the flange, kg: the signature's non-geometric terms predict the "
-            "arm under it (docs/nongeometric.md#payload; default: the payload measured)."
-        ),
-    ] = None,
+    payload_kg: PayloadOption = None,
     as_json: JsonOption = False,
 ) -> None:
     """Print the tool pose at joint values Q (a session's signature or a design model).
@@ -144,13 +139,7 @@ def ik(
         ),
     ] = None,
     accept_verdict: AcceptVerdict = False,
-    payload_kg: Annotated[
-        float | None,
-        typer.Option(
-            help="Payload on the flange, kg: the signature's non-geometric terms predict the "
-            "arm under it (docs/nongeometric.md#payload; default: the payload measured)."
-        ),
-    ] = None,
+    payload_kg: PayloadOption = None,
     as_json: JsonOption = False,
 ) -> None:
     """Joint readings that put the identified tool at a pose (signature-based control)."""

@@ -68,6 +68,14 @@ AcceptVerdict = Annotated[
         "--accept-verdict", help="Use the signature even if its verdict is FAIL (docs/verdict.md)."
     ),
 ]
+#: ``--payload-kg``: the payload on the flange a signature's non-geometric terms predict.
+PayloadOption = Annotated[
+    float | None,
+    typer.Option(
+        help="Payload on the flange, kg: the signature's non-geometric terms predict the arm "
+        "under it (docs/nongeometric.md#payload; default: the payload measured)."
+    ),
+]
 ForceRecording = Annotated[
     bool, typer.Option(help="Replace the recording of an existing session (else refused).")
 ]

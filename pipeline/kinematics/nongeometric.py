@@ -198,10 +198,11 @@ class NonGeometric:
             raise ArmsigError("bad payload", expected="a mass >= 0 kg", got=repr(kg))
         measured = self.measured_payloads_kg or (0.0,)
         if not self.terms.payload and not any(abs(kg - m) <= 1e-9 for m in measured):
+            said = ", ".join(f"{m:g} kg" for m in self.measured_payloads_kg)
             raise ArmsigError(
                 f"the signature cannot predict a payload of {kg:g} kg",
                 expected="the payload the session measured: "
-                + ", ".join(f"{m:g} kg" for m in measured),
+                + (said or "none recorded, so 0 kg means that one"),
                 got=f"{kg:g} kg",
                 fix="identify from a session measured with two payloads or more "
                 "(docs/nongeometric.md#payload)",
