@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 from pipeline.cli import EXIT_REFUSED, app
 from pipeline.contract.channels import POINT_CHANNELS
 from pipeline.contract.mcap_read import read_mcap
+from pipeline.errors import ImportFileError
 from pipeline.evaluate.validate import validate_against
 from pipeline.identify import identify
 from pipeline.importers import import_file
@@ -220,3 +221,38 @@ def test_bad_cell_one_line_naming_the_line(tmp_path: Path, case: str) -> None:
     line = _refused(tmp_path, pose_set_map(extra=extra), edit)
     for f in fragments:
         assert f in line, (f, line)
+
+
+def test_payloads_import_from_a_column_or_stated(tmp_path: Path) -> None:
+    """Issue 27: a payload column (kg) or one stated payload becomes joint_state payload_kg;
+    two payloads give the fit payload terms (docs/nongeometric.md#payload)."""
+    src, _ = pose_set_table(tmp_path / "poses.csv")
+    lines = src.read_text().splitlines()
+    kg = [0.0 if k % 2 else 10.0 for k in range(len(lines) - 1)]
+    src.write_text("\n".join([lines[0] + ";load"] + [f"{row};{v:g}" for row, v in
+                                                      zip(lines[1:], kg, strict=True)]) + "\n")  # fmt: skip
+    mp = tmp_path / "map.toml"
+    mp.write_text('payload_column = "load"\n' + pose_set_map())
+    import_file(src, "table", UR10, tmp_path / "col", mp)
+    states = sorted((m["step"], m["payload_kg"]) for m in
+                    _messages(tmp_path / "col")["/robot/joint_state"])  # fmt: skip
+    assert [v for _, v in states] == kg
+    identify(tmp_path / "col", report=False)
+    joints = read_table(tmp_path / "col" / "stages" / "joints.arrow")
+    assert set(joints.column("payload_kg").to_pylist()) == {0.0, 10.0}
+    mp.write_text("payload_kg = 5\n" + pose_set_map())
+    import_file(src, "table", UR10, tmp_path / "stated", mp)
+    assert {m["payload_kg"] for m in _messages(tmp_path / "stated")["/robot/joint_state"]} == {5.0}
+
+
+def test_a_bad_payload_is_refused_in_one_line(tmp_path: Path) -> None:
+    src, _ = pose_set_table(tmp_path / "poses.csv")
+    lines = src.read_text().splitlines()
+    src.write_text("\n".join([lines[0] + ";load"] + [f"{r};-1" for r in lines[1:]]) + "\n")
+    mp = tmp_path / "map.toml"
+    mp.write_text('payload_column = "load"\n' + pose_set_map())
+    with pytest.raises(ImportFileError, match=r"line 2: payload -1 kg; expected a payload from 0"):
+        import_file(src, "table", UR10, tmp_path / "s", mp)
+    mp.write_text('payload_column = "load"\npayload_kg = 2\n' + pose_set_map())
+    with pytest.raises(ImportFileError, match="payload_kg: is stated and payload_column is given"):
+        import_file(src, "table", UR10, tmp_path / "t", mp)

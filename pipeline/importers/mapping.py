@@ -95,6 +95,8 @@ class ImportMap:
     tool_target: str | None = None  # None: the first target
     tool_offset: tuple[float, float, float] | None = None  # length_unit
     sigma: float | None = None  # length_unit, every coordinate of every point
+    payload_kg: float | None = None  # the payload on the flange at every row
+    payload_column: str | int | None = None  # or a column of it (kg)
     orientation: OrientationColumns | None = None
     check: CheckSplit | None = None
 
@@ -187,6 +189,11 @@ def _check_combinations(src: str, data: dict[str, Any]) -> None:
         if (axes or "sigma" in t) and "sigma" in data:
             raise _refuse(src, "sigma", f"is stated and targets[{k}] has σ columns too",
                           "one stated σ for the file, or σ columns", data["sigma"])  # fmt: skip
+    if "payload_kg" in data and "payload_column" in data:
+        raise _refuse(
+            src, "payload_kg", "is stated and payload_column is given too",
+            "one payload for the file, or a column of it", data["payload_kg"],
+        )  # fmt: skip
     ids = [str(t.get("id", f"t{k + 1}")) for k, t in enumerate(targets)]
     if len(set(ids)) != len(ids):
         raise _refuse(src, "targets", "names a target id twice", "distinct ids", ids)
@@ -254,6 +261,8 @@ def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
         tool_target=data.get("tool_target"),
         tool_offset=None if "tool_offset" not in data else tuple(data["tool_offset"]),  # type: ignore[arg-type]
         sigma=data.get("sigma"),
+        payload_kg=data.get("payload_kg"),
+        payload_column=data.get("payload_column"),
         orientation=None
         if orient is None
         else OrientationColumns(

@@ -45,6 +45,8 @@ class MeasuredRows:
         Its stated σ per rotation-vector component (deg).
     sigma : dict of str to ndarray, shape (R, 3), optional
         Target id -> standard deviation of x, y, z (cm), when the file states it.
+    payload_kg : ndarray, shape (R,), optional
+        The payload on the flange (kg) at each row, when the map states it.
     """
 
     source: Path
@@ -55,6 +57,7 @@ class MeasuredRows:
     orientation_wxyz: np.ndarray | None = None
     sigma: dict[str, np.ndarray] | None = None
     orientation_sigma_deg: float | None = None
+    payload_kg: np.ndarray | None = None
 
     def take(self, keep: np.ndarray) -> MeasuredRows:
         """The rows ``keep`` (indices or mask), in that order."""
@@ -67,6 +70,7 @@ class MeasuredRows:
             targets={t: p[idx] for t, p in self.targets.items()},
             orientation_wxyz=None if self.orientation_wxyz is None else self.orientation_wxyz[idx],
             sigma=None if self.sigma is None else {t: s[idx] for t, s in self.sigma.items()},
+            payload_kg=None if self.payload_kg is None else self.payload_kg[idx],
         )
 
 

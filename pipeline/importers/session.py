@@ -128,13 +128,12 @@ def session_messages(
     for c, (sweep, step, k) in enumerate(configs):
         t_ns = T0_NS + (c + 1) * STEP_NS
         q = [float(v) for v in rows.q[k]]
-        messages.append(
-            Message(
-                "/robot/joint_state",
-                t_ns,
-                {"sweep": sweep, "step": step, "q_commanded": q, "q_encoder": q, "units": units},
-            )
-        )
+        state: dict[str, Any] = {
+            "sweep": sweep, "step": step, "q_commanded": q, "q_encoder": q, "units": units
+        }  # fmt: skip
+        if rows.payload_kg is not None:
+            state["payload_kg"] = float(rows.payload_kg[k])
+        messages.append(Message("/robot/joint_state", t_ns, state))
         for t, target in enumerate(ids[:1] if sweep == "tool" else ids):  # plan.tool_target
             x, y, z = (float(v) for v in rows.targets[target][k])
             point: dict[str, Any] = {

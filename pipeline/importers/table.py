@@ -9,6 +9,7 @@ decimal comma (``decimal = ","``)."""
 from __future__ import annotations
 
 import csv
+import math
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -149,11 +150,14 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
         names = ("rx", "ry", "rz")
         ocols = [_index(c, header, src, hl, f"orientation {a}")
                  for c, a in zip(imap.orientation.columns, names, strict=True)]  # fmt: skip
+    pcol = None
+    if imap.payload_column is not None:
+        pcol = _index(imap.payload_column, header, src, hl, "payload")
     scol = None
     if imap.sweep_column not in (None, INFER):
         scol = _index(imap.sweep_column, header, src, hl, "sweep")  # type: ignore[arg-type]
     cell = _cell_reader(src, imap.decimal)
-    where, q, sweep, angles = [], [], [], []  # type: ignore[var-annotated]
+    where, q, sweep, angles, payload = [], [], [], [], []  # type: ignore[var-annotated]
     pts = {t: [] for t in cols}  # type: ignore[var-annotated]
     sig = {t: [] for t in scols}  # type: ignore[var-annotated]
     for line, fields in reader:
@@ -166,6 +170,8 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
         for t, c in scols.items():
             sig[t].append([cell(fields, k, line, f"target {t} σ") * length for k in c])
         angles.append([cell(fields, k, line, "orientation") for k in ocols])
+        if pcol is not None:
+            payload.append(_payload_cell(cell(fields, pcol, line, "payload"), src, line))
         if scol is not None:
             sweep.append(_sweep_cell(fields, scol, src, line, robot.n_joints))
     if not where:
@@ -178,6 +184,9 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
         orientation_wxyz=_quaternions(np.array(angles, float), imap),
         sigma=_sigmas(rows_sigma=sig, ids=list(cols), n=len(where), imap=imap, length=length),
         orientation_sigma_deg=None if imap.orientation is None else imap.orientation.sigma_deg,
+        payload_kg=np.array(payload, float) if pcol is not None else (
+            None if imap.payload_kg is None else np.full(len(where), float(imap.payload_kg))
+        ),
     )  # fmt: skip
     if imap.poses:
         return pose_set(rows, imap)
@@ -194,6 +203,18 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
             )
         rows = replace(rows, sweep=infer_sweeps(rows, tol))  # a wrap is a change: it infers
     return _unwrapped(rows, imap, robot)
+
+
+def _payload_cell(kg: float, src: str, line: int) -> float:
+    """A payload cell (kg), refused in one line unless finite, >= 0 and <= 10,000 kg."""
+    if not (math.isfinite(kg) and 0.0 <= kg <= 10_000.0):
+        raise ImportFileError(
+            f"{src}: line {line}: payload {kg:g} kg",
+            expected="a payload from 0 to 10000 kg (payload_column)",
+            got=f"{kg:g}",
+            fix="correct the cell, or skip the line (skip_lines)",
+        )
+    return kg
 
 
 def _sigma_columns(t: TargetColumns) -> tuple[str | int, str | int, str | int]:
