@@ -229,8 +229,8 @@ def test_payloads_import_from_a_column_or_stated(tmp_path: Path) -> None:
     src, _ = pose_set_table(tmp_path / "poses.csv")
     lines = src.read_text().splitlines()
     kg = [0.0 if k % 2 else 10.0 for k in range(len(lines) - 1)]
-    src.write_text("\n".join([lines[0] + ";load"] + [f"{row};{v:g}" for row, v in
-                                                      zip(lines[1:], kg, strict=True)]) + "\n")  # fmt: skip
+    rows = [f"{row};{v:g}" for row, v in zip(lines[1:], kg, strict=True)]
+    src.write_text("\n".join([lines[0] + ";load", *rows]) + "\n")
     mp = tmp_path / "map.toml"
     mp.write_text('payload_column = "load"\n' + pose_set_map())
     import_file(src, "table", UR10, tmp_path / "col", mp)
