@@ -79,3 +79,31 @@ def test_plan_and_poses_together_are_refused(tmp_path) -> None:
     opts = SimulationOptions(sensor="tracker", poses=5, plan_file=str(tmp_path / "p.csv"))
     with pytest.raises(ArmsigError, match="--plan and --poses"):
         simulate_session(tmp_path / "s", opts)
+
+
+def test_plan_from_a_session_picks_its_most_informative_poses(tmp_path) -> None:
+    """Issue 28 item 3: `plan --from SESSION` chooses among the session's own poses (their
+    recorded noise, its signature's Jacobian); the file holds their readings."""
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+    from pipeline.planning import plan_from_session
+
+    d = tmp_path / "s"
+    simulate_session(d, SimulationOptions(sensor="tracker", poses=120, sweeps=False, seed=4))
+    identify(d, report=False)
+    robot, plan = plan_from_session(d, 30)
+    steps = np.array(plan.source_steps)
+    assert len(set(steps.tolist())) == 30 and steps.max() < 120
+    assert plan.rms_cm < plan.random_rms_cm
+    recorded = sweep_readings(read_table(stage_path(d, "joints")), POSES_SWEEP, 6,
+                              robot.prismatic)[1]  # fmt: skip
+    np.testing.assert_allclose(plan.q, recorded[steps], atol=1e-12)
+    out = tmp_path / "again.csv"
+    r = CliRunner().invoke(app, ["plan", str(out), "--from", str(d), "--poses", "30"])
+    assert r.exit_code == 0, r.output
+    np.testing.assert_allclose(read_pose_plan(out, robot), plan.q, atol=5e-7)
+    with pytest.raises(ArmsigError, match="more poses asked than the session holds"):
+        plan_from_session(d, 121)
+    r = CliRunner().invoke(app, ["plan", str(out), "--from", str(d), "--robot", "puma560"])
+    assert r.exit_code != 0 and "one of --robot and --from" in r.output

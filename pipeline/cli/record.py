@@ -16,6 +16,7 @@ from pipeline.cli.options import (
     joint_values,
     new_session_folder,
 )
+from pipeline.errors import ArmsigError
 
 commands = typer.Typer()
 
@@ -228,7 +229,17 @@ def import_(
 @commands.command("plan")
 def plan_(
     out: Annotated[str, typer.Argument(help="The pose plan to write (CSV of joint readings).")],
-    robot: Annotated[str, typer.Option(help="Built-in robot name or description .toml.")],
+    robot: Annotated[
+        str | None, typer.Option(help="Built-in robot name or description .toml.")
+    ] = None,
+    from_session: Annotated[
+        str | None,
+        typer.Option(
+            "--from",
+            help="An identified session with a pose set: choose its most informative poses "
+            "(re-calibration with fewer), instead of random candidates of --robot.",
+        ),
+    ] = None,
     poses: Annotated[int, typer.Option(min=1, help="Poses to plan (at most).")] = 50,
     target_rms_mm: Annotated[
         float | None,
@@ -247,13 +258,26 @@ def plan_(
 ) -> None:
     """Plan a pose set: the poses that give the smallest predicted tool error (docs/plan.md)."""
     from pipeline.cli.output import print_json
-    from pipeline.planning import plan_poses, write_plan
+    from pipeline.planning import plan_from_session, plan_poses, write_plan
     from pipeline.robots import get_robot
 
-    rob = get_robot(robot)
     target = None if target_rms_mm is None else target_rms_mm / 10.0
     sigma = None if sigma_mm is None else sigma_mm / 10.0
-    result = plan_poses(rob, poses, target, sigma, candidates, seed)
+    if (robot is None) == (from_session is None):
+        raise ArmsigError(
+            "plan needs one of --robot and --from",
+            expected="--robot ROBOT (random candidates) or --from SESSION (its recorded poses)",
+            fix="pipeline plan OUT.csv --robot puma560 --poses 50",
+        )
+    if from_session is not None:
+        if sigma is not None:
+            raise ArmsigError("--sigma-mm is for --robot", fix="drop --sigma-mm: --from "
+                              "weighs each pose by its recorded noise")  # fmt: skip
+        rob, result = plan_from_session(from_session, poses, target)
+    else:
+        assert robot is not None
+        rob = get_robot(robot)
+        result = plan_poses(rob, poses, target, sigma, candidates, seed)
     path = write_plan(out, rob, result, force)
     if json_out:
         print_json({"path": str(path), **result.to_dict()})

@@ -22,6 +22,7 @@ from pipeline.errors import ArmsigError
 from pipeline.refine.identifiability import analyse
 from pipeline.refine.kinematics import ChainModel, chain_model
 from pipeline.refine.plan import greedy_plan, predicted_rms_cm, workspace_information
+from pipeline.refine.points import PointBlock
 from pipeline.refine.problem import reading_tangents
 from pipeline.refine.uncertainty import model_error_maps, predict, tool_model
 from pipeline.robots.description import RobotDescription
@@ -48,10 +49,12 @@ class Plan:
     rms_by_size_cm: np.ndarray
     random_rms_cm: float
     unidentified: tuple[str, ...] = field(default=())
+    source_steps: tuple[int, ...] = field(default=())  # plan --from: the session's poses
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "poses": len(self.q),
+            **({"session_steps": list(self.source_steps)} if self.source_steps else {}),
             "predicted_rms_cm": self.rms_cm,
             "predicted_p95_cm": self.p95_cm,
             "random_predicted_rms_cm": self.random_rms_cm,
@@ -151,3 +154,78 @@ def write_plan(path: str | Path, robot: RobotDescription, plan: Plan, force: boo
         f"(as many random poses: {plan.random_rms_cm:.3g} cm)"
     )
     return write_pose_plan(out, robot, plan.q, comment)
+
+
+def plan_from_session(
+    session_dir: str | Path, n_poses: int, target_rms_cm: float | None = None
+) -> tuple[RobotDescription, Plan]:
+    """The ``n_poses`` most informative poses of an identified session's pose set (issue
+    28, ``pipeline plan --from``), for a re-calibration with fewer poses: the candidates
+    are the session's poses of its tool target, each with its own recorded noise (the
+    refinement's whitening) and the Jacobian of the session's signature (its refined
+    chain and non-geometric terms), chosen as :func:`plan_poses` chooses. The random
+    comparison is the session's first ``n_poses`` poses in step order."""
+    from pipeline.stages.frames import chain_from_frames, pose_tool_target, readings_at
+    from pipeline.stages.refine import problem_params, refine_summary, refined_x
+    from pipeline.stages.refine_problem import session_problem
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.session import session_plan, session_robot
+    from pipeline.stages.tables import read_table
+
+    sdir = Path(session_dir)
+    names = ("session", "joints", "positions", "frames", "refine")
+    if not all(stage_path(sdir, n).is_file() for n in names):
+        raise ArmsigError(f"{sdir}: not identified", fix=f"run `pipeline identify {sdir}` first")
+    tables = {n: read_table(stage_path(sdir, n)) for n in names}
+    summary = refine_summary(tables["refine"])
+    plan = session_plan(tables["session"])
+    if "poses" not in plan or not summary.get("enabled", False):
+        raise ArmsigError(
+            f"{sdir}: no refined pose set to choose from",
+            expected="a session with a pose set (sweep poses), identified with the refinement",
+            fix="plan new poses with `pipeline plan OUT --robot ROBOT --poses N`",
+        )
+    robot = session_robot(tables["session"])
+    sp = session_problem(tables, **problem_params(summary))
+    model = sp.problem.model
+    x = refined_x(tables["refine"])
+    keys = sp.problem.block.keys
+    sweep, step = keys.column("sweep").to_numpy(), keys.column("step").to_numpy()
+    tool = pose_tool_target(plan, tables["positions"])
+    sel = np.flatnonzero(
+        (sweep == POSES_SWEEP) & (np.array(keys.column("target").to_pylist()) == tool)
+    )
+    if not 1 <= n_poses <= len(sel):
+        raise ArmsigError(
+            "plan --from: more poses asked than the session holds",
+            expected=f"1 to {len(sel)} poses",
+            got=str(n_poses),
+            fix=f"--poses {min(len(sel), 60)}",
+        )
+    n_kin = model.n_params
+    J = model.position_jacobian(x[:n_kin])  # (K, 3, P)
+    block = sp.problem.block
+    assert isinstance(block, PointBlock)  # a pose set is a point sensor's
+    Jw = (block.whiten @ J)[sel]  # each position's own noise (its whitening)
+    q_sig = chain_from_frames(tables["frames"], robot.prismatic).joint_offsets
+    theta = robot.random_configurations(WORKSPACE, 0) - q_sig  # the uncertainty stage's
+    A, B = model_error_maps(tool_model(model, theta), x[:n_kin])
+    M = workspace_information(B)
+    units = model.param_units
+    chosen_plan = greedy_plan(Jw, M, WORKSPACE, units, n_poses, target_rms_cm)
+    chosen = chosen_plan.chosen
+    pred = predict(A, B, chosen_plan.covariance)
+    steps = step[sel][chosen]
+    q = readings_at(tables["joints"], POSES_SWEEP, np.sort(steps), robot.n_joints, robot.prismatic)
+    order = np.argsort(np.argsort(steps))  # the chosen order kept below
+    q = q[order]
+    ident = analyse(Jw[chosen].reshape(-1, Jw.shape[-1]), units, True, len(chosen))
+    return robot, Plan(
+        q=q,
+        rms_cm=float(chosen_plan.rms_cm[-1]),
+        p95_cm=float(np.percentile(pred.position_aligned_cm, 95)),
+        rms_by_size_cm=chosen_plan.rms_cm,
+        random_rms_cm=predicted_rms_cm(Jw[: len(chosen)], M, WORKSPACE, units),
+        unidentified=tuple(model.param_names[k] for k in np.flatnonzero(ident.held)),
+        source_steps=tuple(int(v) for v in steps),
+    )

@@ -144,13 +144,15 @@ def predict(A: Array, B: Array, Sigma: Array, seed: int = 0) -> Prediction:
 
 
 def tool_model(model: ChainModel, theta: Array) -> ChainModel:
-    """``model`` observing only its tool point, at configurations ``theta`` (m, n)."""
+    """``model`` observing only its tool point, at configurations ``theta`` (m, n) (no
+    payload on the flange, when the model has non-geometric terms)."""
     j = model.point_names.index(TOOL_POINT)
     return dataclasses.replace(
         model,
         link=np.full(len(theta), model.n_joints, np.int64),
         theta=np.asarray(theta, float),
         point=np.full(len(theta), j, np.int64),
+        payload_kg=None,
     )
 
 
