@@ -158,6 +158,28 @@ def test_fk_refuses_a_stale_signature(identified_session: Path, tmp_path: Path) 
     assert r.stdout == ""
 
 
+def test_a_signature_of_an_older_armsig_is_refused(
+    identified_session: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 32 item 1: after an upgrade that changes what a stage computes, the
+    signature its old stages built is refused in one line naming the stage and the
+    command that rebuilds it (stage ``refine`` pretended one version newer)."""
+    import dataclasses
+
+    import pipeline.stages.refine as refine_stage
+    import pipeline.stages.refine_points as refine_points
+
+    d = _session(identified_session, tmp_path)
+    assert runner.invoke(app, ["fk", str(d), "--q", Q]).exit_code == 0
+    for module in (refine_stage, refine_points):
+        newer = dataclasses.replace(module.STAGE, version=module.STAGE.version + 1)
+        monkeypatch.setattr(module, "STAGE", newer)
+    r = runner.invoke(app, ["fk", str(d), "--q", Q])
+    assert r.exit_code == 1 and len(r.stderr.splitlines()) == 1, r.output
+    assert "built by an older armsig (stage refine version" in r.stderr
+    assert f"pipeline identify {d}" in r.stderr and r.stdout == ""
+
+
 @pytest.mark.parametrize("robot", ["puma560", str(ROOT / "pipeline/robots/data/scara.toml")])
 def test_fk_robot_still_works(robot: str) -> None:
     r = runner.invoke(app, ["fk", robot, "--q", " ".join(["0"] * get_robot(robot).n_joints)])

@@ -30,7 +30,7 @@ from pipeline.signature.file import (
     signature_text,
     smodel_section,
 )
-from pipeline.stages.runner import committed_hashes, recorded_and_committed, stage_path
+from pipeline.stages.runner import committed_hashes, recorded_committed_outdated, stage_path
 from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_table
 
@@ -235,10 +235,20 @@ def load_session_document(
     fix = f"run `pipeline identify {p.parent}`"
     checked_here = committed is None  # the runner has checked the recording itself
     recording = None
+    outdated: list[tuple[str, Any, int]] = []
     if committed is None:
-        recording, committed = recorded_and_committed(p.parent)
+        recording, committed, outdated = recorded_committed_outdated(p.parent)
     if doc["provenance"]["stages"] != committed:
         raise ArmsigError(f"{p}: {STALE}", fix=fix)
+    if outdated:  # an upgrade changed what a stage computes: its signature is not served
+        name, old, new = outdated[0]
+        raise ArmsigError(
+            f"{p}: built by an older armsig (stage {name} version {old}, now {new}"
+            + (f", and {len(outdated) - 1} more" if len(outdated) > 1 else "")
+            + ")",
+            expected="a signature of this armsig's stages",
+            fix=fix,
+        )
     built_from = doc["provenance"]["recording_sha256"]
     if checked_here and recording != built_from:
         raise ArmsigError(

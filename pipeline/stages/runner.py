@@ -291,9 +291,28 @@ def committed_hashes(session_dir: str | Path) -> dict[str, str | None]:
 def recorded_and_committed(session_dir: str | Path) -> tuple[str | None, dict[str, str | None]]:
     """The SHA-256 of the session's recording (None: missing) and :func:`committed_hashes`,
     from one look at the files (the recording is hashed once)."""
+    recorded, committed, _ = recorded_committed_outdated(session_dir)
+    return recorded, committed
+
+
+def recorded_committed_outdated(
+    session_dir: str | Path,
+) -> tuple[str | None, dict[str, str | None], list[tuple[str, Any, int]]]:
+    """:func:`recorded_and_committed` and the committed identification stages that an older
+    armsig wrote: ``(name, its stage version, this armsig's)`` for every stage whose
+    recorded version is not the current one (``identify`` would recompute them), from the
+    same look at the files."""
     hashes = _Hashes(Path(session_dir))
     committed = {n: hashes.get(n) for n in hashes.identification()}
-    return hashes.get(RECORDING), committed
+    outdated = []
+    for stage in stages(hashes.identification_modules()):
+        checked = hashes.check(stage.name)
+        if checked is None or checked.problem:
+            continue  # missing or damaged: the content check says so
+        version = checked.provenance.get("stage_version")
+        if version != stage.version:
+            outdated.append((stage.name, version, stage.version))
+    return hashes.get(RECORDING), committed, outdated
 
 
 def _check(stage: Stage, params: Any, hashes: _Hashes, stale: set[str]) -> StageStatus:
