@@ -233,3 +233,30 @@ def test_read_only_tree_caches_in_the_user_cache_or_in_memory(tmp_path: Path) ->
     assert {"puma560_start._wrap", "ik_compiled._delta"} <= _index_files(Path(folder))
     env["XDG_CACHE_HOME"] = str(tmp_path / "pipeline/kinematics/__pycache__")
     assert _run(_PROBE, env, tmp_path).split() == ["None", "NullCache", "NullCache"]
+
+
+def test_a_terminal_is_told_once_that_the_kernels_compile(tmp_path, monkeypatch, capsys) -> None:
+    """Issue 30 item 4: the first `ik` or `identify` compiles for ~20 s; a terminal hears
+    why in one line, a pipe or a cached run does not."""
+    import io
+
+    from pipeline.kinematics import kernel_cache
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    term = Terminal()
+    monkeypatch.setattr(kernel_cache.sys, "stderr", term)
+    kernel_cache._say_first_compile(tmp_path)
+    assert term.getvalue().startswith("note: compiling armsig's numerical kernels")
+    assert len(term.getvalue().splitlines()) == 1
+    (tmp_path / "kinematics_0").mkdir()
+    (tmp_path / "kinematics_0" / "kernel.nbi").write_bytes(b"")
+    quiet = Terminal()
+    monkeypatch.setattr(kernel_cache.sys, "stderr", quiet)
+    kernel_cache._say_first_compile(tmp_path)  # compiled already
+    assert quiet.getvalue() == ""
+    monkeypatch.setattr(kernel_cache.sys, "stderr", io.StringIO())  # a pipe
+    kernel_cache._say_first_compile(tmp_path / "empty")
+    assert capsys.readouterr().err == ""

@@ -51,6 +51,7 @@ from __future__ import annotations
 import hashlib
 import os
 import shutil
+import sys
 import tempfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -160,7 +161,25 @@ def cache_dir() -> Path | None:
         digest = sources_digest()
     except OSError:  # sources not readable as files (e.g. a zip import): no digest, no cache
         return None
-    return choose_cache_dir(digest, user_dir, tree_dir, home_dir)
+    folder = choose_cache_dir(digest, user_dir, tree_dir, home_dir)
+    _say_first_compile(folder)
+    return folder
+
+
+def _say_first_compile(folder: Path | None) -> None:
+    """One line on a terminal's stderr when the kernels are not compiled yet (a fresh
+    checkout, an upgrade, or no cache folder): the first ``ik`` or ``identify`` then
+    spends ~20 s compiling before it answers (issue 30); later runs load them. Not on a
+    pipe or in a test, whose output stays the command's own."""
+    if folder is not None and any(folder.glob("**/*.nbi")):  # numba: a folder per package
+        return
+    if not sys.stderr.isatty():
+        return
+    where = f"cached in {folder}" if folder is not None else "in memory: no cache folder"
+    print(
+        f"note: compiling armsig's numerical kernels for this checkout (~20 s, once; {where})",
+        file=sys.stderr,
+    )
 
 
 @contextmanager
