@@ -261,23 +261,17 @@ def session_problem(
     if "poses" not in session_plan(session):  # a pose set: its identifiability decides
         check_coverage(sweep, robot.n_joints, robot.prismatic, "positions")
     rotation = orientation is not None
-    model = model_for_keys(block.keys, session, inputs["joints"], inputs["frames"], rotation, terms)
-    if terms:
-        independent = independent_terms(terms, model, robot.reach_cm)
-        if independent != terms:
-            model = model_for_keys(
-                block.keys, session, inputs["joints"], inputs["frames"], rotation, independent
-            )
+    model = model_for_keys(block.keys, session, inputs["joints"], inputs["frames"], rotation)
     res = joints_to_internal(robot.encoder_resolution, robot.prismatic)
-    return chain_problem(model, block, measured, loss, f_scale, res**2 / 12.0, orientation)
+    rigid = chain_problem(model, block, measured, loss, f_scale, res**2 / 12.0, orientation)
+    return with_terms(rigid, terms, inputs) if terms else rigid
 
 
 def with_terms(sp: SessionProblem, terms: Terms, inputs: Mapping[str, Any]) -> SessionProblem:
     """The rigid problem ``sp`` with the non-geometric ``terms`` that are parameters
     (:func:`independent_terms`), their coefficients after the chain's, started at zero:
     the same block, whose encoder-reading noise is weighed at the start, where the terms
-    are zero (:func:`session_problem` with ``terms`` builds the same problem, twice the
-    work)."""
+    are zero (what :func:`session_problem` with ``terms`` returns)."""
     robot = session_robot(inputs["session"])
     rigid = sp.problem.model
     keys = sp.problem.block.keys
