@@ -109,18 +109,25 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 def _rigid_held_out(inputs: Mapping[str, Any], params: Params, summ: Any) -> Any:
     """The held-out errors of the rigid chain fitted to the same session (the fit the
-    refinement makes with ``refine.nongeometric=none``)."""
+    refinement makes with ``refine.nongeometric=none``): the refinement's own rigid
+    solution when it recorded one (``refine.nongeometric=auto`` fits it first), else
+    fitted here. Its covariance is not needed: only the errors are kept."""
     from pipeline.kinematics.nongeometric import NO_TERMS
     from pipeline.stages.refine import fit_session, problem_params
     from pipeline.stages.refine_problem import session_problem
 
     sp = session_problem(inputs, **{**problem_params(summ), "terms": NO_TERMS})
-    sol, ident = fit_session(sp, inputs)
-    names = {h["name"] for h in ident.get("held", [])}
-    held = np.array([n in names for n in sp.names], bool)
+    recorded = summ.get("nongeometric", {}).get("rigid_fit")
+    if recorded is not None:
+        x, noise, names = np.array(recorded["x"], float), recorded["noise_scale"], recorded["held"]
+    else:
+        sol, ident = fit_session(sp, inputs)
+        x, noise = sol.x, sol.noise_scale
+        names = [h["name"] for h in ident.get("held", [])]
+    held = np.isin(np.array(sp.names), names)
     sp = dataclasses.replace(sp, problem=dataclasses.replace(sp.problem, held=held))
-    scale = sol.noise_scale**2 if np.isfinite(sol.noise_scale) else 1.0
-    return _held_out(inputs, params, sp, sol.x, sol.covariance, scale)[1]
+    scale = noise**2 if np.isfinite(noise) else 1.0
+    return _held_out(inputs, params, sp, x, np.zeros((len(x), len(x))), scale)[1]
 
 
 def _held_out(

@@ -186,6 +186,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     terms = all_terms(robot.prismatic, kinds)
     args = (inputs, params.loss, params.f_scale, level, params.speed_knot_s)
     left_out: dict[str, Any] | None = None
+    rigid_fit: dict[str, Any] | None = None  # the rigid solution, when the terms replace it
     if params.nongeometric == "auto" and terms:
         # The rigid chain first (from the design, exactly as before issue 27); the terms
         # only when its solution shows them (never fitted to noise), from that solution.
@@ -199,7 +200,12 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         else:
             x_start = with_rigid_solution(with_them, sp, sol.x)
             left_out = significance(with_them.problem, x_start, sol, identifiability)
-            if left_out["significant"]:
+            if left_out["significant"]:  # the rigid fit kept: the holdout compares with it
+                rigid_fit = {
+                    "x": sol.x.tolist(),
+                    "noise_scale": sol.noise_scale,
+                    "held": [h["name"] for h in identifiability.get("held", [])],
+                }
                 sp = with_them
                 sol, identifiability = fit_session(sp, inputs, (x_start, sol.f_scale))
     else:
@@ -236,6 +242,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             "terms": list(sp.problem.model.terms.names),
             "measured_payloads_kg": list(payloads),
             **({"test": left_out} if left_out else {}),
+            **({"rigid_fit": rigid_fit} if rigid_fit else {}),
         }
     rows = {
         "group": list(sp.groups),
