@@ -20,7 +20,7 @@ import numpy as np
 from pipeline.kinematics.transforms import Array
 from pipeline.montecarlo.compliance_study import INDEX_NAMES
 from pipeline.montecarlo.engine import StudyResult
-from pipeline.montecarlo.refine_report import column, diagonal, finish, one_panel, per_robot
+from pipeline.montecarlo.refine_report import column, per_robot, scatter_figure
 from pipeline.montecarlo.refine_study import VERDICT_CODES
 
 HEADING = "## Joint compliance: rigid fit against the fit with its terms (issue 27)"
@@ -38,33 +38,26 @@ def _col(values: Array, name: str) -> Array:
 def write_figures(res: StudyResult, folder: Path) -> None:
     """The two figures of the study under ``folder``."""
     mm, v, robots = res.study.values, res.values, res.values.shape[1]
-    fig, ax = one_panel(5.2, 5.0, 0.18, 0.12)
     rigid, terms = _col(v, "rigid_rms_cm"), _col(v, "terms_rms_cm")
-    for i, c in enumerate(mm):
-        ax.loglog(rigid[i], terms[i], "o", ms=3, alpha=0.7, label=f"compliance {c:g} mm")
-    diagonal(ax, rigid, terms)
     labels = (
         "audited RMS, rigid fit (cm)",
         "audited RMS, fit with compliance (cm)",
         f"compliance: two fits of one recording, {robots} robots",
     )
-    finish(fig, ax, labels, folder / "fits.png", grid="both")
+    series = [(rigid[i], terms[i], f"compliance {c:g} mm") for i, c in enumerate(mm)]
+    scatter_figure(folder / "fits.png", series, labels, left=0.18)
 
-    fig, ax = one_panel(5.2, 5.0, 0.18, 0.12)
     top = int(np.argmax(mm))
-    preds, auds = [], []
-    for fit, label in FIT_LABELS:
-        pred, aud = _col(v, f"{fit}_predicted_rms_cm")[top], _col(v, f"{fit}_rms_cm")[top]
-        ax.loglog(pred, aud, "o", ms=3, alpha=0.7, label=label)
-        preds.append(pred)
-        auds.append(aud)
-    diagonal(ax, np.array(preds), np.array(auds))
     labels = (
         "predicted RMS (cm)",
         "audited RMS (cm)",
         f"uncertainty calibration at {mm[top]:g} mm, {robots} robots",
     )
-    finish(fig, ax, labels, folder / "calibration.png", grid="both")
+    series = [
+        (_col(v, f"{fit}_predicted_rms_cm")[top], _col(v, f"{fit}_rms_cm")[top], label)
+        for fit, label in FIT_LABELS
+    ]
+    scatter_figure(folder / "calibration.png", series, labels, left=0.18)
 
 
 def _row(c: float, v: Array) -> str:

@@ -11,6 +11,7 @@ refined RMS over the Cramér-Rao bound and over the predicted RMS, and the PASS 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +63,21 @@ def finish(
     save_png(fig, path)
 
 
+def scatter_figure(
+    path: Path,
+    series: Sequence[tuple[Array, Array, str]],
+    labels: tuple[str, str, str],
+    left: float = 0.15,
+) -> None:
+    """A log-log panel of dots, one ``(x, y, label)`` series each, the line y = x over all
+    of them, the grid on both scales; the PNG at ``path`` (``left``: its left margin)."""
+    fig, ax = one_panel(5.2, 5.0, left, 0.12)
+    for x, y, label in series:
+        ax.loglog(x, y, "o", ms=3, alpha=0.7, label=label)
+    diagonal(ax, np.array([s[0] for s in series]), np.array([s[1] for s in series]))
+    finish(fig, ax, labels, path, grid="both")
+
+
 def write_figures(res: StudyResult, folder: Path) -> None:
     """The three figures of the study under ``folder``."""
     k = np.asarray(res.study.values, float)
@@ -93,17 +109,14 @@ def write_figures(res: StudyResult, folder: Path) -> None:
     )
     finish(fig, ax, labels, folder / "gain.png")
 
-    fig, ax = one_panel(5.2, 5.0, 0.15, 0.12)
     pred, aud = column(v, "predicted_rms_cm"), column(v, "refined_rms_cm")
-    for i, kk in enumerate(k):
-        ax.loglog(pred[i], aud[i], "o", ms=3, alpha=0.7, label=f"k = {kk:g}")
-    diagonal(ax, pred, aud)
     labels = (
         "predicted RMS (cm)",
         "audited RMS (cm)",
         f"refine: uncertainty calibration, {robots} robots",
     )
-    finish(fig, ax, labels, folder / "calibration.png", grid="both")
+    series = [(pred[i], aud[i], f"k = {kk:g}") for i, kk in enumerate(k)]
+    scatter_figure(folder / "calibration.png", series, labels)
 
 
 def per_robot(
