@@ -123,6 +123,22 @@ def plan_poses(
     sig = tracker.sigma_cm(p) if sigma_cm is None else np.full(len(p), float(sigma_cm))
     J = _whitened(model, x, robot, sig)
     theta = robot.random_configurations(WORKSPACE, 0)  # the audit's; q̄ˢ = 0 (the gauge)
+    chosen, prediction = _choose(J, model, x, theta, n_poses, target_rms_cm)
+    return Plan(q=q[chosen], **prediction)
+
+
+def _choose(
+    J: np.ndarray,
+    model: ChainModel,
+    x: np.ndarray,
+    theta: np.ndarray,
+    n_poses: int,
+    target_rms_cm: float | None,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """The candidates chosen (indices into the whitened Jacobians ``J`` (K, 3, P) of
+    ``model`` at ``x``, in the order chosen) and the :class:`Plan` fields of their
+    prediction over the workspace configurations ``theta`` (m, n, from q̄ˢ); the random
+    comparison is the first as many candidates."""
     A, B = model_error_maps(tool_model(model, theta), x)
     M = workspace_information(B)
     units = model.param_units
@@ -130,14 +146,13 @@ def plan_poses(
     chosen = plan.chosen
     ident = analyse(J[chosen].reshape(-1, J.shape[-1]), units, True, len(chosen))
     pred = predict(A, B, plan.covariance)
-    return Plan(
-        q=q[chosen],
-        rms_cm=float(plan.rms_cm[-1]),
-        p95_cm=float(np.percentile(pred.position_aligned_cm, 95)),
-        rms_by_size_cm=plan.rms_cm,
-        random_rms_cm=predicted_rms_cm(J[: len(chosen)], M, WORKSPACE, units),
-        unidentified=tuple(model.param_names[k] for k in np.flatnonzero(ident.held)),
-    )
+    return chosen, {
+        "rms_cm": float(plan.rms_cm[-1]),
+        "p95_cm": float(np.percentile(pred.position_aligned_cm, 95)),
+        "rms_by_size_cm": plan.rms_cm,
+        "random_rms_cm": predicted_rms_cm(J[: len(chosen)], M, WORKSPACE, units),
+        "unidentified": tuple(model.param_names[k] for k in np.flatnonzero(ident.held)),
+    }
 
 
 def write_plan(path: str | Path, robot: RobotDescription, plan: Plan, force: bool = False) -> Path:
@@ -209,23 +224,8 @@ def plan_from_session(
     Jw = (block.whiten @ J)[sel]  # each position's own noise (its whitening)
     q_sig = chain_from_frames(tables["frames"], robot.prismatic).joint_offsets
     theta = robot.random_configurations(WORKSPACE, 0) - q_sig  # the uncertainty stage's
-    A, B = model_error_maps(tool_model(model, theta), x[:n_kin])
-    M = workspace_information(B)
-    units = model.param_units
-    chosen_plan = greedy_plan(Jw, M, WORKSPACE, units, n_poses, target_rms_cm)
-    chosen = chosen_plan.chosen
-    pred = predict(A, B, chosen_plan.covariance)
+    chosen, prediction = _choose(Jw, model, x[:n_kin], theta, n_poses, target_rms_cm)
     steps = step[sel][chosen]
     q = readings_at(tables["joints"], POSES_SWEEP, np.sort(steps), robot.n_joints, robot.prismatic)
-    order = np.argsort(np.argsort(steps))  # the chosen order kept below
-    q = q[order]
-    ident = analyse(Jw[chosen].reshape(-1, Jw.shape[-1]), units, True, len(chosen))
-    return robot, Plan(
-        q=q,
-        rms_cm=float(chosen_plan.rms_cm[-1]),
-        p95_cm=float(np.percentile(pred.position_aligned_cm, 95)),
-        rms_by_size_cm=chosen_plan.rms_cm,
-        random_rms_cm=predicted_rms_cm(Jw[: len(chosen)], M, WORKSPACE, units),
-        unidentified=tuple(model.param_names[k] for k in np.flatnonzero(ident.held)),
-        source_steps=tuple(int(v) for v in steps),
-    )
+    q = q[np.argsort(np.argsort(steps))]  # in the order chosen
+    return robot, Plan(q=q, **prediction, source_steps=tuple(int(v) for v in steps))
