@@ -1,4 +1,5 @@
-# armsig — every target creates .venv and installs on first use.
+# armsig — every target creates .venv and installs on first use; the install compiles the
+# numerical kernels (`pipeline warmup`, ~30-60 s once) so the first `ik` answers at once.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -11,6 +12,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test,lint]'
+	$(BIN)/pipeline warmup
 	touch $(STAMP)
 
 install: $(STAMP)

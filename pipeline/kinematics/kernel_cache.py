@@ -177,7 +177,8 @@ def _say_first_compile(folder: Path | None) -> None:
         return
     where = f"cached in {folder}" if folder is not None else "in memory: no cache folder"
     print(
-        f"note: compiling armsig's numerical kernels for this checkout (~20 s, once; {where})",
+        f"note: compiling armsig's numerical kernels for this checkout (~20-60 s, once; "
+        f"{where}; `pipeline warmup` does it ahead)",
         file=sys.stderr,
     )
 
