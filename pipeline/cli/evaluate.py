@@ -1,4 +1,5 @@
-"""The ``evaluate`` command: grid-touching tasks under design-model and signature control."""
+"""The ``evaluate`` command: grid-touching tasks under design-model and signature control,
+and the design controller driven to compensated targets."""
 
 from __future__ import annotations
 
@@ -25,7 +26,8 @@ def evaluate(
     ] = False,
     report: Annotated[bool, typer.Option(help="Write report/evaluation.md.")] = True,
 ) -> None:
-    """Grid-touching tasks under design-model and signature control, recorded and scored."""
+    """Grid-touching tasks under design-model and signature control, and the design controller
+    driven to compensated targets (`pipeline compensate`), recorded and scored."""
     from pipeline.evaluate import evaluate as run_evaluate
 
     rig = None
@@ -42,10 +44,17 @@ def evaluate(
     if r.recorded:
         typer.echo(f"  rig recorded: {', '.join(r.recorded)}")
     for name, task in r.summary["tasks"].items():
-        med = task["median_improvement"]
-        text = "inf" if med is None else f"{med:.2f}"
-        typer.echo(f"{name:8s} {len(task['indices']):3d} indices, median improvement {text}")
+        text = _factor(task["median_improvement"])
+        extra = ""
+        if "median_improvement_compensated" in task:
+            comp = task["median_improvement_compensated"]
+            extra = f"; compensated targets on the design controller {_factor(comp)}"
+        typer.echo(f"{name:8s} {len(task['indices']):3d} indices, median improvement {text}{extra}")
     for name, why in r.summary["skipped"].items():
         warn(f"{name} skipped: {why}")
     if r.report:
         typer.echo(f"report: {r.report}")
+
+
+def _factor(median: float | None) -> str:
+    return "inf" if median is None else f"{median:.2f}"  # None: an error exactly 0 (JSON)

@@ -1,4 +1,4 @@
-"""The two controllers under test, as models of the end-effector frame E.
+"""The three controllers under test, as models of the end-effector frame E.
 
 ``E`` is the probe (pin, pen or test cube) frame: origin at the probe tip,
 axes those of the flange, whose X axis points at the last joint's target
@@ -12,11 +12,16 @@ frame). Both controllers work in the design base frame:
   S-Model's last frame has its X axis toward the *first* target position
   (4.50), so E is that frame turned about the joint axis by the mean angle
   ``δ`` of the last target in it over its sweep (:func:`flange_angle`):
-  measured, not assumed.
+  measured, not assumed;
+- *compensated*: a controller that keeps its design model, driven to compensated targets
+  (``pipeline compensate``, docs/compensate.md): the program is taught and solved on the
+  signature offline, each target rewritten as the design model's pose at the signature's
+  joints, and the design controller (its closed-form inverse on the branch of those joints,
+  or Newton-Raphson from them) solves that rewritten target.
 
 Arms with fewer than six joints control the pose components of
 :func:`pipeline.control.task_axes_for` only (a SCARA: position and the
-rotation about Z); both controllers then solve in the taught workspace frame,
+rotation about Z); every controller then solves in the taught workspace frame,
 so the controlled rotation is about the workspace's axes, the ones the
 instruments read.
 """
@@ -35,12 +40,14 @@ from pipeline.control.limits import into_limits
 from pipeline.evaluation.tasks import Task
 from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
 from pipeline.kinematics.ik import ALL_AXES, newton_raphson
-from pipeline.kinematics.transforms import Array, invert_transform, rot_z
+from pipeline.kinematics.transforms import Array, invert_transform, rot_z, wrap_angle
 from pipeline.robots.description import RobotDescription
 from pipeline.signature.file import Signature
 from pipeline.units import joints_to_internal
 
 BoolArray = npt.NDArray[np.bool_]
+#: The controllers of an evaluation, in the order of the program, the rig and the indices.
+CONTROLLERS = ("design", "signature", "compensated")
 #: Joint-limit test margin (rad / cm): round-off only; the limits are the robot's own.
 LIMIT_MARGIN = 1e-9
 
@@ -165,6 +172,58 @@ class SignatureModel:
         return q, ok & within_limits(s.robot, q)
 
 
+@dataclass(frozen=True, eq=False)
+class CompensatedModel:
+    """The design controller driven to compensated targets (:mod:`pipeline.control.compensate`):
+    taught with the signature (the offline tool's model, ``fk``), each target solved on the
+    signature, rewritten as ``design.fk(q_s)`` and solved by the design controller from
+    ``q_s``'s configuration: its closed-form inverse on ``q_s``'s branch (Puma), else
+    Newton-Raphson started at ``q_s`` (the condition docs/compensate.md states)."""
+
+    design: DesignModel
+    signature: SignatureModel
+
+    name = "compensated"
+
+    @property
+    def robot(self) -> RobotDescription:
+        return self.design.robot
+
+    def fk(self, q: Array) -> Array:
+        """E in the design base frame as the offline tool models it (the signature)."""
+        return self.signature.fk(q)
+
+    def compensated_targets(
+        self, T: Array, branches: list, q_near: Array, workspace: Array | None = None
+    ) -> tuple[Array, Array, BoolArray]:
+        """The signature's joints ``q_s`` (m, n) for E poses T, the rewritten targets
+        ``design.fk(q_s)`` (m, 4, 4) the nominal controller is given, and which are valid."""
+        q_s, ok = self.signature.solve(T, branches, q_near, workspace)
+        return q_s, self.design.fk(q_s), ok
+
+    def solve(
+        self, T: Array, branches: list, q_near: Array, workspace: Array | None = None
+    ) -> tuple[Array, BoolArray]:
+        """Joint vectors (m, n) the design controller commands for the compensated targets
+        of E poses T; valid mask (m,)."""
+        q_s, T_c, ok = self.compensated_targets(T, branches, q_near, workspace)
+        if self.robot.name == "puma560":
+            from pipeline.robots.puma560 import Branch, branch_of
+
+            flags = branch_of(np.where(ok[:, None], q_s, 0.0))
+            own = [Branch(*(int(v) for v in f)) if good else b
+                   for f, good, b in zip(flags, ok, branches, strict=True)]  # fmt: skip
+            q, ok_d = self.design.solve(T_c, own, q_s[0], workspace)
+        else:
+            q, ok_d = nr_multistart(self.design.chain, self.robot, T_c, q_s, workspace)
+            ok_d &= within_limits(self.robot, q)
+        # The turn of each revolute joint nearest the written readings (a controller told the
+        # configuration takes it): not a 360° turn away where both are inside the limits.
+        near = np.where(self.robot.prismatic, q, q_s + wrap_angle(q - q_s))
+        q = np.where(within_limits(self.robot, near)[:, None], near, q)
+        return q, ok & ok_d
+
+
 #: Seeded restarts of the damped Newton-Raphson for robots without a closed-form inverse.
 RESTARTS = 10
 
@@ -176,7 +235,8 @@ def nr_multistart(
     q_near: Array,
     workspace: Array | None = None,
 ) -> tuple[Array, BoolArray]:
-    """Damped Newton-Raphson (5.4) from ``q_near`` (the taught configuration), then
+    """Damped Newton-Raphson (5.4) from ``q_near`` (the taught configuration, (n,), or one
+    start per target, (m, n)), then
     from the middle of the joint limits and seeded draws for the targets that did
     not converge inside the limits (robots without a closed-form inverse).
 
@@ -199,8 +259,9 @@ def nr_multistart(
         todo = np.flatnonzero(~ok)
         if not len(todo):
             break
-        r = newton_raphson(chain, T[todo], np.broadcast_to(q0, (len(todo), len(q0))), res_q,
-                           max_iter=100, damping=1e-2, task_axes=task_axes)  # fmt: skip
+        start = q0[todo] if q0.ndim == 2 else np.broadcast_to(q0, (len(todo), len(q0)))
+        r = newton_raphson(chain, T[todo], start, res_q, max_iter=100, damping=1e-2,
+                           task_axes=task_axes)  # fmt: skip
         qq = into_limits(robot, r.q)
         good = r.converged & within_limits(robot, qq)
         q[todo[good]], ok[todo[good]] = qq[good], True

@@ -1,4 +1,4 @@
-"""Score the measured tasks: every index for both controllers and the improvement factor.
+"""Score the measured tasks: every index for each controller and the improvement factor.
 
 Reads only the measurement and program tables (recorded readings and the
 desired points of the plan), never the rig's truth.
@@ -16,6 +16,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.evaluation import grid12
+from pipeline.evaluation.controllers import CONTROLLERS
 from pipeline.evaluation.geometry import distance, rotation_from_vector
 from pipeline.evaluation.indices import (
     GRID2D_INDICES,
@@ -27,7 +28,6 @@ from pipeline.evaluation.indices import (
 )
 from pipeline.evaluation.tasks import GRID2D_SHAPE, GRID3D_SHAPE, Task
 
-CONTROLLERS = ("design", "signature")
 AXIS_LETTERS = "xyz"
 
 
@@ -63,7 +63,7 @@ def _select(table: pa.Table, task: str, controller: str) -> dict[str, np.ndarray
         )
         if t == task and c == controller
     ]
-    sub = table.take(rows)
+    sub = table.take(pa.array(rows, pa.int64()))  # typed: no rows is an empty take
     order = np.argsort(sub.column("point").to_numpy(), kind="stable")
     return {
         name: np.array(sub.column(name).to_pylist(), dtype=float)[order]
@@ -84,17 +84,22 @@ def task_indices(
     program: pa.Table,
     task_axes: tuple[int, ...] = (0, 1, 2, 3, 4, 5),
 ) -> tuple[list[tuple[str, str, bool]], np.ndarray]:
-    """Index names (name, unit, signed) and values (2, k) for design and signature.
+    """Index names (name, unit, signed) and values (c, k) for the :data:`CONTROLLERS`; a
+    controller the recording did not measure (an evaluation recorded before the compensated
+    controller existed) has NaN values.
 
     ``task_axes``: the arm's controlled pose components (:func:`restrict_orientation`).
     """
     want = _xyz(_select(program, task.name, "design"))
-    values = []
-    rotations = []
+    values: list[np.ndarray | None] = []
+    rotations: list[np.ndarray | None] = []
     for controller in CONTROLLERS:
         m = _select(measurements, task.name, controller)
-        if "rx_deg" in m:
-            rotations.append(_xyz(m, ("rx_deg", "ry_deg", "rz_deg")))
+        if not any(len(v) for v in m.values()):
+            values.append(None)
+            rotations.append(None)
+            continue
+        rotations.append(_xyz(m, ("rx_deg", "ry_deg", "rz_deg")) if "rx_deg" in m else None)
         if task.name == "lines1d":
             desired = distance(want[0::2], want[1::2])
             values.append(line_length_errors(m["length_cm"], desired))
@@ -123,9 +128,16 @@ def task_indices(
             names = list(
                 zip(grid12.INDEX_NAMES, grid12.INDEX_UNITS, grid12.INDEX_SIGNED, strict=True)
             )
+    table = _fill_unmeasured(values)
     if len(controlled_rotations(task_axes)) == 3 or task.name not in ("grid3d", "grid12"):
-        return names, np.array(values)
-    return restrict_orientation(task.name, names, np.array(values), np.array(rotations), task_axes)
+        return names, table
+    return restrict_orientation(task.name, names, table, _fill_unmeasured(rotations), task_axes)
+
+
+def _fill_unmeasured(rows: list[np.ndarray | None]) -> np.ndarray:
+    """Rows stacked, NaN for the controllers not measured (None)."""
+    like = next(r for r in rows if r is not None)  # the design controller is always measured
+    return np.stack([np.full(like.shape, np.nan) if r is None else r for r in rows])
 
 
 def restrict_orientation(
@@ -137,7 +149,7 @@ def restrict_orientation(
 ) -> tuple[list[tuple[str, str, bool]], np.ndarray]:
     """Orientation indices of an arm that controls only some rotation components.
 
-    ``w_deg`` (2, m, 3): measured rotation vectors (deg) of each point from the
+    ``w_deg`` (c, m, 3): measured rotation vectors (deg) of each point from the
     desired orientation, about the workspace axes, per controller. With ``c``
     the controlled rotation components of ``task_axes`` (a SCARA: Z, the only
     one its solver sets to 0):
@@ -163,7 +175,7 @@ def restrict_orientation(
             continue
         v = values[:, k]
         if task == "grid3d" and name.startswith("relative_orientation_"):
-            w = w_deg.reshape(2, *GRID3D_SHAPE, 3)
+            w = w_deg.reshape(len(w_deg), *GRID3D_SHAPE, 3)
             rel = w[:, -1, -1, 0] - w[:, 0, 0, 0]  # Vertex 4 (corner (nx, ny, 1)) - Vertex 1
             v = rel[:, AXIS_LETTERS.index(name.split("_")[2])]
         elif task == "grid12" and name.endswith("orientation_error_deg"):

@@ -44,7 +44,8 @@ def _factor(item: dict[str, Any]) -> str:
 
 
 def _index_table(task: str, items: list[dict[str, Any]]) -> str:
-    headers = ["index", "unit", "design", "signature", "improvement"]
+    headers = ["index", "unit", "design", "signature", "improvement", "compensated",
+               "improvement, compensated"]  # fmt: skip
     if task == "lines1d":
         headers += ["thesis Robot 1 design / signature (Table 6-6)"]
     if task == "grid3d":
@@ -54,6 +55,17 @@ def _index_table(task: str, items: list[dict[str, Any]]) -> str:
     for k, it in enumerate(items):
         row = [it["name"], it["unit"], f"{it['design']:.4f}", f"{it['signature']:.4f}"]
         row.append(_factor(it))
+        row.append("—" if it["compensated"] is None else f"{it['compensated']:.4f}")
+        row.append(
+            _factor(
+                {
+                    "improvement": it["improvement_compensated"],
+                    "improvement_is_lower_bound": it["improvement_compensated_is_lower_bound"],
+                }
+            )
+            if "improvement_compensated" in it
+            else "—"
+        )
         if task == "grid3d":
             j = grid3d_row[it["name"]]  # rows an arm cannot control are left out
             row += [" / ".join(f"{v:g}" for v in t[j]) for t in (THESIS_6_10, THESIS_6_11)]
@@ -113,10 +125,12 @@ def write_evaluation_report(session_dir: str | Path) -> Path:
         f"Rig: {rig['mode']}, servo {rig['servo']}, instruments {rig['instruments']}. "
         "Improvement = |design| / |signature|; '≥' where the signature's reading is within half "
         "a resolution step of zero (the factor is then at least |design| / resolution). "
-        "Thesis columns: design / signature / factor as printed.",
+        "Thesis columns: design / signature / factor as printed. Compensated: the design "
+        "controller (nominal model) driven to the targets `pipeline compensate` rewrites "
+        "(docs/compensate.md); '—' where the recording has no compensated run.",
         "",
         markdown_table(
-            ["task", "indices", "median improvement"],
+            ["task", "indices", "median improvement", "median improvement, compensated"],
             [
                 [
                     t,
@@ -126,7 +140,15 @@ def write_evaluation_report(session_dir: str | Path) -> Path:
                             "improvement": v["median_improvement"],
                             "improvement_is_lower_bound": False,
                         }
-                    ),
+                    ),  # fmt: skip
+                    _factor(
+                        {
+                            "improvement": v["median_improvement_compensated"],
+                            "improvement_is_lower_bound": False,
+                        }
+                    )
+                    if "median_improvement_compensated" in v
+                    else "—",
                 ]
                 for t, v in s["tasks"].items()
             ],

@@ -1,5 +1,6 @@
 """The machine-readable summary of a session's evaluation (``pipeline evaluate --json``
-and the evaluation report): every index of every task, design against signature."""
+and the evaluation report): every index of every task, design against signature, and the
+design controller driven to compensated targets beside them."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import numpy as np
 from pipeline.contract.evaluation import read_evaluation
 from pipeline.control.controller import task_axes_for
 from pipeline.evaluation.grid12 import CORNER_VERTICES
+from pipeline.evaluation.indices import improvement
 from pipeline.evaluation.score import AXIS_LETTERS, dropped_indices
 from pipeline.evaluation.tasks import TASK_NAMES, reading_resolution
 from pipeline.stages.runner import stage_path
@@ -43,31 +45,38 @@ def summarize(session_dir: str | Path) -> dict[str, Any]:
             )
             continue
         items = []
+        comp_run = all(r.get(f"compensated_{r['unit']}") is not None for r in rows)
         for r in rows:
             u = r["unit"]
-            d, sg = r[f"design_{u}"], r[f"signature_{u}"]
+            d, sg, comp = r[f"design_{u}"], r[f"signature_{u}"], r.get(f"compensated_{u}")
             res = reading_resolution(name, r["name"])
-            # A signature reading within half a resolution step of zero reads as zero:
-            # the factor is then only known to be at least |design| / resolution.
-            bound = bool(res and abs(sg) < 0.5 * res)
-            items.append(
-                {
-                    "name": r["name"],
-                    "unit": u,
-                    "signed": r["signed"],
-                    "design": d,
-                    "signature": sg,
-                    "improvement": abs(d) / res if bound else r["improvement"],
-                    "improvement_is_lower_bound": bound,
-                }
-            )
-        imp = np.array([i["improvement"] for i in items], float)
-        for i in items:  # JSON has no infinity: null means "signature error exactly 0"
-            i["improvement"] = i["improvement"] if np.isfinite(i["improvement"]) else None
-        median = float(np.median(imp))
+            imp, bound = _factor(d, sg, r["improvement"], res)
+            item = {
+                "name": r["name"],
+                "unit": u,
+                "signed": r["signed"],
+                "design": d,
+                "signature": sg,
+                "improvement": imp,
+                "improvement_is_lower_bound": bound,
+                # The design controller driven to compensated targets (null: not run).
+                "compensated": comp,
+            }
+            if comp_run:
+                factor = float(improvement(np.array([d]), np.array([comp]))[0])
+                ci, cb = _factor(d, comp, factor, res)
+                item["improvement_compensated"] = ci
+                item["improvement_compensated_is_lower_bound"] = cb
+            items.append(item)
         tasks[name] = {
             "indices": items,
-            "median_improvement": median if np.isfinite(median) else None,
+            "median_improvement": _median(items, "improvement"),
+            # |design| / |compensated| over the indices; absent: no compensated run.
+            **(
+                {"median_improvement_compensated": _median(items, "improvement_compensated")}
+                if comp_run
+                else {}
+            ),  # fmt: skip
             "not_applicable": dropped_indices(name, axes),
         }
     out: dict[str, Any] = {
@@ -83,3 +92,21 @@ def summarize(session_dir: str | Path) -> dict[str, Any]:
             str(v): rad[f"vertex{v}_radial_error_cm"] for v in CORNER_VERTICES
         }
     return out
+
+
+def _factor(design: float, value: float, factor: float, res: float | None) -> tuple[float, bool]:
+    """The improvement factor ``|design| / |value|`` and whether it is a lower bound: a
+    reading within half a resolution step of zero reads as zero, and the factor is then only
+    known to be at least ``|design| / resolution``."""
+    bound = bool(res and abs(value) < 0.5 * res)
+    return (abs(design) / res if bound and res else factor), bound
+
+
+def _median(items: list[dict[str, Any]], key: str) -> float | None:
+    """The median of ``key`` over the items; each item's infinite factor (an error exactly 0)
+    and the median's become null, as JSON has no infinity."""
+    values = np.array([i[key] for i in items], float)
+    for i in items:
+        i[key] = i[key] if np.isfinite(i[key]) else None
+    median = float(np.median(values))
+    return median if np.isfinite(median) else None

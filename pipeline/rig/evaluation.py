@@ -10,6 +10,7 @@ resolution (Sections 6.5.1-6.5.3).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,6 +20,7 @@ import numpy as np
 from pipeline.control.controller import task_axes_for
 from pipeline.errors import ArmsigError
 from pipeline.evaluation.controllers import (
+    CONTROLLERS,
     DesignModel,
     task_branches,
     task_poses,
@@ -128,6 +130,11 @@ class SimulatedRig:
         self.res = joints_to_internal(self.robot.encoder_resolution, self.robot.prismatic)
         rng = np.random.default_rng([seed, 6])  # issue 6's own stream
         self.rng_fixture, self.rng_servo = rng.spawn(2)
+        #: The servo stream's state before the signature's run of the last task: the
+        #: compensated run of that task replays it (common random numbers, issue 30), so
+        #: the two differ only by what their controllers command, and the design and
+        #: signature draws are those of an evaluation without the compensated run.
+        self._signature_servo_state: Mapping[str, Any] | None = None
         self.tasks = tasks_for(self.robot, self.nominal_tool)
         self.fixture = {}
         for t in self.tasks:
@@ -177,16 +184,22 @@ class SimulatedRig:
             starts += list(rng.uniform(lim[:, 0], lim[:, 1], (TEACH_STARTS, len(lim))))
         return starts
 
-    def reach(self, q_cmd: np.ndarray) -> np.ndarray:
+    def reach(self, q_cmd: np.ndarray, controller: str = "design") -> np.ndarray:
         """Joint positions (m, n) reached for commands (m, n) rad / cm: ±1 count servo."""
         if self.opts.perfect_servo:
             return q_cmd
         counts = np.round(q_cmd / self.res) * self.res  # the controller commands whole counts
-        return counts + self.rng_servo.uniform(-1.0, 1.0, q_cmd.shape) * self.res
+        rng = self.rng_servo
+        if controller == "signature":
+            self._signature_servo_state = rng.bit_generator.state
+        elif controller == "compensated" and self._signature_servo_state is not None:
+            rng = np.random.Generator(type(rng.bit_generator)())
+            rng.bit_generator.state = self._signature_servo_state
+        return counts + rng.uniform(-1.0, 1.0, q_cmd.shape) * self.res
 
     def measure(self, task: Task, controller: str, q_cmd: np.ndarray) -> list[dict[str, Any]]:
         """Instrument readings for one task's program (m, n) of one controller."""
-        q = self.reach(q_cmd)
+        q = self.reach(q_cmd, controller)
         if self.nongeometric is not None:
             q = self.nongeometric.effective(q)
         E = invert_transform(self.fixture[task.name]) @ forward_kinematics(self.chain, q)
@@ -245,7 +258,7 @@ def record_evaluation(
             payload = {"task": task.name, "point": k + 1, "q_encoder": [float(v) for v in qb[k]]}
             messages.append(Message("/eval/teach", t, {**payload, "units": units}))
     for task in rig.tasks:
-        for controller in ("design", "signature"):
+        for controller in CONTROLLERS:
             rows = [
                 r for r in program or [] if r["task"] == task.name and r["controller"] == controller
             ]

@@ -1,5 +1,6 @@
-"""Stage ``evaluate_indices``: the performance indices of every measured task, both
-controllers, and the improvement factor (Tables 6-6 to 6-11, Section 7.2.1)."""
+"""Stage ``evaluate_indices``: the performance indices of every measured task, each
+controller (design, signature, compensated), and the improvement factor of the signature
+over the design model (Tables 6-6 to 6-11, Section 7.2.1)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     measured = set(meas.column("task").to_pylist())
     robot = session_robot(inputs["session"])
     cols: dict[str, list[Any]] = {
-        k: [] for k in ("task", "index", "name", "unit", "signed", "d", "s")
+        k: [] for k in ("task", "index", "name", "unit", "signed", "d", "s", "c")
     }
     for task in tasks_for(robot, nominal_tool(inputs["session"])):
         if task.name not in measured:
@@ -37,7 +38,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
             cols["signed"].append(signed)
             cols["d"].append(values[0, k])
             cols["s"].append(values[1, k])
-    d, s = np.array(cols["d"], float), np.array(cols["s"], float)
+            cols["c"].append(values[2, k])
+    d, s, c = (np.array(cols[k], float) for k in ("d", "s", "c"))
     cm = np.array([u == "cm" for u in cols["unit"]], bool)
     return pa.table(
         {
@@ -50,6 +52,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
             "signature_cm": pa.array(np.where(cm, s, np.nan), mask=~cm),
             "design_deg": pa.array(np.where(cm, np.nan, d), mask=cm),
             "signature_deg": pa.array(np.where(cm, np.nan, s), mask=cm),
+            "compensated_cm": pa.array(c, mask=~cm | np.isnan(c)),
+            "compensated_deg": pa.array(c, mask=cm | np.isnan(c)),
             "improvement": improvement(d, s),
         }
     )
@@ -57,7 +61,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 STAGE = Stage(
     "evaluate_indices",
-    1,
+    2,  # 2: the compensated controller's columns (issue 30)
     ("evaluate_measurements", "evaluate_program", "session"),
     NoParams(),
     compute,

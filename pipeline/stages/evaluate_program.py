@@ -1,6 +1,6 @@
 """Stage ``evaluate_program``: each controller's joint program for every taught task.
 
-Per controller (design, signature; :mod:`pipeline.evaluation.controllers`):
+Per controller (design, signature, compensated; :mod:`pipeline.evaluation.controllers`):
 teach the workspace frame from the recorded readings with the controller's own
 forward kinematics (Section 6.5), put the task's points in it with the
 constant tool orientation, and solve for the joints on the planned Puma branch
@@ -16,6 +16,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.evaluation.controllers import (
+    CompensatedModel,
     DesignModel,
     SignatureModel,
     flange_angle,
@@ -32,8 +33,6 @@ from pipeline.stages.positions import positions, sweep_rows, sweep_targets
 from pipeline.stages.session import session_plan, session_robot
 from pipeline.units import joints_to_boundary, joints_to_internal
 
-CONTROLLERS = ("design", "signature")
-
 
 def nominal_tool(session: pa.Table) -> np.ndarray:
     """Nominal probe on the last link (4, 4), from the recorded measurement plan."""
@@ -45,13 +44,9 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     pris = robot.prismatic
     tool = nominal_tool(inputs["session"])
     sig = inputs["signature"]
-    models = (
-        DesignModel(robot, tool),
-        SignatureModel(
-            sig,
-            flange_angle(sig.chain, *_last_link_points(inputs, sig.chain)),
-        ),
-    )
+    design = DesignModel(robot, tool)
+    signature = SignatureModel(sig, flange_angle(sig.chain, *_last_link_points(inputs, sig.chain)))
+    models = (design, signature, CompensatedModel(design, signature))
     teach = inputs["evaluate_teach"]
     names = teach.column("task").to_pylist()
     points = teach.column("point").to_pylist()
@@ -95,11 +90,11 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 STAGE = Stage(
     "evaluate_program",
-    1,
+    2,  # 2: the compensated controller (issue 30)
     ("evaluate_teach", "signature", "session", "joints", "positions"),
     NoParams(),
     compute,
-    "joint programs of the design and signature controllers",
+    "joint programs of the design, signature and compensated controllers",
 )
 
 
