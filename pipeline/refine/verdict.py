@@ -118,6 +118,7 @@ class Evidence:
     reach_cm: float | None = None
     nongeometric: tuple[str, ...] = field(default_factory=tuple)
     noise_stated: bool = True  # False: imported points without a σ (χ² rules not applied)
+    stated_sigma_cm: float | None = None  # the points' median stated σ (None: sonic, or none)
 
 
 @dataclass(frozen=True)
@@ -330,7 +331,8 @@ def _line(level: str, e: Evidence, reasons: tuple[str, ...], t: Thresholds) -> s
     if not e.noise_stated:
         parts.append("χ² not judged (no stated point noise: map sigma, docs/import.md)")
     elif e.chi2_per_dof is not None:
-        parts.append(f"χ²/dof {e.chi2_per_dof:.2f}")
+        at = "" if e.stated_sigma_cm is None else f" (stated σ {e.stated_sigma_cm:.3g} cm)"
+        parts.append(f"χ²/dof {e.chi2_per_dof:.2f}{at}")
     if e.biases:
         worst = max(b.sigmas for b in e.biases)
         within = not any(_sensor_fires(b, t.bias_sigmas, t) for b in e.biases)

@@ -35,7 +35,7 @@ NUMBERS = (
     "predicted_rms_cm", "predicted_p95_cm", "predicted_max95_cm", "holdout_rms_cm",
     "holdout_expected_rms_cm", "design_misfit_rms_cm", "improvement", "chi2_per_dof",
     "chi2_recorded_per_dof", "max_bias_sigmas", "max_mic_sigmas", "design_reach_cm",
-    "predicted_limit_cm",
+    "predicted_limit_cm", "stated_sigma_cm",
 )  # fmt: skip
 
 
@@ -62,22 +62,13 @@ def _rms(v: np.ndarray) -> float | None:
     return float(np.sqrt(np.mean(v**2))) if len(v) else None
 
 
-def noise_stated(session: pa.Table, positions: pa.Table) -> bool:
-    """Whether the measurements' noise is known: the sonic digitizer's noise law, or a σ
-    recorded with the points (a tracker's, an import's map ``sigma``); an imported file
-    without one weighs every point 1 cm (:func:`pipeline.refine.points.position_covariances`)."""
-    from pipeline.stages.positions import recorded_sigma_cm
-    from pipeline.stages.session import session_sensor
-
-    return session_sensor(session) == "sonic" or recorded_sigma_cm(positions) is not None
-
-
 def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, Any]]:
     """The evidence of a session's stage tables, and the numbers of the verdict row."""
     from pipeline.signature.alignment import design_alignment
     from pipeline.stages.frames import chain_from_frames
+    from pipeline.stages.positions import recorded_sigma_cm
     from pipeline.stages.refine import refine_summary
-    from pipeline.stages.session import session_robot
+    from pipeline.stages.session import session_robot, session_sensor
     from pipeline.stages.uncertainty import summary
 
     refine = inputs["refine"]
@@ -89,6 +80,7 @@ def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, Any]]:
     unc = summary(inputs["uncertainty"])
     hold = inputs["holdout"]
     robot = session_robot(inputs["session"])
+    sigma = recorded_sigma_cm(inputs["positions"])  # None: sonic (its noise law) or unstated
     misfit = design_alignment(chain_from_frames(inputs["chain"], robot.prismatic), robot)[2]
     predicted = None if unc is None else unc["sigma_position_aligned_rms_cm"]
     e = Evidence(
@@ -107,7 +99,8 @@ def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, Any]]:
         design_misfit_cm=misfit,
         reach_cm=robot.reach_cm,
         nongeometric=tuple(summ.get("nongeometric", {}).get("terms", [])),
-        noise_stated=noise_stated(inputs["session"], inputs["positions"]),
+        noise_stated=session_sensor(inputs["session"]) == "sonic" or sigma is not None,
+        stated_sigma_cm=sigma,
     )
     numbers = {
         "predicted_rms_cm": e.predicted_rms_cm,
@@ -122,6 +115,7 @@ def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, Any]]:
         "max_bias_sigmas": max((b.sigmas for b in e.biases), default=None),
         "max_mic_sigmas": max((b.sigmas for b in e.mic_moves), default=None),
         "design_reach_cm": e.reach_cm,
+        "stated_sigma_cm": sigma,
         "noise_stated": e.noise_stated,
     }
     return e, numbers
