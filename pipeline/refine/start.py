@@ -54,12 +54,15 @@ class DesignStart:
         Sensor from the design's world frame (the registration).
     rms_cm : float
         RMS distance of the measured points from the registered design model.
+    errors_cm : ndarray, shape (K,)
+        Each measured point's distance from it.
     """
 
     frames: Array
     tool: Array
     base: Array
     rms_cm: float
+    errors_cm: Array
 
 
 def design_start(
@@ -104,9 +107,10 @@ def design_start(
         if moved < _STOP_CM:
             break
     p = (flange[:, :3, :3] @ t) + flange[:, :3, 3]
-    rms = float(np.sqrt(np.mean(np.sum((p @ B[:3, :3].T + B[:3, 3] - measured) ** 2, axis=1))))
+    errors = np.linalg.norm(p @ B[:3, :3].T + B[:3, 3] - measured, axis=1)
+    rms = float(np.sqrt(np.mean(errors**2)))
     F = B @ link_frames(chain, np.asarray(q_signature, float))  # (n + 2, 4, 4)
     frames = np.concatenate([F[:n], F[n - 1 : n]], axis=0)
     tool = np.eye(4)
     tool[:3, 3] = invert_transform(frames[n])[:3] @ np.r_[F[n, :3, :3] @ t + F[n, :3, 3], 1.0]
-    return DesignStart(frames=frames, tool=tool, base=B, rms_cm=rms)
+    return DesignStart(frames=frames, tool=tool, base=B, rms_cm=rms, errors_cm=errors)
