@@ -23,6 +23,10 @@ from pipeline.importers.mapping import ImportMap, load_map
 from pipeline.signature.file import FILE_NAME, Signature
 from pipeline.signature.session import load_session_signature
 
+#: The base and tool alternation's rounds at most for the design baseline: it stops once
+#: the base moves by less than 1e-12 cm (:func:`pipeline.refine.start.design_start`).
+BASELINE_ROUNDS = 10_000
+
 
 def _as_poses(imap: ImportMap) -> ImportMap:
     """The map read as a plain list of poses: every row checked, no sweeps inferred."""
@@ -63,7 +67,8 @@ def design_errors(sig: Signature, q: np.ndarray, measured: np.ndarray) -> np.nda
 
     qi = joints_to_internal(q, sig.prismatic)
     tool = sig.design_flange_to_tool[:3, 3]  # a start: the tool point is re-solved
-    return design_start(sig.robot.design_chain(), qi, measured, tool, qi[0]).errors_cm
+    chain = sig.robot.design_chain()
+    return design_start(chain, qi, measured, tool, qi[0], BASELINE_ROUNDS).errors_cm
 
 
 def validate_against(

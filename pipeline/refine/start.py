@@ -66,7 +66,12 @@ class DesignStart:
 
 
 def design_start(
-    chain: SerialChain, q: Array, measured: Array, tool_local: Array, q_signature: Array
+    chain: SerialChain,
+    q: Array,
+    measured: Array,
+    tool_local: Array,
+    q_signature: Array,
+    rounds: int = START_ROUNDS,
 ) -> DesignStart:
     """The registered design start (module docstring).
 
@@ -82,12 +87,16 @@ def design_start(
         The design's tool point in the last D-H frame (cm).
     q_signature : ndarray, shape (n,)
         ``q̄^s``, where the frames are taken (rad / cm).
+    rounds : int
+        The alternation's rounds at most (:data:`START_ROUNDS` for a start the refinement
+        improves on; a baseline in its own right needs it converged, e.g. the RCT
+        positioner's 205 poses: 1.853 cm RMS after 50 rounds, 0.04527 cm after 500).
     """
     n = chain.n_joints
     flange = link_frames(chain, q)[:, n]  # (K, 4, 4): F_n(q_k)
     t = np.asarray(tool_local, float).copy()
     B = np.eye(4)
-    for _ in range(START_ROUNDS):
+    for _ in range(rounds):
         p = (flange[:, :3, :3] @ t) + flange[:, :3, 3]
         B_new = register_rigid(p, measured)
         if B_new is None:
