@@ -132,6 +132,30 @@ def test_rct_positioner_validated_on_all_poses(tmp_path: Path) -> None:
     assert every["n"] == 205 and every["mean_cm"] < 0.174, every
 
 
+def _verdict(d: Path) -> dict:
+    return read_table(d / "stages" / "verdict.arrow").to_pylist()[0]
+
+
+def test_stated_sigma_on_sscanss2_and_rct(tmp_path: Path) -> None:
+    """Issue 29: with the examples' stated σ the verdict judges χ² (0.00 before, no σ).
+    SScanSS-2's table at its measured 0.006 mm: χ²/dof 33.9, the rigid chain leaves
+    0.069 mm; the RCT positioner at its radial 0.2 mm: 0.77 (docs/import.md)."""
+    table = _session(tmp_path, "table", REALDATA / "sscanss2" / "table.txt", "sscanss2",
+                     EXAMPLES / "sscanss2" / "table.toml",
+                     EXAMPLES / "sscanss2" / "table_sigma.toml")  # fmt: skip
+    v = _verdict(table)
+    assert v["stated_sigma_cm"] == pytest.approx(0.0006) and 25 < v["chi2_per_dof"] < 45, v
+    assert v["verdict"] == "FAIL" and v["reason_rules"] == ["chi2_fail"], v["reasons"]
+    assert "(stated σ 0.0006 cm)" in v["line"]
+    rct = _session(tmp_path, "rct",
+                   REALDATA / "rct_positioner" / "positioner_kinematic_measurements.yaml", "rct",
+                   EXAMPLES / "rct_positioner" / "positioner.toml",
+                   EXAMPLES / "rct_positioner" / "map.toml")  # fmt: skip
+    v = _verdict(rct)
+    assert v["stated_sigma_cm"] == pytest.approx(0.02) and 0.5 < v["chi2_per_dof"] < 1.2, v
+    assert "χ²/dof 0.77 (stated σ 0.02 cm)" in v["line"], v["line"]
+
+
 UR10_DATA = REALDATA / "ur10_ipa"
 UR10_EXAMPLE = EXAMPLES / "ur10_ipa"
 needs_ur10 = pytest.mark.skipif(

@@ -21,6 +21,7 @@ GOOD = Evidence(
     improvement=38.0,
     biases=(SensorParameter("bias_A", "cm", 0.001, 0.002),),
     mic_moves=(SensorParameter("mic_B.x", "cm", 0.01, 0.02),),
+    reach_cm=176.606,  # the Puma's
 )
 
 
@@ -37,15 +38,16 @@ def test_pass_when_no_rule_fires() -> None:
     ("change", "level", "words"),
     [
         ({"status": "not converged"}, FAIL, "did not converge"),
-        ({"predicted_rms_cm": 0.71}, FAIL, "predicted RMS tool error 0.71 cm > 0.1 cm"),
+        ({"predicted_rms_cm": 0.71}, FAIL, "predicted RMS tool error 0.71 cm > 0.1007 cm "
+         "(0.00057 × the design's reach 176.6 cm); the held-out points (0.009 cm)"),
         ({"chi2_per_dof": 12.0, "chi2_recorded_per_dof": 40.0}, FAIL, "cannot explain"),
-        ({"chi2_per_dof": 3.8, "chi2_recorded_per_dof": 3.9}, CHECK, "χ²/dof 3.80 > 2"),
+        ({"chi2_per_dof": 3.8, "chi2_recorded_per_dof": 3.9}, CHECK, "χ²/dof 3.8 > 2"),
         # a high recorded χ² the self-calibration explains: no χ² reason at all
         ({"chi2_recorded_per_dof": 40.0}, PASS, ""),
         ({"biases": (SensorParameter("bias_B", "cm", 0.05, 0.004),)}, CHECK,
          "bias_B: range bias +0.05 ± 0.004 cm (12.5σ > 3.6σ): the digitizer's calibration is off"),
         ({"mic_moves": (SensorParameter("mic_A.y", "cm", -0.5, 0.05),)}, CHECK,
-         "mic_A.y: position -0.5 ± 0.05 cm (10.0σ > 3.6σ)"),
+         "mic_A.y: position -0.5 ± 0.05 cm (10σ > 3.6σ)"),
         ({"holdout_rms_cm": 0.02}, CHECK, "held-out RMS error 0.02 cm > 2 × its prediction"),
         ({"improvement": 0.8}, CHECK, "improvement over the design model 0.8× < 1×"),
         ({"refined": False, "status": "disabled"}, CHECK, "refinement disabled"),
@@ -107,9 +109,9 @@ def test_fail_outranks_check_and_lists_every_reason() -> None:
     fail, check = v.findings
     assert (fail.level, fail.rule, fail.value, fail.threshold) == (
         FAIL,
-        "max_predicted_rms_cm",
+        "max_predicted_rms_reach",
         0.71,
-        0.1,
+        pytest.approx(5.7e-4 * 176.606),
     )
     assert (check.level, check.rule, check.value, check.threshold) == (
         CHECK,

@@ -42,11 +42,11 @@ def test_a_verdict_parameter_changes_the_line(identified_session: Path, tmp_path
     """A threshold below the session's predicted error: FAIL, with that reason, exit 4."""
     d = shutil.copytree(identified_session, tmp_path / "s")
     r = runner.invoke(
-        app, ["identify", str(d), "--no-report", "--param", "verdict.max_predicted_rms_cm=1e-6"]
+        app, ["identify", str(d), "--no-report", "--param", "verdict.max_predicted_rms_reach=1e-8"]
     )
     assert r.exit_code == EXIT_VERDICT_FAIL, r.output
     last = r.stdout.strip().splitlines()[-1]
-    assert last.startswith("s: FAIL  predicted ") and "> 1e-06 cm" in last
+    assert last.startswith("s: FAIL  predicted ") and "> 1.766e-06 cm" in last
 
 
 def test_report_starts_with_the_verdict(identified_session: Path, tmp_path: Path) -> None:

@@ -18,7 +18,7 @@ from pipeline.errors import VerdictFailError
 from pipeline.signature.verdict import verdict_from_row, verdict_gate
 
 runner = CliRunner()
-FAIL_PARAM = "verdict.max_predicted_rms_cm=1e-6"  # below any session's predicted error
+FAIL_PARAM = "verdict.max_predicted_rms_reach=1e-8"  # below any session's predicted error
 CHECK_PARAM = "verdict.min_improvement=1e9"  # no signature is that much better
 
 
@@ -63,8 +63,10 @@ def test_identify_json_carries_the_verdict_as_data(failed: Path) -> None:
     v = doc["verdict_detail"]
     assert doc["verdict"].startswith("fail: FAIL") and v["status"] == "FAIL"
     first = v["reasons"][0]
-    assert first["level"] == "FAIL" and first["rule"] == "max_predicted_rms_cm"
-    assert first["threshold"] == 1e-6 and first["value"] == v["numbers"]["predicted_rms_cm"] > 1e-6
+    assert first["level"] == "FAIL" and first["rule"] == "max_predicted_rms_reach"
+    limit = v["numbers"]["predicted_limit_cm"]
+    assert limit == 1e-8 * v["numbers"]["design_reach_cm"] and first["threshold"] == limit
+    assert first["value"] == v["numbers"]["predicted_rms_cm"] > limit
     assert "predicted RMS tool error" in first["text"]
 
 

@@ -42,7 +42,7 @@ def test_misfit_rule_on_evidence() -> None:
     v = judge(far)
     assert v.level == FAIL and len(v.reasons) == 1
     assert v.findings[0].rule == "max_design_misfit" and v.findings[0].threshold == 0.05
-    assert "39.5 cm RMS" in v.reasons[0] and "0.31× the design's reach of 125 cm" in v.reasons[0]
+    assert "39.5 cm RMS" in v.reasons[0] and "0.315× the design's reach of 125.4 cm" in v.reasons[0]
 
 
 def test_x_and_y_swapped_fail(tmp_path: Path) -> None:

@@ -3,12 +3,14 @@ compensate, ik-convergence). The work is in :mod:`pipeline.control`."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from pipeline.cli.options import (
     AcceptVerdict,
+    ExportFrame,
     JsonOption,
     Method,
     PayloadOption,
@@ -54,14 +56,24 @@ def fk(
         bool, typer.Option(help="For a session: the design model's pose of the session's tool.")
     ] = False,
     payload_kg: PayloadOption = None,
+    frame: Annotated[
+        ExportFrame,
+        choice(
+            "For a session, the world frame of the pose: design-base (default: the design "
+            "base placed by the design alignment, what `ik --pose` takes back) or sensor "
+            "(where the points were measured: the prediction of a measurement)."
+        ),
+    ] = ExportFrame.design_base,
     as_json: JsonOption = False,
 ) -> None:
     """Print the tool pose at joint values Q (a session's signature or a design model).
 
     For a session: the pose of its signature's tool in the design base frame (what
-    `pipeline ik SESSION --pose` takes back); with --design, the design model's pose
-    of that tool. For a robot: the pose of its design flange. --json prints every
-    number at full precision; --q-file takes many configurations (with --out or --json).
+    `pipeline ik SESSION --pose` takes back), or with --frame sensor in the sensor frame
+    (what the tracker would measure); with --design, the design model's pose of that
+    tool. For a robot: the pose of its design flange in its base frame. The output names
+    the frame. --json prints every number at full precision; --q-file takes many
+    configurations (with --out or --json).
     """
     import numpy as np
 
@@ -74,11 +86,11 @@ def fk(
     if q_file is not None:
         if out is None and not as_json:
             raise ArmsigError("--q-file needs --out or --json", fix="--out poses.arrow")
-        done = poses_of_file(robot, q_file, design=design, out=out, force=force)
+        done = poses_of_file(robot, q_file, design=design, out=out, force=force, frame=frame.value)
         if as_json:
             print_json(done.to_dict())
         else:
-            typer.echo(f"wrote {done.out}: {len(done.q)} poses of {done.robot}")
+            typer.echo(f"wrote {done.out}: {len(done.q)} poses of {done.robot} ({done.frame})")
         outside = sum(1 for names in done.poses.outside_limits if names)
         if outside:
             warn(f"{outside} configuration(s) outside joint limits (column outside_limits)")
@@ -87,11 +99,13 @@ def fk(
         raise ArmsigError("--out is for --q-file", fix="drop --out, or give --q-file")
     assert q is not None
     values = joint_values(q, "--q")
-    pose = tool_pose(robot, values, design=design, payload_kg=payload_kg)
+    pose = tool_pose(robot, values, design=design, payload_kg=payload_kg, frame=frame.value)
+    where = frame.value if Path(robot).is_dir() else "base"  # a description: its base frame
     if as_json:
         print_json(
             {
                 "q": values,
+                "frame": where,
                 "xyz_cm": pose.xyz_cm.tolist(),
                 "rpy_deg": pose.rpy_deg.tolist(),
                 "matrix": pose.matrix.tolist(),
@@ -100,6 +114,7 @@ def fk(
         )
     else:
         with np.printoptions(precision=6, suppress=True):
+            typer.echo(f"frame   = {where}")
             typer.echo(f"xyz_cm  = {pose.xyz_cm}")
             typer.echo(f"rpy_deg = {pose.rpy_deg}")
             typer.echo("T =")

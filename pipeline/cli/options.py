@@ -34,7 +34,7 @@ class ExportFormat(StrEnum):
 
 
 class ExportFrame(StrEnum):
-    """``export --frame``: the exported chain's world frame."""
+    """``export --frame`` and ``fk --frame``: the world frame of an exported chain or a pose."""
 
     sensor = "sensor"
     design_base = "design-base"

@@ -154,7 +154,12 @@ def validate(
     map: Annotated[str | None, typer.Option(help="Map file (TOML) of the second file.")] = None,
     as_json: JsonOption = False,
 ) -> None:
-    """The signature's position error on a second file (read in memory, nothing written)."""
+    """The signature's position error on a second file (read in memory, nothing written).
+
+    Every row is a pose to check (no sweeps needed); its target must be the session's tool
+    point (matched by id). The design model with its base and tool registered to the same
+    points is shown beside the signature (the error without the calibration).
+    """
     from pipeline.evaluate.validate import validate_against
 
     r = validate_against(session, against, format, map)
@@ -175,3 +180,7 @@ def validate(
             f"  base registered:  mean {r['registered_mean_cm']:.4g}  "
             f"RMS {r['registered_rms_cm']:.4g}  max {r['registered_max_cm']:.4g} cm"
         )
+    typer.echo(
+        f"  design model, base and tool registered:  mean {r['design_registered_mean_cm']:.4g}  "
+        f"RMS {r['design_registered_rms_cm']:.4g}  max {r['design_registered_max_cm']:.4g} cm"
+    )

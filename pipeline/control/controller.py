@@ -48,6 +48,7 @@ from pipeline.kinematics.ik.result import STATUS_CONVERGED, STATUS_OUT_OF_LIMITS
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.robots.description import RobotDescription
 from pipeline.robots.fk import ToolPose, ToolPoses, chain_pose, chain_poses
+from pipeline.signature.alignment import FRAMES
 from pipeline.signature.file import Signature
 from pipeline.units import joints_to_internal
 
@@ -166,18 +167,21 @@ class Controller:
         tool = d.tool @ self.flange_to_tool
         return SerialChain(d.links, d.prismatic, base, tool, d.joint_offsets)
 
-    def pose(self, q: np.ndarray | list[float], design: bool = False) -> ToolPose:
-        """The signature tool's pose in the design base frame at joint readings ``q`` (n,),
-        deg / cm (the joints where the signature's non-geometric terms put them): what
-        :meth:`solve` takes back. ``design``: the design model's pose of the same tool
-        (its flange times ``Y``), for comparison."""
+    def pose(
+        self, q: np.ndarray | list[float], design: bool = False, frame: str = "design-base"
+    ) -> ToolPose:
+        """The signature tool's pose at joint readings ``q`` (n,), deg / cm (the joints
+        where the signature's non-geometric terms put them), in ``frame``: the design base
+        frame (what :meth:`solve` takes back) or the sensor frame (where the points were
+        measured: the model's prediction of a measurement). ``design``: the design model's
+        pose of the same tool (its flange times ``Y``), for comparison."""
         ng = None if design else self.signature.nongeometric
-        return chain_pose(self.robot, self._pose_chain(design), q, ng)
+        return chain_pose(self.robot, self._pose_chain(design, frame), q, ng)
 
-    def poses(self, q: np.ndarray, design: bool = False) -> ToolPoses:
+    def poses(self, q: np.ndarray, design: bool = False, frame: str = "design-base") -> ToolPoses:
         """:meth:`pose` of joint readings ``q`` (m, n), deg / cm, in one batch."""
         ng = None if design else self.signature.nongeometric
-        return chain_poses(self.robot, self._pose_chain(design), q, ng)
+        return chain_poses(self.robot, self._pose_chain(design, frame), q, ng)
 
     def _readings(self, res: IKResult) -> IKResult:
         """``res`` (where the joints must sit) as the readings that put them there under the
@@ -191,9 +195,13 @@ class Controller:
         status[res.converged & outside_mask(q, self._limits).any(axis=1)] = STATUS_OUT_OF_LIMITS
         return replace(res, q=q, status=status, converged=status == STATUS_CONVERGED)
 
-    def _pose_chain(self, design: bool) -> SerialChain:
-        """The chain :meth:`pose` evaluates, in the design base frame."""
+    def _pose_chain(self, design: bool, frame: str = "design-base") -> SerialChain:
+        """The chain :meth:`pose` evaluates, in ``frame`` (:data:`FRAMES`)."""
+        if frame not in FRAMES:
+            raise ArmsigError(f"unknown frame {frame!r}", expected=" | ".join(FRAMES))
         X = self.sensor_from_base
+        if frame == "sensor":
+            return self._design_model(X) if design else self.signature.chain
         return self._design_model() if design else in_frame(self.signature.chain, X)
 
     def default_branch(self):  # -> Branch

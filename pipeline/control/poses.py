@@ -27,28 +27,46 @@ from pipeline.robots.fk import ToolPose, ToolPoses
 if TYPE_CHECKING:
     from pipeline.control.controller import Controller
 
+#: ``fk``'s world frame by default: the design base frame, what ``ik --pose`` takes back.
+DEFAULT_FRAME = "design-base"
+
 
 def tool_pose(
-    robot: str | Path, q: Sequence[float], design: bool = False, payload_kg: float | None = None
+    robot: str | Path,
+    q: Sequence[float],
+    design: bool = False,
+    payload_kg: float | None = None,
+    frame: str = DEFAULT_FRAME,
 ) -> ToolPose:
     """The tool pose at joint readings ``q`` (n,), deg / cm.
 
-    ``robot``: an identified session folder (the pose of its signature's tool in the
-    design base frame, what :func:`solve_pose` takes back, under ``payload_kg`` when
-    given (:meth:`Controller.with_payload`); ``design``: the design model's pose of that
-    tool), else a built-in robot name or a ``.toml`` description (the pose of its design
-    flange).
+    ``robot``: an identified session folder (the pose of its signature's tool in
+    ``frame``: the design base frame, what :func:`solve_pose` takes back, or the sensor
+    frame, the model's prediction of a measured point; under ``payload_kg`` when given
+    (:meth:`Controller.with_payload`); ``design``: the design model's pose of that tool),
+    else a built-in robot name or a ``.toml`` description (the pose of its design flange
+    in its base frame).
     """
     model = _pose_model(robot)
     if not isinstance(model, RobotDescription):
         if payload_kg is not None:
             model = model.with_payload(payload_kg)
-        return model.pose(list(q), design=design)  # type: ignore[no-any-return]
-    if payload_kg is not None:
-        raise ArmsigError("--payload-kg needs an identified session", fix="give a session folder")
+        return model.pose(list(q), design=design, frame=frame)  # type: ignore[no-any-return]
+    _session_options(payload_kg, frame)
     from pipeline.robots.fk import design_pose
 
     return design_pose(model, list(q))
+
+
+def _session_options(payload_kg: float | None, frame: str) -> None:
+    """Refuse the options only a session has, given with a robot description."""
+    if payload_kg is not None:
+        raise ArmsigError("--payload-kg needs an identified session", fix="give a session folder")
+    if frame != DEFAULT_FRAME:
+        raise ArmsigError(
+            f"--frame {frame} needs an identified session (a robot description has no sensor)",
+            fix="give a session folder, or drop --frame",
+        )
 
 
 def _pose_model(robot: str | Path) -> Any:
@@ -72,6 +90,7 @@ class PosesFile:
     q: np.ndarray
     poses: ToolPoses
     out: str | None
+    frame: str = DEFAULT_FRAME
 
     def to_dict(self) -> dict[str, Any]:
         """Every pose at full precision (``fk --q-file --json``)."""
@@ -80,6 +99,7 @@ class PosesFile:
             "robot": self.robot,
             "joints": list(self.joints),
             "out": self.out,
+            "frame": self.frame,
             "poses": [
                 {
                     "q": self.q[k].tolist(),
@@ -100,13 +120,15 @@ def poses_of_file(
     design: bool = False,
     out: str | Path | None = None,
     force: bool = False,
+    frame: str = DEFAULT_FRAME,
 ) -> PosesFile:
     """:func:`tool_pose` of every configuration of ``q_file`` (Arrow IPC or CSV, columns
     ``q1_deg`` ... as ``ik --targets`` writes: :func:`pipeline.control.targets.read_joints`).
 
     ``out``: an Arrow file of the input's columns plus the poses (``x_cm`` ... ``rz_deg``,
-    an ``ik --targets`` input) and ``outside_limits``, written atomically; an existing
-    file is replaced only with ``force``.
+    an ``ik --targets`` input in the design base frame) and ``outside_limits``, written
+    atomically (metadata ``frame``); an existing file is replaced only with ``force``.
+    ``frame``: as :func:`tool_pose`.
     """
     import pyarrow as pa
 
@@ -119,13 +141,19 @@ def poses_of_file(
     desc = model if isinstance(model, RobotDescription) else model.robot
     table, q = read_joints(q_file, desc)
     if out is not None:
+        if frame != DEFAULT_FRAME:  # ik --targets would read them in the design base frame
+            raise ArmsigError(
+                f"--out writes an `ik --targets` input, in the {DEFAULT_FRAME} frame, not {frame}",
+                fix=f"--json for {frame}-frame poses, or drop --frame",
+            )
         if Path(out).resolve() == Path(q_file).resolve():
             raise ArmsigError(f"--out {out} is the --q-file file", fix="--out poses.arrow")
         check_new_file(out, "--out", force)
     if isinstance(model, RobotDescription):
+        _session_options(None, frame)
         poses = chain_poses(desc, desc.design_chain(), q)
     else:
-        poses = model.poses(q, design=design)
+        poses = model.poses(q, design=design, frame=frame)
     if out is not None:
         values = np.concatenate([poses.xyz_cm, poses.rpy_deg], axis=1)
         extra = {c: pa.array(values[:, k], pa.float64()) for k, c in enumerate(TARGET_COLUMNS)}
@@ -133,9 +161,10 @@ def poses_of_file(
         table = table.drop_columns([c for c in table.column_names if c in extra])
         for name, values_ in extra.items():
             table = table.append_column(name, values_)
-        write_table(Path(out), table, {"robot": desc.name, "design": str(design)})
+        meta = {"robot": desc.name, "design": str(design), "frame": frame}
+        write_table(Path(out), table, meta)
     joints = tuple(j.name for j in desc.joints)
-    return PosesFile(desc.name, joints, q, poses, None if out is None else str(out))
+    return PosesFile(desc.name, joints, q, poses, None if out is None else str(out), frame)
 
 
 @dataclass(frozen=True)

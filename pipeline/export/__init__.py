@@ -33,13 +33,13 @@ from pipeline.export.sidecar import check_sidecar, sidecar_document, sidecar_pat
 from pipeline.export.urdf import M_PER_CM, chain_from_origins, urdf_text, written_origins
 from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
 from pipeline.kinematics.transforms import invert_transform, pose_error
+from pipeline.signature.alignment import FRAMES
 from pipeline.signature.file import FILE_NAME, Signature, signature_from_document
 from pipeline.signature.session import load_session_document
 from pipeline.signature.verdict import verdict_gate
 from pipeline.units import joints_to_internal
 
 FORMATS = ("urdf", "dh", "mdh", "json")
-FRAMES = ("sensor", "design-base")
 EXPORT_DIR = "export"
 _SUFFIX = {"urdf": ".urdf", "dh": ".dh.json", "mdh": ".mdh.json", "json": ".chain.json"}
 #: What the warning calls each format: all four hold the rigid chain only.

@@ -57,7 +57,9 @@ def parse_foreign(
     if fmt == "sscanss2":
         from pipeline.importers.sscanss2 import read_sscanss2
 
-        return read_sscanss2(path, robot)
+        imap.only_sigma(fmt)
+        rows, home = read_sscanss2(path, robot)
+        return rows.with_sigma(imap.sigma_cm), home
     if fmt == "table":
         from pipeline.importers.table import read_table
 
@@ -70,7 +72,7 @@ def parse_foreign(
     else:
         from pipeline.importers.rct import read_rct
 
-        rows = read_rct(path, robot)
+        rows = read_rct(path, robot).with_sigma(imap.sigma_cm)
         if imap.poses:
             rows = pose_set(rows, imap)
         elif imap.select:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -104,6 +104,28 @@ class ImportMap:
     def name(self) -> str:
         """The map's file name for messages ("map" without a file)."""
         return self.path.name if self.path else "map"
+
+    @property
+    def sigma_cm(self) -> float | None:
+        """The stated ``sigma`` in cm (it is in ``length_unit``), None when not stated."""
+        from pipeline.importers.rows import LENGTH_CM, unit_factor
+
+        if self.sigma is None:
+            return None
+        unit = unit_factor(self.length_unit, LENGTH_CM, "length", f"{self.name}: length_unit")
+        return self.sigma * unit
+
+    def only_sigma(self, fmt: str) -> None:
+        """Refuse a map that says more than a σ (``sigma``, ``length_unit``) for ``fmt``,
+        a format whose file states everything else (sscanss2)."""
+        plain = replace(self, path=None, sigma=None, length_unit=ImportMap.length_unit)
+        if plain != ImportMap():
+            raise ImportFileError(
+                f"{self.name}: --format {fmt} reads only sigma and length_unit from a map",
+                expected="a map of: sigma = 0.01 (and length_unit, default mm)",
+                got="columns, sweeps or other keys",
+                fix=f"drop the other keys (the {fmt} file states its columns and sweeps)",
+            )
 
 
 def _refuse(src: str, key: str, what: str, expected: str, got: Any) -> ImportFileError:

@@ -73,6 +73,14 @@ class MeasuredRows:
             payload_kg=None if self.payload_kg is None else self.payload_kg[idx],
         )
 
+    def with_sigma(self, sigma_cm: float | None) -> MeasuredRows:
+        """These rows with one stated σ (cm) of every coordinate of every target (a map's
+        ``sigma``); unchanged when None."""
+        if sigma_cm is None:
+            return self
+        n = len(self.where)
+        return replace(self, sigma={t: np.full((n, 3), sigma_cm) for t in self.targets})
+
 
 def unit_factor(unit: str, table: dict[str, float], what: str, where: str) -> float:
     """The factor of ``unit`` in ``table`` (to cm or deg); an unknown unit is refused."""

@@ -182,12 +182,12 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
         path, tuple(where), np.array(sweep or [0] * len(where), np.int64), qq,
         {t: np.array(v, float) for t, v in pts.items()},
         orientation_wxyz=_quaternions(np.array(angles, float), imap),
-        sigma=_sigmas(rows_sigma=sig, ids=list(cols), n=len(where), imap=imap, length=length),
+        sigma=_sigmas(rows_sigma=sig, ids=list(cols), n=len(where)),
         orientation_sigma_deg=None if imap.orientation is None else imap.orientation.sigma_deg,
         payload_kg=np.array(payload, float) if pcol is not None else (
             None if imap.payload_kg is None else np.full(len(where), float(imap.payload_kg))
         ),
-    )  # fmt: skip
+    ).with_sigma(imap.sigma_cm)  # fmt: skip
     if imap.poses:
         return pose_set(rows, imap)
     tol = tolerance(imap, robot)
@@ -226,11 +226,10 @@ def _sigma_columns(t: TargetColumns) -> tuple[str | int, str | int, str | int]:
 
 
 def _sigmas(
-    rows_sigma: dict[str, list[list[float]]], ids: list[str], n: int, imap: ImportMap, length: float
+    rows_sigma: dict[str, list[list[float]]], ids: list[str], n: int
 ) -> dict[str, np.ndarray] | None:
-    """Each target's σ of x, y, z (n, 3) cm: its columns, the map's stated σ, or none."""
-    if imap.sigma is not None:
-        return {t: np.full((n, 3), imap.sigma * length) for t in ids}
+    """Each target's σ of x, y, z (n, 3) cm from its columns, or none (the map's stated σ:
+    :meth:`MeasuredRows.with_sigma`)."""
     if not rows_sigma:
         return None
     return {t: np.array(rows_sigma[t], float) if t in rows_sigma else np.full((n, 3), np.nan)

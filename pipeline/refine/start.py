@@ -54,16 +54,24 @@ class DesignStart:
         Sensor from the design's world frame (the registration).
     rms_cm : float
         RMS distance of the measured points from the registered design model.
+    errors_cm : ndarray, shape (K,)
+        Each measured point's distance from it.
     """
 
     frames: Array
     tool: Array
     base: Array
     rms_cm: float
+    errors_cm: Array
 
 
 def design_start(
-    chain: SerialChain, q: Array, measured: Array, tool_local: Array, q_signature: Array
+    chain: SerialChain,
+    q: Array,
+    measured: Array,
+    tool_local: Array,
+    q_signature: Array,
+    rounds: int = START_ROUNDS,
 ) -> DesignStart:
     """The registered design start (module docstring).
 
@@ -79,12 +87,16 @@ def design_start(
         The design's tool point in the last D-H frame (cm).
     q_signature : ndarray, shape (n,)
         ``q̄^s``, where the frames are taken (rad / cm).
+    rounds : int
+        The alternation's rounds at most (:data:`START_ROUNDS` for a start the refinement
+        improves on; a baseline in its own right needs it converged, e.g. the RCT
+        positioner's 205 poses: 1.853 cm RMS after 50 rounds, 0.04527 cm after 500).
     """
     n = chain.n_joints
     flange = link_frames(chain, q)[:, n]  # (K, 4, 4): F_n(q_k)
     t = np.asarray(tool_local, float).copy()
     B = np.eye(4)
-    for _ in range(START_ROUNDS):
+    for _ in range(rounds):
         p = (flange[:, :3, :3] @ t) + flange[:, :3, 3]
         B_new = register_rigid(p, measured)
         if B_new is None:
@@ -104,9 +116,10 @@ def design_start(
         if moved < _STOP_CM:
             break
     p = (flange[:, :3, :3] @ t) + flange[:, :3, 3]
-    rms = float(np.sqrt(np.mean(np.sum((p @ B[:3, :3].T + B[:3, 3] - measured) ** 2, axis=1))))
+    errors = np.linalg.norm(p @ B[:3, :3].T + B[:3, 3] - measured, axis=1)
+    rms = float(np.sqrt(np.mean(errors**2)))
     F = B @ link_frames(chain, np.asarray(q_signature, float))  # (n + 2, 4, 4)
     frames = np.concatenate([F[:n], F[n - 1 : n]], axis=0)
     tool = np.eye(4)
     tool[:3, 3] = invert_transform(frames[n])[:3] @ np.r_[F[n, :3, :3] @ t + F[n, :3, 3], 1.0]
-    return DesignStart(frames=frames, tool=tool, base=B, rms_cm=rms)
+    return DesignStart(frames=frames, tool=tool, base=B, rms_cm=rms, errors_cm=errors)

@@ -13,6 +13,7 @@ from pipeline.report.figures import few_ticks, save_png
 #: Rows of the verdict's numbers table: column, label, format.
 _NUMBERS = (
     ("predicted_rms_cm", "predicted RMS tool error, aligned (cm)", ".4f"),
+    ("predicted_limit_cm", "its limit: max_predicted_rms_reach × the design's reach (cm)", ".4g"),
     ("predicted_p95_cm", "95th percentile over the workspace (cm)", ".4f"),
     ("predicted_max95_cm", "95 % bound of the largest error (cm)", ".4f"),
     ("holdout_rms_cm", "held-out RMS position error (cm)", ".4f"),
@@ -22,6 +23,7 @@ _NUMBERS = (
     ("improvement", "improvement over the design model (×)", ".3g"),
     ("chi2_per_dof", "χ²/dof, sensor self-calibrated", ".3f"),
     ("chi2_recorded_per_dof", "χ²/dof, sensor as recorded", ".3f"),
+    ("stated_sigma_cm", "the points' stated σ, median (cm)", ".4g"),
     ("max_bias_sigmas", "largest microphone range bias (σ)", ".2f"),
     ("max_mic_sigmas", "largest microphone move (σ)", ".2f"),
 )
@@ -59,7 +61,7 @@ def verdict_section(verdict: dict[str, Any], figure: Path | None) -> str:
     rows = [
         f"| {label} | {format(verdict[k], spec)} |"
         for k, label, spec in _NUMBERS
-        if verdict[k] is not None
+        if verdict.get(k) is not None
     ]
     if rows:
         out.append("\n".join(["| quantity | value |", "|---|---|", *rows]))

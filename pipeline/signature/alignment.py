@@ -22,6 +22,9 @@ if TYPE_CHECKING:
 
 #: Random configurations the alignment is fitted over.
 ALIGNMENT_SAMPLES = 500
+#: The world frames a signature's poses and exports are given in: the sensor's (where the
+#: points were measured), or the design base placed there by the design alignment ``X``.
+FRAMES = ("sensor", "design-base")
 
 
 def design_alignment(

@@ -3,9 +3,10 @@
 One row. The evidence (:class:`pipeline.refine.verdict.Evidence`) is read from the
 refinement (its solver summary, χ² with the sensor as recorded and self-calibrated, the
 sensor's parameters against their recorded values), the predicted tool error
-(``uncertainty``), the held-out errors (``holdout``) and the chain's distance from the
-design model; the rules and the default thresholds: :mod:`pipeline.refine.verdict`,
-docs/verdict.md. Every threshold is a parameter: ``--param verdict.chi2_check=3``.
+(``uncertainty``), the held-out errors (``holdout``), the chain's distance from the
+design model and whether the points' noise is stated (``positions``); the rules and the
+default thresholds: :mod:`pipeline.refine.verdict`, docs/verdict.md. Every threshold is
+a parameter: ``--param verdict.chi2_check=3``.
 """
 
 from __future__ import annotations
@@ -19,7 +20,14 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.refine.verdict import Evidence, SensorParameter, Thresholds, Verdict, judge
+from pipeline.refine.verdict import (
+    Evidence,
+    SensorParameter,
+    Thresholds,
+    Verdict,
+    judge,
+    predicted_limit_cm,
+)
 from pipeline.stages.base import Stage, check_param
 
 #: The verdict table's number columns (nullable: a session may lack one).
@@ -27,6 +35,7 @@ NUMBERS = (
     "predicted_rms_cm", "predicted_p95_cm", "predicted_max95_cm", "holdout_rms_cm",
     "holdout_expected_rms_cm", "design_misfit_rms_cm", "improvement", "chi2_per_dof",
     "chi2_recorded_per_dof", "max_bias_sigmas", "max_mic_sigmas", "design_reach_cm",
+    "predicted_limit_cm", "stated_sigma_cm",
 )  # fmt: skip
 
 
@@ -53,12 +62,13 @@ def _rms(v: np.ndarray) -> float | None:
     return float(np.sqrt(np.mean(v**2))) if len(v) else None
 
 
-def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, float | None]]:
+def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, Any]]:
     """The evidence of a session's stage tables, and the numbers of the verdict row."""
     from pipeline.signature.alignment import design_alignment
     from pipeline.stages.frames import chain_from_frames
+    from pipeline.stages.positions import recorded_sigma_cm
     from pipeline.stages.refine import refine_summary
-    from pipeline.stages.session import session_robot
+    from pipeline.stages.session import session_robot, session_sensor
     from pipeline.stages.uncertainty import summary
 
     refine = inputs["refine"]
@@ -70,6 +80,7 @@ def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, float | Non
     unc = summary(inputs["uncertainty"])
     hold = inputs["holdout"]
     robot = session_robot(inputs["session"])
+    sigma = recorded_sigma_cm(inputs["positions"])  # None: sonic (its noise law) or unstated
     misfit = design_alignment(chain_from_frames(inputs["chain"], robot.prismatic), robot)[2]
     predicted = None if unc is None else unc["sigma_position_aligned_rms_cm"]
     e = Evidence(
@@ -88,6 +99,8 @@ def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, float | Non
         design_misfit_cm=misfit,
         reach_cm=robot.reach_cm,
         nongeometric=tuple(summ.get("nongeometric", {}).get("terms", [])),
+        noise_stated=session_sensor(inputs["session"]) == "sonic" or sigma is not None,
+        stated_sigma_cm=sigma,
     )
     numbers = {
         "predicted_rms_cm": e.predicted_rms_cm,
@@ -102,13 +115,16 @@ def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, float | Non
         "max_bias_sigmas": max((b.sigmas for b in e.biases), default=None),
         "max_mic_sigmas": max((b.sigmas for b in e.mic_moves), default=None),
         "design_reach_cm": e.reach_cm,
+        "stated_sigma_cm": sigma,
+        "noise_stated": e.noise_stated,
     }
     return e, numbers
 
 
 def verdict_table(v: Verdict, numbers: Mapping[str, float | None]) -> pa.Table:
     """The stage's row: the verdict ``v``, its reasons (text, level, rule, number,
-    threshold) and the ``numbers`` it was judged on (keys :data:`NUMBERS`)."""
+    threshold), the ``numbers`` it was judged on (keys :data:`NUMBERS`) and whether the
+    points' noise was stated (``noise_stated``, default true)."""
     f = v.findings
 
     def per_reason(values: list[Any], t: pa.DataType) -> pa.Array:
@@ -124,13 +140,15 @@ def verdict_table(v: Verdict, numbers: Mapping[str, float | None]) -> pa.Table:
             "reason_values": per_reason([r.value for r in f], pa.float64()),
             "reason_thresholds": per_reason([r.threshold for r in f], pa.float64()),
             **{k: pa.array([numbers[k]], pa.float64()) for k in NUMBERS},
+            "noise_stated": pa.array([numbers.get("noise_stated", True)], pa.bool_()),
         }
     )
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     e, numbers = evidence(inputs)
-    return verdict_table(judge(e, params), numbers)
+    limit = {"predicted_limit_cm": predicted_limit_cm(e, params)}
+    return verdict_table(judge(e, params), numbers | limit)
 
 
 def verdict_line(session_dir: Path) -> str | None:
@@ -147,13 +165,15 @@ def verdict_line(session_dir: Path) -> str | None:
 
 STAGE = Stage(
     "verdict",
-    7,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
+    8,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
     # 3: each reason's level, rule, number and threshold (issue 30);
     # 4: the floor_cm of the sensor and held-out rules (issue 33);
     # 5: parameters held at the design (pose sets, issue 26) a CHECK;
     # 6: a signature implausibly far from the design a FAIL, design_reach_cm (issue 32);
-    # 7: a point sensor's χ² beyond chi2_fail names the error the model leaves out (27)
-    ("session", "refine", "uncertainty", "holdout", "chain"),
+    # 7: a point sensor's χ² beyond chi2_fail names the error the model leaves out (27);
+    # 8: the predicted-accuracy limit scales with the reach and the held-out data, no χ²
+    # rule without a stated point noise, unrounded numbers (issue 29)
+    ("session", "refine", "uncertainty", "holdout", "chain", "positions"),
     Params(),
     compute,
     "PASS / CHECK / FAIL of the signature, with the reasons",
