@@ -9,10 +9,9 @@ links, meshes, inertias, limits, extra frames, comments stay), plus one fixed li
    reading is ``v = s·q + c`` (:func:`pipeline.kinematics.conventions.reading_conventions`);
    then the vendor link frame ``V_i(v)`` (the child link of joint ``i``) must equal
    ``B · D_i(q) · C_i`` with ``D_i`` the design model's frame ``i`` (z on joint ``i+1``), ``B``
-   the vendor root in the design base and ``C_i`` constant. ``B`` and ``C_n`` from the
-   last link (the hand-eye equation ``C A_k = B_k C`` over small motions), then each
-   ``C_i`` over random configurations must stay constant within 1e-6 m and 1e-6 rad, else
-   the file is refused naming the joint.
+   the vendor root in the design base (found with the conventions) and ``C_i`` constant:
+   over random configurations each ``C_i`` must stay constant within 1e-6 m and
+   1e-6 rad, else the file is refused naming the joint.
 2. Calibrated. The vendor's link ``i`` goes where the signature puts link ``i``:
    ``V'_i(v) = B · X⁻¹ · S_i(q) · G_i`` (``S_i``: signature frame ``i`` in the sensor frame,
    ``X``: sensor from design base). ``G_i`` is the vendor frame's place on the signature's
@@ -82,11 +81,6 @@ SAME_ROBOT_M = 1e-6
 SAME_ROBOT_RAD = 1e-6
 #: Configurations of the same-robot check (within the description's limits, seed 1).
 SAME_ROBOT_CONFIGURATIONS = 200
-#: The hand-eye start: small motions (rad / cm) about a random configuration, so that no
-#: relative rotation nears a half turn (where its axis' sign is undefined).
-HAND_EYE_STEP = 0.3
-
-
 @dataclass(frozen=True)
 class OntoResult:
     """What was written, how the vendor file matched, and how far the calibration moved
@@ -214,25 +208,6 @@ def mean_transform(T: Array) -> Array:
     return out
 
 
-def hand_eye(V: Array, D: Array) -> tuple[Array, Array]:
-    """``B``, ``C`` with ``V_k = B · D_k · C`` (exact data, (m, 4, 4) each): from
-    ``C A_k = Bd_k C`` with ``A_k = V_0⁻¹ V_k``, ``Bd_k = D_0⁻¹ D_k``, the rotation axes
-    ``log Bd_k = R_C log A_k`` (Kabsch), then ``(R_Bd_k − I) t_C = R_C t_A_k − t_Bd_k``."""
-    from scipy.spatial.transform import Rotation  # lazy: ~0.3 s of import
-
-    A = invert_transform(V[0]) @ V[1:]
-    Bd = invert_transform(D[0]) @ D[1:]
-    a = Rotation.from_matrix(A[:, :3, :3]).as_rotvec()
-    b = Rotation.from_matrix(Bd[:, :3, :3]).as_rotvec()
-    Rc = Rotation.align_vectors(b, a)[0].as_matrix()
-    M = (Bd[:, :3, :3] - np.eye(3)).reshape(-1, 3)
-    rhs = (A[:, :3, 3] @ Rc.T - Bd[:, :3, 3]).reshape(-1)
-    C = np.eye(4)
-    C[:3, :3], C[:3, 3] = Rc, np.linalg.lstsq(M, rhs, rcond=None)[0]
-    B = mean_transform(V @ invert_transform(C) @ invert_transform(D))
-    return B, C
-
-
 def _spread(T: Array) -> tuple[float, float]:
     """How far transforms (m, 4, 4) stray from their mean: metres, radians."""
     dp, dr = pose_error(np.broadcast_to(mean_transform(T), T.shape), T)
@@ -259,10 +234,7 @@ def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> dict[str, A
     def v_of(q: Array) -> Array:
         return q * conv.sign + conv.offset
 
-    rng = np.random.default_rng(1)
-    q0 = robot.random_configurations(1, 1)
-    qs = q0 + rng.uniform(-HAND_EYE_STEP, HAND_EYE_STEP, (20, robot.n_joints))
-    B, _ = hand_eye(vc.frames(v_of(qs))[:, -1], link_frames(design, qs)[:, -2])
+    B = conv.world  # the vendor root in the design base
     q = robot.random_configurations(SAME_ROBOT_CONFIGURATIONS, 1)
     V = vc.frames(v_of(q))
     D = link_frames(design, q)[:, 1:-1]  # frame i: after joint i, z on joint i+1
