@@ -25,10 +25,11 @@ from typer.testing import CliRunner
 from pipeline.cli import EXIT_REFUSED, app
 from pipeline.export import export, tool0_from_last
 from pipeline.export.onto import OntoResult, export_onto
+from pipeline.export.urdf import origin_element
 from pipeline.identify import identify
 from pipeline.kinematics.chain import SerialChain, forward_kinematics, link_frames
 from pipeline.kinematics.conventions import reading_conventions
-from pipeline.kinematics.transforms import invert_transform, rot_x, rot_z, trans
+from pipeline.kinematics.transforms import invert_transform, rot_x, rot_z, transform_from_xyz_rpy
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.robots import get_robot
 from pipeline.robots.description import load_description
@@ -180,7 +181,7 @@ def test_onto_own_design_urdf(sessions, robot, tmp_path) -> None:
     default = Path(export(d, "urdf", out=tmp_path / "default.urdf").path)
     r = export_onto(d, vendor, out=tmp_path / "cal.urdf")
     assert r.joints == {j.name: j.name for j in sig.robot.joints}
-    assert r.vendor_sign == [1.0] * sig.robot.n_joints
+    assert r.vendor_sign == [1.0] * sig.robot.n_joints and r.conventions_warning is None
     np.testing.assert_allclose(r.vendor_offset, 0.0, atol=1e-9)
     assert r.same_robot_m <= 1e-12 and r.max_position_error_m <= 1e-12
     np.testing.assert_allclose(r.vendor_root_from_design_base, np.eye(4), atol=1e-10)
@@ -201,10 +202,6 @@ def test_onto_a_vendor_that_counts_otherwise(sessions, tmp_path) -> None:
         if '<joint name="wrist_1"' in b:
             m = re.search(r'<origin xyz="([^"]+)" rpy="([^"]+)"/>', b)
             assert m
-            from pipeline.kinematics.transforms import transform_from_xyz_rpy
-
-            from pipeline.export.urdf import origin_element
-
             T = transform_from_xyz_rpy(np.array(m.group(1).split(), float) * 100,
                                        np.array(m.group(2).split(), float))  # fmt: skip
             blocks[k] = b.replace(m.group(0), origin_element(T @ rot_z(np.radians(30.0))))
@@ -213,6 +210,9 @@ def test_onto_a_vendor_that_counts_otherwise(sessions, tmp_path) -> None:
     r = export_onto(d, tmp_path / "other.urdf", out=tmp_path / "cal.urdf")
     assert r.vendor_sign == [1.0, 1.0, -1.0, 1.0, 1.0, 1.0]
     np.testing.assert_allclose(r.vendor_offset, [0, 0, 0, -30.0, 0, 0], atol=1e-9)
+    assert (
+        r.conventions_warning and "elbow = -elbow, wrist_1 = wrist_1 -30" in r.conventions_warning
+    )
     assert check_onto(sig, r, default) <= 1e-12
 
 
@@ -238,7 +238,7 @@ def test_real_ur10_onto_example_robot_data(ur10_c70: Path, tmp_path: Path) -> No
     default = Path(export(ur10_c70, "urdf", out=tmp_path / "d.urdf", accept_verdict=True).path)
     r = export_onto(ur10_c70, vendor, out=tmp_path / "ur10.urdf", accept_verdict=True)
     assert r.joints == {j.name: f"{j.name}_joint" for j in sig.robot.joints}
-    assert r.vendor_sign == [1.0] * 6
+    assert r.vendor_sign == [1.0] * 6 and r.conventions_warning is None
     np.testing.assert_allclose(r.vendor_offset, 0.0, atol=1e-9)  # π/2 written 1.57079632679
     assert r.same_robot_m <= 1e-12, r.same_robot_m
     # the vendor's own file is the design model moved by B: its base_link turned 180 deg
@@ -357,9 +357,9 @@ def test_description_rates_are_checked(tmp_path) -> None:
 @pytest.mark.skipif(_check_urdf() is None, reason="check_urdf (liburdfdom-tools) not installed")
 def test_check_urdf_accepts_every_export(sessions, tmp_path) -> None:
     d = sessions["ur10"]
+    onto = export_onto(d, vendor_file("ur10_robot.urdf"), out=tmp_path / "c.urdf")
     paths = [export(d, "urdf").path, export(d, "urdf", frame="sensor").path,
-             export(d, "urdf", design=True).path,
-             export_onto(d, vendor_file("ur10_robot.urdf"), out=tmp_path / "c.urdf").path]  # fmt: skip
+             export(d, "urdf", design=True).path, onto.path]  # fmt: skip
     for p in paths:
         run = subprocess.run([str(_check_urdf()), p], capture_output=True, text=True)
         assert run.returncode == 0 and "Successfully Parsed XML" in run.stdout, run.stdout

@@ -101,8 +101,9 @@ def export(
             f"the signature at {o.configurations} configurations to "
             f"{o.max_position_error_m:.1e} m, {o.max_orientation_error_rad:.1e} rad",
         )
-        if o.sidecar_warning:
-            warn(o.sidecar_warning)
+        for w in (o.conventions_warning, o.sidecar_warning):
+            if w:
+                warn(w)
         return
     if format_ is None or joint_map is not None:
         raise ArmsigError(

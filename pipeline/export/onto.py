@@ -48,6 +48,7 @@ from pipeline.export import (
     tool0_from_last,
     write_sidecar,
 )
+from pipeline.export.sidecar import sidecar_path
 from pipeline.export.urdf import M_PER_CM, origin_element
 from pipeline.export.vendor import (
     VendorJoint,
@@ -81,6 +82,8 @@ SAME_ROBOT_M = 1e-6
 SAME_ROBOT_RAD = 1e-6
 #: Configurations of the same-robot check (within the description's limits, seed 1).
 SAME_ROBOT_CONFIGURATIONS = 200
+
+
 @dataclass(frozen=True)
 class OntoResult:
     """What was written, how the vendor file matched, and how far the calibration moved
@@ -91,6 +94,7 @@ class OntoResult:
     joints: dict[str, str]  # armsig joint -> vendor joint
     vendor_sign: list[float]  # v = sign · q + offset
     vendor_offset: list[float]  # deg / cm
+    conventions_warning: str | None  # where the vendor reads joints otherwise
     same_robot_m: float  # largest variation of a C_i (m)
     same_robot_rad: float
     origin_moves_mm: dict[str, float]  # per vendor joint: calibrated origin − vendor's
@@ -116,14 +120,13 @@ class VendorChain:
     joints: list[VendorJoint]
     before: Array  # (n, 4, 4)
 
-    def frames(self, v: Array, origins: Array | None = None) -> Array:
-        """Child-link frames ``V_i(v)`` (m, n, 4, 4) in the vendor root, readings (m, n)
-        rad / cm; ``origins`` (n, 4, 4) in place of the joints' own."""
-        O = np.stack([j.origin for j in self.joints]) if origins is None else origins
+    def frames(self, v: Array) -> Array:
+        """Child-link frames ``V_i(v)`` (m, n, 4, 4) in the vendor root, cm, of readings
+        ``v`` (m, n), rad / cm."""
         V = np.empty((*v.shape, 4, 4))
         T = np.broadcast_to(np.eye(4), (len(v), 4, 4))
         for i, j in enumerate(self.joints):
-            T = T @ self.before[i] @ O[i] @ motion(j, v[:, i])
+            T = T @ self.before[i] @ j.origin @ motion(j, v[:, i])
             V[:, i] = T
         return V
 
@@ -133,19 +136,23 @@ class VendorChain:
         R = [axis_frame(j.axis) for j in self.joints]
         M = [self.before[i] @ j.origin @ R[i] for i, j in enumerate(self.joints)]
         links = [R[i].T @ M[i + 1] for i in range(len(M) - 1)] + [np.eye(4)]
-        return SerialChain(np.stack(links), [j.type == "prismatic" for j in self.joints], M[0])
+        pris = np.array([j.type == "prismatic" for j in self.joints])
+        return SerialChain(np.stack(links), pris, M[0])
 
 
 def vendor_chain(urdf: VendorURDF, names: list[str]) -> VendorChain:
     """The vendor joints ``names`` as one serial chain from the root, or a one-line
     refusal (a moving joint between them, or not in this order)."""
-    joints, before, link = [], [], urdf.root
+    joints: list[VendorJoint] = []
+    before: list[Array] = []
+    link = urdf.root
     for name in names:
         j = urdf.joints[name]
         path = path_to(urdf, j.parent, link)
         if path is None:
+            after = repr(joints[-1].name) if joints else "the root"
             raise ArmsigError(
-                f"{urdf.path}: joint {name!r} does not follow {joints[-1].name if joints else 'the root'!r}",
+                f"{urdf.path}: joint {name!r} does not follow {after}",
                 expected="the mapped joints in the robot description's order, base to tip",
             )
         moving = [p.name for p in path if p.moving]
@@ -177,7 +184,9 @@ def joint_names(sig: Signature, urdf: VendorURDF, joint_map: str | None) -> dict
     mine = [j.name for j in sig.robot.joints]
     extra = sorted(set(given) - set(mine))
     if extra:
-        raise ArmsigError(f"--joint-map names unknown armsig joints {extra}", expected=", ".join(mine))
+        raise ArmsigError(
+            f"--joint-map names unknown armsig joints {extra}", expected=", ".join(mine)
+        )
     moving = [j.name for j in urdf.joints.values() if j.moving]
     out = {}
     for j in sig.robot.joints:
@@ -219,10 +228,27 @@ def _mot(prismatic: bool, x: float) -> Array:
     return out
 
 
-def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> dict[str, Any]:
-    """The same-robot check and the calibrated origins (module docstring): ``origins``
-    (n, 4, 4) cm, ``tool`` (the armsig_tool origin on the last mapped link), ``B``, the
-    conventions and the check's spread; ArmsigError when the file is another robot."""
+@dataclass(frozen=True)
+class Calibration:
+    """The vendor chain calibrated (module docstring), cm: the new joint ``origins``
+    (n, 4, 4), the ``armsig_tool`` origin on the last mapped link, ``B`` (the vendor root
+    in the design base), the vendor frames ``G_i`` on the signature's links, ``BX`` (the
+    vendor root from the sensor frame, ``B · X⁻¹``), the reading conventions and how
+    constant the design-to-vendor transforms stayed (m, rad)."""
+
+    chain: VendorChain
+    conventions: Conventions
+    origins: Array
+    tool: Array
+    B: Array
+    G: list[Array]
+    BX: Array
+    same_robot: tuple[float, float]
+
+
+def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> Calibration:
+    """The same-robot check and the calibrated origins (module docstring); ArmsigError
+    when the file is another robot."""
     robot, chain = sig.robot, sig.chain
     vc = vendor_chain(urdf, names)
     design = robot.design_chain()
@@ -247,7 +273,7 @@ def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> dict[str, A
                 f"{urdf.path} is not the robot {robot.name}: its link {j.child!r} (after "
                 f"joint {j.name!r}) moves against armsig's design link by {m * 1e3:.3g} mm, "
                 f"{np.degrees(r):.3g} deg over {len(q)} configurations",
-                expected=f"a constant transform (within {SAME_ROBOT_M:g} m, {SAME_ROBOT_RAD:g} rad)",
+                expected=f"a constant transform, within {SAME_ROBOT_M:g} m, {SAME_ROBOT_RAD:g} rad",
                 fix="export onto this robot model's own URDF, or check --joint-map",
             )
         worst_m, worst_rad = max(worst_m, m), max(worst_rad, r)
@@ -267,17 +293,16 @@ def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> dict[str, A
         for i, j in enumerate(vc.joints)
     ]
     before = [invert_transform(chain.base) @ XB] + G[:-1]  # G_{i−1}; the root's: V'_0 = I
+    q0 = np.asarray(chain.joint_offsets)
     origins = np.stack([
         invert_transform(vc.before[i]) @ invert_transform(before[i])
-        @ _mot(bool(pris[i]), -chain.joint_offsets[i] - conv.sign[i] * conv.offset[i])
+        @ _mot(bool(pris[i]), -q0[i] - conv.sign[i] * conv.offset[i])
         @ chain.links[i] @ G[i]
         for i in range(len(G))
     ])  # fmt: skip
-    return {
-        "origins": origins, "tool": invert_transform(G[-1]) @ chain.tool, "B": B,
-        "G": G, "XB": XB, "conventions": conv, "chain": vc,
-        "same_robot": (worst_m, worst_rad),
-    }  # fmt: skip
+    tool = invert_transform(G[-1]) @ chain.tool
+    BX = invert_transform(XB)
+    return Calibration(vc, conv, origins, tool, B, G, BX, (worst_m, worst_rad))
 
 
 def _xml_tool(parent: str, origin: Array, session: str) -> bytes:
@@ -290,25 +315,25 @@ def _xml_tool(parent: str, origin: Array, session: str) -> bytes:
     ).encode()
 
 
-def calibrated_bytes(urdf: VendorURDF, cal: dict[str, Any], session: str) -> bytes:
+def calibrated_bytes(urdf: VendorURDF, cal: Calibration, session: str) -> bytes:
     """The vendor file with the mapped joints' ``<origin>`` replaced (or inserted), a
     comment after the XML declaration and the ``armsig_tool`` link before ``</robot>``."""
     data = urdf.data
     if TOOL_LINK in urdf.links:
         raise ArmsigError(f"{urdf.path} already has a link named {TOOL_LINK!r}")
     edits: list[tuple[int, int, bytes]] = []
-    for j, O in zip(cal["chain"].joints, cal["origins"], strict=True):
-        new = origin_element(O).encode()
+    for j, origin in zip(cal.chain.joints, cal.origins, strict=True):
+        new = origin_element(origin).encode()
         if j.origin_span is None:
             edits.append((j.body_start, j.body_start, b"\n    " + new))
         else:
             edits.append((*j.origin_span, new))
     end = data.rindex(b"</robot>")
-    edits.append((end, end, _xml_tool(cal["chain"].joints[-1].child, cal["tool"], session)))
+    edits.append((end, end, _xml_tool(cal.chain.joints[-1].child, cal.tool, session)))
     decl = data.find(b"?>") + 2 if data.lstrip().startswith(b"<?xml") else 0
     note = (
         f"\n<!-- calibrated by armsig (session {session}): the <origin> of the joints "
-        f"{', '.join(j.name for j in cal['chain'].joints)} hold the identified geometry and "
+        f"{', '.join(j.name for j in cal.chain.joints)} hold the identified geometry and "
         "encoder offsets (docs/export.md); everything else is the vendor's file -->"
     ).encode()
     edits.append((decl, decl, note if decl else note.lstrip() + b"\n"))
@@ -317,21 +342,22 @@ def calibrated_bytes(urdf: VendorURDF, cal: dict[str, Any], session: str) -> byt
     return data
 
 
-def check_calibrated(sig: Signature, data: bytes, path: Path, names: list[str],
-                     cal: dict[str, Any]) -> tuple[float, float]:  # fmt: skip
+def check_calibrated(
+    sig: Signature, data: bytes, path: Path, names: list[str], cal: Calibration
+) -> tuple[float, float]:
     """Read ``data`` back as a URDF and compare its mapped links and ``armsig_tool`` with
     the signature at :data:`CHECK_CONFIGURATIONS` readings; RuntimeError (a bug) above
     :data:`CHECK_POSITION_M` / :data:`CHECK_ORIENTATION_RAD`."""
     back = parse_vendor_urdf(data, path)
     vc = vendor_chain(back, names)
-    conv: Conventions = cal["conventions"]
+    conv = cal.conventions
     q = random_readings(sig, CHECK_CONFIGURATIONS)
     V = vc.frames(q * conv.sign + conv.offset)
     tool = back.joints[f"{TOOL_LINK}_joint"].origin
     S = link_frames(sig.chain, q)
-    BX = invert_transform(cal["XB"])  # the vendor root from the sensor frame, B · X⁻¹
+    BX = cal.BX
     want = np.concatenate(
-        [BX @ S[:, i + 1] @ cal["G"][i] for i in range(len(names))] + [BX @ S[:, -1]]
+        [BX @ S[:, i + 1] @ cal.G[i] for i in range(len(names))] + [BX @ S[:, -1]]
     )
     got = np.concatenate([V[:, i] for i in range(len(names))] + [V[:, -1] @ tool])
     dp, dr = pose_error(want, got)
@@ -370,7 +396,7 @@ def export_onto(
     warning = verdict_gate(sig.verdict, str(sdir), accept_verdict)
     section = doc.get("nongeometric")
     if section and out is not None:
-        check_new_file(path.with_suffix(".nongeometric.json"), "sidecar", force)
+        check_new_file(sidecar_path(path), "sidecar", force)
     mapping = joint_names(sig, urdf, joint_map)
     names = list(mapping.values())
     cal = calibrate(sig, urdf, names)
@@ -380,16 +406,46 @@ def export_onto(
                                  "URDF", own_folder=out is None)  # fmt: skip
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(path) as f:  # the vendor's bytes, whatever their encoding
-        f.write(data)
+        f.write(data)  # type: ignore[arg-type]
     moves_mm, moves_deg = {}, {}
-    for j, O in zip(cal["chain"].joints, cal["origins"], strict=True):
-        dp, dr = pose_error(j.origin, O)
+    for j, origin in zip(cal.chain.joints, cal.origins, strict=True):
+        dp, dr = pose_error(j.origin, origin)
         moves_mm[j.name], moves_deg[j.name] = float(dp) * 10.0, float(np.degrees(dr))
-    conv = cal["conventions"]
+    conv = cal.conventions
     off = np.where(sig.prismatic, conv.offset, np.degrees(wrap_angle(conv.offset)))
-    status = None if sig.verdict is None else sig.verdict.status
     return OntoResult(
-        str(path), str(src), mapping, conv.sign.tolist(), off.tolist(), *cal["same_robot"],
-        moves_mm, moves_deg, CHECK_CONFIGURATIONS, pos, rot, cal["B"].tolist(), status,
-        warning, str(path.with_suffix(".nongeometric.json")) if section else None, side_warning,
+        path=str(path), vendor=str(src), joints=mapping, vendor_sign=conv.sign.tolist(),
+        vendor_offset=off.tolist(), conventions_warning=_conventions_warning(mapping, conv, off),
+        same_robot_m=cal.same_robot[0], same_robot_rad=cal.same_robot[1],
+        origin_moves_mm=moves_mm, origin_moves_deg=moves_deg,
+        configurations=CHECK_CONFIGURATIONS, max_position_error_m=pos,
+        max_orientation_error_rad=rot, vendor_root_from_design_base=cal.B.tolist(),
+        verdict=None if sig.verdict is None else sig.verdict.status, verdict_warning=warning,
+        sidecar=str(sidecar_path(path)) if section else None, sidecar_warning=side_warning,
     )  # fmt: skip
+
+
+#: Offsets below this (deg / cm) are the vendor's rounding, not another zero.
+ROUNDING = 1e-6
+
+
+def _conventions_warning(mapping: dict[str, str], conv: Conventions, off: Array) -> str | None:
+    """Where the vendor reads a joint otherwise than armsig (sign, offset): which, and that
+    the controller must report the vendor's readings; None when it reads the same."""
+    other = [
+        f"{v} = {'-' if s < 0 else ''}{a}{f' {o:+.6g}' if abs(o) > ROUNDING else ''}"
+        for (a, v), s, o in zip(mapping.items(), conv.sign, off, strict=True)
+        if s < 0 or abs(o) > ROUNDING
+    ]
+    if not other:
+        return None
+    alt = (
+        f"; {conv.alternatives} other conventions fit this geometry as well"
+        if conv.alternatives
+        else ""
+    )
+    return (
+        f"the vendor file reads joints otherwise than the robot description ({', '.join(other)}; "
+        f"deg / cm){alt}: the calibrated file is right for a controller that reports the "
+        "vendor's readings"
+    )

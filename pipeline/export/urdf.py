@@ -70,7 +70,10 @@ def link_names(robot: RobotDescription) -> list[str]:
     links = [BASE_LINK, *(f"{j.name}_link" for j in robot.joints), FLANGE_LINK, TOOL0_LINK,
              TOOL_LINK]  # fmt: skip
     joints = [j.name for j in robot.joints]
-    for names, kind in ((links, "link"), ([*joints, TOOL_JOINT, FLANGE_JOINT, TOOL0_JOINT], "joint")):
+    for names, kind in (
+        (links, "link"),
+        ([*joints, TOOL_JOINT, FLANGE_JOINT, TOOL0_JOINT], "joint"),
+    ):
         dup = next((x for x in names if names.count(x) > 1), None)
         if dup is not None:
             raise ArmsigError(
@@ -107,13 +110,13 @@ def _fixed(name: str, parent: str, child: str, origin: Array) -> list[str]:
 def _limit(j: JointSpec) -> str:
     """The ``<limit>`` element in SI units: position always, velocity and effort as the
     description gives them, else 0 (urdfdom requires both attributes)."""
-    lo, hi = (j.lower * M_PER_CM, j.upper * M_PER_CM) if j.prismatic else np.radians((j.lower, j.upper))
+    lo, hi = (
+        (j.lower * M_PER_CM, j.upper * M_PER_CM) if j.prismatic else np.radians((j.lower, j.upper))
+    )
     v = j.velocity_limit or 0.0
     v = v * M_PER_CM if j.prismatic else float(np.radians(v))
     e = j.effort_limit or 0.0
-    return (
-        f'<limit lower="{_num(lo)}" upper="{_num(hi)}" effort="{_num(e)}" velocity="{_num(v)}"/>'
-    )
+    return f'<limit lower="{_num(lo)}" upper="{_num(hi)}" effort="{_num(e)}" velocity="{_num(v)}"/>'
 
 
 def urdf_text(

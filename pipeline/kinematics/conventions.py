@@ -81,8 +81,8 @@ def _lay(
             if max(np.hypot(*p[:2]), np.hypot(*r[:2])) <= SAME_LINE_CM:
                 return [_Candidate(s, np.nan, slide, 0.0, 0.0)]  # both on z itself: any turn
             psi = float(np.arctan2(r[1], r[0]) - np.arctan2(p[1], p[0]))
-        miss = np.linalg.norm((_rz(psi) @ p - r)[:2])
-        return [_Candidate(s, psi, slide, 0.0, float(miss))]
+        apart = float(np.linalg.norm((_rz(psi) @ p - r)[:2]))
+        return [_Candidate(s, psi, slide, 0.0, apart)]
     out = []
     for s in (1.0, -1.0):
         v = s * w
@@ -95,9 +95,9 @@ def _lay(
         if gap > SAME_DIRECTION_RAD or not np.dot(e, e) > 0.0:
             out.append(_Candidate(s, t, slide, gap, np.inf))
             continue
-        z = -np.dot(np.cross(d, w), e) / np.dot(e, e) if slide is None else slide
+        z: float = float(-np.dot(np.cross(d, w), e) / np.dot(e, e)) if slide is None else slide
         miss = float(np.linalg.norm(np.cross(d + np.array([0.0, 0.0, z]), w)))
-        out.append(_Candidate(s, t, float(z), gap, miss))
+        out.append(_Candidate(s, t, z, gap, miss))
     return out
 
 
@@ -128,7 +128,9 @@ def reading_conventions(a: SerialChain, b: SerialChain, names: list[str]) -> Con
             got=f"{np.degrees(worst.miss_rad):.3g} deg and {worst.miss_cm * 10:.3g} mm apart",
             fix="check that both describe the same robot model",
         )
-    sign, off = min(found, key=lambda f: (int((f[0] < 0).sum()), round(float(np.abs(f[1][:n]).sum()), 9)))
+    sign, off = min(
+        found, key=lambda f: (int((f[0] < 0).sum()), round(float(np.abs(f[1][:n]).sum()), 9))
+    )
     # E_{-1} = Rot(z, ψ_0) Trans(z, slide_0): b.base = W · a.base · E_{-1}
     E = np.eye(4)
     E[:3, :3], E[2, 3] = _rz(off[n + 1]), off[n]
@@ -176,8 +178,8 @@ def _search(a: SerialChain, b: SerialChain, i: int, E: Array, slide: _Slide | No
     if not good:
         misfit.append((i, min(cands, key=lambda k: (k.miss_rad, k.miss_cm))))
         return
-    qa, qb = a.joint_offsets, b.joint_offsets
-    shift = sign[i] * qa[i] - qb[i]
+    qa, qb = np.asarray(a.joint_offsets), np.asarray(b.joint_offsets)
+    shift = float(sign[i] * qa[i] - qb[i])
     along = float(B[2, 2])  # next axis parallel: a slide before is ±one after
     for k in good:
         psi = k.psi

@@ -209,7 +209,10 @@ MAX_COUPLING_COND = 1e6
 MAX_VELOCITY = 1e5
 MAX_EFFORT = 1e7
 #: The optional per-joint fields and their bounds (value, unit for the message).
-_RATES = (("velocity_limit", MAX_VELOCITY, "deg/s or cm/s"), ("effort_limit", MAX_EFFORT, "N·m or N"))
+_RATES = (
+    ("velocity_limit", MAX_VELOCITY, "deg/s or cm/s"),
+    ("effort_limit", MAX_EFFORT, "N·m or N"),
+)
 
 
 def _is_number(x: Any) -> bool:
