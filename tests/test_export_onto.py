@@ -23,6 +23,7 @@ from test_realdata import needs_ur10, ur10_c70  # noqa: F401  (the fixture, shar
 from typer.testing import CliRunner
 
 from pipeline.cli import EXIT_REFUSED, app
+from pipeline.errors import ArmsigError
 from pipeline.export import export, tool0_from_last
 from pipeline.export.onto import OntoResult, export_onto
 from pipeline.export.urdf import origin_element
@@ -236,6 +237,9 @@ def test_real_ur10_onto_example_robot_data(ur10_c70: Path, tmp_path: Path) -> No
     vendor = vendor_file("ur10_robot.urdf")
     sig = load_session_signature(ur10_c70 / "signature.json")
     default = Path(export(ur10_c70, "urdf", out=tmp_path / "d.urdf", accept_verdict=True).path)
+    with pytest.raises(ArmsigError, match="verdict is FAIL"):  # issue 30 item 2, as export
+        export_onto(ur10_c70, vendor, out=tmp_path / "ur10.urdf")
+    assert not (tmp_path / "ur10.urdf").exists()
     r = export_onto(ur10_c70, vendor, out=tmp_path / "ur10.urdf", accept_verdict=True)
     assert r.joints == {j.name: f"{j.name}_joint" for j in sig.robot.joints}
     assert r.vendor_sign == [1.0] * 6 and r.conventions_warning is None

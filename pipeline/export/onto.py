@@ -33,6 +33,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -305,12 +306,16 @@ def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> Calibration
     return Calibration(vc, conv, origins, tool, B, G, BX, (worst_m, worst_rad))
 
 
+def _comment(text: str) -> str:
+    return f"<!-- {text.replace('--', '-')} -->"  # "--" may not stand in an XML comment
+
+
 def _xml_tool(parent: str, origin: Array, session: str) -> bytes:
     return (
-        f"  <!-- armsig: the measured tool point of session {session} -->\n"
+        f"  {_comment(f'armsig: the measured tool point of session {session}')}\n"
         f'  <link name="{TOOL_LINK}"/>\n'
         f'  <joint name="{TOOL_LINK}_joint" type="fixed">\n'
-        f'    <parent link="{parent}"/>\n    <child link="{TOOL_LINK}"/>\n'
+        f'    <parent link={quoteattr(parent)}/>\n    <child link="{TOOL_LINK}"/>\n'
         f"    {origin_element(origin)}\n  </joint>\n"
     ).encode()
 
@@ -331,12 +336,12 @@ def calibrated_bytes(urdf: VendorURDF, cal: Calibration, session: str) -> bytes:
     end = data.rindex(b"</robot>")
     edits.append((end, end, _xml_tool(cal.chain.joints[-1].child, cal.tool, session)))
     decl = data.find(b"?>") + 2 if data.lstrip().startswith(b"<?xml") else 0
-    note = (
-        f"\n<!-- calibrated by armsig (session {session}): the <origin> of the joints "
+    note = "\n" + _comment(
+        f"calibrated by armsig (session {session}): the <origin> of the joints "
         f"{', '.join(j.name for j in cal.chain.joints)} hold the identified geometry and "
-        "encoder offsets (docs/export.md); everything else is the vendor's file -->"
-    ).encode()
-    edits.append((decl, decl, note if decl else note.lstrip() + b"\n"))
+        "encoder offsets (docs/export.md); everything else is the vendor's file"
+    )
+    edits.append((decl, decl, (note if decl else note.lstrip() + "\n").encode()))
     for a, b, text in sorted(edits, key=lambda e: e[0], reverse=True):
         data = data[:a] + text + data[b:]
     return data
