@@ -49,21 +49,67 @@ def viz(
 def export(
     session: SessionArg,
     format_: Annotated[
-        ExportFormat, choice("urdf, dh, mdh (Craig) or json (docs/export.md).", "--format")
-    ],
+        ExportFormat | None,
+        choice("urdf, dh, mdh (Craig) or json (docs/export.md); urdf with --onto.", "--format"),
+    ] = None,
     out: Annotated[
         str | None,
         typer.Option(help="Output file (default: SESSION/export/); an existing one needs --force."),
     ] = None,
     design: Annotated[bool, typer.Option(help="Export the design model instead.")] = False,
     frame: Annotated[
-        ExportFrame, choice("World frame: sensor, or design-base (via the design alignment).")
-    ] = ExportFrame.sensor,
+        ExportFrame | None,
+        choice(
+            "World frame: sensor, or design-base (the robot's base, via the design alignment; "
+            "the default of urdf)."
+        ),
+    ] = None,
+    onto: Annotated[
+        str | None,
+        typer.Option(
+            help="A vendor URDF of this robot model: write it with the signature's joint "
+            "origins and offsets, keeping its links, meshes, inertias and limits."
+        ),
+    ] = None,
+    joint_map: Annotated[
+        str | None,
+        typer.Option(help="With --onto: armsig=vendor joint names, comma separated."),
+    ] = None,
     force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
     accept_verdict: AcceptVerdict = False,
     as_json: JsonOption = False,
 ) -> None:
-    """Export the session's signature (checked against its FK) as URDF, D-H or JSON."""
+    """Export the session's signature (checked against its FK) as URDF, D-H or JSON, or
+    onto a vendor's URDF."""
+    from pipeline.errors import ArmsigError
+
+    if onto is not None:
+        if design or frame is not None or format_ not in (None, ExportFormat.urdf):
+            raise ArmsigError(
+                "--onto writes the signature into the vendor's URDF, in the vendor's root frame",
+                expected="no --design, --frame, or --format other than urdf",
+            )
+        from pipeline.export.onto import export_onto
+
+        o = export_onto(session, onto, out, joint_map, force, accept_verdict)
+        moved = max(o.origin_moves_mm.values())
+        report(
+            o,
+            as_json,
+            f"wrote {o.path} ({o.vendor} with the signature of {session}); same robot to "
+            f"{o.same_robot_m:.1e} m; origins moved by up to {moved:.3g} mm; reproduces "
+            f"the signature at {o.configurations} configurations to "
+            f"{o.max_position_error_m:.1e} m, {o.max_orientation_error_rad:.1e} rad",
+        )
+        for w in (o.conventions_warning, o.sidecar_warning):
+            if w:
+                warn(w)
+        return
+    if format_ is None or joint_map is not None:
+        raise ArmsigError(
+            "export needs --format (urdf, dh, mdh, json), or --onto VENDOR.urdf"
+            + (" (--joint-map goes with --onto)" if joint_map is not None else "")
+        )
     from pipeline.export import export as run_export
 
     r = run_export(
@@ -71,7 +117,7 @@ def export(
         format_.value,
         out=out,
         design=design,
-        frame=frame.value,
+        frame=None if frame is None else frame.value,
         force=force,
         accept_verdict=accept_verdict,
     )

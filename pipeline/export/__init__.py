@@ -30,7 +30,14 @@ from pipeline.export.dh_table import (
 )
 from pipeline.export.documents import chain_document, chain_from_document, dh_document, mdh_document
 from pipeline.export.sidecar import check_sidecar, sidecar_document, sidecar_path
-from pipeline.export.urdf import M_PER_CM, chain_from_origins, urdf_text, written_origins
+from pipeline.export.urdf import (
+    M_PER_CM,
+    as_written,
+    chain_from_origins,
+    fixed_origins,
+    urdf_text,
+    written_origins,
+)
 from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
 from pipeline.kinematics.transforms import invert_transform, pose_error
 from pipeline.signature.alignment import FRAMES
@@ -40,6 +47,9 @@ from pipeline.signature.verdict import verdict_gate
 from pipeline.units import joints_to_internal
 
 FORMATS = ("urdf", "dh", "mdh", "json")
+#: The world frame of each format when ``--frame`` is not given: a URDF's root is the robot's
+#: base (ROS's ``base_link``); the tables and the chain JSON keep the signature's own frame.
+DEFAULT_FRAME = {"urdf": "design-base", "dh": "sensor", "mdh": "sensor", "json": "sensor"}
 EXPORT_DIR = "export"
 _SUFFIX = {"urdf": ".urdf", "dh": ".dh.json", "mdh": ".mdh.json", "json": ".chain.json"}
 #: What the warning calls each format: all four hold the rigid chain only.
@@ -80,6 +90,44 @@ def export_chain(sig: Signature, design: bool, frame: str) -> SerialChain:
         chain = sig.robot.design_chain()  # world: the design base
         return chain if frame == "design-base" else in_frame(chain, invert_transform(X))
     return sig.chain if frame == "sensor" else in_frame(sig.chain, X)
+
+
+def onto_line(G: np.ndarray, K: np.ndarray, point: np.ndarray, direction: np.ndarray,
+              prismatic: bool) -> np.ndarray:  # fmt: skip
+    """``G · Δ``: a frame ``G`` (4, 4, in the frame after a joint) moved the least so that
+    the joint's axis there, ``K⁻¹ · z`` (``K = K̄``, the link after the joint's motion),
+    is the line ``point + λ · direction`` in the moved frame (a unit ``direction``; for a
+    prismatic joint, the direction only: a slide has no line)."""
+    L = invert_transform(G) @ invert_transform(K)
+    p, u, w = L[:3, 3], L[:3, 2], np.asarray(direction, float)
+    k, c = np.cross(u, w), float(np.dot(u, w))
+    Kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    D = np.eye(4)  # Δ⁻¹: the shortest turn of u onto w (Rodrigues), then p onto the line
+    D[:3, :3] = np.eye(3) + Kx + Kx @ Kx / (1.0 + c)
+    if not prismatic:
+        off = D[:3, :3] @ p - point
+        D[:3, 3] = -(off - np.dot(off, w) * w)
+    out: np.ndarray = G @ invert_transform(D)
+    return out
+
+
+def tool0_from_last(sig: Signature, design: bool) -> np.ndarray:
+    """The physical flange (ROS-I ``tool0``, the design model's last D-H frame) in the last
+    link frame ``F_n`` of the exported chain, (4, 4) cm.
+
+    The design alignment places it: ``F_signature(q) ≈ X · F_design(q) · Y`` with
+    ``F_design = … · F_n^design · tool_design``, so the design flange on the signature is
+    ``F_signature(q) · Y⁻¹ · tool_design⁻¹``, rigid with the last link:
+    ``F_n(q) · tool · Y⁻¹ · tool_design⁻¹``, then moved the least (:func:`onto_line`) so
+    that the identified last joint axis is where the design has it in its flange frame
+    (a flange turns about its own axis; the least-squares ``Y`` does not know that). The
+    design model: ``I`` (its own ``F_n``)."""
+    if design:
+        return np.eye(4)
+    T = sig.chain.tool @ invert_transform(sig.design_flange_to_tool)
+    T = T @ invert_transform(sig.robot.tool.matrix())
+    axis = invert_transform(sig.robot.design_chain().links[-1])  # the design's, in F_n
+    return onto_line(T, sig.chain.links[-1], axis[:3, 3], axis[:3, 2], bool(sig.prismatic[-1]))
 
 
 def random_readings(sig: Signature, m: int, seed: int = 0) -> np.ndarray:
@@ -132,38 +180,60 @@ def json_text(doc: dict[str, Any]) -> str:
     return "{\n" + body + "\n}\n"
 
 
+def _with_tool(chain: SerialChain, tool: np.ndarray) -> SerialChain:
+    return SerialChain(chain.links, chain.prismatic, chain.base, tool, chain.joint_offsets)
+
+
 def render(
     sig: Signature, chain: SerialChain, fmt: str, model: str, frame: str
-) -> tuple[str, SerialChain]:
-    """The file's text and the chain its numbers (as written) describe."""
+) -> tuple[str, SerialChain, list[tuple[SerialChain, SerialChain]]]:
+    """The file's text, the chain its numbers (as written) describe, and for a URDF the
+    pair (intended, as written) of ``tool0``'s chain."""
     robot, pris = sig.robot, sig.prismatic
     if fmt == "urdf":
-        where = "sensor frame" if frame == "sensor" else "design base frame"
+        where = (
+            "the sonic sensor's frame"
+            if frame == "sensor"
+            else "the robot's base (the design base placed by the signature's design alignment)"
+        )
         comment = (
-            f"armsig {model} model of {robot.name}, base_link = the {where}; SI units; "
-            "joint variable = encoder reading (rad, m), encoder offsets in the joint origins"
+            f"armsig {model} model of {robot.name}, base_link = {where}; flange and tool0 = "
+            "the physical flange (ROS-Industrial: flange x, tool0 z out of the flange); tool = "
+            "the measured tool point; SI units; joint variable = encoder reading (rad, m), "
+            "encoder offsets in the joint origins"
         )
         name = robot.name if model == "signature" else f"{robot.name}_design"
-        return urdf_text(chain, robot, name, comment), chain_from_origins(
-            written_origins(chain), pris
+        t0 = tool0_from_last(sig, model == "design")
+        origins = written_origins(chain)
+        flange, tool0 = as_written(fixed_origins(chain, t0))
+        urdf_tool0 = chain_from_origins(origins, pris)
+        urdf_tool0 = SerialChain(
+            np.concatenate((urdf_tool0.links[:-1], (flange @ tool0)[None])), pris, urdf_tool0.base
+        )
+        return (
+            urdf_text(chain, robot, name, comment, t0),
+            chain_from_origins(origins, pris),
+            [(_with_tool(chain, t0), urdf_tool0)],
         )
     if fmt == "json":
         doc = chain_document(chain, robot, model, frame)
         text = json_text(doc)
-        return text, chain_from_document(json.loads(text), pris)
+        return text, chain_from_document(json.loads(text), pris), []
     table = dh_table_from_chain(chain)
     if fmt == "dh":
         doc = dh_document(table, robot, model, frame)
         text = json_text(doc)
-        return text, chain_from_dh_table(_dh_from_document(json.loads(text), pris))
+        return text, chain_from_dh_table(_dh_from_document(json.loads(text), pris)), []
     doc = mdh_document(modified_from_dh(table), table.hayati, robot, model, frame)
     text = json_text(doc)
-    return text, chain_from_modified(_mdh_from_document(json.loads(text), pris))
+    return text, chain_from_modified(_mdh_from_document(json.loads(text), pris)), []
 
 
 def default_path(session_dir: Path, fmt: str, design: bool, frame: str) -> Path:
-    """``SESSION/export/{signature|design}[.design-base].{urdf,dh.json,mdh.json,chain.json}``."""
-    stem = ("design" if design else "signature") + ("" if frame == "sensor" else f".{frame}")
+    """``SESSION/export/{signature|design}[.FRAME].{urdf,dh.json,mdh.json,chain.json}``, the
+    frame named when it is not the format's :data:`DEFAULT_FRAME`."""
+    named = "" if frame == DEFAULT_FRAME[fmt] else f".{frame}"
+    stem = ("design" if design else "signature") + named
     return session_dir / EXPORT_DIR / (stem + _SUFFIX[fmt])
 
 
@@ -172,11 +242,12 @@ def export(
     fmt: str,
     out: str | Path | None = None,
     design: bool = False,
-    frame: str = "sensor",
+    frame: str | None = None,
     force: bool = False,
     accept_verdict: bool = False,
 ) -> ExportResult:
-    """Export a session's signature (``design``: its design model) as ``fmt``.
+    """Export a session's signature (``design``: its design model) as ``fmt``, its world
+    in ``frame`` (None: the format's :data:`DEFAULT_FRAME`).
 
     ``out`` defaults to :func:`default_path` (armsig's own folder, rewritten every time);
     an ``out`` that exists is refused unless ``force``. A signature whose verdict is FAIL
@@ -188,6 +259,7 @@ def export(
     """
     if fmt not in FORMATS:
         raise ArmsigError(f"unknown export format {fmt!r}", expected=", ".join(FORMATS))
+    frame = DEFAULT_FRAME[fmt] if frame is None else frame
     if frame not in FRAMES:
         raise ArmsigError(f"unknown export frame {frame!r}", expected=", ".join(FRAMES))
     sdir = Path(session_dir)
@@ -205,17 +277,12 @@ def export(
         check_new_file(side, "sidecar", force)
     model = "design" if design else "signature"
     chain = export_chain(sig, design, frame)
-    text, written = render(sig, chain, fmt, model, frame)
+    text, written, frames = render(sig, chain, fmt, model, frame)
     q = random_readings(sig, CHECK_CONFIGURATIONS)
     pos, rot = _check(chain, written, q)
-    side_warning = None
-    if section:  # the terms first: the export never stands without them
-        side_text = json_text(sidecar_document(sig, section, path.name))
-        check_sidecar(json.loads(side_text), sig, q)
-        write_text_atomic(side, side_text)
-        side_warning = _sidecar_warning(fmt, len(section["terms"]), side)
-    elif out is None:  # no stale terms beside a rigid export in armsig's own folder
-        side.unlink(missing_ok=True)
+    for intended, as_text in frames:  # the URDF's tool0 (its flange is tool0 turned)
+        _check(intended, as_text, q)
+    side_warning = write_sidecar(sig, section, path, q, _NAME[fmt], own_folder=out is None)
     write_text_atomic(path, text)
     status = None if sig.verdict is None else sig.verdict.status
     return ExportResult(
@@ -224,9 +291,29 @@ def export(
     )  # fmt: skip
 
 
-def _sidecar_warning(fmt: str, n: int, side: Path) -> str:
+def write_sidecar(
+    sig: Signature,
+    section: dict[str, Any] | None,
+    path: Path,
+    q: np.ndarray,
+    what: str,
+    own_folder: bool,
+) -> str | None:
+    """Before the export ``path`` (a ``what``: "URDF", ...) is written: the signature's
+    non-geometric ``section`` beside it (checked at readings ``q``), and the warning that
+    says so; None for a rigid signature (whose ``own_folder`` loses a stale sidecar). The
+    terms go first: the export never stands without them."""
+    side = sidecar_path(path)
+    if not section:
+        if own_folder:  # no stale terms beside a rigid export in armsig's own folder
+            side.unlink(missing_ok=True)
+        return None
+    side_text = json_text(sidecar_document(sig, section, path.name))
+    check_sidecar(json.loads(side_text), sig, q)
+    write_text_atomic(side, side_text)
+    n = len(section["terms"])
     terms = "1 non-geometric term is" if n == 1 else f"{n} non-geometric terms are"
     return (
-        f"the {_NAME[fmt]} holds the rigid chain only; the signature's {terms} written "
+        f"the {what} holds the rigid chain only; the signature's {terms} written "
         f"beside it in {side}"
     )

@@ -41,7 +41,9 @@ class JointSpec:
     """One joint: its type, travel and encoder.
 
     ``lower``/``upper`` and ``encoder_resolution`` are in degrees for revolute
-    joints and cm for prismatic joints.
+    joints and cm for prismatic joints; ``velocity_limit`` in deg/s or cm/s and
+    ``effort_limit`` in N·m or N, None when the description does not give them (only
+    exports use them: the URDF's ``<limit>``).
     """
 
     name: str
@@ -50,6 +52,8 @@ class JointSpec:
     upper: float
     encoder_resolution: float
     dh: DHRow
+    velocity_limit: float | None = None
+    effort_limit: float | None = None
 
     @property
     def prismatic(self) -> bool:
@@ -199,6 +203,16 @@ MAX_LENGTH_CM = 1000.0
 #: digits (1e-5 deg of 180 deg), so a condition number of 1e6 still resolves joint
 #: values to about 0.1 deg; a worse C is a typo or a singular map, not a controller.
 MAX_COUPLING_COND = 1e6
+#: Bounds of the optional velocity (deg/s, cm/s) and effort (N·m, N) limits: far above
+#: any arm (a fast robot turns ~1,000 deg/s; a large one's base ~10⁵ N·m), they only
+#: catch a typo or a unit off by 10⁶.
+MAX_VELOCITY = 1e5
+MAX_EFFORT = 1e7
+#: The optional per-joint fields and their bounds (value, unit for the message).
+_RATES = (
+    ("velocity_limit", MAX_VELOCITY, "deg/s or cm/s"),
+    ("effort_limit", MAX_EFFORT, "N·m or N"),
+)
 
 
 def _is_number(x: Any) -> bool:
@@ -275,7 +289,8 @@ def _joint(jt: Any, where: str) -> JointSpec:
     """One ``[[joints]]`` table; travel and lengths within the bounds of a description."""
     if not isinstance(jt, dict):
         raise RobotDescriptionError(f"{where} is not a table", got=repr(jt))
-    _known(jt, ("name", "type", "limits", "encoder_resolution", "dh"), where)
+    _known(jt, ("name", "type", "limits", "encoder_resolution", "dh", *(k for k, *_ in _RATES)),
+           where)  # fmt: skip
     jname = _field(jt, "name", where, str)
     jtype = _field(jt, "type", where, str)
     if jtype not in JOINT_TYPES:
@@ -314,7 +329,11 @@ def _joint(jt: Any, where: str) -> JointSpec:
             )
         )
     )
-    return JointSpec(jname, jtype, lower, upper, res, row)
+    rates = [None if jt.get(k) is None else _bounded(jt[k], k, where, b, u) for k, b, u in _RATES]
+    for (key, *_), v in zip(_RATES, rates, strict=True):
+        if v is not None and v <= 0:
+            raise RobotDescriptionError(f"{where}: field '{key}' must be positive", got=repr(v))
+    return JointSpec(jname, jtype, lower, upper, res, row, *rates)
 
 
 def _coupling(table: Any, n: int, where: str) -> Coupling | None:
@@ -417,6 +436,7 @@ def description_to_dict(robot: RobotDescription) -> dict[str, Any]:
                     "a_cm": j.dh.a_cm,
                     "alpha_deg": j.dh.alpha_deg,
                 },
+                **{k: getattr(j, k) for k, *_ in _RATES if getattr(j, k) is not None},
             }
             for j in robot.joints
         ],

@@ -1,0 +1,209 @@
+"""A vendor's URDF as read for ``export --onto``: its joints, its tree, where each joint's
+``<origin>`` sits in the file's bytes (so that only those bytes change), and the forward
+kinematics of a serial path through it.
+
+The file is read with the standard library's expat parser (the XML as it is: no xacro).
+Only ``<joint>`` and ``<link>`` elements directly under ``<robot>`` count; a ``<joint>``
+inside ``<transmission>`` is not a kinematic joint.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from xml.parsers import expat
+
+import numpy as np
+
+from pipeline.errors import ArmsigError, one_line
+from pipeline.kinematics.transforms import Array, rot_z, trans_z, transform_from_xyz_rpy
+
+M_PER_CM = 0.01
+MOVING = ("revolute", "continuous", "prismatic")
+KINDS = (*MOVING, "fixed")
+#: A start tag, its attribute values may hold ``>``.
+_TAG = r'(?:[^>"\']|"[^"]*"|\'[^\']*\')*'
+_ORIGIN = re.compile(rb"<origin\b" + _TAG.encode() + rb"?(/?)>")  # lazy: "/" stays out
+_END_ORIGIN = re.compile(rb"</origin\s*>")
+_START = re.compile(rb"<joint\b" + _TAG.encode() + rb">")
+
+
+@dataclass(frozen=True)
+class VendorJoint:
+    """One ``<joint>``: kinematics in cm, and where its ``<origin>`` is in the file."""
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    origin: Array  # (4, 4) cm; identity when the file has no <origin>
+    axis: Array  # (3,) unit; URDF's default (1, 0, 0) when absent
+    origin_span: tuple[int, int] | None  # bytes of the <origin> element; None: absent
+    body_start: int  # bytes: just after the <joint ...> start tag
+
+    @property
+    def moving(self) -> bool:
+        return self.type in MOVING
+
+
+@dataclass(frozen=True)
+class VendorURDF:
+    path: Path
+    data: bytes
+    name: str
+    links: tuple[str, ...]
+    joints: dict[str, VendorJoint]
+    root: str
+
+    @property
+    def joint_of_child(self) -> dict[str, VendorJoint]:
+        return {j.child: j for j in self.joints.values()}
+
+
+def _numbers(text: str | None, n: int, what: str) -> Array:
+    if text is None:
+        return np.zeros(n)
+    try:
+        v = np.array([float(x) for x in text.split()])
+    except ValueError:
+        v = np.array([])
+    if v.shape != (n,) or not np.isfinite(v).all():
+        raise ArmsigError(f"{what}: not {n} numbers", got=repr(text))
+    return v
+
+
+def read_vendor_urdf(path: str | Path) -> VendorURDF:
+    """Parse ``path``; :class:`ArmsigError` in one line for a missing file, bad XML, or a
+    tree that is not one robot (no single root, a joint whose links are unknown)."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise ArmsigError(
+            f"cannot read the vendor URDF {p}", got=exc.strerror or str(exc),
+            fix="give the path of a .urdf file (xacro files: run xacro first)",
+        ) from exc  # fmt: skip
+    return parse_vendor_urdf(data, p)
+
+
+def parse_vendor_urdf(data: bytes, p: Path) -> VendorURDF:
+    """The URDF text ``data`` (read from ``p``, named in messages) as a :class:`VendorURDF`."""
+    stack: list[str] = []
+    robot: list[str] = []
+    links: list[str] = []
+    raw: list[dict[str, object]] = []
+    parser = expat.ParserCreate()
+
+    def start(tag: str, attrs: dict[str, str]) -> None:
+        depth = len(stack)
+        at = parser.CurrentByteIndex
+        if depth == 0:
+            robot.append(tag if tag != "robot" else attrs.get("name", ""))
+        elif depth == 1 and tag == "link":
+            links.append(attrs.get("name", ""))
+        elif depth == 1 and tag == "joint":
+            m = _START.match(data, at)
+            raw.append({"name": attrs.get("name", ""), "type": attrs.get("type", ""),
+                        "body": m.end() if m else at})  # fmt: skip
+        elif depth == 2 and stack[1] == "joint" and raw:
+            j = raw[-1]
+            if tag in ("parent", "child"):
+                j[tag] = attrs.get("link")
+            elif tag == "axis":
+                j["axis"] = attrs.get("xyz")
+            elif tag == "origin":
+                j["xyz"], j["rpy"], j["at"] = attrs.get("xyz"), attrs.get("rpy"), at
+        stack.append(tag)
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = lambda tag: stack.pop()
+    try:
+        parser.Parse(data, True)
+    except expat.ExpatError as exc:
+        raise ArmsigError(f"{p} is not XML", got=one_line(str(exc), 120)) from exc
+    if robot != [robot[0]] or not raw:
+        raise ArmsigError(f"{p} is not a URDF", expected="a <robot> with <joint> elements")
+    joints = {}
+    for j in raw:
+        name = str(j["name"])
+        what = f"{p}: joint {name!r}"
+        if j["type"] not in KINDS or not j.get("parent") or not j.get("child"):
+            raise ArmsigError(
+                f"{what} is not a serial-arm joint",
+                expected=f"type {', '.join(KINDS)} with a parent and a child link",
+                got=f"type {j['type']!r}",
+            )
+        xyz = _numbers(j.get("xyz"), 3, f"{what}: origin xyz")  # type: ignore[arg-type]
+        rpy = _numbers(j.get("rpy"), 3, f"{what}: origin rpy")  # type: ignore[arg-type]
+        axis = _numbers(j.get("axis") or "1 0 0", 3, f"{what}: axis")  # type: ignore[arg-type]
+        if not np.linalg.norm(axis) > 0:
+            raise ArmsigError(f"{what}: axis is zero", expected="a direction")
+        joints[name] = VendorJoint(
+            name, str(j["type"]), str(j["parent"]), str(j["child"]),
+            transform_from_xyz_rpy(xyz / M_PER_CM, rpy), axis / np.linalg.norm(axis),
+            _span(data, j.get("at")), int(j["body"]),  # type: ignore[call-overload]
+        )  # fmt: skip
+    children = {j.child for j in joints.values()}
+    roots = [x for x in links if x not in children]
+    unknown = {x for j in joints.values() for x in (j.parent, j.child)} - set(links)
+    if unknown or len(roots) != 1:
+        raise ArmsigError(
+            f"{p}: the links do not form one tree",
+            expected="one root link, every joint's links declared",
+            got=f"roots {roots}, undeclared {sorted(unknown)}",
+        )
+    return VendorURDF(p, data, robot[0], tuple(links), joints, roots[0])
+
+
+def _span(data: bytes, at: object) -> tuple[int, int] | None:
+    """Bytes of the ``<origin>`` element that starts at byte ``at``."""
+    if at is None:
+        return None
+    start = int(at)  # type: ignore[call-overload]
+    m = _ORIGIN.match(data, start)
+    if m is None:
+        raise ArmsigError("an <origin> start tag could not be delimited", got=f"byte {start}")
+    if m.group(1):  # <origin .../>
+        return start, m.end()
+    end = _END_ORIGIN.search(data, m.end())
+    if end is None:
+        raise ArmsigError("an <origin> element is not closed", got=f"byte {start}")
+    return start, end.end()
+
+
+def path_to(urdf: VendorURDF, link: str, stop: str) -> list[VendorJoint] | None:
+    """The joints from link ``stop`` down to ``link`` (root first), [] if they are one,
+    None if ``stop`` is not above ``link``."""
+    up = urdf.joint_of_child
+    out: list[VendorJoint] = []
+    while link != stop:
+        if link not in up:
+            return None
+        j = up[link]
+        out.append(j)
+        link = j.parent
+    return list(reversed(out))
+
+
+def motion(j: VendorJoint, v: Array) -> Array:
+    """``Rot(axis, v)`` or ``Trans(axis · v)`` of readings ``v`` (m,), rad / cm: (m, 4, 4)."""
+    R = axis_frame(j.axis)
+    M = trans_z(v) if j.type == "prismatic" else rot_z(v)
+    out: Array = R @ M @ R.T
+    return out
+
+
+def axis_frame(axis: Array) -> Array:
+    """A rotation (4, 4) that takes z to the unit ``axis`` (the shortest one; a half turn
+    about x for −z)."""
+    z = np.array([0.0, 0.0, 1.0])
+    c = float(np.dot(z, axis))
+    T = np.eye(4)
+    if c < -1.0 + 1e-15:
+        T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+        return T
+    k = np.cross(z, axis)
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    T[:3, :3] = np.eye(3) + K + K @ K / (1.0 + c)  # Rodrigues, sin θ k̂ = k
+    return T
