@@ -23,10 +23,6 @@ from pipeline.importers.mapping import ImportMap, load_map
 from pipeline.signature.file import FILE_NAME, Signature
 from pipeline.signature.session import load_session_signature
 
-#: The base and tool alternation's rounds at most for the design baseline: it stops once
-#: the base moves by less than 1e-12 cm (:func:`pipeline.refine.start.design_start`).
-BASELINE_ROUNDS = 10_000
-
 
 def _as_poses(imap: ImportMap) -> ImportMap:
     """The map read as a plain list of poses: every row checked, no sweeps inferred."""
@@ -60,15 +56,14 @@ def _target(file: str, ids: list[str], tool: str | None) -> str:
 
 def design_errors(sig: Signature, q: np.ndarray, measured: np.ndarray) -> np.ndarray:
     """Each measured point's distance (m,) cm from the design model with its base and tool
-    point registered to the points (:func:`pipeline.refine.start.design_start`: the
+    point registered to the points (:func:`pipeline.refine.baseline.register_design`: the
     before of a before/after, what the robot does uncalibrated in a registered cell)."""
-    from pipeline.refine.start import design_start
+    from pipeline.refine.baseline import register_design
     from pipeline.units import joints_to_internal
 
     qi = joints_to_internal(q, sig.prismatic)
     tool = sig.design_flange_to_tool[:3, 3]  # a start: the tool point is re-solved
-    chain = sig.robot.design_chain()
-    return design_start(chain, qi, measured, tool, qi[0], BASELINE_ROUNDS).errors_cm
+    return register_design(sig.robot.design_chain(), qi, measured, tool).errors_cm
 
 
 def validate_against(

@@ -71,7 +71,6 @@ def design_start(
     measured: Array,
     tool_local: Array,
     q_signature: Array,
-    rounds: int = START_ROUNDS,
 ) -> DesignStart:
     """The registered design start (module docstring).
 
@@ -87,16 +86,12 @@ def design_start(
         The design's tool point in the last D-H frame (cm).
     q_signature : ndarray, shape (n,)
         ``q̄^s``, where the frames are taken (rad / cm).
-    rounds : int
-        The alternation's rounds at most (:data:`START_ROUNDS` for a start the refinement
-        improves on; a baseline in its own right needs it converged, e.g. the RCT
-        positioner's 205 poses: 1.853 cm RMS after 50 rounds, 0.04527 cm after 500).
     """
     n = chain.n_joints
     flange = link_frames(chain, q)[:, n]  # (K, 4, 4): F_n(q_k)
     t = np.asarray(tool_local, float).copy()
     B = np.eye(4)
-    for _ in range(rounds):
+    for _ in range(START_ROUNDS):
         p = (flange[:, :3, :3] @ t) + flange[:, :3, 3]
         B_new = register_rigid(p, measured)
         if B_new is None:
