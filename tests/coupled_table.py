@@ -76,14 +76,20 @@ def tracker_file(folder: Path, robot_toml: Path, home_turned: bool = False) -> t
     return path, sim
 
 
-def tracker_map(folder: Path, sweeps: str = "") -> Path:
-    """The map of :func:`tracker_file` (sweeps inferred, targets a, b, c; a the tool),
+def tracker_map(
+    folder: Path, sweeps: str = "", select: dict[int, dict[int, float]] | None = None
+) -> Path:
+    """The map of :func:`tracker_file` (targets a, b, c; a the tool): its sweeps inferred,
+    or with ``select`` (joint -> held joint values) chosen by ``[[sweeps.select]]``;
     ``sweeps``: more lines of its [sweeps] table."""
     parts = ['delimiter = " "\nlength_unit = "mm"']
     for t in REFLECTORS_CM:
         parts.append(f'[[targets]]\nid = "{t}"\n' + "\n".join(f'{a} = "{t}_{a}"' for a in "xyz"))
     parts += [f'[[joints]]\ncolumn = "J{j}"\nunit = "deg"' for j in range(1, 7)]
-    parts.append(f'[sweeps]\ncolumn = "infer"\n{sweeps}')
+    parts.append("[sweeps]\n" + ('column = "infer"\n' if select is None else "") + sweeps)
+    for joint, held in (select or {}).items():
+        values = ", ".join(f'"{k}" = {v!r}' for k, v in held.items())
+        parts.append(f"[[sweeps.select]]\njoint = {joint}\nheld = {{ {values} }}")
     p = folder / "map.toml"
     p.write_text("\n\n".join(parts) + "\n")
     return p

@@ -7,6 +7,7 @@ whole turn away is home."""
 from __future__ import annotations
 
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -110,6 +111,20 @@ def test_wrong_coupling_names_the_sweep_that_disagrees(tmp_path: Path) -> None:
     assert "sweep 1:" not in sweeps[0] and "[coupling]" in sweeps[0]
 
 
+def test_sweeps_select_holds_joint_values(tmp_path: Path) -> None:
+    """``[[sweeps.select]]`` chooses each sweep by its held joints' values: in the shoulder's
+    sweep the elbow holds while its reading moves."""
+    from pipeline.robots.description import load_description
+
+    robot = coupled_robot(tmp_path)
+    src, _ = tracker_file(tmp_path, robot)
+    home = load_description(robot).joints_from_readings(_rows(src)[-1, :6])
+    select = {j: {k: float(home[k - 1]) for k in range(1, 7) if k != j} for j in range(1, 7)}
+    out = import_file(src, "table", robot, tmp_path / "s", tracker_map(tmp_path, select=select))
+    assert [int((out.rows.sweep == j).sum()) for j in range(1, 7)] == [7] * 6  # and home
+    assert not (out.rows.sweep < 0).any()  # no row left over as a validation configuration
+
+
 def test_decoupled_file_with_a_coupled_description_is_refused(tmp_path: Path) -> None:
     """The issue's hand-decoupled file (readings = joint values) read with the coupled
     description: the elbow's joint value moves in the shoulder's sweep."""
@@ -119,20 +134,41 @@ def test_decoupled_file_with_a_coupled_description_is_refused(tmp_path: Path) ->
     assert "[coupling]" in str(err.value)
 
 
-def test_home_a_turn_away_is_home(tmp_path: Path) -> None:
+@pytest.mark.parametrize("coupling", [False, True])
+def test_home_a_turn_away_is_home(tmp_path: Path, coupling: bool) -> None:
     """No row reads home exactly; the first reads joint 6 at home + 360°: it is the tool
-    measurement (no fallback, no warning), q^s on home's turn."""
-    robot = coupled_robot(tmp_path)
+    measurement (no fallback, no warning), recorded with q^s on home's turn."""
+    robot = coupled_robot(tmp_path) if coupling else PUMA
     src, _ = tracker_file(tmp_path, robot, home_turned=True)
     rows = _rows(src)[:, :6]
     out = import_file(src, "table", robot, tmp_path / "s", tracker_map(tmp_path))
     assert out.tool.warning is None, out.tool.warning
     assert list(out.tool.rows) == [0]
-    np.testing.assert_allclose(out.tool.signature_q, rows[0] - [0, 0, 0, 0, 0, 360.0])
+    home = rows[0] - [0, 0, 0, 0, 0, 360.0]
+    np.testing.assert_allclose(out.tool.signature_q, home)
     desc = _description(tmp_path / "s")
-    np.testing.assert_allclose(desc["signature_q"], rows[0] - [0, 0, 0, 0, 0, 360.0])
+    np.testing.assert_allclose(desc["signature_q"], home)
     content = read_mcap(tmp_path / "s" / "recording.mcap", POINT_CHANNELS, "re-import")
-    tool = [
-        m["q_encoder"] for _, m in content.messages["/robot/joint_state"] if m["sweep"] == "tool"
-    ]
-    np.testing.assert_allclose(tool, [desc["signature_q"]])  # recorded on home's turn
+    states = content.messages["/robot/joint_state"]
+    np.testing.assert_allclose([m["q_encoder"] for _, m in states if m["sweep"] == "tool"], [home])
+
+
+def test_import_warns_in_one_line_and_raises_no_python_warning(tmp_path: Path) -> None:
+    """The fallback when no row is at home (the SScanSS-2 file without its home rows) is one
+    ``warning:`` line of the command; the import path raises no Python warning."""
+    from import_data import TWO_LINK, sscanss2_text
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+
+    src = tmp_path / "two.txt"
+    src.write_text(sscanss2_text(TWO_LINK, [[-150, -50, 50, 150], [-120, -40, 40, 120]]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        args = ["import", str(src), "--format", "sscanss2", "--robot", str(TWO_LINK)]
+        r = CliRunner().invoke(app, [*args, str(tmp_path / "s")])
+    assert r.exit_code == 0, r.output
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(
+        "warning: two.txt: no row has every joint at home"
+    )
