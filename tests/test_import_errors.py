@@ -94,6 +94,17 @@ CASES = {
         _sscanss2(lambda ls: [*ls[:4], ls[3], *ls[4:]]),
         ["f.txt: line 4 and line 5 measure joint 1 (link1) at the same reading", "duplicated"],
     ),
+    "stops within sweeps.duplicate": (
+        _table(lambda ls: ls, lambda m: m + "duplicate = [0.01, 45]\n"),
+        [
+            "f.csv: line 10 and line 11 measure joint 2 (link2) at the same reading -120",
+            "within 45, the map's sweeps.duplicate",
+        ],
+    ),  # fmt: skip
+    "tolerance per joint of another robot": (
+        _table(lambda ls: ls, lambda m: m.replace("tolerance = 0.01", "tolerance = [1, 2, 3]")),
+        ["map.toml: sweeps.tolerance has 3 values", "one number, or 2 (one per joint"],
+    ),
     "type disagrees with the robot": (
         _sscanss2(lambda ls: _cell(ls, 0, 5, "prismatic")),
         ["f.txt: line 1: joint 1 is 'prismatic' in the file but 'revolute'", "try:"],

@@ -70,6 +70,40 @@ def test_table_infer_two_targets_units(tmp_path: Path) -> None:
     assert _metadata(tmp_path / "s")["map_sha256"] == file_sha256(mp)
 
 
+def test_docs_example_two_targets_identifies(tmp_path: Path) -> None:
+    """The docs' example map (two reflectors on the tool of a 2 mm arm, issue 29): both are
+    points of the last link in every sweep and the tool measurement, and the arm, below the
+    1 cm floor that picks among a nest's targets, identifies from them exactly."""
+    from pipeline.identify import identify
+    from pipeline.stages.tables import read_table
+
+    src = two_link_table(tmp_path / "two.csv")
+    mp = tmp_path / "map.toml"
+    mp.write_text(TWO_LINK_MAP)
+    import_file(src, "table", TWO_LINK, tmp_path / "s", mp)
+    plan = _read(tmp_path / "s")["/robot/description"][0]["plan"]
+    assert plan["tool_targets"] == ["a", "b"] and plan["sweeps_measure_tool"]
+    identify(tmp_path / "s", report=False)
+    names = read_table(tmp_path / "s" / "stages" / "refine.arrow").column("name").to_pylist()
+    assert {"tool.x", "tool/b.x"} <= set(names) and not any("sweep" in n for n in names)
+    rows = read_table(tmp_path / "s" / "stages" / "validation.arrow").to_pylist()
+    assert len(rows) == 7 + 7 + 2 and max(r["error_cm"] for r in rows) <= 1e-9
+
+
+def test_held_tolerance_is_not_the_duplicate_rule(tmp_path: Path) -> None:
+    """A held-joint tolerance above a sweep's step (45° against joint 2's 40° steps) once
+    refused the stops as duplicated rows (issue 29); two stops are one configuration only
+    within sweeps.duplicate (default: the encoder resolution)."""
+    src = two_link_table(tmp_path / "two.csv")
+    lines = src.read_text().splitlines()
+    body = [f"{x},{1 if k < 7 else 2}" for k, x in enumerate(lines[2:])]
+    src.write_text("\n".join([lines[0], lines[1] + ",sweep", *body]) + "\n")
+    mp = tmp_path / "map.toml"
+    mp.write_text(TWO_LINK_MAP.replace('"infer"', '"sweep"').replace("0.01", "45"))
+    out = import_file(src, "table", TWO_LINK, tmp_path / "s", mp)
+    assert [int((out.rows.sweep == j).sum()) for j in (1, 2)] == [7, 7]
+
+
 def test_existing_recording_refused_unless_force(tmp_path: Path) -> None:
     src = tmp_path / "two.txt"
     src.write_text(sscanss2_text(TWO_LINK, TWO_LINK_VALUES))

@@ -56,8 +56,8 @@ def test_a_nest_on_the_tool_at_every_pose_is_fitted_as_points_of_the_last_link(
 ) -> None:
     d = _pose_session(tmp_path_factory, targets=3, poses=20)
     names = read_table(stage_path(d, "refine")).column("name").to_pylist()
-    assert {"poses/T2.x", "poses/T3.z", "tool.y"} <= set(names)
-    assert "poses/T1.x" not in names  # T1 is the tool (plan.tool_target)
+    assert {"tool/T2.x", "tool/T3.z", "tool.y"} <= set(names)
+    assert "tool/T1.x" not in names  # T1 is the tool (plan.tool_target)
     assert audit(d, configurations=300).signature.max_position_cm <= 1e-6
 
 

@@ -61,6 +61,8 @@ CASES = {
     "sonic_channel": ("channel /sonic/ranges in a recording of sensor 'points'", ""),
     "untold_tool_target": ("does not say which is the tool", "sweep tool"),
     "orientation_sigma_alone": ("orientation_sigma_deg without", "(sweep 3, step 2, target T2)"),
+    "not_a_tool_target": ("does not plan", "(sweep tool, step 0, target T3)"),
+    "tool_targets_without_the_tool": ("does not hold plan.tool_target", "tool_target T1"),
 }
 
 
@@ -99,6 +101,11 @@ def test_broken_point_recordings_are_refused_naming_the_key(
         _edit(raw, pt, orientation_wxyz=[0.9, 0.1, 0.0, 0.0])
     elif case == "orientation_sigma_alone":
         _edit(raw, pt, orientation_sigma_deg=0.01)
+    elif case == "not_a_tool_target":  # plan.tool_targets T1, T2: T3 is no target on the tool
+        _set_description(raw, lambda d: d["plan"].update(tool_targets=["T1", "T2"]))
+        _edit(raw, _first(raw, POINTS, sweep="tool"), target="T3")
+    elif case == "tool_targets_without_the_tool":
+        _set_description(raw, lambda d: d["plan"].update(tool_targets=["T2", "T3"]))
     elif case == "sonic_channel":
         channels["/sonic/ranges"] = "sonic_ranges"
         ranges = [[None] * 4 for _ in range(5)]
@@ -118,6 +125,21 @@ def test_broken_point_recordings_are_refused_naming_the_key(
     with pytest.raises(RecordingError, match=what) as exc:
         read_recording(tmp_path / "recording.mcap")
     assert key in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_tool_sweep_measures_the_targets_on_the_tool(session: Path, tmp_path: Path) -> None:
+    """``plan.tool_targets``: the tool sweep may measure every target on the last link, the
+    tool point among them (issue 29); without it, only ``plan.tool_target``."""
+    raw, _ = read_raw(session / "recording.mcap")
+    tool = _first(raw, POINTS, sweep="tool")
+    raw.append(raw[tool].with_payload({**raw[tool].payload, "target": "T2"}))
+    write_raw(tmp_path / "refused.mcap", raw, channels=POINT_CHANNELS)
+    with pytest.raises(RecordingError, match="does not plan"):
+        read_recording(tmp_path / "refused.mcap")
+    _set_description(raw, lambda d: d["plan"].update(tool_targets=["T1", "T2"]))
+    write_raw(tmp_path / "recording.mcap", raw, channels=POINT_CHANNELS)
+    rec = read_recording(tmp_path / "recording.mcap")
+    assert sorted(rec.point_target[rec.point_sweep == TOOL_SWEEP].tolist()) == ["T1", "T2"]
 
 
 def test_points_are_keyed_sorted_and_carry_their_uncertainty(session: Path, tmp_path: Path) -> None:

@@ -7,7 +7,15 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.refine.verdict import CHECK, FAIL, PASS, Evidence, SensorParameter, judge
+from pipeline.refine.verdict import (
+    CHECK,
+    FAIL,
+    PASS,
+    Evidence,
+    SensorParameter,
+    SweepHoldout,
+    judge,
+)
 
 GOOD = Evidence(
     refined=True,
@@ -62,6 +70,27 @@ def test_each_rule_fires(change: dict[str, object], level: str, words: str) -> N
         assert len(v.reasons) == 1 and words in v.reasons[0], v.reasons
         assert v.findings[0].level == level and v.findings[0].text == v.reasons[0]
         assert v.line.startswith(level) and words in v.line
+
+
+def test_the_sweeps_that_disagree_are_named() -> None:
+    """Issue 29: one sweep's held-out error beyond twice its prediction while the others'
+    are not (a wrong [coupling] shows in the shoulder's sweep): a CHECK naming it. Every
+    sweep beyond, or a noiseless sweep within the floor, is no such finding."""
+    ok = [SweepHoldout(str(j), 0.009, 0.008) for j in (1, 3, 4)]
+    bad = dataclasses.replace(GOOD, holdout_sweeps=(*ok, SweepHoldout("2", 1.19, 0.426)))
+    v = judge(bad)
+    assert v.level == CHECK and len(v.reasons) == 1, v.reasons
+    assert v.reasons[0].startswith("the sweeps disagree: held-out RMS error beyond its ")
+    assert "sweep 2: 1.19 cm > 2 × 0.426 cm" in v.reasons[0] and "sweep 1" not in v.reasons[0]
+    assert v.findings[0].rule == "holdout_ratio" and v.findings[0].value == pytest.approx(
+        2.79, 0.01
+    )
+    every = tuple(SweepHoldout(str(j), 0.05, 0.008) for j in (1, 2))
+    assert "disagree" not in " ".join(
+        judge(dataclasses.replace(GOOD, holdout_sweeps=every)).reasons
+    )
+    exact = (SweepHoldout("1", 1e-12, 0.0), SweepHoldout("2", 1.5e-4, 0.0))
+    assert judge(dataclasses.replace(GOOD, holdout_sweeps=exact)).level == PASS
 
 
 def test_a_noiseless_session_passes_above_the_floor() -> None:

@@ -15,13 +15,13 @@ from pipeline.rig.simulate import SimulationOptions, simulate_session
 SMALL = {"points": 12, "repeats": 2}
 #: sha256 of recording.mcap as made before the plan was cached (main at ae2a052), seed 5;
 #: renewed when the recording embeds a changed channel schema (issue 26: the sweep
-#: 'poses' of joint_state.json; issue 27: its optional payload_kg), its messages unchanged
-#: (checked against 0537394 and bef8e5b: every message's topic, log and publish time and
-#: bytes equal).
+#: 'poses' of joint_state.json; issue 27: its optional payload_kg; issue 29: plan.tool_targets
+#: of robot_description.json), its messages unchanged (checked against 0537394, bef8e5b and
+#: 23ce14c: every message's topic, log and publish time and bytes equal).
 BEFORE = {
-    (): "9354d2deac16d9ae62d2fc6518092938a03080fea330b10badc91b0089eeffc2",
+    (): "a366be4f38d7e7299e1efd6de763180f28bcc150739070135cdf8898b061cdc4",
     (("noise_factor", 4.6), ("wac_error_cm", 0.5)): (
-        "782573987473f7263f0798a1ddddf99a5b8265fcf95b4ca8fa973160624fa402"
+        "b2afbef8349ba7ef5c475bd321cd42ed8d32f683f60b5e7274f232d5322ee7bd"
     ),
 }
 

@@ -17,7 +17,13 @@ from pipeline.errors import ImportFileError, os_errors_refused
 from pipeline.importers.mapping import ImportMap, load_map
 from pipeline.importers.rows import LENGTH_CM, MeasuredRows, checked_rows
 from pipeline.importers.session import ToolChoice, session_messages, tool_rows
-from pipeline.importers.sweeps import home_readings, pose_set, select_sweeps, tolerance
+from pipeline.importers.sweeps import (
+    Tolerances,
+    home_readings,
+    pose_set,
+    select_sweeps,
+    tolerances,
+)
 from pipeline.importers.write import source_metadata, write_imported
 from pipeline.robots.description import RobotDescription, load_description
 
@@ -36,11 +42,13 @@ class Imported:
     recording: Path | None
 
 
-def _tolerance(fmt: str, imap: ImportMap, robot: RobotDescription) -> np.ndarray:
-    """How far a held joint may read from its sweep's value (deg / cm)."""
+def _tolerances(fmt: str, imap: ImportMap, robot: RobotDescription) -> Tolerances:
+    """How far a held joint may be from its sweep's value, and how close two stops of a
+    sweep may be (deg / cm)."""
     if fmt == "sscanss2":
-        return robot.encoder_resolution / 2  # the file states each configuration exactly
-    return tolerance(imap, robot)
+        half = robot.encoder_resolution / 2  # the file states each configuration exactly
+        return Tolerances(half, half)
+    return tolerances(imap, robot)
 
 
 def parse_foreign(
@@ -76,7 +84,7 @@ def parse_foreign(
         if imap.poses:
             rows = pose_set(rows, imap)
         elif imap.select:
-            rows = select_sweeps(rows, imap, _tolerance(fmt, imap, robot))
+            rows = select_sweeps(rows, imap, robot, _tolerances(fmt, imap, robot).held)
     if not (rows.sweep > 0).any():
         return rows, np.zeros(robot.n_joints)
     return rows, home_readings(rows, imap, robot)
@@ -93,9 +101,9 @@ def read_foreign(
             fix='e.g. joint = 2 with held = { "1" = 0.0 }',
         )
     rows, home = parse_foreign(path, fmt, robot, imap)
-    tol = _tolerance(fmt, imap, robot)
+    tol = _tolerances(fmt, imap, robot)
     rows = checked_rows(rows, robot, tol)
-    return rows, tool_rows(rows, home, tol)
+    return rows, tool_rows(rows, home, robot, tol.held)
 
 
 def import_file(

@@ -90,6 +90,7 @@ class ImportMap:
     sweep_column: str | int | None = None  # a column, "infer", or None (select)
     select: tuple[SweepSelect, ...] = ()
     tolerance: tuple[float, ...] | float | None = None  # deg / cm; None: encoder resolution
+    duplicate: tuple[float, ...] | float | None = None  # deg / cm; None: encoder resolution
     home: tuple[float, ...] | None = None  # deg / cm
     poses: bool = False  # every row a configuration of the pose set
     tool_target: str | None = None  # None: the first target
@@ -262,7 +263,7 @@ def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
         SweepSelect(s["joint"], {int(j): float(v) for j, v in s.get("held", {}).items()})
         for s in sw.get("select", [])
     )
-    tol = sw.get("tolerance")
+    tol, dup = sw.get("tolerance"), sw.get("duplicate")
     orient = data.get("orientation")
     check = data.get("check")
     return ImportMap(
@@ -278,6 +279,7 @@ def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
         sweep_column=sw.get("column"),
         select=select,
         tolerance=tuple(map(float, tol)) if isinstance(tol, list) else tol,
+        duplicate=tuple(map(float, dup)) if isinstance(dup, list) else dup,
         home=None if "home" not in sw else tuple(float(v) for v in sw["home"]),
         poses=data.get("sweep") == POSES,
         tool_target=data.get("tool_target"),

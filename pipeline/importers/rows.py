@@ -82,6 +82,17 @@ class MeasuredRows:
         return replace(self, sigma={t: np.full((n, 3), sigma_cm) for t in self.targets})
 
 
+@dataclass(frozen=True)
+class Tolerances:
+    """Per joint, joint values (deg / cm): ``held``, how far a joint that holds may read
+    from its value (sweep inference, selection, the held-joint check, home); ``duplicate``,
+    two stops of a sweep whose swept joint is within it are one configuration measured
+    twice."""
+
+    held: np.ndarray
+    duplicate: np.ndarray
+
+
 def unit_factor(unit: str, table: dict[str, float], what: str, where: str) -> float:
     """The factor of ``unit`` in ``table`` (to cm or deg); an unknown unit is refused."""
     if unit not in table:
@@ -105,13 +116,15 @@ def readings_in_boundary_units(
     return out
 
 
-def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: np.ndarray) -> MeasuredRows:
-    """Refuse rows that would make a wrong session; ``tol`` (n,): how far a held joint
-    may read from its sweep's median (deg / cm).
+def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: Tolerances) -> MeasuredRows:
+    """Refuse rows that would make a wrong session; ``tol``: how far a held joint may be
+    from its sweep's median, how close two stops of a sweep may be (joint values: the
+    readings through the robot's coupling).
 
-    Refused: a non-finite value; a σ that is not positive; a row measured twice (same
-    sweep, same readings); a joint without a sweep (unless the rows are a pose set) or
-    whose sweep does not move it; a sweep in which another joint moves too.
+    Refused: a non-finite value; a σ that is not positive; a joint value outside its
+    limits; a row measured twice (same sweep, the swept joint within ``tol.duplicate``); a
+    joint without a sweep (unless the rows are a pose set) or whose sweep does not move
+    it; a sweep in which another joint moves too.
     """
     src = rows.source.name
     extra = [] if rows.orientation_wxyz is None else [rows.orientation_wxyz]
@@ -132,15 +145,17 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: np.ndarray) -
             fix="correct the σ column, or state one σ for the file (map: sigma = ...)",
         )
     names = [j.name for j in robot.joints]
-    q = robot.joints_from_readings(rows.q)
+    values = robot.joints_from_readings(rows.q)
+    coupled = "" if robot.coupling is None else " (through the coupling)"
+    what = "reading" if robot.coupling is None else "joint value"
     lim = robot.limits
-    out = np.argwhere((q < lim[:, 0] - LIMIT_MARGIN) | (q > lim[:, 1] + LIMIT_MARGIN))
+    out = np.argwhere((values < lim[:, 0] - LIMIT_MARGIN) | (values > lim[:, 1] + LIMIT_MARGIN))
     if len(out):
         k, j = out[0]
         unit = robot.joints[j].unit
         raise ImportFileError(
-            f"{src}: {rows.where[k]}: joint {j + 1} ({names[j]}) reads {q[k, j]:g} {unit}, "
-            "outside its limits",
+            f"{src}: {rows.where[k]}: joint {j + 1} ({names[j]}) reads {values[k, j]:g} "
+            f"{unit}{coupled}, outside its limits",
             expected=f"{lim[j, 0]:g} to {lim[j, 1]:g} {unit} (± {LIMIT_MARGIN:g})",
             fix="check the joint's unit and unwrap setting in the map, or the robot's limits",
         )
@@ -155,33 +170,37 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: np.ndarray) -
                 expected="rows where this joint moves alone",
                 fix="add its sweep, or check the sweep column / map",
             )
-        q = rows.q[sel]
-        if np.ptp(q[:, j]) <= tol[j]:
+        q = values[sel]
+        if np.ptp(q[:, j]) <= tol.held[j]:
             raise ImportFileError(
                 f"{src}: joint {j + 1} ({names[j]}) never moves in its sweep "
                 f"({rows.where[sel[0]]} on)",
-                expected=f"readings spread by more than {tol[j]:g}",
+                expected=f"readings spread by more than {tol.held[j]:g}",
                 fix="check the joint's column and the sweep column of the map",
             )
         order = np.argsort(q[:, j], kind="stable")
-        same = np.flatnonzero(np.abs(np.diff(q[order, j])) <= tol[j])
+        same = np.flatnonzero(np.abs(np.diff(q[order, j])) <= tol.duplicate[j])
         if len(same):
             a, b = sel[order[same[0]]], sel[order[same[0] + 1]]
             raise ImportFileError(
                 f"{src}: {rows.where[a]} and {rows.where[b]} measure joint {j + 1} "
-                f"({names[j]}) at the same reading {q[order[same[0]], j]:g}",
-                expected="each configuration of a sweep once (duplicated rows)",
+                f"({names[j]}) at the same {what} {q[order[same[0]], j]:g}",
+                expected=f"each configuration of a sweep once (duplicated rows: within "
+                f"{tol.duplicate[j]:g}, the map's sweeps.duplicate)",
                 fix="delete one of the two rows (or average them)",
             )
-        held = np.abs(q - np.median(q, axis=0)) > tol
+        held = np.abs(q - np.median(q, axis=0)) > tol.held
         held[:, j] = False
         if held.any():
             k, m = np.argwhere(held)[0]
             raise ImportFileError(
                 f"{src}: {rows.where[sel[k]]}: joint {m + 1} ({names[m]}) moves in the sweep "
-                f"of joint {j + 1} (reading {q[k, m]:g}, median {np.median(q[:, m]):g})",
-                expected=f"one joint moving per sweep, the others within {tol[m]:g}",
-                fix="split the rows into one sweep per joint, or raise the map's tolerance",
+                f"of joint {j + 1} ({what} {q[k, m]:g}, median {np.median(q[:, m]):g}"
+                f"{coupled})",
+                expected=f"one joint moving per sweep, the others within {tol.held[m]:g} "
+                "(the map's sweeps.tolerance)",
+                fix="split the rows into one sweep per joint, raise the map's tolerance, or "
+                "check the robot description's [coupling]",
             )
     unknown = np.flatnonzero(
         ~np.isin(rows.sweep, [CHECK_SWEEP, POSES_SWEEP, *range(1, robot.n_joints + 1)])

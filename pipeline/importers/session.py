@@ -1,9 +1,14 @@
 """Measured rows -> the messages of a point-session recording (schemas/mcap/).
 
-Each joint's sweep becomes sweep ``j`` with its steps ordered by reading; the rows
-measured with every joint at home become the tool measurement (sweep ``tool``,
-signature configuration q^s = their mean reading); every other row that is in no
-sweep becomes a validation configuration (sweep ``check``). A pose set's rows become
+Each joint's sweep becomes sweep ``j`` with its steps ordered by the joint's value (its
+reading through the robot's coupling); the rows measured with every joint at home
+(whole turns aside) become the tool measurement (sweep ``tool``, signature configuration
+q^s = their mean reading); every other row that is in no sweep becomes a validation
+configuration (sweep ``check``); a tool row a whole turn from home is recorded on home's
+turn (the same pose, and q^s its reading). Every target of a row is recorded; the joint sweeps and
+the tool measurement of a file measure the same targets, reflectors on the last link
+(``plan.sweeps_measure_tool``; with several, ``plan.tool_targets``: each one point of the
+last link in every sweep). A pose set's rows become
 sweep ``poses`` in file order (``plan.poses``), with no tool measurement: q^s is the
 first pose's readings. The readings are recorded as both commanded and encoder values:
 a file holds only what the joints read. A point's stated σ is its ``sigma_cm`` (the
@@ -18,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.importers.rows import MeasuredRows
+from pipeline.importers.sweeps import whole_turns
 from pipeline.rig.recorder import Message
 from pipeline.robots.description import RobotDescription, description_to_dict
 from pipeline.stages.recording import CHECK_SWEEP, POSES_SWEEP
@@ -28,16 +34,23 @@ STEP_NS = 10**9  # one configuration per second, in the order they are written
 
 @dataclass(frozen=True)
 class ToolChoice:
-    """Rows of the tool measurement and the signature configuration q^s (deg / cm)."""
+    """Rows of the tool measurement, their readings as recorded (on home's turn: a row a
+    whole turn away from home is the same pose) and the signature configuration q^s
+    (deg / cm)."""
 
     rows: np.ndarray  # (m,) row indices
     signature_q: np.ndarray  # (n,)
     note: str  # how they were chosen, for the user
     warning: str | None = None  # one line for the user when the choice is a fallback
+    readings: np.ndarray | None = None  # (m, n); None: the rows' own readings
 
 
-def tool_rows(rows: MeasuredRows, home: np.ndarray, tol: np.ndarray) -> ToolChoice:
-    """The rows where every joint reads home (within ``tol``); q^s = their mean reading.
+def tool_rows(
+    rows: MeasuredRows, home: np.ndarray, robot: RobotDescription, tol: np.ndarray
+) -> ToolChoice:
+    """The rows where every joint is at home: its joint value within ``tol`` of home's,
+    whole turns aside (a revolute joint 360 deg away is home); q^s = their mean reading,
+    each row's readings taken to the turn of ``home`` first.
 
     When no row is at home, the row of the last joint's sweep nearest home is the
     tool measurement and q^s its readings (home except the last joint): its ``warning``
@@ -48,12 +61,17 @@ def tool_rows(rows: MeasuredRows, home: np.ndarray, tol: np.ndarray) -> ToolChoi
     if len(poses):
         note = f"the pose set (fitted), q^s the readings of {rows.where[poses[0]]}"
         return ToolChoice(np.zeros(0, np.int64), rows.q[poses[0]].copy(), note)
-    at_home = np.flatnonzero((np.abs(rows.q - home) <= tol).all(axis=1))
+    d = robot.joints_from_readings(rows.q) - robot.joints_from_readings(home)
+    turns = whole_turns(d, robot.prismatic)
+    at_home = np.flatnonzero((np.abs(d - turns) <= tol).all(axis=1))
     if len(at_home):
-        return ToolChoice(at_home, rows.q[at_home].mean(axis=0), "rows with every joint at home")
+        # the readings of the same joint values on home's turn (through the coupling)
+        shift = robot.readings_from_joints(turns) - robot.readings_from_joints(0.0 * turns)
+        q = rows.q[at_home] - shift[at_home]
+        return ToolChoice(at_home, q.mean(axis=0), "rows with every joint at home", None, q)
     n = rows.q.shape[1]
     last = np.flatnonzero(rows.sweep == n)
-    k = last[np.argmin(np.abs(rows.q[last, -1] - home[-1]))]
+    k = last[np.argmin(np.abs((d - turns)[last, -1]))]
     note = (
         f"no row has every joint at home; the tool is the point of {rows.where[k]} "
         f"(joint {n} at {rows.q[k, -1]:g} instead of {home[-1]:g}), and q^s its readings"
@@ -73,20 +91,21 @@ def session_messages(
     robot description's tool."""
     units = [j.unit for j in robot.joints]
     ids = list(rows.targets)
+    values = robot.joints_from_readings(rows.q)
     configs: list[tuple[str | int, int, int]] = []  # (sweep name, step, row)
     sweeps: list[dict[str, Any]] = []
     for j in range(1, robot.n_joints + 1):
         sel = np.flatnonzero(rows.sweep == j)
         if len(sel) == 0:
             continue  # a pose set: no joint sweep
-        sel = sel[np.argsort(rows.q[sel, j - 1], kind="stable")]
+        sel = sel[np.argsort(values[sel, j - 1], kind="stable")]
         configs += [(j, s, int(k)) for s, k in enumerate(sel)]
         sweeps.append(
             {
                 "joint": j,
                 "n_points": len(sel),
-                "q_first": float(rows.q[sel[0], j - 1]),
-                "q_last": float(rows.q[sel[-1], j - 1]),
+                "q_first": float(values[sel[0], j - 1]),
+                "q_last": float(values[sel[-1], j - 1]),
                 "targets": ids,
             }
         )
@@ -108,6 +127,8 @@ def session_messages(
     }
     if sweeps:
         plan["sweeps_measure_tool"] = True  # every row measured every target on the end link
+        if len(ids) > 1:
+            plan["tool_targets"] = ids  # each one point on the last link, in every sweep
     if len(poses):
         plan["poses"] = {"n_points": len(poses), "targets": ids}
     if len(check):
@@ -125,16 +146,17 @@ def session_messages(
             },
         ),
     ]
+    tool_q = rows.q[tool.rows] if tool.readings is None else tool.readings
     for c, (sweep, step, k) in enumerate(configs):
         t_ns = T0_NS + (c + 1) * STEP_NS
-        q = [float(v) for v in rows.q[k]]
+        q = [float(v) for v in (tool_q[step] if sweep == "tool" else rows.q[k])]
         state: dict[str, Any] = {
             "sweep": sweep, "step": step, "q_commanded": q, "q_encoder": q, "units": units
         }  # fmt: skip
         if rows.payload_kg is not None:
             state["payload_kg"] = float(rows.payload_kg[k])
         messages.append(Message("/robot/joint_state", t_ns, state))
-        for t, target in enumerate(ids[:1] if sweep == "tool" else ids):  # plan.tool_target
+        for t, target in enumerate(ids):
             x, y, z = (float(v) for v in rows.targets[target][k])
             point: dict[str, Any] = {
                 "sweep": sweep, "step": step, "target": target, "x_cm": x, "y_cm": y, "z_cm": z

@@ -1,5 +1,10 @@
 """Which rows form which joint's sweep (a sweep column, ``infer``, or a selection), or
-the pose set (every row, a seeded fraction of them validation configurations)."""
+the pose set (every row, a seeded fraction of them validation configurations).
+
+A file holds the controller's readings; which joint moves and which holds is a matter of
+joint values, the readings through the robot's coupling when it has one
+(:meth:`~pipeline.robots.description.RobotDescription.joints_from_readings`): a coupled
+controller's elbow reading follows the shoulder while the elbow itself holds."""
 
 from __future__ import annotations
 
@@ -9,17 +14,42 @@ import numpy as np
 
 from pipeline.errors import ImportFileError
 from pipeline.importers.mapping import ImportMap
-from pipeline.importers.rows import MeasuredRows
+from pipeline.importers.rows import MeasuredRows, Tolerances
 from pipeline.robots.description import RobotDescription
 from pipeline.stages.recording import CHECK_SWEEP, POSES_SWEEP
 
 
-def tolerance(imap: ImportMap, robot: RobotDescription) -> np.ndarray:
-    """Held-joint tolerance per joint (deg / cm): the map's, else the encoder resolution."""
-    if imap.tolerance is None:
+def _per_joint(
+    value: tuple[float, ...] | float | None, key: str, imap: ImportMap, robot: RobotDescription
+) -> np.ndarray:
+    """A map's ``sweeps.<key>`` per joint (one number or one per joint); None: the encoder
+    resolution."""
+    if value is None:
         return robot.encoder_resolution
-    tol = np.broadcast_to(np.asarray(imap.tolerance, float), (robot.n_joints,)).copy()
-    return tol
+    v = np.asarray(value, float)
+    if v.ndim and len(v) != robot.n_joints:
+        raise ImportFileError(
+            f"{imap.name}: sweeps.{key} has {len(v)} values",
+            expected=f"one number, or {robot.n_joints} (one per joint of {robot.name})",
+            fix="list one value per joint, or give one number for all",
+        )
+    return np.broadcast_to(v, (robot.n_joints,)).copy()
+
+
+def tolerances(imap: ImportMap, robot: RobotDescription) -> Tolerances:
+    """The map's ``tolerance`` (held joints) and ``duplicate`` (stops of a sweep), each
+    the encoder resolution when the map has none."""
+    return Tolerances(
+        _per_joint(imap.tolerance, "tolerance", imap, robot),
+        _per_joint(imap.duplicate, "duplicate", imap, robot),
+    )
+
+
+def whole_turns(d: np.ndarray, prismatic: np.ndarray | bool) -> np.ndarray:
+    """The whole turns (multiples of 360 deg, 0 for prismatic joints; ``prismatic`` of d's
+    last axis) nearest the joint value differences ``d``: ``d`` minus them is within
+    ±180 deg, and a joint 360 deg away sits where it was."""
+    return np.where(prismatic, 0.0, 360.0 * np.round(np.asarray(d, float) / 360.0))
 
 
 def pose_set(rows: MeasuredRows, imap: ImportMap) -> MeasuredRows:
@@ -40,15 +70,15 @@ def pose_set(rows: MeasuredRows, imap: ImportMap) -> MeasuredRows:
     return replace(rows, sweep=sweep)
 
 
-def infer_sweeps(rows: MeasuredRows, tol: np.ndarray) -> np.ndarray:
+def infer_sweeps(rows: MeasuredRows, robot: RobotDescription, tol: np.ndarray) -> np.ndarray:
     """Sweep of each row from consecutive rows: a run of rows in which one joint changes
-    and the others hold (within ``tol``) is that joint's sweep.
+    and the others hold (within ``tol``, joint values) is that joint's sweep.
 
     A row after which two joints change at once starts a new run; a run of one row
     that moves into another run with two joints changing belongs to no sweep and is refused.
     """
     src = rows.source.name
-    moved = np.abs(np.diff(rows.q, axis=0)) > tol  # (R-1, n)
+    moved = np.abs(np.diff(robot.joints_from_readings(rows.q), axis=0)) > tol  # (R-1, n)
     sweep = np.zeros(len(rows.where), np.int64)
     start = 0
     while start < len(sweep):
@@ -65,11 +95,15 @@ def infer_sweeps(rows: MeasuredRows, tol: np.ndarray) -> np.ndarray:
                 break
         if joint is None:
             nxt = f" and {rows.where[end]}" if end < len(sweep) else ""
+            coupled = "" if robot.coupling is None else ", joint values through the coupling"
             raise ImportFileError(
                 f"{src}: {rows.where[start]}{nxt}: no single joint moves here "
-                f"({'two or more joints change' if nxt else 'the last row stands alone'})",
+                f"({'two or more joints change' if nxt else 'the last row stands alone'}"
+                f"{coupled})",
                 expected="runs of rows in which one joint moves and the others hold",
-                fix="give a sweep column in the map, or list the row in skip_lines",
+                fix="give a sweep column in the map, list the row in skip_lines, or check the "
+                "robot description's [coupling] (a controller whose reading of one joint "
+                "follows another's)",
             )
         if (sweep == joint + 1).any():
             raise ImportFileError(
@@ -82,11 +116,15 @@ def infer_sweeps(rows: MeasuredRows, tol: np.ndarray) -> np.ndarray:
     return sweep
 
 
-def select_sweeps(rows: MeasuredRows, imap: ImportMap, tol: np.ndarray) -> MeasuredRows:
+def select_sweeps(
+    rows: MeasuredRows, imap: ImportMap, robot: RobotDescription, tol: np.ndarray
+) -> MeasuredRows:
     """Rows of each ``[[sweeps.select]]`` form that joint's sweep (a row may serve two,
-    e.g. home); every row in no sweep becomes a validation configuration (``check``)."""
+    e.g. home): those whose held joints have the listed joint values (within ``tol``);
+    every row in no sweep becomes a validation configuration (``check``)."""
     parts, used = [], np.zeros(len(rows.where), bool)
     n = rows.q.shape[1]
+    q = robot.joints_from_readings(rows.q)
     for k, sel in enumerate(imap.select):
         beyond = [j for j in (sel.joint, *sel.held) if j > n]
         if beyond:
@@ -97,7 +135,7 @@ def select_sweeps(rows: MeasuredRows, imap: ImportMap, tol: np.ndarray) -> Measu
             )
         ok = np.ones(len(rows.where), bool)
         for j, value in sel.held.items():
-            ok &= np.abs(rows.q[:, j - 1] - value) <= tol[j - 1]
+            ok &= np.abs(q[:, j - 1] - value) <= tol[j - 1]
         used |= ok
         part = rows.take(ok)
         parts.append((part, np.full(int(ok.sum()), sel.joint)))
@@ -131,8 +169,10 @@ def _concat(parts: list[tuple[MeasuredRows, np.ndarray]]) -> MeasuredRows:
 
 
 def home_readings(rows: MeasuredRows, imap: ImportMap, robot: RobotDescription) -> np.ndarray:
-    """The tool configuration's readings (deg / cm): the map's ``home``, else each joint's
-    median reading over the other joints' sweeps."""
+    """The tool configuration's readings (deg / cm): the map's ``home``, else the readings
+    of each joint's median value over the other joints' sweeps (joint values, whole turns
+    taken to the branch of the first such row; a joint no other sweep holds: its median
+    over its own sweep)."""
     if imap.home is not None:
         if len(imap.home) != robot.n_joints:
             raise ImportFileError(
@@ -142,6 +182,11 @@ def home_readings(rows: MeasuredRows, imap: ImportMap, robot: RobotDescription) 
             )
         return np.array(imap.home)
     swept = rows.sweep > 0
-    return np.array(
-        [np.median(rows.q[swept & (rows.sweep != j + 1), j]) for j in range(robot.n_joints)]
-    )
+    q = robot.joints_from_readings(rows.q)
+    home = np.zeros(robot.n_joints)
+    for j in range(robot.n_joints):
+        held = q[swept & (rows.sweep != j + 1), j]
+        if len(held) == 0:
+            held = q[rows.sweep == j + 1, j]
+        home[j] = np.median(held - whole_turns(held - held[0], robot.prismatic[j]))
+    return robot.readings_from_joints(home)

@@ -26,7 +26,7 @@ from pipeline.importers.rows import (
     unit_factor,
 )
 from pipeline.importers.sscanss2 import csv_rows, editor_lines, read_text
-from pipeline.importers.sweeps import infer_sweeps, pose_set, select_sweeps, tolerance
+from pipeline.importers.sweeps import infer_sweeps, pose_set, select_sweeps, tolerances
 from pipeline.robots.description import RobotDescription
 from pipeline.stages.recording import CHECK_SWEEP
 
@@ -190,9 +190,9 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
     ).with_sigma(imap.sigma_cm)  # fmt: skip
     if imap.poses:
         return pose_set(rows, imap)
-    tol = tolerance(imap, robot)
+    tol = tolerances(imap, robot).held
     if imap.select:
-        return select_sweeps(rows, imap, tol)
+        return select_sweeps(rows, imap, robot, tol)
     if scol is None:
         if not np.isfinite(qq).all():
             bad = np.flatnonzero(~np.isfinite(qq).all(axis=1))[0]
@@ -201,7 +201,7 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
                 expected="finite joint readings in every row",
                 fix="delete the row, or list it in the map's skip_lines",
             )
-        rows = replace(rows, sweep=infer_sweeps(rows, tol))  # a wrap is a change: it infers
+        rows = replace(rows, sweep=infer_sweeps(rows, robot, tol))  # a wrap is a change
     return _unwrapped(rows, imap, robot)
 
 

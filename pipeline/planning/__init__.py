@@ -75,7 +75,7 @@ def _design_model(
     p0 = F[n, :3, :3] @ tool_local + F[n, :3, 3]
     K = len(q)
     model = chain_model(
-        np.full(K, POSES_SWEEP), ["tool"] * K, joints_to_internal(q, pris), F[:n], pris, None
+        np.full(K, POSES_SWEEP), ["tool"] * K, joints_to_internal(q, pris), F[:n], pris
     )
     x = np.concatenate([np.zeros(model.n_axis_params), p0])
     return model, x

@@ -18,7 +18,8 @@ with ``S_k = S̄_{k−1}`` and ``p0`` the point at ``q̄^s`` (sensor frame). Onl
 - each target point's ``p0`` (cm): one per (sweep, target) of the joint sweeps, one
   ``tool`` point shared by every measurement of the tool (tool sweep, check sweep, the
   pose set's tool target and an import's ``plan.tool_target`` rows), and one per other
-  target of the pose set (``poses/<target>``, on the last link).
+  target on the last link (``tool/<target>``: the pose set's other reflectors, an
+  import's ``plan.tool_targets``), shared by every sweep that measures it.
 
 Gauge freedoms and how they are fixed:
 
@@ -60,7 +61,7 @@ from pipeline.kinematics.chain import SerialChain
 from pipeline.kinematics.nongeometric import Terms, regressor
 from pipeline.kinematics.so3 import right_jacobian, rotation_from_vector
 from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans, trans_z
-from pipeline.sweeps import TOOL_SWEEP, WHOLE_ARM_SWEEPS
+from pipeline.sweeps import WHOLE_ARM_SWEEPS
 
 Array = npt.NDArray[np.float64]
 
@@ -396,20 +397,21 @@ class ChainModel:
         return np.concatenate([F, F[-1:], tool[None]], axis=0)
 
 
-def point_name(sweep: int, target: str, tool_target: str | None, pose_tool: str | None) -> str:
+def point_name(sweep: int, target: str, tool: str | None, sweep_tool_targets: Sequence[str]) -> str:
     """The point a measurement of ``target`` in ``sweep`` sees (module docstring).
 
-    ``tool_target``: the tool's target id when the joint sweeps measured the tool too
-    (``plan.sweeps_measure_tool``, imports), else None: a tracker's joint sweeps may
-    reuse the tool's id for their own nests. ``pose_tool``: the tool's target id in the
-    pose set and the check sweep (None: every target there is the tool, the single
-    target of a session without a nest on the last link). Another target of those
-    sweeps is a point of its own on the last link, ``poses/<target>``.
+    ``tool``: the tool point's target id (``plan.tool_target``; None: every target of the
+    tool, check and pose sweeps is the tool, the single target of a session without a
+    nest on the last link). ``sweep_tool_targets``: the ids the joint sweeps measure on
+    the last link (``plan.tool_targets``, else ``plan.tool_target``, when
+    ``plan.sweeps_measure_tool``: imports), each one point in every sweep; empty
+    otherwise: a tracker's joint sweeps may reuse the tool's ids for their own nests. A
+    target on the last link other than the tool is a point of its own there,
+    ``tool/<target>``; any other target of a joint sweep is one of that sweep's link,
+    ``sweep<j>/<target>``.
     """
-    if sweep in WHOLE_ARM_SWEEPS and sweep != TOOL_SWEEP:
-        return TOOL_POINT if pose_tool is None or target == pose_tool else f"poses/{target}"
-    if sweep == TOOL_SWEEP or (tool_target is not None and target == tool_target):
-        return TOOL_POINT
+    if sweep in WHOLE_ARM_SWEEPS or target in sweep_tool_targets:
+        return TOOL_POINT if tool is None or target == tool else f"{TOOL_POINT}/{target}"
     return f"sweep{sweep}/{target}"
 
 
@@ -419,26 +421,26 @@ def chain_model(
     theta: Array,
     frames0: Array,
     prismatic: npt.NDArray[np.bool_],
-    tool_target: str | None,
-    pose_tool: str | None = None,
+    tool: str | None = None,
+    sweep_tool_targets: Sequence[str] = (),
     tool_rotation: bool = False,
 ) -> ChainModel:
     """The model of the observations (``sweep``, ``target``) (K,), started at the thesis
     frames ``frames0`` (n, 4, 4) of the joints ``prismatic`` (n,).
 
     ``theta`` (K, n): each observation's joint readings minus ``q̄^s`` (rad / cm);
-    ``tool_target``, ``pose_tool``: as in :func:`point_name`; ``tool_rotation``: the tool's
-    orientation is a parameter (a 6-D sensor measured it). The stage tables are read by
-    :func:`pipeline.stages.refine_problem.model_for_keys`.
+    ``tool``, ``sweep_tool_targets``: as in :func:`point_name`; ``tool_rotation``: the
+    tool's orientation is a parameter (a 6-D sensor measured it). The stage tables are
+    read by :func:`pipeline.stages.refine_problem.model_for_keys`.
     """
     n = len(prismatic)
     names = [
-        point_name(int(s), str(t), tool_target, pose_tool)
+        point_name(int(s), str(t), tool, sweep_tool_targets)
         for s, t in zip(sweep, target, strict=True)
     ]
     point_names = tuple(dict.fromkeys(names))
     index = {p: j for j, p in enumerate(point_names)}
-    on_last = np.isin(sweep, WHOLE_ARM_SWEEPS) | (np.array(names) == TOOL_POINT)
+    on_last = np.isin(sweep, WHOLE_ARM_SWEEPS) | np.isin(np.array(target), sweep_tool_targets)
     link = np.where(on_last, n, sweep)
     if ((link < 1) | (link > n)).any():
         bad = int(sweep[(link < 1) | (link > n)][0])

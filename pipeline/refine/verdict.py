@@ -28,7 +28,9 @@ CHECK (look before shipping):
   neither χ² rule applies when the points' noise is not stated (an imported file
   without a σ: every point weighs 1 cm, χ²/dof ~0 means nothing); the line says so;
 - the held-out error exceeds its prediction (at least ``floor_cm``) by more than
-  ``holdout_ratio``;
+  ``holdout_ratio``; so does one joint sweep's while the others' do not exceed theirs: the
+  sweeps disagree (a joint read wrongly during them, e.g. a wrong ``[coupling]`` in the
+  robot description, shows where the reflectors on the tool tie the sweeps together);
 - the improvement over the design model is below ``min_improvement``;
 - a parameter could not be identified from the data and was held at its design value
   (pose sets: :mod:`pipeline.refine.identifiability`): that part of the signature is the
@@ -99,6 +101,15 @@ class SensorParameter:
 
 
 @dataclass(frozen=True)
+class SweepHoldout:
+    """One sweep's held-out RMS error and the RMS of its prediction (cm)."""
+
+    sweep: str
+    rms_cm: float
+    expected_rms_cm: float
+
+
+@dataclass(frozen=True)
 class Evidence:
     """What the verdict is judged on; None where the session has no such number."""
 
@@ -119,6 +130,7 @@ class Evidence:
     nongeometric: tuple[str, ...] = field(default_factory=tuple)
     noise_stated: bool = True  # False: imported points without a σ (χ² rules not applied)
     stated_sigma_cm: float | None = None  # the points' median stated σ (None: sonic, or none)
+    holdout_sweeps: tuple[SweepHoldout, ...] = field(default_factory=tuple)
 
 
 @dataclass(frozen=True)
@@ -221,6 +233,26 @@ def _predicted_reasons(e: Evidence, t: Thresholds) -> list[Reason]:
     return [Reason(FAIL, "max_predicted_rms_reach", p, limit, text)]
 
 
+def _sweep_reasons(e: Evidence, t: Thresholds) -> list[Reason]:
+    """The sweeps whose held-out RMS error exceeds ``holdout_ratio`` × its prediction (at
+    least ``floor_cm``) while another sweep's does not: one CHECK naming them."""
+    over = [s for s in e.holdout_sweeps
+            if s.rms_cm > t.holdout_ratio * max(s.expected_rms_cm, t.floor_cm)]  # fmt: skip
+    if not over or len(over) == len(e.holdout_sweeps):
+        return []
+    worst = max(s.rms_cm / max(s.expected_rms_cm, t.floor_cm) for s in over)
+    each = "; ".join(
+        f"sweep {s.sweep}: {s.rms_cm:.3g} cm > {t.holdout_ratio:g} × {s.expected_rms_cm:.3g} cm"
+        for s in over
+    )
+    text = (
+        f"the sweeps disagree: held-out RMS error beyond its prediction in {each}, not in the "
+        "other sweeps: a joint read wrongly during them (the robot description's [coupling]?), "
+        "see docs/verdict.md#sweeps"
+    )
+    return [Reason(CHECK, "holdout_ratio", worst, t.holdout_ratio, text)]
+
+
 def judge(e: Evidence, t: Thresholds = Thresholds()) -> Verdict:
     """The verdict on evidence ``e`` under thresholds ``t`` (module docstring)."""
     found: list[Reason] = []
@@ -292,6 +324,7 @@ def judge(e: Evidence, t: Thresholds = Thresholds()) -> Verdict:
             f"held-out RMS error {h:.4g} cm > {t.holdout_ratio:g} × its prediction "
             f"{hx:.4g} cm{floor}",
         )
+    found += _sweep_reasons(e, t)
     if e.held:
         fire(
             CHECK,

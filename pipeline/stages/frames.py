@@ -166,6 +166,12 @@ def tool_from_probe(chain: SerialChain, q_tool: np.ndarray, p_tool: np.ndarray) 
     return tool
 
 
+def plan_tool_target(inputs: Mapping[str, Any]) -> str | None:
+    """``plan.tool_target`` of the session (None: the tool sweep's only target is the tool)."""
+    tool = session_plan(inputs["session"]).get("tool_target")
+    return None if tool is None else str(tool)
+
+
 def tool_points_of_sweeps(
     inputs: Mapping[str, Any], n: int, pris: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -223,8 +229,9 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     held = joints_to_internal(held_readings(inputs["joints"], pris), pris)
     F[:n] = frames_at_signature(F[:n], held, joints_to_internal(qs, pris), pris)
     F[n] = F[n - 1]  # S̄_n = S̄_{n-1}
-    # The tool sweep measures one target (the recording reader refuses others).
-    tool_rows = sweep_rows(inputs["positions"], TOOL_SWEEP)
+    # The tool point: plan.tool_target (the tool sweep may measure more targets on the
+    # last link, plan.tool_targets), else the tool sweep's only target.
+    tool_rows = sweep_rows(inputs["positions"], TOOL_SWEEP, plan_tool_target(inputs))
     p_tool = positions(tool_rows)
     usable = ~np.isnan(p_tool).any(axis=1)
     if not usable.any():
@@ -267,7 +274,7 @@ def tool_point_rows(
     of the tool point in the tool sweep and the pose set, each joined to its joint state by
     (sweep, step)."""
     plan = session_plan(inputs["session"])
-    tool = usable_points(inputs, TOOL_SWEEP, None, n, pris)
+    tool = usable_points(inputs, TOOL_SWEEP, plan_tool_target(inputs), n, pris)
     poses = usable_points(inputs, POSES_SWEEP, pose_tool_target(plan, inputs["positions"]), n, pris)
     return np.vstack([tool[0], poses[0]]), np.vstack([tool[1], poses[1]])
 
@@ -327,8 +334,9 @@ def chain_from_frames(frames: pa.Table, prismatic: np.ndarray):  # -> SerialChai
 STAGE = Stage(
     "frames",
     # 4: frames brought to q̄^s with each sweep's recorded readings;
-    # 5: imports' sweep points join the tool
-    5,
+    # 5: imports' sweep points join the tool; 6: the tool sweep's plan.tool_target rows
+    # (plan.tool_targets: several targets on the last link, issue 29)
+    6,
     ("features", "joints", "positions", "session"),
     NoParams(),
     compute,

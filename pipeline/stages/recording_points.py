@@ -3,8 +3,10 @@
 What one message's schema cannot check, refused with one line naming the key: a key
 ``(sweep, step, target)`` recorded twice, a sweep or step the plan does not have, a
 target id the plan does not list for its sweep (``plan.sweeps[].targets``,
-``plan.poses.targets``; ``plan.tool_target`` for the tool sweep, whose only target it
-is), a pose set of several targets without its ``plan.tool_target``, ``sigma_cm``
+``plan.poses.targets``; ``plan.tool_targets`` for the tool sweep, else
+``plan.tool_target``, its only target), a ``plan.tool_targets`` without
+``plan.tool_target`` among them, a pose set of several targets without its
+``plan.tool_target``, ``sigma_cm``
 together with ``cov_cm2``, a covariance that is not symmetric positive definite, a
 quaternion that is not of unit length. Pairing with the joint states is the caller's.
 """
@@ -109,16 +111,25 @@ def _refuse_unplanned_targets(
     p: Path, sweep: np.ndarray, step: np.ndarray, target: np.ndarray, plan: dict[str, Any]
 ) -> None:
     """Targets of a joint sweep within its ``targets`` and of the pose set within
-    ``plan.poses.targets`` (when listed); the tool sweep measures ``tool_target`` (when
-    given), else exactly one target, and a pose set of several targets needs
+    ``plan.poses.targets`` (when listed); the tool sweep measures ``tool_targets`` (when
+    given: the targets on the last link, ``tool_target`` among them), else ``tool_target``
+    (when given), else exactly one target, and a pose set of several targets needs
     ``tool_target`` among them (which of its points is the tool)."""
     allowed: dict[int, list[str]] = {
         int(s["joint"]): list(s["targets"]) for s in plan["sweeps"] if "targets" in s
     }
     if "targets" in plan.get("poses", {}):
         allowed[POSES_SWEEP] = list(plan["poses"]["targets"])
+    if "tool_targets" in plan and plan.get("tool_target") not in plan["tool_targets"]:
+        raise RecordingError(
+            f"{p}: /robot/description plan.tool_targets ({', '.join(plan['tool_targets'])}) "
+            "does not hold plan.tool_target",
+            expected="the tool point's target id among the targets on the last link",
+            got=f"tool_target {plan.get('tool_target')}",
+            fix="record plan.tool_target, one of plan.tool_targets",
+        )
     if "tool_target" in plan:
-        allowed[TOOL_SWEEP] = [str(plan["tool_target"])]
+        allowed[TOOL_SWEEP] = list(plan.get("tool_targets", [str(plan["tool_target"])]))
     for s, what in ((TOOL_SWEEP, "sweep tool measures"), (POSES_SWEEP, "the pose set measures")):
         measured = sorted(set(target[sweep == s].tolist()))
         if "tool_target" not in plan and len(measured) > 1:
@@ -138,7 +149,8 @@ def _refuse_unplanned_targets(
     for k in range(len(sweep)):
         ids = allowed.get(int(sweep[k]))
         if ids is not None and target[k] not in ids:
-            where = {TOOL_SWEEP: "plan.tool_target", POSES_SWEEP: "plan.poses targets"}.get(
+            tool = "plan.tool_targets" if "tool_targets" in plan else "plan.tool_target"
+            where = {TOOL_SWEEP: tool, POSES_SWEEP: "plan.poses targets"}.get(
                 int(sweep[k]), "its plan.sweeps targets"
             )
             raise RecordingError(

@@ -405,11 +405,12 @@ def held_parameters(refine: pa.Table) -> np.ndarray:
 
 STAGE = Stage(
     "refine",
-    5,  # 3: the rods' speed spline fit on its normal equations (linear in the samples);
+    6,  # 3: the rods' speed spline fit on its normal equations (linear in the samples);
     # 4: the speed spline's knots chosen from the rods, every parameter in the summary,
     # single-cycle sonic positions weighed by the range noise law (level points);
     # 5: non-geometric terms (refine.nongeometric), the robust scale follows understated
-    # noise (f_scale_used)
+    # noise (f_scale_used); 6: a target on the last link (plan.tool_targets) is one point
+    # in every joint sweep that measures it, named tool/<target> (was poses/<target>)
     ("session", "joints", "positions", "frames", "ranges"),
     Params(),
     compute,

@@ -133,9 +133,9 @@ def model_for_keys(
     robot = session_robot(session)
     n, pris = robot.n_joints, robot.prismatic
     plan = session_plan(session)
-    shared = plan.get("sweeps_measure_tool", False) and plan.get("tool_target") is not None
-    tool_target = str(plan["tool_target"]) if shared else None
-    pose_tool = plan.get("tool_target")
+    tool = plan.get("tool_target")
+    shared = plan.get("sweeps_measure_tool", False) and tool is not None
+    on_tool = [str(t) for t in plan.get("tool_targets", [tool])] if shared else []
     q_sig = chain_from_frames(frames, pris).joint_offsets
     sweep = keys.column("sweep").to_numpy().astype(np.int64)
     step = keys.column("step").to_numpy().astype(np.int64)
@@ -146,7 +146,7 @@ def model_for_keys(
         theta[sel] = joints_to_internal(q, pris) - q_sig
     target = keys.column("target").to_pylist()
     F = matrices_from_columns(frames)[:n]
-    model = chain_model(sweep, target, theta, F, pris, tool_target, pose_tool, tool_rotation)
+    model = chain_model(sweep, target, theta, F, pris, tool, on_tool, tool_rotation)
     if not terms:
         return model
     payload = np.nan_to_num(payloads_at(joints, sweep, step), nan=0.0)

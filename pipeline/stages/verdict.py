@@ -23,6 +23,7 @@ import pyarrow as pa
 from pipeline.refine.verdict import (
     Evidence,
     SensorParameter,
+    SweepHoldout,
     Thresholds,
     Verdict,
     judge,
@@ -60,6 +61,17 @@ def _sensor(refine: pa.Table, group: str) -> tuple[SensorParameter, ...]:
 
 def _rms(v: np.ndarray) -> float | None:
     return float(np.sqrt(np.mean(v**2))) if len(v) else None
+
+
+def _sweep_holdouts(hold: pa.Table) -> tuple[SweepHoldout, ...]:
+    """Per sweep of the ``holdout`` table, its held-out RMS error and expected RMS (cm)."""
+    from pipeline.sweeps import sweep_name
+
+    sweep = hold.column("sweep").to_numpy()
+    err, exp = hold.column("error_cm").to_numpy(), hold.column("expected_cm").to_numpy()
+    rms = {int(s): np.sqrt([np.mean(err[sweep == s] ** 2), np.mean(exp[sweep == s] ** 2)])
+           for s in np.unique(sweep)}  # fmt: skip
+    return tuple(SweepHoldout(sweep_name(s), float(e), float(x)) for s, (e, x) in rms.items())
 
 
 def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, Any]]:
@@ -101,6 +113,7 @@ def evidence(inputs: Mapping[str, Any]) -> tuple[Evidence, dict[str, Any]]:
         nongeometric=tuple(summ.get("nongeometric", {}).get("terms", [])),
         noise_stated=session_sensor(inputs["session"]) == "sonic" or sigma is not None,
         stated_sigma_cm=sigma,
+        holdout_sweeps=_sweep_holdouts(hold),
     )
     numbers = {
         "predicted_rms_cm": e.predicted_rms_cm,
@@ -165,14 +178,15 @@ def verdict_line(session_dir: Path) -> str | None:
 
 STAGE = Stage(
     "verdict",
-    8,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
+    9,  # 2: the design alignment by refine.lm, not scipy (design misfit moved by ~1e-12 cm);
     # 3: each reason's level, rule, number and threshold (issue 30);
     # 4: the floor_cm of the sensor and held-out rules (issue 33);
     # 5: parameters held at the design (pose sets, issue 26) a CHECK;
     # 6: a signature implausibly far from the design a FAIL, design_reach_cm (issue 32);
     # 7: a point sensor's χ² beyond chi2_fail names the error the model leaves out (27);
     # 8: the predicted-accuracy limit scales with the reach and the held-out data, no χ²
-    # rule without a stated point noise, unrounded numbers (issue 29)
+    # rule without a stated point noise, unrounded numbers (issue 29);
+    # 9: a CHECK naming the sweeps whose held-out error alone exceeds its prediction (29)
     ("session", "refine", "uncertainty", "holdout", "chain", "positions"),
     Params(),
     compute,
