@@ -10,6 +10,7 @@ import typer
 
 from pipeline.cli.options import JsonOption, SessionArg, comma_list, stage_params
 from pipeline.cli.output import print_json, warn
+from pipeline.errors import ArmsigError
 from pipeline.signature.verdict import verdict_failed
 
 commands = typer.Typer()
@@ -52,6 +53,7 @@ def identify(
                 "warnings": result.warnings,
                 "verdict": result.verdict,
                 "verdict_detail": None if v is None else v.to_dict(),
+                "validation": _validation(session),
             }
         )
     else:
@@ -184,3 +186,16 @@ def validate(
         f"  design model, base and tool registered:  mean {r['design_registered_mean_cm']:.4g}  "
         f"RMS {r['design_registered_rms_cm']:.4g}  max {r['design_registered_max_cm']:.4g} cm"
     )
+
+
+def _validation(session: str) -> dict[str, Any] | None:
+    """The session's ``validation`` numbers per role (signature, and the registered design
+    model beside it: issue 29), None without the stage (a sonic session) or a session folder."""
+    from pipeline.report.validation import role_errors, validation_rows
+    from pipeline.stages.runner import session_folder, stage_path
+
+    try:
+        rows = validation_rows(stage_path(session_folder(session), "validation"))
+    except ArmsigError:
+        return None
+    return None if rows is None else role_errors(rows)

@@ -59,6 +59,12 @@ COLUMNS = (
     _c("check_rms_cm", pa.float64(), "cm", "signature position error RMS on check points"),
     _c("check_max_cm", pa.float64(), "cm", "signature position error max on check points"),
     _c("check_registered_rms_cm", pa.float64(), "cm", "the same RMS after base registration"),
+    _c("check_design_rms_cm", pa.float64(), "cm",
+       "the design model's RMS on the check points, its base and tool registered to the fit "
+       "points (the uncalibrated arm: the before of the before/after)"),
+    _c("fit_rms_cm", pa.float64(), "cm", "signature position error RMS on the fit points"),
+    _c("fit_design_rms_cm", pa.float64(), "cm",
+       "the registered design model's RMS on the fit points"),
     _c("gain_evaluation", pa.float64(), "",
        "median over tasks of the median |design| / |signature| index of the measured "
        "evaluation (pipeline fleet evaluate only)"),
@@ -102,8 +108,7 @@ def session_row(
     """The row of an identified session (``evaluation``: its evaluation summary, if run)."""
     import datetime as dt
 
-    from pipeline.evaluation.validation import position_errors
-    from pipeline.report.validation import validation_rows
+    from pipeline.report.validation import role_errors, validation_rows
 
     doc = read_signature_document(sdir / FILE_NAME)
     session = read_table(stage_path(sdir, "session"))
@@ -134,18 +139,18 @@ def session_row(
             verdict_reasons=list(v["reasons"]),
         )
     rows = validation_rows(stage_path(sdir, "validation"))
-    check = [r for r in rows or [] if r["role"] == "check"]
-    if check:
-        reg = [r["registered_error_cm"] for r in check]
-        e = position_errors(
-            np.array([r["error_cm"] for r in check], float),
-            None if any(v is None for v in reg) else np.array(reg, float),
-        )
+    roles = role_errors(rows)
+    if "fit" in roles:
+        row.update(fit_rms_cm=roles["fit"]["rms_cm"],
+                   fit_design_rms_cm=roles["fit"]["design_registered_rms_cm"])  # fmt: skip
+    if "check" in roles:
+        e = roles["check"]
         row.update(
-            check_points=e.n,
-            check_rms_cm=e.rms_cm,
-            check_max_cm=e.max_cm,
-            check_registered_rms_cm=e.registered_rms_cm,
+            check_points=e["n"],
+            check_rms_cm=e["rms_cm"],
+            check_max_cm=e["max_cm"],
+            check_registered_rms_cm=e["registered_rms_cm"],
+            check_design_rms_cm=e["design_registered_rms_cm"],
         )
     elif command == "validate":
         row["warnings"].append(

@@ -16,36 +16,55 @@ ROLE_TEXT = {
 }
 
 
-def validation_section(rows: list[dict[str, Any]] | None) -> str:
-    """Mean, RMS and max position error per role, as measured and base-registered (cm);
-    a session without the stage (sonic) or without points gets one line saying so."""
-    head = "## Validation: model position error on measured points\n\n"
-    if not rows:
-        return head + "No measured tool-target points to compare (no `check` configurations)."
-    body = [
-        "| data | points | mean (cm) | RMS (cm) | max (cm) | registered mean | "
-        "registered RMS | registered max |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
-    ]
-    for role, text in ROLE_TEXT.items():
-        sel = [r for r in rows if r["role"] == role]
+def role_errors(rows: list[dict[str, Any]] | None) -> dict[str, dict[str, Any]]:
+    """Per role of the ``validation`` rows: the signature's position errors as measured and
+    base-registered, and the registered design model's RMS beside them (cm; None where the
+    rows have none): the numbers of the report's table, ``identify --json`` and ``fleet``."""
+    out: dict[str, dict[str, Any]] = {}
+    for role in ROLE_TEXT:
+        sel = [r for r in rows or [] if r["role"] == role]
         if not sel:
             continue
         raw = np.array([r["error_cm"] for r in sel])
         reg_v = [r["registered_error_cm"] for r in sel]
         reg = None if any(v is None for v in reg_v) else np.array(reg_v, float)
-        e = position_errors(raw, reg)
-        regs = ["—"] * 3 if reg is None else [
-            f"{v:.4g}" for v in (e.registered_mean_cm, e.registered_rms_cm, e.registered_max_cm)
-        ]  # fmt: skip
+        design_v = [r.get("design_error_cm") for r in sel]
+        design = None if any(v is None for v in design_v) else np.array(design_v, float)
+        out[role] = {
+            **position_errors(raw, reg).to_dict(),
+            "design_registered_rms_cm": (
+                None if design is None else float(np.sqrt(np.mean(design**2)))
+            ),
+        }
+    return out
+
+
+def validation_section(rows: list[dict[str, Any]] | None) -> str:
+    """Mean, RMS and max position error per role, as measured and base-registered (cm),
+    and the registered design model's RMS beside them; a session without the stage (sonic)
+    or without points gets one line saying so."""
+    head = "## Validation: model position error on measured points\n\n"
+    if not rows:
+        return head + "No measured tool-target points to compare (no `check` configurations)."
+    body = [
+        "| data | points | mean (cm) | RMS (cm) | max (cm) | registered mean | "
+        "registered RMS | registered max | design model, registered RMS |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for role, e in role_errors(rows).items():
+        keys = ("registered_mean_cm", "registered_rms_cm", "registered_max_cm",
+                "design_registered_rms_cm")  # fmt: skip
+        cells = ["—" if e.get(k) is None else f"{e[k]:.4g}" for k in keys]
         body.append(
-            f"| {text} | {e.n} | {e.mean_cm:.4g} | {e.rms_cm:.4g} | {e.max_cm:.4g} | "
-            + " | ".join(regs) + " |"
+            f"| {ROLE_TEXT[role]} | {e['n']} | {e['mean_cm']:.4g} | {e['rms_cm']:.4g} | "
+            f"{e['max_cm']:.4g} | " + " | ".join(cells) + " |"
         )  # fmt: skip
     note = (
         "\n\nModel: the signature's forward kinematics with its tool at the recorded joint "
         "values. Registered: after the least-squares rigid motion of the model points onto "
-        "the measured ones (the base's placement removed)."
+        "the measured ones (the base's placement removed). Design model, registered: the "
+        "design chain with its base and tool point fitted to the fit points, the error the "
+        "arm makes uncalibrated in a registered cell (the before of the before/after)."
     )
     return head + "\n".join(body) + note
 

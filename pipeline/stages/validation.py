@@ -9,6 +9,12 @@ they measured the tool point itself (``plan.sweeps_measure_tool``, SScanSS-2 sty
 every row measures the end effector), are fit data (role ``fit``). Each role's
 distances are also given after registering the base: the least-squares rigid motion
 of that role's predicted points onto its measured ones.
+
+Beside them, the design model's error (the "before" of a before/after, issue 29): the
+design chain with its base and tool point registered to the *fit* points
+(:func:`pipeline.refine.baseline.register_design`), at every row: on the fit rows what the
+uncalibrated arm does in a cell registered on them, on the check rows the same on points
+neither fit saw.
 """
 
 from __future__ import annotations
@@ -56,7 +62,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     if not plan.get("sweeps_measure_tool", False):
         ok &= sweep <= 0  # sweep targets sit on the links: not the tool point
     cols: dict[str, list[Any]] = {k: [] for k in ("sweep", "step", "role")}
-    arrays: dict[str, list[np.ndarray]] = {k: [] for k in ("p", "m", "raw", "reg")}
+    arrays: dict[str, list[np.ndarray]] = {k: [] for k in ("p", "m", "raw", "reg", "q")}
     for role in ROLES:
         sel = ok & ((sweep == CHECK_SWEEP) == (role == "check"))
         if not sel.any():
@@ -65,6 +71,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         for s in np.unique(sweep[sel]):
             at = sweep[sel] == s
             q[at] = readings_at(inputs["joints"], int(s), step[sel][at], n, pris)
+        arrays["q"].append(q)
         model = model_points(chain, q, pris, nongeometric)
         raw, reg = error_distances(model, xyz[sel])
         cols["sweep"] += sweep[sel].tolist()
@@ -76,6 +83,9 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         arrays["reg"].append(np.full(len(raw), np.nan) if reg is None else reg)
     p, m = (np.vstack(arrays[k]) if arrays[k] else np.zeros((0, 3)) for k in ("p", "m"))
     raw, reg = (np.concatenate(arrays[k]) if arrays[k] else np.zeros(0) for k in ("raw", "reg"))
+    q_all = np.vstack(arrays["q"]) if arrays["q"] else np.zeros((0, n))
+    fit = np.array(cols["role"]) == "fit"
+    design = _design_errors(robot, plan, q_all, p, fit)
     return pa.table(
         {
             "sweep": pa.array(cols["sweep"], pa.int32()),
@@ -85,13 +95,38 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
             **{f"model_{a}_cm": pa.array(m[:, k], pa.float64()) for k, a in enumerate("xyz")},
             "error_cm": pa.array(raw, pa.float64()),
             "registered_error_cm": pa.array(reg, pa.float64(), mask=np.isnan(reg)),
+            "design_error_cm": pa.array(design, pa.float64(), mask=np.isnan(design)),
         }
     )
 
 
+def _design_errors(
+    robot: Any, plan: dict[str, Any], q: np.ndarray, measured: np.ndarray, fit: np.ndarray
+) -> np.ndarray:
+    """Each row's distance (cm) from the design model with its base and tool point
+    registered to the ``fit`` rows (module docstring); NaN where they cannot fix it (fewer
+    than 3 fit points, or on one line)."""
+    from pipeline.errors import StageError
+    from pipeline.refine.baseline import register_design
+    from pipeline.units import joints_to_internal
+
+    out = np.full(len(q), np.nan)
+    if fit.sum() < 3:
+        return out
+    qi = joints_to_internal(q, robot.prismatic)
+    tool = np.asarray(plan.get("tool_local_cm", (0.0, 0.0, 0.0)), float)
+    try:
+        base = register_design(robot.design_chain(), qi[fit], measured[fit], tool)
+    except StageError:  # the fit points do not fix a rigid motion
+        return out
+    out[:] = base.errors(qi, measured)
+    return out
+
+
 STAGE = Stage(
     "validation",
-    3,  # 2: from the signature chain (stage chain); 3: with its non-geometric terms
+    4,  # 2: from the signature chain (stage chain); 3: with its non-geometric terms;
+    # 4: design_error_cm, the registered design model beside it (issue 29)
     ("positions", "joints", "chain", "session", "refine"),
     NoParams(),
     compute,
