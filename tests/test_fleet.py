@@ -224,6 +224,17 @@ def test_scheduler_address_from_option_environment_or_local(monkeypatch) -> None
     assert scheduler_address("local") is None
 
 
+@pytest.mark.parametrize("address", ["not a url", "http://x", "tcp://[bad"])
+def test_a_scheduler_that_is_not_an_address_is_one_line(tmp_path: Path, address: str) -> None:
+    """Issue 32: ``--scheduler 'not a url'`` ended in exit 70 (distributed's ValueError)."""
+    (tmp_path / "s").mkdir()
+    (tmp_path / "s" / "recording.mcap").write_bytes(b"")
+    res = CliRunner().invoke(app, ["fleet", "identify", str(tmp_path), "--scheduler", address])
+    assert res.exit_code == 1, res.output
+    assert res.stderr.startswith("error: ") and len(res.stderr.splitlines()) == 1, res.stderr
+    assert f"{address!r} is not a Dask scheduler address" in res.stderr
+
+
 def test_fleet_evaluate_gives_the_measured_gain(recorded: Path, tmp_path: Path, threads) -> None:
     fleet = tmp_path / "fleet"
     shutil.copytree(recorded / "r0", fleet / "r0")
