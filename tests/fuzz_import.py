@@ -459,7 +459,7 @@ def _target(kind: str, d: Path, s: Path) -> tuple[Path, list[Path]]:
     user.write_text("a user's file\n")
     undo: list[Path] = []
     if kind == "new":
-        return d / "out" / "new.out", undo
+        return d / "new.out", undo
     if kind == "user_file":
         return user, undo
     if kind == "user_file_immutable":
@@ -530,14 +530,18 @@ def case_import_name(b: Base, d: Path, kind: str, force: bool) -> tuple[str, str
     paths = b.write(d / "in")
     undo: list[Path] = []
     name = {"new": d / "new", "user_file": paths["data"], "recording": d / "s",
-            "dangling_link": d / "dangling", "link_to_recording": d / "link",
-            "file_as_folder": paths["robot"] / "x", "missing_folder": d / "a" / "b",
-            "long_name": d / ("n" * 300), "immutable_folder": d / "ro" / "x",
-            }.get(kind, d / "s")  # fmt: skip
-    if kind == "dangling_link":
-        name.symlink_to(d / "nowhere")
-    elif kind == "link_to_recording":
-        name.symlink_to(d / "s")
+            "dangling_link": d / "link", "link_to_recording": d / "link",
+            "link_to_user_file": d / "link", "file_as_folder": paths["robot"] / "x",
+            "missing_folder": d / "a" / "b", "long_name": d / ("n" * 300),
+            "immutable_folder": d / "ro" / "x", "folder": d / "empty",
+            "user_file_immutable": paths["data"]}.get(kind, d / "s")  # fmt: skip
+    if kind in ("dangling_link", "link_to_recording", "link_to_user_file"):
+        name.symlink_to({"dangling_link": d / "nowhere", "link_to_recording": d / "s",
+                         "link_to_user_file": paths["data"]}[kind])  # fmt: skip
+    elif kind == "folder":
+        name.mkdir()
+    elif kind == "user_file_immutable" and immutable(name, True):
+        undo.append(name)
     elif kind == "immutable_folder":
         (d / "ro").mkdir()
         if immutable(d / "ro", True):
@@ -608,7 +612,7 @@ def case_stale(
         doc = (s / "signature.json").read_text()
         m = list(_NUMBER.finditer(doc))[int(rng.integers(40, 200))]
         (s / "signature.json").write_text(doc[: m.start()] + "7" + doc[m.end() :])
-        what = "signature.json edited"
+        what = "signature.json edited" if m.group() != "7" else ""  # "7" over 7: unchanged
     paths = b.write(d / "in2")
     args = {
         "fk": ["fk", str(s), "--q", "10 10"],  # every base is a two-joint arm
