@@ -41,7 +41,7 @@ fuzz: $(STAMP)
 	$(BIN)/python tests/fuzz_recording.py sessions/robot3/recording.mcap --byte 500 --json 200
 
 # Issue 32: 1,000 seeded import, map, validate, export, ik --out and fault cases, and 20
-# concurrent runs (tests/fuzz_import.py; about 6 min on 2 cores).
+# concurrent runs (tests/fuzz_import.py; 213 s on 2 cores).
 fuzz-import: $(STAMP)
 	$(BIN)/python tests/fuzz_import.py --cases 1000 --concurrent 20
 
