@@ -6,7 +6,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SESSION ?= robot3
 
-.PHONY: install test lint bench fuzz identify sessions clean
+.PHONY: install test lint bench fuzz fuzz-import identify sessions clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -41,6 +41,11 @@ bench: $(STAMP)
 # Issue 13's acceptance: 500 byte-level and 200 JSON-level seeded mutations of robot3's recording.
 fuzz: $(STAMP)
 	$(BIN)/python tests/fuzz_recording.py sessions/robot3/recording.mcap --byte 500 --json 200
+
+# Issue 32: 1,000 seeded import, map, validate, export, ik --out and fault cases, and 20
+# concurrent runs (tests/fuzz_import.py; 213 s on 2 cores).
+fuzz-import: $(STAMP)
+	$(BIN)/python tests/fuzz_import.py --cases 1000 --concurrent 20
 
 # The seven committed sessions: seeds 1-7, every other option at its default.
 sessions: $(STAMP)

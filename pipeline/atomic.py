@@ -20,25 +20,34 @@ TEMP_SUFFIX = ".tmp"
 SESSION_INPUTS = ("recording.mcap", "evaluation.mcap")
 
 
+#: What to try when a file cannot be written (an OSError of :func:`atomic_write`).
+WRITE_FIX = "check the free space and that the file and its folder are writable (chattr, chmod)"
+
+
 @contextlib.contextmanager
 def atomic_write(path: str | Path, mode: str = "wb") -> Iterator[IO[bytes] | IO[str]]:
-    """Open a temp file beside ``path``; on success rename it over ``path``."""
+    """Open a temp file beside ``path``; on success rename it over ``path``. An OSError
+    (no space, permission, an immutable file, a name too long) is an
+    :class:`~pipeline.errors.ArmsigError` naming ``path`` and the cause."""
+    from pipeline.errors import os_errors_refused
+
     target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=TEMP_SUFFIX, dir=target.parent)
-    umask = os.umask(0)
-    os.umask(umask)
-    try:
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file normal permissions
-        with os.fdopen(fd, mode) as fh:
-            yield fh
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+    with os_errors_refused(target, WRITE_FIX, always_path=True):
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=TEMP_SUFFIX, dir=target.parent)
+        umask = os.umask(0)
+        os.umask(umask)
+        try:
+            os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file normal permissions
+            with os.fdopen(fd, mode) as fh:
+                yield fh
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, target)
+        except BaseException:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+            raise
 
 
 def remove_debris(folder: Path) -> list[Path]:
@@ -84,9 +93,16 @@ def check_writable(path: str | Path, what: str, *, folder: bool = False) -> Path
     made when the output is written). ``what`` names the output in the message, e.g.
     ``"--out"``. Returns ``path`` as a :class:`Path`.
     """
-    from pipeline.errors import ArmsigError
+    from pipeline.errors import os_errors_refused
 
     p = Path(path)
+    with os_errors_refused(p, "give a shorter path, or one you can read"):  # a name too long
+        return _check_writable(p, what, folder)
+
+
+def _check_writable(p: Path, what: str, folder: bool) -> Path:
+    from pipeline.errors import ArmsigError
+
     if folder:
         if p.exists() and not p.is_dir():
             raise ArmsigError(f"{what} {p} is a file", expected="a folder (or a new path)")

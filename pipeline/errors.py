@@ -76,13 +76,14 @@ class VerdictFailError(ArmsigError):
 
 
 @contextlib.contextmanager
-def os_errors_refused(path: str | Path, fix: str) -> Iterator[None]:
+def os_errors_refused(path: str | Path, fix: str, *, always_path: bool = False) -> Iterator[None]:
     """Turn an :class:`OSError` inside the block (no space, permission, a name too long, a
     folder where a file was expected) into one line naming the path (the error's own, else
-    ``path``) and the cause, with ``fix``."""
+    ``path``; always ``path`` with ``always_path``, e.g. not the temp file beside it) and the
+    cause, with ``fix``."""
     try:
         yield
     except OSError as exc:
-        where = exc.filename if exc.filename is not None else path
+        where = exc.filename if exc.filename is not None and not always_path else path
         cause = exc.strerror or one_line(str(exc), 200) or type(exc).__name__
         raise ArmsigError(f"{where}: {cause}", fix=fix) from exc

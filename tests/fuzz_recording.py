@@ -301,14 +301,15 @@ def json_mutation(parsed: _Parsed, rng: np.random.Generator) -> Mutation:
 # --------------------------------------------------------------------------- running
 
 
-class _Timeout(Exception):
-    pass
+class Timeout(KeyboardInterrupt):
+    """No answer in time: a KeyboardInterrupt, which the command line re-raises (a plain
+    exception inside a command would be reported as an internal error, exit 70)."""
 
 
 @contextlib.contextmanager
-def _alarm(seconds: float) -> Iterator[None]:
+def alarm(seconds: float) -> Iterator[None]:
     def handler(signum: int, frame: Any) -> None:
-        raise _Timeout
+        raise Timeout
 
     old = signal.signal(signal.SIGALRM, handler)
     signal.setitimer(signal.ITIMER_REAL, seconds)
@@ -319,7 +320,7 @@ def _alarm(seconds: float) -> Iterator[None]:
         signal.signal(signal.SIGALRM, old)
 
 
-def _tool_positions(signature_path: Path) -> np.ndarray:
+def tool_positions(signature_path: Path) -> np.ndarray:
     """Signature tool positions (cm) at fixed random configurations within the limits."""
     from pipeline.kinematics.chain import forward_kinematics
     from pipeline.signature.file import load_signature
@@ -355,11 +356,11 @@ def run_one(mutation: Mutation, reference: np.ndarray, workdir: Path, name: str)
     from pipeline.errors import ArmsigError
 
     try:
-        with _alarm(TIMEOUT_S), warnings.catch_warnings():
+        with alarm(TIMEOUT_S), warnings.catch_warnings():
             warnings.simplefilter("ignore")
             sig = identify_copy(mutation.data, workdir, name)
-            positions = _tool_positions(sig)
-    except _Timeout:
+            positions = tool_positions(sig)
+    except Timeout:
         return Outcome(mutation.label, "hang", f"no answer within {TIMEOUT_S:g} s")
     except ArmsigError as exc:
         text = str(exc)
@@ -395,7 +396,7 @@ def fuzz(
     t0 = time.process_time()
     with tempfile.TemporaryDirectory(prefix="armsig-fuzz-") as tmp:
         work = Path(tmp)
-        reference = _tool_positions(identify_copy(original, work, "original"))
+        reference = tool_positions(identify_copy(original, work, "original"))
         plan = ["byte"] * n_byte + ["json"] * n_json
         order = rng.permutation(len(plan))
         for k, which in enumerate(plan[i] for i in order):

@@ -43,14 +43,15 @@ def sscanss2_text(
 TWO_LINK_VALUES = [list(range(-150, 151, 50)), list(range(-120, 121, 40))]
 
 
-def two_link_table(path: Path) -> Path:
-    """A CSV with a header: j1_deg, j2_rad, x/y/z of two targets (mm), in sweep order."""
+def two_link_table(path: Path, robot_toml: Path = TWO_LINK) -> Path:
+    """A CSV with a header: j1_deg, j2_rad, x/y/z of two targets (mm), in sweep order
+    (of the two-link arm, or another two-joint ``robot_toml``)."""
     rows = []
     for j, vals in enumerate(TWO_LINK_VALUES):
         for v in vals:
             q = np.zeros(2)
             q[j] = v
-            p = tool_points_mm(TWO_LINK, q[None])[0]
+            p = tool_points_mm(robot_toml, q[None])[0]
             rows.append([q[0], np.deg2rad(q[1]), *p, *(p + [0.0, 0.0, 0.5])])
     head = "j1_deg,j2_rad,x1,y1,z1,x2,y2,z2"
     body = "\n".join(",".join(f"{c:.12g}" for c in r) for r in rows)

@@ -74,6 +74,37 @@ def test_failed_run_keeps_its_outputs_and_points_at_them(
     assert not failed.exists()
 
 
+def test_a_full_disk_during_identify_names_the_cause(
+    identified_session: Path, tmp_path: Path, monkeypatch
+) -> None:
+    """Issue 32: a full disk while a stage was written surfaced as a FileNotFoundError about
+    stages/.pending (exit 70), hiding the cause. The third stage's write fails with ENOSPC
+    (inside the atomic write, as a real one would): one line naming the file and the cause."""
+    import errno
+
+    from pipeline.atomic import atomic_write
+    from pipeline.stages import runner
+
+    d = shutil.copytree(identified_session, tmp_path / "s")
+    good = stage_path(d, "positions").read_bytes()
+    real, calls = runner.write_table, []
+
+    def full(path: Path, table: pa.Table, provenance: dict) -> pa.Table:
+        calls.append(path)
+        if len(calls) < 3:
+            return real(path, table, provenance)
+        with atomic_write(path):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(runner, "write_table", full)
+    r = CliRunner().invoke(app, ["identify", str(d), "--force"])
+    assert r.exit_code == 1, r.output
+    assert r.stderr.startswith("error: ") and len(r.stderr.splitlines()) == 1, r.stderr
+    assert f"{calls[2].name}: No space left on device" in r.stderr, r.stderr
+    assert stage_path(d, "positions").read_bytes() == good  # the committed stages untouched
+    assert not list(d.rglob("*.tmp"))
+
+
 def test_cached_input_keeps_advice_on_the_committed_file(
     identified_session: Path, tmp_path: Path, monkeypatch
 ) -> None:

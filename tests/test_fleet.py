@@ -141,6 +141,27 @@ def test_fleet_validate_says_what_sonic_sessions_lack(recorded: Path, tmp_path: 
     assert all((fleet / "fleet-report" / f).is_file() for f in ("gain.png", "drift.png"))
 
 
+def test_fleet_report_marks_a_signature_gone_stale(recorded: Path, tmp_path: Path, threads):
+    """Issue 32: the report read signatures by their digest only, so a session whose
+    recording changed after ``fleet identify`` still had its drift computed from the old
+    signature. It is now checked as every consumer checks it, and marked."""
+    from pipeline.fleet.report import load_rows, write_fleet_report
+
+    fleet = tmp_path / "fleet"
+    for name in ("r6", "r7"):
+        shutil.copytree(recorded / name, fleet / name)
+    run_fleet("identify", [str(fleet)], threads, fleet, progress=None)
+    text = write_fleet_report(fleet).read_text()
+    assert re.search(r"\| puma560 \| .*r7 \| \d", text), text  # a drift value
+    earlier, later = (Path(r["session"]) for r in sorted(
+        load_rows(fleet), key=lambda r: (r["identified_utc"], r["session"])))  # fmt: skip
+    shutil.copyfile(earlier / "recording.mcap", later / "recording.mcap")
+    text = write_fleet_report(fleet).read_text()
+    assert "2 sessions, 0 failed, 1 no longer as fleet.arrow recorded them" in text
+    drift_row = next(line for line in text.splitlines() if line.startswith("| puma560 |"))
+    assert "stale: identified from another recording.mcap" in drift_row, drift_row
+
+
 def test_find_sessions_refuses_an_empty_folder(tmp_path: Path) -> None:
     from pipeline.errors import ArmsigError
 
@@ -222,6 +243,17 @@ def test_scheduler_address_from_option_environment_or_local(monkeypatch) -> None
     assert scheduler_address(None) == "tcp://10.0.0.1:8786"
     assert scheduler_address("tcp://h:1") == "tcp://h:1"
     assert scheduler_address("local") is None
+
+
+@pytest.mark.parametrize("address", ["not a url", "http://x", "tcp://[bad"])
+def test_a_scheduler_that_is_not_an_address_is_one_line(tmp_path: Path, address: str) -> None:
+    """Issue 32: ``--scheduler 'not a url'`` ended in exit 70 (distributed's ValueError)."""
+    (tmp_path / "s").mkdir()
+    (tmp_path / "s" / "recording.mcap").write_bytes(b"")
+    res = CliRunner().invoke(app, ["fleet", "identify", str(tmp_path), "--scheduler", address])
+    assert res.exit_code == 1, res.output
+    assert res.stderr.startswith("error: ") and len(res.stderr.splitlines()) == 1, res.stderr
+    assert f"{address!r} is not a Dask scheduler address" in res.stderr
 
 
 def test_fleet_evaluate_gives_the_measured_gain(recorded: Path, tmp_path: Path, threads) -> None:

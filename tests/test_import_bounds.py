@@ -129,6 +129,21 @@ def test_full_disk_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     _refusal(r, str(tmp_path / "s" / "recording.mcap"), "No space left on device")
 
 
+def test_more_rows_than_one_import_takes_is_one_line(tmp_path: Path, monkeypatch) -> None:
+    """Issue 32 item 6: a million-row import, then identify, ran for minutes in GBs; the
+    limit (docs/import.md, Size) is refused in one line with the count, nothing written.
+    The limit is lowered here so that 14 rows exceed it."""
+    import pipeline.importers as importers
+
+    monkeypatch.setattr(importers, "MAX_ROWS", 10)
+    src = tmp_path / "two.txt"
+    src.write_text(sscanss2_text(TWO_LINK, TWO_LINK_VALUES))
+    r = CliRunner().invoke(app, ["import", str(src), "--format", "sscanss2", "--robot",
+                                 str(TWO_LINK), str(tmp_path / "s")])  # fmt: skip
+    _refusal(r, "two.txt: 14 rows, over the 10 one import takes", "1 row in 2 of each sweep")
+    assert not (tmp_path / "s").exists()
+
+
 @pytest.mark.parametrize("index", ["nan", "-1e400", "inf", "1.5", "3"])
 def test_sscanss2_joint_index_that_is_no_joint(tmp_path: Path, index: str) -> None:
     src = tmp_path / "j.txt"

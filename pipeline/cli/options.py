@@ -7,6 +7,7 @@ The parsers turn option text into values and refuse it with one line naming the 
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 from enum import StrEnum
 from pathlib import Path
@@ -14,7 +15,7 @@ from typing import Annotated, Any
 
 import typer
 
-from pipeline.errors import ArmsigError
+from pipeline.errors import ArmsigError, os_errors_refused
 
 
 class Method(StrEnum):
@@ -91,7 +92,20 @@ def new_session_folder(name: str) -> Path:
             expected="a name (sessions/NAME) or a folder path ending in a new folder's name",
             fix="pipeline simulate demo (or a path such as runs/demo)",
         )
-    return Path(name) if ("/" in name or Path(name).is_absolute()) else Path("sessions") / name
+    p = Path(name) if ("/" in name or Path(name).is_absolute()) else Path("sessions") / name
+    with os_errors_refused(p, "give a folder name of at most 255 bytes"):
+        if p.is_symlink() and not p.exists():  # it read "File exists" (issue 32)
+            raise ArmsigError(
+                f"session folder {p} is a symbolic link to {os.readlink(p)}, which does not exist",
+                expected="a new folder, or a link to an existing one",
+                fix="remove the link, or create the folder it points to",
+            )
+        if p.exists() and not p.is_dir():
+            raise ArmsigError(
+                f"session folder {p} is a file", expected="a new or existing session folder",
+                fix="choose another name",
+            )  # fmt: skip
+    return p
 
 
 def comma_list(text: str) -> list[str]:

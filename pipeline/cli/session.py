@@ -123,6 +123,8 @@ def show(
     typer.echo(json.dumps(st.provenance, indent=1, sort_keys=True))
     with pl.Config(tbl_rows=rows, tbl_cols=-1, tbl_width_chars=4000, fmt_str_lengths=60):
         typer.echo(pl.DataFrame(st.table).head(rows))
+    if st.problem:  # shown as it is, but not as armsig's (issue 32)
+        warn(f"{st.path}: {st.problem}; try: `pipeline identify {session} --force` rewrites it")
 
 
 @commands.command()
@@ -171,6 +173,9 @@ def validate(
     typer.echo(
         f"{r['file']}: {r['n']} points of target {r['target']} vs the signature of {session}"
     )
+    if r["rows_skipped"]:  # said, not skipped silently (issue 32)
+        warn(f"{r['rows_skipped']} row(s) of {r['file']} skipped: a reading or coordinate "
+             "is not a finite number (NaN or inf)")  # fmt: skip
     typer.echo(
         f"  as measured:      mean {r['mean_cm']:.4g}  RMS {r['rms_cm']:.4g}  "
         f"max {r['max_cm']:.4g} cm"

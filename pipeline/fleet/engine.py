@@ -74,6 +74,13 @@ def dask_client(
     if address is not None:
         try:
             client = Client(address, timeout="10s")
+        except ValueError as exc:  # distributed's parse of the address ("not a url")
+            raise ArmsigError(
+                f"{address!r} is not a Dask scheduler address",
+                expected="tcp://HOST:PORT (or local)",
+                got=str(exc),
+                fix="--scheduler tcp://HOST:PORT, or drop --scheduler for a local cluster",
+            ) from exc
         except OSError as exc:
             raise ArmsigError(
                 f"cannot reach the Dask scheduler {address}",

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.errors import ArmsigError
+from pipeline.errors import ArmsigError, one_line
 from pipeline.fleet.run import TABLE_NAME
 from pipeline.report.figures import panel_figure, save_png
 from pipeline.report.identification import markdown_table, sig
@@ -34,41 +34,57 @@ def load_rows(folder: Path) -> list[dict[str, Any]]:
     return read_table(path).to_pylist()
 
 
-def drift(rows: list[dict[str, Any]]) -> dict[str, list[tuple[str, float | None]]]:
+def current_signatures(rows: list[dict[str, Any]]) -> dict[str, tuple[Any, str]]:
+    """Per session identified without error: its signature and ``""`` if it is still the
+    one ``fleet.arrow`` recorded and still the session's (checked as every consumer of a
+    signature checks it: :func:`~pipeline.signature.session.load_session_document`), else
+    None and why not (changed since fleet.arrow, or stale: the recording or a stage table
+    changed, or an older armsig built it)."""
+    from pipeline.signature.file import signature_from_document
+    from pipeline.signature.session import load_session_document
+
+    out: dict[str, tuple[Any, str]] = {}
+    for r in rows:
+        if r["error"] is not None:
+            continue
+        path = Path(r["session"]) / FILE_NAME
+        try:
+            doc = load_session_document(path)
+        except ArmsigError as exc:
+            out[r["session"]] = None, f"stale: {one_line(str(exc).removeprefix(f'{path}: '), 160)}"
+            continue
+        if doc[DIGEST_KEY] != r["signature_sha256"]:
+            out[r["session"]] = None, "signature changed since fleet.arrow"
+        else:
+            out[r["session"]] = signature_from_document(doc, str(path)), ""
+    return out
+
+
+def drift(
+    rows: list[dict[str, Any]], current: dict[str, tuple[Any, str]]
+) -> dict[str, list[tuple[str, float | None, str]]]:
     """Per robot with two or more identified sessions, in identification order: each later
     session's RMS tool position difference (cm) from the one before, after aligning the two
     signatures' bases and tools (:func:`~pipeline.signature.alignment.chain_alignment`: no
-    ground truth, independent of each session's sensor frame). None when a session's
-    signature.json is no longer the one ``fleet.arrow`` recorded."""
+    ground truth, independent of each session's sensor frame). None, with why, when either
+    signature is not ``current`` (:func:`current_signatures`)."""
     by_robot: dict[str, list[dict[str, Any]]] = {}
     for r in rows:
         if r["error"] is None:
             by_robot.setdefault(r["robot"], []).append(r)
-    out: dict[str, list[tuple[str, float | None]]] = {}
+    out: dict[str, list[tuple[str, float | None, str]]] = {}
     for robot, rs in sorted(by_robot.items()):
         rs.sort(key=lambda r: (r["identified_utc"], r["session"]))
-        sigs = [_signature(r) for r in rs]
-        steps: list[tuple[str, float | None]] = []
-        for (a, b), r in zip(zip(sigs, sigs[1:], strict=False), rs[1:], strict=True):
-            rms = None if a is None or b is None else chain_alignment(b.chain, a.chain, b.robot)[2]
-            steps.append((r["session"], rms))
+        steps: list[tuple[str, float | None, str]] = []
+        for a, b in zip(rs, rs[1:], strict=False):
+            (sa, why_a), (sb, why_b) = current[a["session"]], current[b["session"]]
+            if sa is None or sb is None:
+                steps.append((b["session"], None, why_b or f"{a['session']}: {why_a}"))
+            else:
+                steps.append((b["session"], chain_alignment(sb.chain, sa.chain, sb.robot)[2], ""))
         if steps:
             out[robot] = steps
     return out
-
-
-def _signature(row: dict[str, Any]) -> Any:
-    """The session's signature if it is still the one of ``row`` (same digest), else None."""
-    from pipeline.signature.file import read_signature_document, signature_from_document
-
-    path = Path(row["session"]) / FILE_NAME
-    try:
-        doc = read_signature_document(path)
-    except ArmsigError:
-        return None
-    if doc[DIGEST_KEY] != row["signature_sha256"]:
-        return None
-    return signature_from_document(doc, str(path))
 
 
 def _gain_figure(rows: list[dict[str, Any]], path: Path) -> Path:
@@ -107,10 +123,10 @@ def _accuracy_figure(rows: list[dict[str, Any]], path: Path) -> Path:
     return save_png(fig, path)
 
 
-def _drift_figure(steps: dict[str, list[tuple[str, float | None]]], path: Path) -> Path:
+def _drift_figure(steps: dict[str, list[tuple[str, float | None, str]]], path: Path) -> Path:
     fig, (ax,) = panel_figure(1)
     for robot, s in steps.items():
-        ax.plot(range(1, len(s) + 1), [np.nan if v is None else v for _, v in s], "o-",
+        ax.plot(range(1, len(s) + 1), [np.nan if v is None else v for _, v, _ in s], "o-",
                 label=robot)  # fmt: skip
     ax.set_xlabel("session (identification order) vs the one before")
     ax.set_ylabel("aligned RMS tool position difference (cm)")
@@ -129,30 +145,32 @@ def write_fleet_report(folder: str | Path) -> Path:
     rows = load_rows(d)
     out = d / REPORT_DIR
     out.mkdir(parents=True, exist_ok=True)
-    steps = drift(rows)
+    current = current_signatures(rows)
+    steps = drift(rows, current)
     figs = {
         "gain.png": _gain_figure(rows, out / "gain.png"),
         "accuracy.png": _accuracy_figure(rows, out / "accuracy.png"),
         "drift.png": _drift_figure(steps, out / "drift.png"),
     }
     failed = [r for r in rows if r["error"] is not None]
+    stale = {s: why for s, (_, why) in current.items() if why}
     table = markdown_table(
         ["session", "robot", "sensor", "points", "σ normal max (cm)", "check RMS (cm)",
          "gain", "warnings", "error"],
         [
             [r["session"], r["robot"] or "—", r["sensor"] or "—", r["points"] or "—",
              sig(r["sigma_normal_max_cm"]), sig(r["check_rms_cm"]), sig(r["gain_evaluation"]),
-             len(r["warnings"] or []), r["error"] or ""]
+             len(r["warnings"] or []), r["error"] or stale.get(r["session"], "")]
             for r in rows
         ],
     )  # fmt: skip
     drift_rows = [
-        [robot, s, "signature changed since fleet.arrow" if v is None else sig(v)]
-        for robot, vs in steps.items()
-        for s, v in vs
+        [robot, s, why if v is None else sig(v)] for robot, vs in steps.items() for s, v, why in vs
     ]
     parts = [
-        f"# Fleet: {len(rows)} sessions, {len(failed)} failed\n",
+        f"# Fleet: {len(rows)} sessions, {len(failed)} failed"
+        + (f", {len(stale)} no longer as fleet.arrow recorded them (column error)" if stale else "")
+        + "\n",
         table,
         "\n## Design model against signature\n",
         "Gain: the median over the evaluation's tasks of the median |design| / |signature| "

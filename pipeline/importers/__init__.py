@@ -28,6 +28,10 @@ from pipeline.importers.write import source_metadata, write_imported
 from pipeline.robots.description import RobotDescription, load_description
 
 FORMATS = ("sscanss2", "table", "rct")
+#: The most rows one import takes. Measured on 2 cores (docs/import.md, "Size"): 100,000
+#: rows import in 22 s (0.67 GB) and identify in 37 s (0.87 GB); time and memory grow at
+#: least in proportion (a million rows: minutes and ~7 GB each), for no better signature.
+MAX_ROWS = 100_000
 #: What to try after an OSError of import or validate (:func:`~pipeline.errors.os_errors_refused`).
 OS_FIX = "check the path (a name of at most 255 bytes), its permissions and the free space"
 
@@ -101,6 +105,13 @@ def read_foreign(
             fix='e.g. joint = 2 with held = { "1" = 0.0 }',
         )
     rows, home = parse_foreign(path, fmt, robot, imap)
+    if len(rows.where) > MAX_ROWS:
+        raise ImportFileError(
+            f"{path.name}: {len(rows.where):,} rows, over the {MAX_ROWS:,} one import takes",
+            expected=f"at most {MAX_ROWS:,} rows (docs/import.md, Size)",
+            fix=f"subsample the file (1 row in {-(-len(rows.where) // MAX_ROWS)} of each "
+            "sweep), or import a part and choose the informative poses with `pipeline plan --from`",
+        )
     tol = _tolerances(fmt, imap, robot)
     rows = checked_rows(rows, robot, tol)
     return rows, tool_rows(rows, home, robot, tol.held)
@@ -132,4 +143,12 @@ def import_file(
     return Imported(rows, tool, robot, recording)
 
 
-__all__ = ["FORMATS", "OS_FIX", "Imported", "import_file", "parse_foreign", "read_foreign"]
+__all__ = [
+    "FORMATS",
+    "MAX_ROWS",
+    "OS_FIX",
+    "Imported",
+    "import_file",
+    "parse_foreign",
+    "read_foreign",
+]

@@ -19,7 +19,7 @@ from pipeline.stages.runner import (
     stage_path,
     status,
 )
-from pipeline.stages.tables import read_provenance, read_table
+from pipeline.stages.tables import check_table, read_provenance, read_table
 
 
 def session_status(session_dir: str | Path) -> list[StageStatus]:
@@ -33,11 +33,13 @@ def session_status(session_dir: str | Path) -> list[StageStatus]:
 
 @dataclass(frozen=True)
 class StageTable:
-    """A stage's output file, its provenance and its table."""
+    """A stage's output file, its provenance and its table; ``problem``: why the file is
+    not the one armsig wrote (e.g. edited since: its content hash differs), else empty."""
 
     path: Path
     provenance: dict[str, Any]
     table: pa.Table
+    problem: str = ""
 
 
 def stage_table(
@@ -49,6 +51,7 @@ def stage_table(
         raise ArmsigError(f"{path}: no such stage output", fix=f"`pipeline status {session_dir}`")
     provenance = read_provenance(path)
     table = read_table(path)  # a damaged file: one line, not a polars panic
+    problem = check_table(path, stage).problem  # the check every consumer of a stage makes
     if columns:
         unknown = [c for c in columns if c not in table.column_names]
         if unknown:
@@ -56,4 +59,4 @@ def stage_table(
                 f"{path}: no column {unknown[0]!r}", expected=", ".join(table.column_names)
             )
         table = table.select(list(columns))
-    return StageTable(path, provenance, table)
+    return StageTable(path, provenance, table, problem)

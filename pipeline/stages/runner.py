@@ -19,6 +19,7 @@ the same bits on any machine, in any fleet worker and in a Monte-Carlo study.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import datetime as dt
 import importlib
@@ -33,9 +34,9 @@ from typing import Any, TextIO
 from threadpoolctl import threadpool_limits
 
 from pipeline import __version__
-from pipeline.atomic import remove_debris
+from pipeline.atomic import WRITE_FIX, remove_debris
 from pipeline.contract.digest import file_sha256
-from pipeline.errors import ArmsigError, StageError
+from pipeline.errors import ArmsigError, StageError, os_errors_refused
 from pipeline.progress import Progress
 from pipeline.schemas import validate_table
 from pipeline.stages.base import RECORDING, Stage, StageRun, session_folder
@@ -436,11 +437,14 @@ def run(
                     sdir, all_stages, names, hashes, runs, force, from_stage, only, overrides, bar
                 )
             except Exception as exc:
-                _keep_failed(sdir, names, hashes.pending)
+                with contextlib.suppress(OSError):  # a full disk: the run's own error is news
+                    _keep_failed(sdir, names, hashes.pending)
                 raise _pointing_at_failed(exc, sdir, hashes.pending) from exc
             for name in names:  # commit: every stage of the run succeeded
                 if name in hashes.pending:
-                    os.replace(pending / f"{name}.arrow", stage_path(sdir, name))
+                    target = stage_path(sdir, name)  # chattr +i: one line naming it
+                    with os_errors_refused(target, WRITE_FIX, always_path=True):
+                        os.replace(pending / f"{name}.arrow", target)
             hashes.pending.clear()
             shutil.rmtree(failed_dir(sdir), ignore_errors=True)
         finally:
@@ -581,6 +585,10 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
         "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
     }
     hashes.pending.add(stage.name)
-    written = write_table(hashes.path(stage.name), table, provenance)
+    try:
+        written = write_table(hashes.path(stage.name), table, provenance)
+    except BaseException:  # not written: stages/failed/ must not look for it (issue 32)
+        hashes.pending.discard(stage.name)
+        raise
     hashes.put(stage.name, CheckedTable(written, provenance))
     return table
