@@ -4,6 +4,8 @@ target was not reached (exit 3, after the output). Nothing here imports numpy.""
 from __future__ import annotations
 
 import contextlib
+import datetime
+import math
 import warnings
 from collections.abc import Iterator
 from typing import Any
@@ -17,10 +19,26 @@ class NotReached(Exception):  # a signal, not an error: the output is complete
 
 
 def print_json(data: Any) -> None:
-    """``data`` as JSON on stdout, for ``jq`` and scripts."""
+    """``data`` as one JSON document on stdout, for ``jq`` and scripts: every float at
+    full precision (its shortest round-trip repr), NaN and infinities as ``null`` (JSON
+    has none; Python's ``NaN`` token would break ``jq``), times as ISO 8601 text."""
     import json
 
-    typer.echo(json.dumps(data, indent=1))
+    typer.echo(json.dumps(_jsonable(data), indent=1, allow_nan=False))
+
+
+def _jsonable(data: Any) -> Any:
+    """``data`` with every non-finite float replaced by None and every date-time by its
+    ISO 8601 text (in dicts, lists and tuples)."""
+    if isinstance(data, float):
+        return data if math.isfinite(data) else None
+    if isinstance(data, dict):
+        return {k: _jsonable(v) for k, v in data.items()}
+    if isinstance(data, list | tuple):
+        return [_jsonable(v) for v in data]
+    if isinstance(data, datetime.datetime):
+        return data.isoformat()
+    return data
 
 
 def warn(text: str) -> None:
