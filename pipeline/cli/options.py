@@ -117,7 +117,7 @@ def choice_list(help_text: str, enum: type[StrEnum]) -> Any:
         choices_of(text, enum)
         return text
 
-    def complete(ctx: Any, param: Any, incomplete: str) -> list[str]:
+    def complete(incomplete: str) -> list[str]:
         head, _, last = incomplete.rpartition(",")
         given = {item.lower() for item in comma_list(head)}
         prefix = f"{head}," if head else ""
@@ -127,7 +127,7 @@ def choice_list(help_text: str, enum: type[StrEnum]) -> Any:
             if e.value.startswith(last.lower()) and e.value not in given
         ]
 
-    return typer.Option(help=help_text, callback=check, shell_complete=complete)
+    return typer.Option(help=help_text, callback=check, autocompletion=complete)
 
 
 def choices_of(text: str, enum: type[StrEnum]) -> tuple[str, ...]:
