@@ -3,11 +3,8 @@ target was not reached (exit 3, after the output). Nothing here imports numpy.""
 
 from __future__ import annotations
 
-import contextlib
 import datetime
 import math
-import warnings
-from collections.abc import Iterator
 from typing import Any
 
 import typer
@@ -62,22 +59,3 @@ def warn_outside_limits(names: list[str] | tuple[str, ...]) -> None:
     """The warning for joint values outside their limits (nothing when there are none)."""
     if names:
         warn(f"outside joint limits: {', '.join(names)}")
-
-
-@contextlib.contextmanager
-def quiet_numpy(debug: bool) -> Iterator[None]:
-    """No numpy floating-point or RuntimeWarning lines on stderr (unless ``debug``).
-
-    armsig checks its numbers itself (finite inputs, dropouts as NaN, feature
-    checks) and reports what matters as warnings of its own or as an error, so
-    numpy's ``invalid value`` / ``divide by zero`` / ``Mean of empty slice`` lines
-    would only precede those. They are all RuntimeWarnings (numpy's default error
-    state warns), so the filter silences them without importing numpy: a warm
-    ``identify`` needs none (issue 18). Other warning categories still print.
-    """
-    if debug:
-        yield
-        return
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        yield
