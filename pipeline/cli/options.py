@@ -133,13 +133,13 @@ def choice_list(help_text: str, enum: type[StrEnum]) -> Any:
 def choices_of(text: str, enum: type[StrEnum]) -> tuple[str, ...]:
     """The values of ``enum`` named in comma-separated ``text`` (any case), in order; an
     unknown one is a usage error (exit 2) listing the choices."""
-    values = {e.value: e.value for e in enum}
+    values = [e.value for e in enum]
     items = comma_list(text)
     for item in items:
         if item.lower() not in values:
             listed = ", ".join(repr(v) for v in values)
             raise typer.BadParameter(f"{item!r} is not one of {listed}.")
-    return tuple(values[item.lower()] for item in items)
+    return tuple(item.lower() for item in items)
 
 
 SessionArg = Annotated[str, typer.Argument(help="Session folder, e.g. sessions/robot3.")]
