@@ -20,7 +20,8 @@ Only this module turns exceptions into exit codes, in one place (:class:`_Pipeli
 4   the signature's verdict is FAIL (docs/verdict.md): ``identify`` after writing the
     signature and the report and printing the verdict; ``export`` and ``ik`` refuse it
     unless ``--accept-verdict`` (a :class:`~pipeline.errors.VerdictFailError`)
-70  internal error: a bug in armsig (the traceback with ``ARMSIG_DEBUG=1``)
+70  internal error: a bug in armsig (the traceback with ``ARMSIG_DEBUG=1``, which also
+    shows other packages' warnings and Dask's logs: :mod:`pipeline.quiet`)
 ==  =====================================================================
 
 Every error is one line on stderr starting ``error:``.
@@ -39,15 +40,15 @@ import typer
 from typer.core import TyperGroup
 
 from pipeline.cli import control, evaluate, fleet, montecarlo, outputs, record, session
-from pipeline.cli.output import NotReached, quiet_numpy
+from pipeline.cli.output import NotReached
 from pipeline.errors import ArmsigError, VerdictFailError, one_line
+from pipeline.quiet import DEBUG_ENV, quiet
 
 EXIT_REFUSED = 1
 EXIT_USAGE = 2
 EXIT_NOT_REACHED = 3
 EXIT_VERDICT_FAIL = 4
 EXIT_INTERNAL = 70  # EX_SOFTWARE of sysexits.h
-DEBUG_ENV = "ARMSIG_DEBUG"
 
 
 def _fail(message: str, code: int) -> int:
@@ -70,7 +71,7 @@ class _Pipeline(TyperGroup):
         prog = prog_name or "pipeline"
         debug = os.environ.get(DEBUG_ENV) == "1"
         try:
-            with quiet_numpy(debug):
+            with quiet(debug):  # other packages' warnings and logs: pipeline.quiet
                 rv = super().main(argv, prog, complete_var, standalone_mode=False, **extra)
             code = rv if isinstance(rv, int) else 0  # an int: typer.Exit's code (--help: 0)
         except typer.TyperException as exc:  # the parser's: unknown option, bad value, ...

@@ -14,6 +14,7 @@ from pipeline.cli.options import (
     JsonOption,
     Method,
     PayloadOption,
+    PumaBranch,
     SessionArg,
     choice,
     finite,
@@ -130,7 +131,8 @@ def ik(
         typer.Option(help="x y z (cm) rx ry rz (deg, fixed axes) in the design base frame."),
     ] = None,
     branch: Annotated[
-        str | None, typer.Option(help="Puma branch, e.g. right-up-noflip (default: that of q^s).")
+        PumaBranch | None,
+        choice("Puma branch, e.g. right-up-noflip (default: that of --near, else of q^s)."),
     ] = None,
     method: Annotated[Method, choice("nr (Newton-Raphson) or jacobi.")] = Method.nr,
     targets: Annotated[
@@ -189,7 +191,7 @@ def ik(
     r = solve_pose(
         session,
         finite(pose, "--pose"),
-        branch=branch,
+        branch=None if branch is None else branch.value,
         method=method.value,
         tool=user_tool,
         near=q_near,
@@ -269,11 +271,16 @@ def ik_convergence(
     seed: Annotated[
         int, typer.Option(min=0, help="Seed of the target and the poor signature.")
     ] = 3,
+    as_json: JsonOption = False,
 ) -> None:
     """Per-iteration errors of Newton-Raphson and Jacobi (Tables 5-1, 5-2, Section 5.4)."""
     from pipeline.control.convergence import convergence_tables, format_tables
 
-    typer.echo(format_tables(convergence_tables(session, seed=seed)))
+    tables = convergence_tables(session, seed=seed)
+    if as_json:
+        print_json([t.to_dict() for t in tables])
+        return
+    typer.echo(format_tables(tables))
 
 
 @commands.command()

@@ -4,11 +4,12 @@ report). The work is in :mod:`pipeline.fleet`."""
 from __future__ import annotations
 
 import sys
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
-from pipeline.cli.output import warn
+from pipeline.cli.options import JsonOption
+from pipeline.cli.output import print_json, warn
 from pipeline.errors import ArmsigError
 
 commands = typer.Typer(
@@ -36,13 +37,37 @@ FleetOut = Annotated[
 
 
 def _fleet(
-    command: str, dirs: list[str], scheduler: str | None, workers: int | None, out: str | None
+    command: str,
+    dirs: list[str],
+    scheduler: str | None,
+    workers: int | None,
+    out: str | None,
+    as_json: bool,
 ) -> None:
-    """Run ``command`` over the sessions; print one line per session, and refuse (exit 1)
-    when any session failed, after every other one is done and fleet.arrow is written."""
+    """Run ``command`` over the sessions; print one line per session (``as_json``: the
+    rows of fleet.arrow as one JSON document), and refuse (exit 1) when any session
+    failed, after every other one is done and fleet.arrow is written."""
     from pipeline.fleet.run import fleet
 
     r = fleet(command, dirs, scheduler, workers, out, progress=sys.stderr)
+    if as_json:  # the warnings are in the rows, and on stderr as without --json
+        print_json({"table": str(r.table), "wall_s": r.wall_s, "failed": len(r.failed),
+                    "sessions": r.rows})  # fmt: skip
+        for row in r.rows:
+            for w in row["warnings"]:
+                warn(f"{row['session']}: {w}")
+    else:
+        _print_rows(r)
+    if r.failed:
+        raise ArmsigError(
+            f"{len(r.failed)} of {len(r.rows)} sessions failed (the others are done)",
+            fix=f"see the error column of {r.table}; a rerun redoes only what is stale",
+        )
+
+
+def _print_rows(r: Any) -> None:
+    """One line per session of a :class:`~pipeline.fleet.run.FleetResult`, its warnings
+    on stderr, then the count and the table."""
     for row in r.rows:
         if row["error"] is not None:
             typer.echo(f"  FAILED {row['session']}: {row['error']}")
@@ -58,11 +83,6 @@ def _fleet(
         for w in row["warnings"]:
             warn(f"{row['session']}: {w}")
     typer.echo(f"{len(r.rows)} sessions in {r.wall_s:.1f} s; wrote {r.table}")
-    if r.failed:
-        raise ArmsigError(
-            f"{len(r.failed)} of {len(r.rows)} sessions failed (the others are done)",
-            fix=f"see the error column of {r.table}; a rerun redoes only what is stale",
-        )
 
 
 @commands.command("identify")
@@ -71,9 +91,10 @@ def fleet_identify(
     scheduler: SchedulerOption = None,
     workers: FleetWorkers = None,
     out: FleetOut = None,
+    as_json: JsonOption = False,
 ) -> None:
     """`pipeline identify` on every session, one Dask task each; writes fleet.arrow."""
-    _fleet("identify", dirs, scheduler, workers, out)
+    _fleet("identify", dirs, scheduler, workers, out, as_json)
 
 
 @commands.command("evaluate")
@@ -82,9 +103,10 @@ def fleet_evaluate(
     scheduler: SchedulerOption = None,
     workers: FleetWorkers = None,
     out: FleetOut = None,
+    as_json: JsonOption = False,
 ) -> None:
     """`pipeline evaluate` on every session (design vs signature gain); writes fleet.arrow."""
-    _fleet("evaluate", dirs, scheduler, workers, out)
+    _fleet("evaluate", dirs, scheduler, workers, out, as_json)
 
 
 @commands.command("validate")
@@ -93,16 +115,22 @@ def fleet_validate(
     scheduler: SchedulerOption = None,
     workers: FleetWorkers = None,
     out: FleetOut = None,
+    as_json: JsonOption = False,
 ) -> None:
     """The validation (check) errors of every point session; sonic sessions have none."""
-    _fleet("validate", dirs, scheduler, workers, out)
+    _fleet("validate", dirs, scheduler, workers, out, as_json)
 
 
 @commands.command("report")
 def fleet_report(
     folder: Annotated[str, typer.Argument(help="Folder holding fleet.arrow.")],
+    as_json: JsonOption = False,
 ) -> None:
     """Write FOLDER/fleet-report/fleet.md with figures from FOLDER/fleet.arrow."""
     from pipeline.fleet.report import write_fleet_report
 
-    typer.echo(f"wrote {write_fleet_report(folder)}")
+    path = write_fleet_report(folder)
+    if as_json:
+        print_json({"report": str(path)})
+        return
+    typer.echo(f"wrote {path}")

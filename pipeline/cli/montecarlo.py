@@ -7,15 +7,18 @@ from typing import Annotated
 
 import typer
 
+from pipeline.cli.options import JsonOption, Study, choice
+from pipeline.cli.output import print_json
+
 commands = typer.Typer()
 
 
 @commands.command()
 def montecarlo(
     study: Annotated[
-        str,
-        typer.Option(
-            help="encoder, machining, noise, points, radius, misalignment, features, refine "
+        Study,
+        choice(
+            "encoder, machining, noise, points, radius, misalignment, features, refine "
             "(S-Model against refined signature; whole simulate + identify sessions, ~1.8 s of "
             "CPU per robot and setting), compliance (rigid fit against a fit with joint "
             "compliance on compliant robots; ~5.6 s of CPU per robot) or all (refine, "
@@ -37,16 +40,22 @@ def montecarlo(
             "of --workers (same numbers as without)."
         ),
     ] = None,
+    as_json: JsonOption = False,
 ) -> None:
     """Monte-Carlo study of design-model and signature control (Chapter 7, Appendix G)."""
     from pipeline.montecarlo.studies import run_montecarlo
 
     if scheduler is None:
-        lines = run_montecarlo(study, robots, seed, out, workers, progress=sys.stderr)
+        done = run_montecarlo(study.value, robots, seed, out, workers, progress=sys.stderr)
     else:
         from pipeline.fleet.engine import dask_client
 
         with dask_client(scheduler, workers) as client:
-            lines = run_montecarlo(study, robots, seed, out, progress=sys.stderr, client=client)
-    for line in lines:
+            done = run_montecarlo(
+                study.value, robots, seed, out, progress=sys.stderr, client=client
+            )
+    if as_json:
+        print_json(done.to_dict())
+        return
+    for line in done.lines:
         typer.echo(line)

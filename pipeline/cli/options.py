@@ -42,17 +42,105 @@ class ExportFrame(StrEnum):
 
 
 class Sensor(StrEnum):
-    """``simulate --sensor``."""
+    """``simulate --sensor`` (``pipeline.rig.simulate.SENSORS``)."""
 
     sonic = "sonic"
     tracker = "tracker"
 
 
+class Air(StrEnum):
+    """``simulate --air`` (``pipeline.rig.simulate.AIRS``)."""
+
+    lab = "lab"
+    drifting = "drifting"
+
+
+class Fault(StrEnum):
+    """The items of ``simulate --faults`` (``pipeline.rig.simulate.FAULTS``)."""
+
+    bias = "bias"
+    dropouts = "dropouts"
+    outliers = "outliers"
+
+
+class ImportFormat(StrEnum):
+    """``import --format`` and ``validate --format`` (``pipeline.importers.FORMATS``)."""
+
+    sscanss2 = "sscanss2"
+    table = "table"
+    rct = "rct"
+
+
+class Study(StrEnum):
+    """``montecarlo --study`` (``pipeline.montecarlo.studies.STUDY_NAMES``)."""
+
+    encoder = "encoder"
+    machining = "machining"
+    noise = "noise"
+    points = "points"
+    radius = "radius"
+    misalignment = "misalignment"
+    features = "features"
+    refine = "refine"
+    compliance = "compliance"
+    all = "all"
+
+
+class PumaBranch(StrEnum):
+    """``ik --branch``: shoulder, elbow and wrist flags of a Puma solution (the labels of
+    ``pipeline.robots.puma560.BRANCHES``, in their order)."""
+
+    right_up_noflip = "right-up-noflip"
+    right_up_flip = "right-up-flip"
+    right_down_noflip = "right-down-noflip"
+    right_down_flip = "right-down-flip"
+    left_up_noflip = "left-up-noflip"
+    left_up_flip = "left-up-flip"
+    left_down_noflip = "left-down-noflip"
+    left_down_flip = "left-down-flip"
+
+
 #: Options whose value is one of an :class:`~enum.Enum`'s: any case (``--format URDF``),
-#: offered by shell completion, refused with the choices (exit 2) otherwise.
+#: offered by shell completion, refused with the choices (exit 2) otherwise. The enums
+#: repeat the tuples of the modules doing the work (which import numpy, issue 18);
+#: tests/test_cli_choices.py keeps them equal.
 def choice(help_text: str, *names: str) -> Any:
     """A ``typer.Option`` taking an enum's value in any case."""
     return typer.Option(*names, help=help_text, case_sensitive=False)
+
+
+def choice_list(help_text: str, enum: type[StrEnum]) -> Any:
+    """A ``typer.Option`` of comma-separated values of ``enum`` (any case; ``--faults
+    bias,Dropouts``): refused with the choices (exit 2) otherwise, each item offered by
+    shell completion. Its value is the text; :func:`choices_of` splits it."""
+
+    def check(text: str) -> str:
+        choices_of(text, enum)
+        return text
+
+    def complete(incomplete: str) -> list[str]:
+        head, _, last = incomplete.rpartition(",")
+        given = {item.lower() for item in comma_list(head)}
+        prefix = f"{head}," if head else ""
+        return [
+            prefix + e.value
+            for e in enum
+            if e.value.startswith(last.lower()) and e.value not in given
+        ]
+
+    return typer.Option(help=help_text, callback=check, autocompletion=complete)
+
+
+def choices_of(text: str, enum: type[StrEnum]) -> tuple[str, ...]:
+    """The values of ``enum`` named in comma-separated ``text`` (any case), in order; an
+    unknown one is a usage error (exit 2) listing the choices."""
+    values = [e.value for e in enum]
+    items = comma_list(text)
+    for item in items:
+        if item.lower() not in values:
+            listed = ", ".join(repr(v) for v in values)
+            raise typer.BadParameter(f"{item!r} is not one of {listed}.")
+    return tuple(item.lower() for item in items)
 
 
 SessionArg = Annotated[str, typer.Argument(help="Session folder, e.g. sessions/robot3.")]

@@ -3,9 +3,8 @@ target was not reached (exit 3, after the output). Nothing here imports numpy.""
 
 from __future__ import annotations
 
-import contextlib
-import warnings
-from collections.abc import Iterator
+import datetime
+import math
 from typing import Any
 
 import typer
@@ -17,10 +16,26 @@ class NotReached(Exception):  # a signal, not an error: the output is complete
 
 
 def print_json(data: Any) -> None:
-    """``data`` as JSON on stdout, for ``jq`` and scripts."""
+    """``data`` as one JSON document on stdout, for ``jq`` and scripts: every float at
+    full precision (its shortest round-trip repr), NaN and infinities as ``null`` (JSON
+    has none; Python's ``NaN`` token would break ``jq``), times as ISO 8601 text."""
     import json
 
-    typer.echo(json.dumps(data, indent=1))
+    typer.echo(json.dumps(_jsonable(data), indent=1, allow_nan=False))
+
+
+def _jsonable(data: Any) -> Any:
+    """``data`` with every non-finite float replaced by None and every date-time by its
+    ISO 8601 text (in dicts, lists and tuples)."""
+    if isinstance(data, float):
+        return data if math.isfinite(data) else None
+    if isinstance(data, dict):
+        return {k: _jsonable(v) for k, v in data.items()}
+    if isinstance(data, list | tuple):
+        return [_jsonable(v) for v in data]
+    if isinstance(data, datetime.datetime):
+        return data.isoformat()
+    return data
 
 
 def warn(text: str) -> None:
@@ -44,22 +59,3 @@ def warn_outside_limits(names: list[str] | tuple[str, ...]) -> None:
     """The warning for joint values outside their limits (nothing when there are none)."""
     if names:
         warn(f"outside joint limits: {', '.join(names)}")
-
-
-@contextlib.contextmanager
-def quiet_numpy(debug: bool) -> Iterator[None]:
-    """No numpy floating-point or RuntimeWarning lines on stderr (unless ``debug``).
-
-    armsig checks its numbers itself (finite inputs, dropouts as NaN, feature
-    checks) and reports what matters as warnings of its own or as an error, so
-    numpy's ``invalid value`` / ``divide by zero`` / ``Mean of empty slice`` lines
-    would only precede those. They are all RuntimeWarnings (numpy's default error
-    state warns), so the filter silences them without importing numpy: a warm
-    ``identify`` needs none (issue 18). Other warning categories still print.
-    """
-    if debug:
-        yield
-        return
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        yield

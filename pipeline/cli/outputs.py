@@ -15,7 +15,7 @@ from pipeline.cli.options import (
     choice,
     joint_values,
 )
-from pipeline.cli.output import report, warn, warn_outside_limits
+from pipeline.cli.output import print_json, report, warn, warn_outside_limits
 
 commands = typer.Typer()
 
@@ -34,14 +34,26 @@ def viz(
     out: Annotated[
         str | None, typer.Option(help="Output MCAP file (default: SESSION/viz.mcap).")
     ] = None,
+    as_json: JsonOption = False,
 ) -> None:
     """Write viz.mcap for Foxglove's 3-D panel: frames, fitted features, measured points (m)."""
     from pipeline.viz.write import viz as run_viz
 
     r = run_viz(session, None if q is None else joint_values(q, "--q"), out)
-    shown = " ".join(f"{v:g}" for v in r.configuration)
-    typer.echo(f"wrote {r.path}: {sum(r.topics.values())} messages on {len(r.topics)} topics")
-    typer.echo(f"link frames at q = {shown} (deg / cm); lengths in metres")
+    if as_json:  # the configuration in deg / cm, as --q takes it
+        print_json(
+            {
+                "path": str(r.path),
+                "messages": sum(r.topics.values()),
+                "topics": r.topics,
+                "configuration": r.configuration,
+                "outside_limits": r.outside_limits,
+            }
+        )
+    else:
+        shown = " ".join(f"{v:g}" for v in r.configuration)
+        typer.echo(f"wrote {r.path}: {sum(r.topics.values())} messages on {len(r.topics)} topics")
+        typer.echo(f"link frames at q = {shown} (deg / cm); lengths in metres")
     warn_outside_limits(r.outside_limits)
 
 

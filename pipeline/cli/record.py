@@ -3,35 +3,57 @@ or imported from a file of measured points (robots, simulate, import)."""
 
 from __future__ import annotations
 
-from typing import Annotated
+import dataclasses
+from typing import Annotated, Any
 
 import typer
 
 from pipeline.cli.options import (
+    Air,
+    Fault,
     ForceRecording,
+    ImportFormat,
+    JsonOption,
     NewSessionArg,
     Sensor,
     choice,
-    comma_list,
+    choice_list,
+    choices_of,
     joint_values,
     new_session_folder,
 )
+from pipeline.cli.output import print_json, warn
 from pipeline.errors import ArmsigError
 
 commands = typer.Typer()
 
 
 @commands.command()
-def robots() -> None:
+def robots(as_json: JsonOption = False) -> None:
     """List the built-in robots with their joints."""
     from pipeline.robots import builtin_names, get_robot
 
-    for name in builtin_names():
-        rob = get_robot(name)
+    described = [get_robot(name) for name in builtin_names()]
+    if as_json:
+        print_json(
+            [_robot_dict(name, rob) for name, rob in zip(builtin_names(), described, strict=True)]
+        )
+        return
+    for name, rob in zip(builtin_names(), described, strict=True):
         joints = ", ".join(
             f"{j.name} ({j.type[0].upper()}, {j.lower:g}..{j.upper:g} {j.unit})" for j in rob.joints
         )
         typer.echo(f"{name}: {rob.n_joints} joints: {joints}")
+
+
+def _robot_dict(name: str, rob: Any) -> dict[str, Any]:
+    """A built-in robot for ``robots --json``: its joints' types, limits and resolution."""
+    joints = [
+        {"name": j.name, "type": j.type, "unit": j.unit, "lower": j.lower, "upper": j.upper,
+         "encoder_resolution": j.encoder_resolution}
+        for j in rob.joints
+    ]  # fmt: skip
+    return {"name": name, "description": rob.name, "n_joints": rob.n_joints, "joints": joints}
 
 
 @commands.command()
@@ -62,7 +84,7 @@ def simulate(
     repeats: Annotated[
         int, typer.Option(min=1, max=100, help="Digitize cycles per position, N_avg.")
     ] = 10,
-    faults: Annotated[str, typer.Option(help="Comma-separated: bias, dropouts, outliers.")] = "",
+    faults: Annotated[str, choice_list("Comma-separated: bias, dropouts, outliers.", Fault)] = "",
     wac_error_cm: Annotated[
         float,
         typer.Option(
@@ -116,12 +138,12 @@ def simulate(
         typer.Option(help="Tracker: record the poses of this pose plan (`pipeline plan`)."),
     ] = "",
     air: Annotated[
-        str,
-        typer.Option(
-            help="lab (temperature linear in height, one drift) or drifting (speed of sound "
+        Air,
+        choice(
+            "lab (temperature linear in height, one drift) or drifting (speed of sound "
             "linear in height, drifts of 8-45 min; also when noiseless), docs/rig.md."
         ),
-    ] = "lab",
+    ] = Air.lab,
     log_jitter_s: Annotated[
         float,
         typer.Option(
@@ -161,6 +183,7 @@ def simulate(
         ),
     ] = "",
     force: ForceRecording = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Record a simulated session: recording.mcap plus rig-truth.json."""
     from pipeline.rig.simulate import SimulationOptions, simulate_session
@@ -174,7 +197,7 @@ def simulate(
         noise_factor=noise_factor,
         points=points,
         repeats=repeats,
-        faults=tuple(comma_list(faults)),
+        faults=choices_of(faults, Fault),
         wac_error_cm=wac_error_cm,
         noiseless=noiseless,
         max_sweep_deg=max_sweep_deg,
@@ -186,7 +209,7 @@ def simulate(
         poses=poses,
         sweeps=sweeps,
         plan_file=plan,
-        air=air,
+        air=air.value,
         log_jitter_s=log_jitter_s,
         six_d=six_d,
         compliance_mm=compliance,
@@ -194,34 +217,59 @@ def simulate(
         payloads_kg=tuple(joint_values(payloads, "--payloads", "0,10")),
     )
     path = simulate_session(folder, opts, force=force)
-    typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {folder / 'rig-truth.json'}")
+    truth = folder / "rig-truth.json"
+    if as_json:
+        print_json({"session": str(folder), "recording": str(path), "bytes": path.stat().st_size,
+                    "rig_truth": str(truth), "options": dataclasses.asdict(opts)})  # fmt: skip
+        return
+    typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {truth}")
 
 
 @commands.command("import")
 def import_(
     file: Annotated[str, typer.Argument(help="The foreign file of measured points.")],
     name: NewSessionArg,
-    format: Annotated[str, typer.Option(help="sscanss2 | table | rct (docs/import.md).")],
+    format: Annotated[ImportFormat, choice("sscanss2, table or rct (docs/import.md).")],
     robot: Annotated[str, typer.Option(help="Robot description .toml of the measured machine.")],
     map: Annotated[
         str | None, typer.Option(help="Map file (TOML): columns, units, sweeps (docs/import.md).")
     ] = None,
     force: ForceRecording = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Convert a file of measured points into a point session (recording.mcap)."""
-    from pipeline.cli.output import warn
     from pipeline.importers import import_file
-
-    out = import_file(file, format, robot, new_session_folder(name), map, force)
     from pipeline.sweeps import CHECK_SWEEP, POSES_SWEEP
 
+    folder = new_session_folder(name)
+    out = import_file(file, format.value, robot, folder, map, force)
     n_check = int((out.rows.sweep == CHECK_SWEEP).sum())
     n_poses = int((out.rows.sweep == POSES_SWEEP).sum())
-    poses = f"{n_poses} poses, " if n_poses else ""
-    typer.echo(
-        f"wrote {out.recording}: {len(out.rows.where)} configurations "
-        f"({poses}{n_check} for validation), tool from {out.tool.note}"
-    )
+    if as_json:
+        print_json(
+            {
+                "session": str(folder),
+                "recording": str(out.recording),
+                "format": format.value,
+                "robot": out.robot.name,
+                "configurations": len(out.rows.where),
+                "poses": n_poses,
+                "check": n_check,
+                "targets": sorted(out.rows.targets),
+                "tool": {
+                    "note": out.tool.note,
+                    "rows": out.tool.rows.tolist(),
+                    "signature_q": out.tool.signature_q.tolist(),
+                    "warning": out.tool.warning,
+                },
+            }
+        )
+    else:
+        poses = f"{n_poses} poses, " if n_poses else ""
+        typer.echo(
+            f"wrote {out.recording}: {len(out.rows.where)} configurations "
+            f"({poses}{n_check} for validation), tool from {out.tool.note}"
+        )
     if out.tool.warning:
         warn(out.tool.warning)
 
@@ -251,13 +299,10 @@ def plan_(
     ] = None,
     candidates: Annotated[int, typer.Option(min=1, help="Random candidate poses.")] = 10_000,
     seed: Annotated[int, typer.Option(min=0, help="Seed of the candidates.")] = 0,
-    json_out: Annotated[
-        bool, typer.Option("--json", help="Print the plan's numbers as JSON.")
-    ] = False,
+    json_out: JsonOption = False,
     force: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
 ) -> None:
     """Plan a pose set: the poses that give the smallest predicted tool error (docs/plan.md)."""
-    from pipeline.cli.output import print_json
     from pipeline.planning import plan_from_session, plan_poses, write_plan
     from pipeline.robots import get_robot
 

@@ -8,7 +8,14 @@ from typing import Annotated, Any
 
 import typer
 
-from pipeline.cli.options import JsonOption, SessionArg, comma_list, stage_params
+from pipeline.cli.options import (
+    ImportFormat,
+    JsonOption,
+    SessionArg,
+    choice,
+    comma_list,
+    stage_params,
+)
 from pipeline.cli.output import print_json, warn
 from pipeline.errors import ArmsigError
 from pipeline.signature.verdict import verdict_failed
@@ -107,10 +114,13 @@ def status(session: SessionArg, as_json: JsonOption = False) -> None:
 def show(
     session: SessionArg,
     stage: Annotated[str, typer.Argument(help="Stage name, e.g. features.")],
-    rows: Annotated[int, typer.Option(help="Rows to print.")] = 20,
+    rows: Annotated[
+        int | None, typer.Option(min=0, help="Rows to print (default: 20; with --json, all).")
+    ] = None,
     columns: Annotated[
         str | None, typer.Option(help="Comma-separated columns to print (default: all).")
     ] = None,
+    as_json: JsonOption = False,
 ) -> None:
     """Print a stage table (polars) with its provenance."""
     import json
@@ -120,11 +130,36 @@ def show(
     from pipeline.stages.inspection import stage_table
 
     st = stage_table(session, stage, None if columns is None else comma_list(columns))
-    typer.echo(json.dumps(st.provenance, indent=1, sort_keys=True))
-    with pl.Config(tbl_rows=rows, tbl_cols=-1, tbl_width_chars=4000, fmt_str_lengths=60):
-        typer.echo(pl.DataFrame(st.table).head(rows))
-    if st.problem:  # shown as it is, but not as armsig's (issue 32)
+    if st.problem:  # shown as it is, but not as armsig's (issue 32); stderr in both modes
         warn(f"{st.path}: {st.problem}; try: `pipeline identify {session} --force` rewrites it")
+    if as_json:
+        shown = st.table if rows is None else st.table.slice(0, rows)
+        print_json(
+            {
+                "path": str(st.path),
+                "provenance": st.provenance,
+                "n_rows": st.table.num_rows,
+                "columns": [_column_dict(f) for f in st.table.schema],
+                "rows": shown.to_pylist(),
+            }
+        )
+        return
+    n = 20 if rows is None else rows
+    typer.echo(json.dumps(st.provenance, indent=1, sort_keys=True))
+    with pl.Config(tbl_rows=n, tbl_cols=-1, tbl_width_chars=4000, fmt_str_lengths=60):
+        typer.echo(pl.DataFrame(st.table).head(n))
+
+
+def _column_dict(field: Any) -> dict[str, Any]:
+    """A stage table's column for ``show --json``: name, Arrow type, unit and description
+    (the field's metadata; null when empty)."""
+    meta = {k.decode(): v.decode() for k, v in (field.metadata or {}).items()}
+    return {
+        "name": field.name,
+        "type": str(field.type),
+        "unit": meta.get("unit") or None,
+        "description": meta.get("description") or None,
+    }
 
 
 @commands.command()
@@ -154,7 +189,7 @@ def audit(
 def validate(
     session: SessionArg,
     against: Annotated[str, typer.Option(help="A second file of measured points.")],
-    format: Annotated[str, typer.Option(help="sscanss2 | table | rct (docs/import.md).")],
+    format: Annotated[ImportFormat, choice("sscanss2, table or rct (docs/import.md).")],
     map: Annotated[str | None, typer.Option(help="Map file (TOML) of the second file.")] = None,
     as_json: JsonOption = False,
 ) -> None:
@@ -166,7 +201,7 @@ def validate(
     """
     from pipeline.evaluate.validate import validate_against
 
-    r = validate_against(session, against, format, map)
+    r = validate_against(session, against, format.value, map)
     if as_json:
         print_json(r)
         return

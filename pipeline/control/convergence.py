@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -30,6 +31,13 @@ class ConvergenceTable:
     signature: str
     method: str
     rows: np.ndarray  # (k+1, 5)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The table for ``ik-convergence --json``: one dict per iteration, full precision."""
+        keys = ("x_cm", "y_cm", "z_cm", "radial_cm")
+        rows = [{"iteration": int(r[0]), **dict(zip(keys, map(float, r[1:]), strict=True))}
+                for r in self.rows]  # fmt: skip
+        return {"signature": self.signature, "method": self.method, "iterations": rows}
 
 
 def _perturbed(chain: SerialChain, scale: float, seed: int) -> SerialChain:

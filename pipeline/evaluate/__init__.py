@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from pipeline.contract.evaluation import read_evaluation
+from pipeline.progress import Progress
 from pipeline.report.evaluation_summary import summarize
 from pipeline.stages.lock import session_lock
 from pipeline.stages.runner import (
@@ -77,6 +78,28 @@ def _evaluate(sdir: Path, rig: Any | None, report: bool, progress: TextIO | None
     ident = identify(sdir, report=report, progress=progress)
     path = sdir / "evaluation.mcap"
     simulated = (sdir / "rig-truth.json").is_file()
+    # One bar over the evaluation's work (the identification drew its own): the rig's two
+    # recordings (a simulated session), the first two stages, the four stages again (the
+    # rig may have re-recorded their input), the report. Cold, the recordings and the
+    # first stages are nearly all of it (the solver's kernels compile).
+    steps = (2 if simulated else 0) + 2 + len(EVALUATE_STAGE_MODULES) + (1 if report else 0)
+    bar = Progress("evaluate", steps, progress, unit="steps")
+    try:
+        recorded, runs = _record_and_run(sdir, rig, simulated, path, bar)
+        summary = summarize(sdir)
+        rep = _report_if_stale(sdir) if report else None
+        if report:
+            bar.step()
+    finally:
+        bar.close()
+    return EvaluateResult(ident.runs, runs, recorded, rep, summary)
+
+
+def _record_and_run(
+    sdir: Path, rig: Any | None, simulated: bool, path: Path, bar: Progress
+) -> tuple[list[str], list[StageRun]]:
+    """Record the teaching and the programs on the simulated rig when needed, and run
+    the evaluation stages; what was recorded and the stages' runs (``bar`` stepped)."""
     recorded: list[str] = []
     if simulated:
         from pipeline.rig.evaluation import EvaluationRigOptions, record_evaluation
@@ -89,7 +112,9 @@ def _evaluate(sdir: Path, rig: Any | None, report: bool, progress: TextIO | None
             recorded.append("teach")
         else:
             opts = _recorded_options(read_evaluation(path).description)
-    first = {r.name: r for r in run(sdir, modules=EVALUATE_STAGE_MODULES[:2]) if r.action == "ran"}
+        bar.step()
+    first_runs = run(sdir, modules=EVALUATE_STAGE_MODULES[:2], progress=bar)
+    first = {r.name: r for r in first_runs if r.action == "ran"}
     if simulated:
         from pipeline.stages.evaluate_measurements import program_matches
 
@@ -99,12 +124,9 @@ def _evaluate(sdir: Path, rig: Any | None, report: bool, progress: TextIO | None
             units = rec.teach[0]["units"]
             record_evaluation(sdir, _program_payloads(program, units), opts)
             recorded.append("program")
-    runs = [
-        first.get(r.name, r) for r in run(sdir, modules=EVALUATE_STAGE_MODULES, progress=progress)
-    ]
-    summary = summarize(sdir)
-    rep = _report_if_stale(sdir) if report else None
-    return EvaluateResult(ident.runs, runs, recorded, rep, summary)
+        bar.step()
+    runs = [first.get(r.name, r) for r in run(sdir, modules=EVALUATE_STAGE_MODULES, progress=bar)]
+    return recorded, runs
 
 
 def _recorded_options(description: dict[str, Any]) -> Any:

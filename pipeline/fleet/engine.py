@@ -14,6 +14,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from pipeline.errors import ArmsigError
+from pipeline.quiet import debugging, quiet
 
 #: The environment variable Dask itself reads for its scheduler address.
 SCHEDULER_ENV = "DASK_SCHEDULER_ADDRESS"
@@ -21,6 +22,9 @@ SCHEDULER_ENV = "DASK_SCHEDULER_ADDRESS"
 LOCAL = "local"
 #: ``preload`` of a fleet's local workers: the modules a session's task imports.
 FLEET_PRELOAD = ("pipeline.fleet.preload",)
+#: ``preload`` of every local cluster of worker processes: no other package's warnings or
+#: log records from the workers (they share the command's stderr), unless ARMSIG_DEBUG=1.
+QUIET_PRELOAD = ("pipeline.fleet.quiet_worker",)
 #: Dask configuration of the local cluster's workers (docs/scale.md has the numbers):
 #: - ``pre-spawn-environ`` empty: the workers inherit this environment, as the process
 #:   pool's workers do, without Dask's one-thread caps of OpenBLAS / OpenMP / MKL (with
@@ -66,7 +70,23 @@ def dask_client(
     on a local cluster of ``workers`` (default: the machine's cores) started for the block,
     each worker importing the modules ``preload`` (e.g. :data:`FLEET_PRELOAD`) as it starts
     and, with ``share_cores``, its share of the cores for BLAS (:func:`shared_cores_environ`).
-    An existing cluster is used as it is configured."""
+    An existing cluster is used as it is configured. Inside the block, and in the local
+    workers, Dask logs nothing and other packages warn nothing (:mod:`pipeline.quiet`)."""
+    import distributed  # noqa: F401  (it sets its loggers' levels on import; quiet() after)
+
+    with quiet():  # Dask's log records and warnings (the workers': QUIET_PRELOAD)
+        with _client(scheduler, workers, processes, preload, share_cores) as client:
+            yield client
+
+
+@contextlib.contextmanager
+def _client(
+    scheduler: str | None,
+    workers: int | None,
+    processes: bool,
+    preload: tuple[str, ...],
+    share_cores: bool,
+) -> Iterator[Any]:
     import dask
     from distributed import Client, LocalCluster
 
@@ -104,7 +124,7 @@ def dask_client(
             processes=processes,
             host="127.0.0.1",
             dashboard_address=":0",  # a free port: no clash with another cluster
-            preload=list(preload),
+            preload=[*preload, *(QUIET_PRELOAD if processes and not debugging() else ())],
             **nanny,
         )
     with cluster, Client(cluster) as client:

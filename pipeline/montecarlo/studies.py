@@ -23,6 +23,7 @@ them last.
 from __future__ import annotations
 
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -153,6 +154,61 @@ def get_study(name: str) -> Study:
     return reg[name]
 
 
+@dataclass(frozen=True)
+class StudyRun:
+    """One study of a ``montecarlo`` run: where its tables went and, for a swept study,
+    its settings and the mean and std of every index over the robots (settings × indices)."""
+
+    name: str
+    folder: Path
+    wall_s: float
+    robots: int  # robots per setting; the features study: trials per configuration
+    result: Any  # StudyResult, or the features study's result
+
+    @property
+    def line(self) -> str:
+        if self.name == "features":
+            return f"features: 36 configurations, {self.wall_s:.1f} s"
+        settings = len(self.result.study.values)
+        return f"{self.name}: {self.robots} robots x {settings} settings, {self.wall_s:.1f} s"
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"study": self.name, "folder": str(self.folder),
+                               "wall_s": self.wall_s}  # fmt: skip
+        if self.name == "features":
+            r = self.result
+            return {**out, "trials": r.trials, "radius_cm": r.radius_cm,
+                    "fit_6_12": list(r.fit_612), "fit_6_13": list(r.fit_613)}  # fmt: skip
+        st, summary = self.result.study, self.result.summary
+        return {
+            **out,
+            "robots": self.robots,
+            "seed": self.result.seed,
+            "parameter": st.parameter,
+            "settings": list(st.values),
+            "indices": list(st.index_names),
+            "index_units": list(st.index_units),
+            "mean": summary.mean.tolist(),
+            "std": summary.std.tolist(),
+        }
+
+
+@dataclass(frozen=True)
+class MonteCarloRun:
+    """What ``pipeline montecarlo`` did: its studies in the order run, and the report."""
+
+    studies: list[StudyRun]
+    report: Path
+
+    @property
+    def lines(self) -> list[str]:
+        """One line per study with its wall time, then the report's path."""
+        return [*(s.line for s in self.studies), f"wrote {self.report}"]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"studies": [s.to_dict() for s in self.studies], "report": str(self.report)}
+
+
 def run_montecarlo(
     study: str,
     robots: int = 500,
@@ -161,12 +217,9 @@ def run_montecarlo(
     workers: int = 1,
     progress: TextIO | None = sys.stderr,
     client: Any = None,
-) -> list[str]:
+) -> MonteCarloRun:
     """Run ``study`` (or ``all``), write tables, figures and ``montecarlo.md`` under ``out``
-    (``client``: a Dask client to run the batches on instead of ``workers`` processes).
-
-    Returns the lines to print: one per study with its wall time.
-    """
+    (``client``: a Dask client to run the batches on instead of ``workers`` processes)."""
     from pipeline.montecarlo import features_study, output, report
 
     if study not in STUDY_NAMES:
@@ -175,17 +228,13 @@ def run_montecarlo(
         raise ArmsigError("too few robots", expected="--robots >= 2", got=str(robots))
     names = [*SWEPT, "features", *LATER] if study == "all" else [study]
     out_dir = check_writable(out, "--out", folder=True)  # before hours of computing
-    lines = []
+    done = []
     for name in names:
         if name == "features":
             feat = features_study.run_features(seed=seed, progress=progress)
-            output.write_features(out_dir, feat)
-            lines.append(f"features: 36 configurations, {feat.wall_s:.1f} s")
+            folder = output.write_features(out_dir, feat)
+            done.append(StudyRun(name, folder, feat.wall_s, feat.trials, feat))
             continue
         res = run_study(get_study(name), robots, seed, workers, progress, client=client)
-        output.write_study(out_dir, res)
-        lines.append(
-            f"{name}: {robots} robots x {len(res.study.values)} settings, {res.wall_s:.1f} s"
-        )
-    lines.append(f"wrote {report.write_report(out_dir)}")
-    return lines
+        done.append(StudyRun(name, output.write_study(out_dir, res), res.wall_s, robots, res))
+    return MonteCarloRun(done, report.write_report(out_dir))

@@ -392,7 +392,7 @@ def run(
     only: str | None = None,
     overrides: Mapping[str, Mapping[str, Any]] | None = None,
     modules: tuple[str, ...] | None = None,
-    progress: TextIO | None = None,
+    progress: TextIO | Progress | None = None,
 ) -> list[StageRun]:
     """Bring every stage of a session up to date, then (identification) its signature.
 
@@ -404,7 +404,9 @@ def run(
     from_stage : rerun this stage and every later one.
     only : rerun just this stage (its inputs must exist and pass their checks).
     overrides : ``{stage: {param: value}}``.
-    progress : where the progress line goes (:class:`pipeline.progress.Progress`; None: silent).
+    progress : where the progress line goes (:class:`pipeline.progress.Progress`; None:
+        silent), or a bar of the caller's that each stage steps (``evaluate``'s, which
+        also counts the rig's recordings and the report).
 
     Returns
     -------
@@ -430,7 +432,12 @@ def run(
         for folder in (sdir, sdir / "stages", sdir / "report"):
             remove_debris(folder)  # temp files of killed atomic writes
         label = "identify" if _is_identification(set(names)) else "evaluate"
-        bar = Progress(label, len(all_stages), progress, unit="stages")
+        own = not isinstance(progress, Progress)  # else the caller's bar, closed by it
+        bar = (
+            progress
+            if isinstance(progress, Progress)
+            else Progress(label, len(all_stages), progress, unit="stages")
+        )
         try:
             try:
                 _run_all(
@@ -448,7 +455,8 @@ def run(
             hashes.pending.clear()
             shutil.rmtree(failed_dir(sdir), ignore_errors=True)
         finally:
-            bar.close()
+            if own:
+                bar.close()
             shutil.rmtree(pending, ignore_errors=True)
         if _is_identification(set(names)):
             runs.append(_write_product(sdir, all_stages, overrides, hashes, force))
