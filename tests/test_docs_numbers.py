@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from doc_quotes import assert_quoted
 
 from pipeline.evaluate import evaluate
 from pipeline.export import export
@@ -86,13 +87,10 @@ def test_readme_evaluation_line_is_the_codes(summaries: dict[int, dict[str, Any]
     assert m[3] == f"{radial:.4f}"
 
 
-def _doc(name: str) -> str:
-    return (ROOT / name).read_text()
-
-
 def test_verdict_example_is_the_codes(robot3: tuple[Path, IdentifyResult]) -> None:
     verdict = robot3[1].verdict
-    line = next(x for x in _doc("docs/verdict.md").splitlines() if x.startswith("robot3: "))
+    lines = (ROOT / "docs" / "verdict.md").read_text().splitlines()
+    line = next(x for x in lines if x.startswith("robot3: "))
     assert line == verdict, f"docs/verdict.md's example line is now:\n{verdict}"
 
 
@@ -103,11 +101,10 @@ def _cm(value: float, sign: bool = False) -> str:
 
 def test_pseudo_dh_of_robot3_is_the_codes(robot3: tuple[Path, IdentifyResult]) -> None:
     d = read_table(robot3[0] / "stages" / "dh.arrow").to_pydict()["d_cm"]
-    doc = _doc("docs/export.md")
-    quoted = f"robot3 has `d2 = {_cm(d[1])} cm` and `d3 = {_cm(d[2], True)} cm`"
-    assert quoted in " ".join(doc.split()), f"docs/export.md should say: {quoted}"
-    largest = f"(the pseudo D-H: {_cm(max(map(abs, d)))} cm)"
-    assert largest in doc, f"docs/export.md should say: {largest}"
+    assert_quoted(
+        "docs/export.md", f"robot3 has `d2 = {_cm(d[1])} cm` and `d3 = {_cm(d[2], True)} cm`"
+    )
+    assert_quoted("docs/export.md", f"(the pseudo D-H: {_cm(max(map(abs, d)))} cm)")
 
 
 def test_exported_dh_of_robot3_is_the_codes(
@@ -116,7 +113,7 @@ def test_exported_dh_of_robot3_is_the_codes(
     r = export(robot3[0], "dh", out=tmp_path / "r.dh.json")
     rows = json.loads(Path(r.path).read_text())["rows"]
     largest = f"{max(abs(row['d_cm']) for row in rows):.1f}"
-    assert f"Robot3: largest `|d|` is {largest} cm" in _doc("docs/export.md"), largest
-    assert f"largest \\|d\\| {largest} cm" in _doc("README.md"), largest
+    assert_quoted("docs/export.md", f"Robot3: largest `|d|` is {largest} cm")
+    assert_quoted("README.md", f"robot3 D-H with Hayati's β, largest \\|d\\| {largest} cm")
     # docs/export.md: "the table reproduces the signature to within 1e-14 m"
     assert r.max_position_error_m < 1e-14, r.max_position_error_m
