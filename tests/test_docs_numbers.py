@@ -5,10 +5,12 @@ them must come with the documents refreshed (each failure shows what the code gi
   what `pipeline evaluate` prints for the committed sessions robot1-7;
 - docs/verdict.md's example line: `identify` of the committed robot3 recording;
 - docs/export.md's (and the README's) D-H numbers of robot3: its pseudo D-H (stage `dh`)
-  and the exported D-H table (`pipeline export --format dh`).
+  and the exported D-H table (`pipeline export --format dh`);
+- docs/refine.md's rows robot1-7 (what `python -m bench.accuracy` prints for them) and
+  docs/compensate.md's audited robot3 RMS.
 
 The committed sessions are copied (recording, evaluation, rig truth) and identified once
-per module; robot3's copy serves every check.
+per module; robot3's copy serves every robot3 check.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from doc_quotes import assert_quoted
 from pipeline.evaluate import evaluate
 from pipeline.export import export
 from pipeline.identify import IdentifyResult, identify
+from pipeline.montecarlo.refine_study import session_accuracy
 from pipeline.stages.tables import read_table
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -49,15 +52,24 @@ def robot3(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, IdentifyResu
 
 
 @pytest.fixture(scope="module")
-def summaries(
+def committed(
     tmp_path_factory: pytest.TempPathFactory, robot3: tuple[Path, IdentifyResult]
-) -> dict[int, dict[str, Any]]:
-    """`evaluate` of each committed session (a copy of what git holds), by robot number."""
+) -> dict[int, Path]:
+    """Every committed session, copied and identified (no report), by robot number."""
     out = {}
     for k in range(1, 8):
-        d = robot3[0] if k == 3 else _committed(k, tmp_path_factory.mktemp("docs"))
-        out[k] = evaluate(d, report=False).summary
+        if k == 3:
+            out[k] = robot3[0]
+            continue
+        out[k] = _committed(k, tmp_path_factory.mktemp("docs"))
+        identify(out[k], report=False)
     return out
+
+
+@pytest.fixture(scope="module")
+def summaries(committed: dict[int, Path]) -> dict[int, dict[str, Any]]:
+    """`evaluate` of each committed session, by robot number."""
+    return {k: evaluate(d, report=False).summary for k, d in committed.items()}
 
 
 def _row(summary: dict[str, Any], k: int) -> str:
@@ -117,3 +129,16 @@ def test_exported_dh_of_robot3_is_the_codes(
     assert_quoted("README.md", f"robot3 D-H with Hayati's β, largest \\|d\\| {largest} cm")
     # docs/export.md: "the table reproduces the signature to within 1e-14 m"
     assert r.max_position_error_m < 1e-14, r.max_position_error_m
+
+
+def test_refine_table_rows_are_the_codes(committed: dict[int, Path]) -> None:
+    """docs/refine.md's "Numbers" table, robot1-7: the row `bench.accuracy` prints (the
+    audit of the thesis S-Model and of the refined chain, 1,000 configurations)."""
+    for k, d in committed.items():
+        a = session_accuracy(d)
+        thesis, refined = a.smodel.rms_position_cm, a.refined.rms_position_cm
+        cells = (f"{thesis:.5f}", f"{refined:.5f}", f"{thesis / refined:.2f}")
+        cells += (f"{a.predicted_rms_cm:.5f}", f"{a.crb_cm:.5f}", f"{a.chi2_per_dof:.2f}")
+        assert_quoted("docs/refine.md", f"| robot{k} | " + " | ".join(cells) + f" | {a.verdict} |")
+        if k == 3:  # the same audit, docs/compensate.md's last paragraph
+            assert_quoted("docs/compensate.md", f"(robot3 RMS {refined:.4f} cm,")
