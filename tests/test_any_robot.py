@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from doc_quotes import assert_quoted
 from typer.testing import CliRunner
 
 from pipeline.cli import app
@@ -32,6 +33,7 @@ from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_table
 from pipeline.units import joints_to_internal
 
+ROOT = Path(__file__).resolve().parent.parent
 ROBOTS = builtin_names()
 NOISELESS = {"noiseless": True, "points": 12, "repeats": 1}
 
@@ -75,6 +77,7 @@ def test_default_noise_signature_beats_design(sessions, robot: str) -> None:
     r = _audit(sessions[robot, False])
     # Issue acceptance: signature RMS position error at least 5x below the design's.
     assert r.improvement >= 5.0, (r.signature, r.design)
+    assert_quoted("README.md", f"{r.improvement:.0f}x ({robot})")  # "... is 43x (puma560), ..."
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
@@ -255,7 +258,7 @@ def test_planner_error_names_robot_joint_and_fix() -> None:
 
 # ---------------------------------------------------------------- user description file
 
-EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "my_scara.toml"
+EXAMPLE = ROOT / "examples" / "my_scara.toml"
 
 
 def test_user_description_file_end_to_end_on_the_command_line(tmp_path: Path) -> None:

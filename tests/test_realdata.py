@@ -2,7 +2,8 @@
 
 Skipped, with the reason, when the folder is absent. The files are read from there and
 never copied into the repository; derived files (a subset) are written to tmp_path.
-Every number is explained in docs/import.md.
+Every number is explained in docs/import.md; the ones docs/import.md's "Real data" tables
+and examples/README.md quote are compared with the text (issue 30, item 8).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from doc_quotes import assert_quoted
 from import_data import TWO_LINK, sscanss2_text
 
 from pipeline.evaluate.validate import validate_against
@@ -63,6 +65,12 @@ def _errors(d: Path, role: str, sweeps_only: bool = False) -> np.ndarray:
     )
 
 
+def _e(x: float, digits: int = 2) -> str:
+    """A small number as the documents write it: 7.50e-8."""
+    mantissa, exponent = f"{x:.{digits}e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
 def test_two_link_model_error(tmp_path: Path) -> None:
     d = _session(tmp_path, "two_link", REALDATA / "sscanss2" / "two_link.csv", "sscanss2",
                  EXAMPLES / "sscanss2" / "two_link.toml")  # fmt: skip
@@ -70,6 +78,12 @@ def test_two_link_model_error(tmp_path: Path) -> None:
     # The file prints mm to 6 decimals: its points sit up to 5.4e-8 cm from the exact
     # geometry (docs/import.md), so no model can do better than that on it.
     assert e.max() <= 1e-7, e.max()
+    rms = np.sqrt(np.mean(e**2))
+    row = (
+        f"| armsig model error on the file | 24 (22 rows + 2 home rows as tool) | {_e(e.max())} cm"
+    )
+    assert_quoted("docs/import.md", f"{row} | {_e(rms)} cm |")
+    assert_quoted("examples/README.md", f"it is {_e(e.max(), 1)} cm, the file's own rounding")
     # The same geometry written without rounding: the identification is exact.
     values = {1: [], 2: []}  # type: dict[int, list[float]]
     for line in (REALDATA / "sscanss2" / "two_link.csv").read_text().split():
@@ -106,37 +120,89 @@ def test_table_subset_model_error(table_subset: Path) -> None:
     e = _errors(table_subset, "fit", sweeps_only=True)
     assert len(e) == 24
     assert e.max() <= 0.0184, e.max()  # SScanSS-2: 0.018427 cm on the same 24 points
+    quoted = (
+        f"**{10 * e.max():.4f} mm** (RMS {10 * np.sqrt(np.mean(e**2)):.4f} mm, 24 sweep points)"
+    )
+    assert_quoted("docs/import.md", quoted)
 
 
 def test_table_all_44_points(table_subset: Path, tmp_path: Path) -> None:
     r = validate_against(table_subset, REALDATA / "sscanss2" / "table.txt", "sscanss2")
     assert r["n"] == 44
-    assert r["max_cm"] <= 0.025 and r["rms_cm"] <= 0.012, r  # measured: docs/import.md
+    assert r["max_cm"] <= 0.025 and r["rms_cm"] <= 0.012, r
+    assert_quoted(
+        "docs/import.md",
+        f"the signature of the 24-point subset predicts them with a largest error of "
+        f"{10 * r['max_cm']:.4f} mm and an RMS of {10 * r['rms_cm']:.4f} mm",
+    )
     d = _session(tmp_path, "table", REALDATA / "sscanss2" / "table.txt", "sscanss2",
                  EXAMPLES / "sscanss2" / "table.toml")  # fmt: skip
     e = _errors(d, "fit", sweeps_only=True)
-    assert len(e) == 44 and e.max() <= 0.02 and np.sqrt(np.mean(e**2)) <= 0.01
-
-
-def test_rct_positioner_validated_on_all_poses(tmp_path: Path) -> None:
-    d = _session(tmp_path, "rct",
-                 REALDATA / "rct_positioner" / "positioner_kinematic_measurements.yaml", "rct",
-                 EXAMPLES / "rct_positioner" / "positioner.toml",
-                 EXAMPLES / "rct_positioner" / "map.toml")  # fmt: skip
-    check = _errors(d, "check")
-    assert len(check) == 205 - 16 - 13 + 1  # the home pose is in both sweeps
-    assert check.mean() < 0.174, check.mean()  # robot_cal_tools' calibration: 1.74 mm
-    every = validate_against(
-        d, REALDATA / "rct_positioner" / "positioner_kinematic_measurements.yaml", "rct"
+    largest, rms = 10 * e.max(), 10 * np.sqrt(np.mean(e**2))
+    assert len(e) == 44 and largest <= 0.2 and rms <= 0.1
+    assert_quoted(
+        "docs/import.md", f"the largest model error is {largest:.4f} mm, RMS {rms:.4f} mm"
     )
-    assert every["n"] == 205 and every["mean_cm"] < 0.174, every
+    assert_quoted("examples/README.md", f"largest {largest:.4f} mm, RMS {rms:.4f} mm")
+
+
+RCT = REALDATA / "rct_positioner" / "positioner_kinematic_measurements.yaml"
+
+
+@pytest.fixture(scope="module")
+def rct(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The RCT positioner imported with examples/rct_positioner's map (stated σ) and identified."""
+    return _session(tmp_path_factory.mktemp("rct"), "rct", RCT, "rct",
+                    EXAMPLES / "rct_positioner" / "positioner.toml",
+                    EXAMPLES / "rct_positioner" / "map.toml")  # fmt: skip
+
+
+def _table_row(label: str, n: int, mean: float, rms: float, largest: float, reg: float) -> str:
+    """A row of docs/import.md's RCT table (errors in cm, written in mm)."""
+    return (
+        f"| {label} | {n} | "
+        + " | ".join(f"{10 * v:.3f} mm" for v in (mean, rms, largest, reg))
+        + " |"
+    )
+
+
+def _stats(rows: list[dict]) -> tuple[float, float, float, float]:
+    """Mean, RMS and largest error (cm) of validation rows, and their registered mean."""
+    e = np.array([r["error_cm"] for r in rows])
+    reg = float(np.mean([r["registered_error_cm"] for r in rows]))
+    return float(e.mean()), float(np.sqrt(np.mean(e**2))), float(e.max()), reg
+
+
+def test_rct_positioner_validated_on_all_poses(rct: Path) -> None:
+    rows = read_table(rct / "stages" / "validation.arrow").to_pylist()
+    check = [r for r in rows if r["role"] == "check"]
+    fit = [r for r in rows if r["role"] == "fit"]
+    assert len(check) == 205 - 16 - 13 + 1  # the home pose is in both sweeps
+    every = validate_against(rct, RCT, "rct")
+    assert every["n"] == 205
+    check_mean = _stats(check)[0]
+    assert max(check_mean, every["mean_cm"]) < 0.174  # robot_cal_tools' calibration: 1.74 mm
+    # What docs/import.md's table and examples/README.md quote.
+    label = "validation configurations (never used by the fit)"
+    assert_quoted("docs/import.md", _table_row(label, len(check), *_stats(check)))
+    assert_quoted(
+        "docs/import.md", _table_row("fit data (sweeps and tool)", len(fit), *_stats(fit))
+    )
+    every_stats = (every[k] for k in ("mean_cm", "rms_cm", "max_cm", "registered_mean_cm"))
+    label = "all 205 poses (`pipeline validate --against`)"
+    assert_quoted("docs/import.md", _table_row(label, 205, *every_stats))
+    assert_quoted(
+        "examples/README.md",
+        f"The 177 validation poses are predicted with a mean error of {10 * check_mean:.3f} mm, "
+        f"all 205 with {10 * every['mean_cm']:.3f} mm",
+    )
 
 
 def _verdict(d: Path) -> dict:
     return read_table(d / "stages" / "verdict.arrow").to_pylist()[0]
 
 
-def test_stated_sigma_on_sscanss2_and_rct(tmp_path: Path) -> None:
+def test_stated_sigma_on_sscanss2_and_rct(tmp_path: Path, rct: Path) -> None:
     """Issue 29: with the examples' stated σ the verdict judges χ² (0.00 before, no σ).
     SScanSS-2's table at its measured 0.006 mm: χ²/dof 33.9, the rigid chain leaves
     0.069 mm; the RCT positioner at its radial 0.2 mm: 0.77 (docs/import.md)."""
@@ -145,15 +211,17 @@ def test_stated_sigma_on_sscanss2_and_rct(tmp_path: Path) -> None:
                      EXAMPLES / "sscanss2" / "table_sigma.toml")  # fmt: skip
     v = _verdict(table)
     assert v["stated_sigma_cm"] == pytest.approx(0.0006) and 25 < v["chi2_per_dof"] < 45, v
+    assert_quoted("docs/import.md", f"**χ²/dof {v['chi2_per_dof']:.1f}, {v['verdict']}**")
     assert v["verdict"] == "FAIL" and v["reason_rules"] == ["chi2_fail"], v["reasons"]
     assert "(stated σ 0.0006 cm)" in v["line"]
-    rct = _session(tmp_path, "rct",
-                   REALDATA / "rct_positioner" / "positioner_kinematic_measurements.yaml", "rct",
-                   EXAMPLES / "rct_positioner" / "positioner.toml",
-                   EXAMPLES / "rct_positioner" / "map.toml")  # fmt: skip
     v = _verdict(rct)
     assert v["stated_sigma_cm"] == pytest.approx(0.02) and 0.5 < v["chi2_per_dof"] < 1.2, v
     assert "χ²/dof 0.77 (stated σ 0.02 cm)" in v["line"], v["line"]
+    assert_quoted(
+        "docs/import.md",
+        f"χ²/dof {v['chi2_per_dof']:.2f} (0.00 before, no σ), verdict {v['verdict']} (the "
+        f"improvement over the design model, {v['improvement']:.2f}×, as before)",
+    )
 
 
 UR10_DATA = REALDATA / "ur10_ipa"
@@ -179,7 +247,11 @@ def test_ur10_series_c_held_out(ur10_c70: Path) -> None:
     held = read_table(ur10_c70 / "stages" / "holdout.arrow").to_pylist()
     assert len(held) == 832 and {r["sweep"] for r in held} == {-1}  # the 30 %: sweep check
     rms = np.sqrt(np.mean(np.square([r["error_cm"] for r in held])))
-    assert rms <= 0.050, rms  # issues 26, 27: ≤ 0.50 mm; measured 0.4827 mm (README)
+    assert rms <= 0.050, rms  # issues 26, 27: ≤ 0.50 mm
+    mm = f"{10 * rms:.3f}"
+    assert_quoted("README.md", f"| Series C, 832 held-out poses | {mm} mm RMS |")
+    assert_quoted("README.md", f"the UR10 trained on 70 % of Series C: C {mm}, A")
+    assert_quoted("docs/import.md", f"| C held out (`holdout` stage) | 832 | **{mm} mm** |")
     check = _errors(ur10_c70, "check")
     assert len(check) == 832 and np.sqrt(np.mean(check**2)) <= 0.051
     summary = refine_summary(read_table(ur10_c70 / "stages" / "refine.arrow"))
@@ -197,17 +269,42 @@ def test_ur10_series_c_held_out(ur10_c70: Path) -> None:
     assert per_joint == {1: 0, 2: 4, 3: 3, 4: 2, 5: 1, 6: 0}, terms
 
 
+#: Where the README and docs/import.md quote each number ({v}: in mm, 3 decimals).
+B_MEASURED = (
+    ("README.md", "C's tracker placement), as measured / registered | {v} /"),
+    ("README.md", "B {v}, D"),
+    ("docs/import.md", "| B as measured | 1,495 | **{v} mm** |"),
+)
+B_REGISTERED = (
+    ("README.md", " / {v} mm | 1."),
+    ("docs/import.md", "| B registered | 1,495 | {v} mm |"),
+)
+A_REGISTERED = (
+    ("README.md", "(11,911 poses, tracker moved), registered | {v} mm |"),
+    ("README.md", "A {v}, B"),
+    ("docs/import.md", "| A registered | 11,911 | {v} mm |"),
+)
+D_REGISTERED = (
+    ("README.md", "(632 poses, tracker moved), registered | {v} mm |"),
+    ("README.md", "D {v} mm;"),
+    ("docs/import.md", "| D registered | 632 | {v} mm |"),
+)
+
+
 @needs_ur10
 @pytest.mark.parametrize(
-    ("series", "file", "key", "bound_cm"),
+    ("series", "file", "key", "bound_cm", "quotes"),
     [
-        ("b", "Series_B/measurements_joint_configurations.csv", "rms_cm", 0.085),
-        ("b", "Series_B/measurements_joint_configurations.csv", "registered_rms_cm", 0.06),
-        ("a", "Series_A/measurements_grid.csv", "registered_rms_cm", 0.075),
-        ("d", "Series_D/measurements_iso_cubes.csv", "registered_rms_cm", 0.065),
+        ("b", "Series_B/measurements_joint_configurations.csv", "rms_cm", 0.085, B_MEASURED),
+        ("b", "Series_B/measurements_joint_configurations.csv", "registered_rms_cm", 0.06,
+         B_REGISTERED),
+        ("a", "Series_A/measurements_grid.csv", "registered_rms_cm", 0.075, A_REGISTERED),
+        ("d", "Series_D/measurements_iso_cubes.csv", "registered_rms_cm", 0.065, D_REGISTERED),
     ],
-)
-def test_ur10_other_series(ur10_c70: Path, series: str, file: str, key: str, bound_cm: float):
+)  # fmt: skip
+def test_ur10_other_series(
+    ur10_c70: Path, series: str, file: str, key: str, bound_cm: float, quotes: tuple
+) -> None:
     """B shares C's tracker placement (as measured); A and D were measured from elsewhere
     (base registered). Issue 27's goals (B ≤ 0.85 mm as measured, A ≤ 0.75, D ≤ 0.65);
     measured with joint compliance (README): B 0.820 mm, registered 0.588 mm; A 0.636 mm;
@@ -217,6 +314,11 @@ def test_ur10_other_series(ur10_c70: Path, series: str, file: str, key: str, bou
     )
     assert r["target"] == "tmac" and r["rows_skipped"] == 0
     assert r[key] <= bound_cm, r
+    for doc, quote in quotes:
+        assert_quoted(doc, quote.format(v=f"{10 * r[key]:.3f}"))
+    # validate's own baseline beside the signature: the design, base and tool registered
+    design = f"{10 * r['design_registered_rms_cm']:.3f} mm"
+    assert_quoted("README.md", f"{series.upper()} {design}")  # "... points: B 1.085 mm, A ..."
 
 
 @needs_ur10

@@ -19,10 +19,10 @@ def montecarlo(
         Study,
         choice(
             "encoder, machining, noise, points, radius, misalignment, features, refine "
-            "(S-Model against refined signature; whole simulate + identify sessions, ~1.8 s of "
-            "CPU per robot and setting), compliance (rigid fit against a fit with joint "
-            "compliance on compliant robots; ~5.6 s of CPU per robot) or all (refine, "
-            "compliance last)."
+            "(S-Model against refined signature; whole simulate + identify sessions, seconds of "
+            "CPU per robot and setting: docs/montecarlo.md), compliance (rigid fit against a "
+            "fit with joint compliance on compliant robots; seconds of CPU per robot) or all "
+            "(refine, compliance last)."
         ),
     ],
     robots: Annotated[

@@ -30,9 +30,8 @@ compliance draws from its own stream of the simulate seed), so the sessions of a
 differ by the deflections alone.
 
 Cost: two sessions per robot, each simulated once and identified twice (the second fit
-reruns ``refine`` and the stages after it, ~1.2 s of CPU): 10 robots on 2 workers
-took 56 s of CPU, planning and imports included, ~5.6 s per robot; the refine study's
-three sessions take ~5.4 s.
+reruns ``refine`` and the stages after it, ~1.2 s of CPU): ~6 s of CPU per robot,
+measured 2026-11-27 (docs/montecarlo.md, "Cost").
 """
 
 from __future__ import annotations

@@ -8,8 +8,8 @@ the simulate seed of robot r is drawn from its seed sequence and recorded as the
 The pipeline never reads the truth; only the audit (:func:`pipeline.rig.audit.table_errors`,
 1,000 configurations) does. The session folder is temporary.
 
-Cost: ~1.8 s of CPU per robot and setting on a quiet machine (planning the session, ~2.3 s,
-is cached per process by ``pipeline simulate``); docs/montecarlo.md.
+Cost: ~1.6 s of CPU per robot and setting, measured 2026-11-27 (planning the session, ~2.3 s,
+is cached per process by ``pipeline simulate``); docs/montecarlo.md, "Cost".
 
 BLAS: OpenBLAS's sums depend on its thread count, so each robot, its simulation included,
 runs with one BLAS thread (:func:`pipeline.stages.runner.one_blas_thread`, as every stage

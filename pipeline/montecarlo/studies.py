@@ -14,10 +14,10 @@ refine         k = 1, 4.6, 10 times (7.9)                   audit: S-Model, refi
 compliance     true compliance 0, 0.3 mm                    audit: rigid, with terms
 =============  ==========================================  ======================
 
-``refine`` (issue 15) runs whole ``pipeline simulate`` + ``identify`` sessions, ~1.8 s of
-CPU per robot and setting (the thesis studies: ~0.02 s); ``compliance`` (issue 27) two
-such sessions per robot, each identified twice (~5.6 s per robot); ``--study all`` runs
-them last.
+``refine`` (issue 15) runs whole ``pipeline simulate`` + ``identify`` sessions, seconds of
+CPU per robot and setting (the thesis studies: ~0.02 s; measured in docs/montecarlo.md);
+``compliance`` (issue 27) two such sessions per robot, each identified twice; ``--study
+all`` runs them last.
 """
 
 from __future__ import annotations
