@@ -243,7 +243,10 @@ def plan_(
     poses: Annotated[int, typer.Option(min=1, help="Poses to plan (at most).")] = 50,
     target_rms_mm: Annotated[
         float | None,
-        typer.Option(help="Stop at the first plan whose predicted RMS tool error meets this."),
+        typer.Option(
+            help="Stop at the first plan whose audited RMS tool error stays under this with "
+            "95 % probability."
+        ),
     ] = None,
     sigma_mm: Annotated[
         float | None,
@@ -284,13 +287,14 @@ def plan_(
         return
     typer.echo(
         f"wrote {path}: {len(result.q)} poses, predicted RMS tool error "
-        f"{result.rms_cm * 10:.3g} mm (95 % {result.p95_cm * 10:.3g} mm) over the workspace; "
+        f"{result.rms_cm * 10:.3g} mm (under {result.rms_q95_cm * 10:.3g} mm with 95 % "
+        f"probability; 95 % of the workspace under {result.p95_cm * 10:.3g} mm); "
         f"as many random poses: {result.random_rms_cm * 10:.3g} mm"
     )
-    if target is not None and result.rms_cm > target:
+    if target is not None and result.rms_q95_cm > target:
         typer.echo(
-            f"warning: {poses} poses predict {result.rms_cm * 10:.3g} mm, above the target "
-            f"{target_rms_mm:g} mm; plan more poses (--poses)",
+            f"warning: {len(result.q)} poses stay under {result.rms_q95_cm * 10:.3g} mm with 95 % "
+            f"probability, above the target {target_rms_mm:g} mm; plan more poses (--poses)",
             err=True,
         )
     if result.unidentified:
