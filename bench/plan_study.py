@@ -14,6 +14,10 @@ Per robot (Puma 560, UR10), tracker noise, pose sets only (``--no-sweeps``):
   number below the 30-pose plan's prediction), recorded and audited on every seed; printed:
   the share of seeds whose audited RMS meets ``T`` (asks >= 90 %).
 
+* **sweeps** (``--sweeps``): the sweep plan's predicted RMS (``plan_sweeps`` with
+  ``SWEEP_POINTS`` points per sweep) against the median audited RMS of sessions recorded
+  with as many points (``simulate --points``), Puma, sonic and tracker.
+
 Every seed is a new true robot (manufacturing errors) and new noise; the plans are fixed
 before any seed is drawn (a plan is designed before the robot is measured).
 """
@@ -36,16 +40,41 @@ POSES = 30
 TARGETS_CM = {"puma560": 0.0010, UR10: 0.0007}
 
 
+SWEEP_POINTS = 20
+
+
 def audited_rms_cm(d: Path, **options: object) -> float:
-    """Simulate (tracker, pose set only) into ``d``, identify, audit: aligned RMS (cm)."""
+    """Simulate into ``d`` (tracker, pose set only, unless ``options`` say otherwise),
+    identify, audit: aligned RMS (cm)."""
     from pipeline.identify import identify
     from pipeline.rig.audit import audit
     from pipeline.rig.simulate import SimulationOptions, simulate_session
 
     shutil.rmtree(d, ignore_errors=True)
-    simulate_session(d, SimulationOptions(sensor="tracker", sweeps=False, **options))  # type: ignore[arg-type]
+    opts = {"sensor": "tracker", "sweeps": False, **options}
+    simulate_session(d, SimulationOptions(**opts))  # type: ignore[arg-type]
     identify(d, report=False)
     return float(audit(d, configurations=1000).signature.rms_position_cm)
+
+
+def sweep_study(sensor: str, seeds: range, tmp: Path) -> None:
+    """The sweep plan's prediction against audited sessions of as many points."""
+    from pipeline.planning.sweeps import plan_sweeps
+    from pipeline.robots import get_robot
+
+    plan = plan_sweeps(get_robot("puma560"), sensor, points=SWEEP_POINTS)
+    audited = [
+        audited_rms_cm(tmp / "s", sensor=sensor, sweeps=True, points=SWEEP_POINTS, seed=s)
+        for s in seeds
+    ]
+    med = float(np.median(audited))
+    print(
+        f"plan study sweeps puma560 {sensor}, {SWEEP_POINTS} points per sweep, {len(seeds)} "
+        f"seeds: predicted {plan.rms_cm * 1e4:.2f} um (q95 {plan.rms_q95_cm * 1e4:.2f} um), "
+        f"audited median {med * 1e4:.2f} um ({plan.rms_cm / med - 1:+.0%}), under the q95 on "
+        f"{np.mean(np.array(audited) <= plan.rms_q95_cm):.0%} of seeds",
+        flush=True,
+    )
 
 
 def study(robot_name: str, seeds: range, tmp: Path) -> dict[str, object]:
@@ -94,9 +123,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--robots", default="puma560,ur10")
+    ap.add_argument("--sweeps", action="store_true", help="the sweep plans' study instead")
     args = ap.parse_args()
     names = [UR10 if n == "ur10" else n for n in args.robots.split(",")]
     with tempfile.TemporaryDirectory() as t:
+        if args.sweeps:
+            for sensor in ("tracker", "sonic"):
+                sweep_study(sensor, range(1, args.seeds + 1), Path(t))
+            return
         for name in names:
             res = study(name, range(1, args.seeds + 1), Path(t))
             print(
@@ -109,7 +143,8 @@ def main() -> None:
             )
             print(
                 f"plan study {res['robot']} --target-rms-mm {res['target_cm'] * 10:g}: "
-                f"{res['target_poses']} poses, predicted {res['target_predicted_cm'] * 1e4:.2f} um, "
+                f"{res['target_poses']} poses, predicted "
+                f"{res['target_predicted_cm'] * 1e4:.2f} um, "
                 f"audited median {res['target_median_cm'] * 1e4:.2f} um, met on "
                 f"{res['target_met']:.0%} of seeds (goal >= 90 %)",
                 flush=True,

@@ -41,7 +41,9 @@ def test_a_target_stops_the_plan_at_the_first_size_that_meets_it_with_95_percent
     target = float(full.rms_by_size_cm[29])
     short = plan_poses(robot, 80, target_rms_cm=target, candidates=1000)
     n = len(short.q)
-    assert n > 30 and short.rms_q95_cm <= target < plan_poses(robot, n - 1, candidates=1000).rms_q95_cm
+    assert (
+        n > 30 and short.rms_q95_cm <= target < plan_poses(robot, n - 1, candidates=1000).rms_q95_cm
+    )
     np.testing.assert_allclose(short.q[:30], full.q[:30])  # the same greedy, stopped later
 
 

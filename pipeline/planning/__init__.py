@@ -165,13 +165,14 @@ def _choose(
     units = model.param_units
     plan = greedy_plan(J, M, WORKSPACE, units, n_poses, target_rms_cm)
     chosen = plan.chosen
-    return chosen, {
+    fields = {
         **prediction(J[chosen], model, A, B, M, plan.covariance),
-        "rms_cm": float(plan.rms_cm[-1]),  # the greedy's own numbers (the same, to rounding)
+        "rms_cm": float(plan.rms_cm[-1]),  # the greedy's own (the same, to rounding)
         "rms_q95_cm": plan.rms_quantile_cm,
         "rms_by_size_cm": plan.rms_cm,
         "random_rms_cm": predicted_rms_cm(J[: len(chosen)], M, WORKSPACE, units),
     }
+    return chosen, fields
 
 
 def prediction(
