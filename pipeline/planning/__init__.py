@@ -101,16 +101,35 @@ def design_model(
     return model, x
 
 
+def reading_noise(
+    model: ChainModel, x: np.ndarray, robot: RobotDescription
+) -> tuple[np.ndarray, np.ndarray]:
+    """``∂p/∂q`` (K, n, 3) of every observation and the variance (n,) of each joint's
+    reading: the encoders' rounding, ``resolution² / 12`` (internal units)."""
+    res = joints_to_internal(robot.encoder_resolution, robot.prismatic)
+    return reading_tangents(model, x), res**2 / 12
+
+
+def whitening(
+    model: ChainModel,
+    x: np.ndarray,
+    robot: RobotDescription,
+    cov_cm2: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """``L⁻¹`` (K, 3, 3) of position noise ``cov_cm2`` (K, 3, 3) plus the readings', as
+    the refinement weighs (:func:`pipeline.refine.points.with_reading_noise`); ``noise``:
+    :func:`reading_noise` when already computed."""
+    g, var = reading_noise(model, x, robot) if noise is None else noise
+    cov = cov_cm2 + np.einsum("kni,knj,n->kij", g, g, var)
+    return np.asarray(np.linalg.inv(np.linalg.cholesky(cov)))
+
+
 def whitened(
     model: ChainModel, x: np.ndarray, robot: RobotDescription, cov_cm2: np.ndarray
 ) -> np.ndarray:
-    """Whitened Jacobians (K, 3, P): position noise ``cov_cm2`` (K, 3, 3) plus the readings'
-    (:func:`pipeline.refine.points.with_reading_noise`'s law)."""
-    res = joints_to_internal(robot.encoder_resolution, robot.prismatic)
-    g = reading_tangents(model, x)  # (K, n, 3)
-    cov = cov_cm2 + np.einsum("kni,knj,n->kij", g, g, res**2 / 12)
-    W = np.linalg.inv(np.linalg.cholesky(cov))
-    return np.asarray(W @ model.position_jacobian(x))
+    """Whitened Jacobians (K, 3, P): :func:`whitening` times the position Jacobians."""
+    return np.asarray(whitening(model, x, robot, cov_cm2) @ model.position_jacobian(x))
 
 
 def plan_poses(

@@ -15,7 +15,9 @@ range per joint is the longest the limits and the sensor allow. The points per s
 * for a wanted tool accuracy (``target_rms_cm``), on which the thesis is silent, from the
   covariance of the whole fit: the design model observing every planned point (the
   refinement's information, :mod:`pipeline.refine.plan`), its predicted RMS tool error
-  over the workspace after the audit's alignment; every ``N_i`` is scaled by one factor
+  over the workspace after the audit's alignment (:func:`sweep_covariance`: the readings
+  of the joints a sweep holds err by one constant for the whole sweep, which more points
+  do not average); every ``N_i`` is scaled by one factor
   (information grows as ``N``) to the first whose audited RMS stays under the target with
   95 % probability, as pose plans do.
 
@@ -250,8 +252,8 @@ def _whole_fit(
     specs: list[SweepSpec],
 ) -> SweepPlan:
     """The plan of ``specs`` with the whole fit's prediction (module docstring)."""
-    from pipeline.planning import WORKSPACE, design_model, prediction, whitened
-    from pipeline.refine.plan import design_covariance, workspace_information
+    from pipeline.planning import WORKSPACE, design_model, prediction
+    from pipeline.refine.plan import workspace_information
     from pipeline.refine.uncertainty import model_error_maps, tool_model
 
     plan = SweepPlan(sensor, layout.signature_q, n_avg, tuple(specs), layout.tool_local_cm,
@@ -263,8 +265,7 @@ def _whole_fit(
     local[TOOL_SWEEP] = np.array(layout.tool_local_cm)
     model, x = design_model(robot, placement, ids, local, np.concatenate(q))
     cov = _point_cov(model.positions(x), sensor, geometry, n_avg, sigma_cm)
-    J = whitened(model, x, robot, cov)
-    Sigma = design_covariance(J, model.param_units)
+    J, Sigma = sweep_covariance(model, x, robot, cov, ids)
     A, B = model_error_maps(tool_model(model, robot.random_configurations(WORKSPACE, 0)), x)
     pred = prediction(J, model, A, B, workspace_information(B), Sigma)
     from dataclasses import replace
@@ -273,19 +274,72 @@ def _whole_fit(
                    p95_cm=pred["p95_cm"], unidentified=pred["unidentified"])  # fmt: skip
 
 
+def sweep_covariance(
+    model: Any, x: np.ndarray, robot: RobotDescription, cov_cm2: np.ndarray, sweep: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The whitened Jacobians (K, 3, P) of a sweep session's observations (their
+    ``sweep`` ids (K,), in measuring order) and the covariance (P, P) of its whole fit.
+
+    The refinement weighs each position by its own noise, ``cov_cm2`` plus every joint's
+    reading noise, as if independent (:func:`pipeline.planning.whitening`). A joint held
+    still is read once and stays put (the simulated servo, and a real arm's brakes): its
+    reading's rounding is one error shared by every position until the joint moves again,
+    i.e. by the sweeps measured before its own and by those after it (and the tool), which
+    more points do not average. The fit's covariance is then the sandwich
+    ``Σ₀ (Σ_k F_k C_k F_kᵀ + Σ_h Σ_runs var_h v vᵀ) Σ₀`` with ``F_k = J_kᵀ W_kᵀ W_k``
+    (the fit's weights), ``C_k`` the independent part (the sensor and the swept joint's
+    reading), ``v = Σ_{k ∈ run} F_k ∂p_k/∂q_h`` over a run of positions holding joint
+    ``h``, and ``Σ₀`` the fit's own covariance
+    (:func:`pipeline.refine.plan.design_covariance`)."""
+    from pipeline.planning import reading_noise, whitening
+    from pipeline.refine.plan import design_covariance
+
+    g, var = reading_noise(model, x, robot)
+    W = whitening(model, x, robot, cov_cm2, (g, var))
+    J = W @ model.position_jacobian(x)
+    Sigma0 = design_covariance(J, model.param_units)
+    n = g.shape[1]
+    swept = sweep[:, None] == np.arange(1, n + 1)[None, :]  # (K, n): the joint moving
+    F = np.einsum("kip,kij->kpj", J, W)  # J_kᵀ W_k (P, 3) per observation (whitened J)
+    C = cov_cm2 + np.einsum("kni,knj,n,kn->kij", g, g, var, swept)
+    H = np.einsum("kpi,kij,kqj->pq", F, C, F)
+    for h in range(n):
+        run = np.cumsum(swept[:, h])  # a held run ends where joint h moves
+        for r in np.unique(run[~swept[:, h]]):
+            at = ~swept[:, h] & (run == r)
+            v = np.einsum("kpi,ki->p", F[at], g[at, h])
+            H += var[h] * np.outer(v, v)
+    return J, Sigma0 @ H @ Sigma0
+
+
 def _scaled_to(plan: SweepPlan, target_cm: float, evaluate: Any) -> SweepPlan:
-    """``plan`` with every ``N_i`` scaled by the smallest factor (never below 1) whose
-    whole fit stays under ``target_cm`` with 95 % probability: the RMS falls as
-    ``1/√N``, so the factor ``(q95 / target)²`` is tried first, then 5 % more until met
-    (or every sweep at :data:`MAX_POINTS`)."""
+    """``plan`` with every ``N_i`` scaled by the smallest factor (never below 1, to 2 %)
+    whose whole fit stays under ``target_cm`` with 95 % probability, or every sweep at
+    :data:`MAX_POINTS` when none does. Without the held joints' shared errors the RMS
+    would fall as ``1/√N``, so ``(q95 / target)²`` is the least factor that can do; the
+    rest is a bisection (the RMS falls with every point added)."""
     base = [s.points for s in plan.sweeps]
-    factor = max(1.0, (plan.rms_q95_cm / target_cm) ** 2)
-    while True:
+
+    def at(factor: float) -> SweepPlan:
         n = [int(min(np.ceil(factor * b), MAX_POINTS)) for b in base]
-        plan = evaluate([_with_points(s, k) for s, k in zip(plan.sweeps, n, strict=True)])
-        if plan.rms_q95_cm <= target_cm or min(n) >= MAX_POINTS:
-            return plan
-        factor *= 1.05
+        return evaluate([_with_points(s, k) for s, k in zip(plan.sweeps, n, strict=True)])
+
+    lo = max(1.0, (plan.rms_q95_cm / target_cm) ** 2)
+    best = at(lo)
+    if best.rms_q95_cm <= target_cm:
+        return best
+    hi = MAX_POINTS / min(base)
+    best = at(hi)
+    if best.rms_q95_cm > target_cm:
+        return best  # unreachable: the most points (the caller warns)
+    while hi / lo > 1.02:
+        mid = np.sqrt(lo * hi)
+        trial = at(mid)
+        if trial.rms_q95_cm <= target_cm:
+            hi, best = mid, trial
+        else:
+            lo = mid
+    return best
 
 
 def write_sweep_plan(
