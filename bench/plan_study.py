@@ -14,6 +14,9 @@ Per robot (Puma 560, UR10), tracker noise, pose sets only (``--no-sweeps``):
   number below the 30-pose plan's prediction), recorded and audited on every seed; printed:
   the share of seeds whose audited RMS meets ``T`` (asks >= 90 %).
 
+* **bounds** (``--bounds``): from the information matrices alone, no simulation: the
+  predicted RMS of the greedy plan, the median of 20 random sets of the candidates, and
+  the least any ``POSES`` of them can predict (the continuous I-optimal design's bound).
 * **sweeps** (``--sweeps``): the sweep plan's predicted RMS (``plan_sweeps`` with
   ``SWEEP_POINTS`` points per sweep) against the median audited RMS of sessions recorded
   with as many points (``simulate --points``), Puma, sonic and tracker.
@@ -124,8 +127,22 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--robots", default="puma560,ur10")
     ap.add_argument("--sweeps", action="store_true", help="the sweep plans' study instead")
+    ap.add_argument("--bounds", action="store_true", help="the information bounds instead")
     args = ap.parse_args()
     names = [UR10 if n == "ur10" else n for n in args.robots.split(",")]
+    if args.bounds:
+        from pipeline.planning import design_bounds
+        from pipeline.robots import get_robot
+
+        for name in names:
+            b = design_bounds(get_robot(name), POSES)
+            r, g, lo = b["random_median_cm"], b["greedy_cm"], b["bound_cm"]
+            print(
+                f"plan bounds {get_robot(name).name}, {POSES} poses: random median "
+                f"{r * 1e4:.2f} um, greedy {g * 1e4:.2f} um ({r / g:.2f}x), "
+                f"best possible >= {lo * 1e4:.2f} um ({r / lo:.2f}x at most)"
+            )
+        return
     with tempfile.TemporaryDirectory() as t:
         if args.sweeps:
             for sensor in ("tracker", "sonic"):

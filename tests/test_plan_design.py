@@ -4,10 +4,12 @@ brute-force reference, and the quantile a target is met with against draws."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from pipeline.refine.plan import (
     PRIOR_SIGMAS,
     TARGET_QUANTILE,
+    continuous_design,
     greedy_plan,
     rms_quantile_cm,
 )
@@ -48,3 +50,23 @@ def test_the_quantile_a_target_is_met_with_matches_draws_of_the_parameters(rng) 
     np.testing.assert_allclose(rms_quantile_cm(Sigma, M, 40), np.quantile(rms, TARGET_QUANTILE),
                                rtol=0.03)  # fmt: skip
     assert rms_quantile_cm(Sigma, M, 40) > np.sqrt(np.trace(M @ Sigma) / 40)  # above the mean
+
+
+def test_the_continuous_design_of_a_straight_line_is_its_two_ends() -> None:
+    """y = a + b x on x in [-1, 1], the error of (a, b) weighed alike (M = I): the
+    A-optimal design puts half the weight on each end, trace(A⁻¹) = 2."""
+    x = np.linspace(-1.0, 1.0, 21)
+    J = np.zeros((21, 3, 2))
+    J[:, 0, 0], J[:, 0, 1] = 1.0, x
+    design = continuous_design(J, np.eye(2), ("cm", "cm"))
+    assert design.bound <= 2.0 + 1e-12 <= design.criterion + 1e-12
+    assert design.criterion == pytest.approx(2.0, rel=1e-3)
+    assert design.weights[[0, -1]].sum() == pytest.approx(1.0, abs=1e-3)
+
+
+def test_no_greedy_plan_beats_the_continuous_bound(rng) -> None:
+    J, M, units = _problem(rng, K=200)
+    design = continuous_design(J, M, units)
+    plan = greedy_plan(J, M, 40, units, 15)
+    assert np.sqrt(design.bound / 15 / 40) <= plan.rms_cm[-1]
+    assert design.bound <= design.criterion <= 1.05 * design.bound  # converged to ~5 %

@@ -141,10 +141,6 @@ def plan_poses(
     seed: int = 0,
 ) -> Plan:
     """The plan (module docstring): ``sigma_cm`` None takes the simulated tracker's law."""
-    from pipeline.rig import tracker
-    from pipeline.rig.plan import PROBE_LENGTH_CM, default_sensor_from_base
-    from pipeline.sensor.geometry import default_geometry
-
     if not (1 <= n_poses <= candidates and 1 <= candidates <= 1_000_000):
         raise ArmsigError(
             "plan sizes out of range",
@@ -152,6 +148,21 @@ def plan_poses(
             got=f"poses {n_poses}, candidates {candidates}",
             fix="--poses 50 --candidates 10000",
         )
+    q, model, x, J = _candidates(robot, sigma_cm, candidates, seed)
+    theta = robot.random_configurations(WORKSPACE, 0)  # the audit's; q̄ˢ = 0 (the gauge)
+    chosen, fields = _choose(J, model, x, theta, n_poses, target_rms_cm)
+    return Plan(q=q[chosen], **fields)
+
+
+def _candidates(
+    robot: RobotDescription, sigma_cm: float | None, candidates: int, seed: int
+) -> tuple[np.ndarray, ChainModel, np.ndarray, np.ndarray]:
+    """Random visible candidates (K, n, boundary units), their design model, its ``x``
+    and their whitened Jacobians (K, 3, P) (module docstring)."""
+    from pipeline.rig import tracker
+    from pipeline.rig.plan import PROBE_LENGTH_CM, default_sensor_from_base
+    from pipeline.sensor.geometry import default_geometry
+
     placement = default_sensor_from_base(robot)
     tool = tracker.pose_tool_local((0.0, 0.0, PROBE_LENGTH_CM))
     rng = np.random.default_rng(seed)
@@ -161,10 +172,34 @@ def plan_poses(
     model, x = design_model(robot, placement, np.full(len(q), POSES_SWEEP), {TOOL_SWEEP: tool}, q)
     p = model.positions(x)
     sig = tracker.sigma_cm(p) if sigma_cm is None else np.full(len(p), float(sigma_cm))
-    J = whitened(model, x, robot, sig[:, None, None] ** 2 * np.eye(3))
-    theta = robot.random_configurations(WORKSPACE, 0)  # the audit's; q̄ˢ = 0 (the gauge)
-    chosen, prediction = _choose(J, model, x, theta, n_poses, target_rms_cm)
-    return Plan(q=q[chosen], **prediction)
+    return q, model, x, whitened(model, x, robot, sig[:, None, None] ** 2 * np.eye(3))
+
+
+def design_bounds(
+    robot: RobotDescription, n_poses: int, candidates: int = CANDIDATES, draws: int = 20
+) -> dict[str, float]:
+    """How much a plan of ``n_poses`` can gain over as many random poses, from the
+    information matrices alone (issue 28): the predicted RMS (cm) of the greedy plan, the
+    median over ``draws`` seeded random sets of the candidates, and the least any
+    ``n_poses`` of them can predict (:func:`pipeline.refine.plan.continuous_design`)."""
+    from pipeline.refine.plan import continuous_design
+
+    q, model, x, J = _candidates(robot, None, candidates, 0)
+    A, B = model_error_maps(tool_model(model, robot.random_configurations(WORKSPACE, 0)), x)
+    M = workspace_information(B)
+    units = model.param_units
+    rng = np.random.default_rng(1)
+    rand = [
+        predicted_rms_cm(J[rng.choice(len(J), n_poses, replace=False)], M, WORKSPACE, units)
+        for _ in range(draws)
+    ]
+    design = continuous_design(J, M, units)
+    return {
+        "greedy_cm": float(greedy_plan(J, M, WORKSPACE, units, n_poses).rms_cm[-1]),
+        "random_median_cm": float(np.median(rand)),
+        "continuous_cm": float(np.sqrt(design.criterion / n_poses / WORKSPACE)),
+        "bound_cm": float(np.sqrt(design.bound / n_poses / WORKSPACE)),
+    }
 
 
 def _choose(

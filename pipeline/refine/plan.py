@@ -150,3 +150,50 @@ def predicted_rms_cm(J: Array, M: Array, n_workspace: int, units: tuple[str, ...
     from :func:`design_covariance`."""
     Sigma = design_covariance(J, units)
     return float(np.sqrt(max(np.trace(M @ Sigma), 0.0) / n_workspace))
+
+
+@dataclass(frozen=True)
+class ContinuousDesign:
+    """The approximate I-optimal design over the candidates: weights (K,) summing to 1,
+    its criterion ``f = trace(M A(w)⁻¹)`` for unit total information, and a lower bound on
+    the criterion of every design of the candidates (the same units: tolerance-scaled
+    away, internal units back). ``N`` poses of any choice predict an RMS of at least
+    ``sqrt(bound / N / m)``."""
+
+    weights: Array
+    criterion: float
+    bound: float
+
+
+#: Multiplicative steps of :func:`continuous_design`: the gap to the bound closes to
+#: ~1 % within a few hundred on 10,000 candidates of a 6-axis arm.
+DESIGN_STEPS = 400
+
+
+def continuous_design(
+    J: Array, M: Array, units: tuple[str, ...], steps: int = DESIGN_STEPS
+) -> ContinuousDesign:
+    """The I-optimal approximate design (Atkinson, Donev & Tobias ch. 9-10) over the
+    candidates whose whitened Jacobians are ``J`` (K, 3, P), by the multiplicative
+    algorithm ``w_k ← w_k (d_k / f)^½`` with ``d_k = trace(J_k A⁻¹ M A⁻¹ J_kᵀ)`` (the
+    criterion's gradient, ``Σ w_k d_k = f``). The bound: ``f`` is convex, so for any
+    design ``A*`` and ``t > 0``, ``f(A*)/t = f(tA*) ≥ 2 f(A) − t trace(A⁻¹MA⁻¹ A*) ≥
+    2 f − t max_k d_k``; at the best ``t = f / max_k d_k`` this is ``f(A*) ≥ f² / max_k
+    d_k`` (equality at the optimum, where ``max_k d_k = f``: the equivalence theorem).
+    No exact N-pose design beats the continuous optimum, so the bound holds for every
+    plan and every random set of the candidates."""
+    tol = tolerance_scale(units)
+    Js = J * tol
+    Ms = M * np.outer(tol, tol)
+    K = len(Js)
+    w = np.full(K, 1.0 / K)
+    f = d_max = np.inf
+    for _ in range(steps):
+        A = np.einsum("k,kip,kiq->pq", w, Js, Js)
+        A_inv = np.linalg.inv(A)
+        C = A_inv @ Ms @ A_inv
+        d = np.einsum("kip,pq,kiq->k", Js, C, Js)
+        f, d_max = float(np.trace(Ms @ A_inv)), float(d.max())
+        w = w * np.sqrt(np.clip(d, 0.0, None) / f)
+        w /= w.sum()
+    return ContinuousDesign(w, f, f * f / d_max)
