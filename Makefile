@@ -6,7 +6,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SESSION ?= robot3
 
-.PHONY: install test lint bench fuzz fuzz-import identify sessions clean
+.PHONY: install test lint bench bench-plan fuzz fuzz-import identify sessions clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -37,6 +37,13 @@ bench: $(STAMP)
 	$(BIN)/python -c "import roboticstoolbox" 2>/dev/null || $(BIN)/pip install --quiet -e '.[bench]' \
 		|| echo "bench: could not install the bench extra; the peer comparison is skipped"
 	$(BIN)/python -m bench
+
+# Issue 28's simulated acceptance of `pipeline plan` (minutes): planned vs random pose sets
+# and --target-rms-mm over 20 seeds, the information bound, the sweep plans' prediction.
+bench-plan: $(STAMP)
+	$(BIN)/python -m bench.plan_study
+	$(BIN)/python -m bench.plan_study --bounds
+	$(BIN)/python -m bench.plan_study --sweeps
 
 # Issue 13's acceptance: 500 byte-level and 200 JSON-level seeded mutations of robot3's recording.
 fuzz: $(STAMP)

@@ -68,6 +68,7 @@ CHOICES: dict[tuple[str, str], tuple[type[StrEnum], list[str]]] = {
     ("ik", "--branch"): (PumaBranch, ["ik", "S"]),
     ("compensate", "--method"): (Method, ["compensate", "S", "--targets", "t", "--out", "o"]),
     ("simulate", "--sensor"): (Sensor, ["simulate", "NEW"]),
+    ("plan", "--sensor"): (Sensor, ["plan", "OUT.csv", "--robot", "puma560", "--sweeps"]),
     ("simulate", "--air"): (Air, ["simulate", "NEW"]),
     ("simulate", "--faults"): (Fault, ["simulate", "NEW"]),
     ("import", "--format"): (ImportFormat, ["import", "f.csv", "NEW", "--robot", "r.toml"]),

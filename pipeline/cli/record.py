@@ -276,7 +276,9 @@ def import_(
 
 @commands.command("plan")
 def plan_(
-    out: Annotated[str, typer.Argument(help="The pose plan to write (CSV of joint readings).")],
+    out: Annotated[
+        str, typer.Argument(help="The plan to write (CSV of joint readings, docs/plan.md).")
+    ],
     robot: Annotated[
         str | None, typer.Option(help="Built-in robot name or description .toml.")
     ] = None,
@@ -288,21 +290,49 @@ def plan_(
             "(re-calibration with fewer), instead of random candidates of --robot.",
         ),
     ] = None,
-    poses: Annotated[int, typer.Option(min=1, help="Poses to plan (at most).")] = 50,
+    poses: Annotated[int | None, typer.Option(min=1, help="Poses to plan (at most; 50).")] = None,
     target_rms_mm: Annotated[
         float | None,
-        typer.Option(help="Stop at the first plan whose predicted RMS tool error meets this."),
+        typer.Option(
+            help="Plan the fewest measurements whose audited RMS tool error stays under this "
+            "with 95 % probability."
+        ),
     ] = None,
     sigma_mm: Annotated[
         float | None,
-        typer.Option(help="Point noise per coordinate (default: the tracker's law, docs/rig.md)."),
+        typer.Option(help="Point noise per coordinate (default: the sensor's law, docs/rig.md)."),
     ] = None,
     candidates: Annotated[int, typer.Option(min=1, help="Random candidate poses.")] = 10_000,
     seed: Annotated[int, typer.Option(min=0, help="Seed of the candidates.")] = 0,
+    sweeps: Annotated[
+        bool,
+        typer.Option(
+            "--sweeps",
+            help="Plan joint sweeps (points per sweep and range per joint, (6.11)-(6.13)) "
+            "instead of poses.",
+        ),
+    ] = False,
+    sensor: Annotated[
+        Sensor | None,
+        choice("sonic (sweeps only; their default) or tracker (the default for poses)."),
+    ] = None,
+    plane_sigma_deg: Annotated[
+        float | None, typer.Option(help="Sweeps: wanted σ of every plane-of-rotation (deg).")
+    ] = None,
+    center_sigma_mm: Annotated[
+        float | None, typer.Option(help="Sweeps: wanted σ of every center-of-rotation (mm).")
+    ] = None,
+    points: Annotated[
+        int | None, typer.Option(min=5, max=1000, help="Sweeps: points per sweep, N_i, fixed.")
+    ] = None,
+    repeats: Annotated[
+        int, typer.Option(min=1, max=100, help="Sweeps, sonic: cycles per position, N_avg.")
+    ] = 10,
     json_out: JsonOption = False,
     force: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
 ) -> None:
-    """Plan a pose set: the poses that give the smallest predicted tool error (docs/plan.md)."""
+    """Plan a measurement: the poses, or the joint sweeps, that give a wanted accuracy
+    (docs/plan.md)."""
     from pipeline.planning import plan_from_session, plan_poses, write_plan
     from pipeline.robots import get_robot
 
@@ -314,31 +344,96 @@ def plan_(
             expected="--robot ROBOT (random candidates) or --from SESSION (its recorded poses)",
             fix="pipeline plan OUT.csv --robot puma560 --poses 50",
         )
+    sweep_only = {"--plane-sigma-deg": plane_sigma_deg, "--center-sigma-mm": center_sigma_mm,
+                  "--points": points}  # fmt: skip
+    if sweeps:
+        if from_session is not None or poses is not None:
+            raise ArmsigError("--sweeps plans joint sweeps, not poses",
+                              fix="drop --from and --poses (or --sweeps)")  # fmt: skip
+        assert robot is not None
+        _sweep_plan(out, get_robot(robot), sensor or Sensor.sonic, plane_sigma_deg,
+                    None if center_sigma_mm is None else center_sigma_mm / 10.0, target, sigma,
+                    points, repeats, json_out, force)  # fmt: skip
+        return
+    given = [k for k, v in sweep_only.items() if v is not None]
+    if given or sensor == Sensor.sonic:
+        what = (given or ["--sensor sonic"])[0]
+        fix = "add --sweeps, or drop it (pose plans are the tracker's)"
+        raise ArmsigError(f"{what} is for sweep plans", fix=fix)
+    n_poses = 50 if poses is None else poses
     if from_session is not None:
         if sigma is not None:
             raise ArmsigError("--sigma-mm is for --robot", fix="drop --sigma-mm: --from "
                               "weighs each pose by its recorded noise")  # fmt: skip
-        rob, result = plan_from_session(from_session, poses, target)
+        rob, result = plan_from_session(from_session, n_poses, target)
     else:
         assert robot is not None
         rob = get_robot(robot)
-        result = plan_poses(rob, poses, target, sigma, candidates, seed)
+        result = plan_poses(rob, n_poses, target, sigma, candidates, seed)
     path = write_plan(out, rob, result, force)
     if json_out:
         print_json({"path": str(path), **result.to_dict()})
         return
     typer.echo(
         f"wrote {path}: {len(result.q)} poses, predicted RMS tool error "
-        f"{result.rms_cm * 10:.3g} mm (95 % {result.p95_cm * 10:.3g} mm) over the workspace; "
+        f"{result.rms_cm * 10:.3g} mm (under {result.rms_q95_cm * 10:.3g} mm with 95 % "
+        f"probability; 95 % of the workspace under {result.p95_cm * 10:.3g} mm); "
         f"as many random poses: {result.random_rms_cm * 10:.3g} mm"
     )
-    if target is not None and result.rms_cm > target:
+    _warn_plan(target, target_rms_mm, result.rms_q95_cm, result.unidentified, "poses (--poses)")
+
+
+def _warn_plan(
+    target: float | None, target_mm: float | None, q95: float, unidentified: tuple[str, ...],
+    more: str,
+) -> None:  # fmt: skip
+    """The warnings of ``plan``: a target not met, parameters not identifiable."""
+    if target is not None and q95 > target:
         typer.echo(
-            f"warning: {poses} poses predict {result.rms_cm * 10:.3g} mm, above the target "
-            f"{target_rms_mm:g} mm; plan more poses (--poses)",
+            f"warning: the plan stays under {q95 * 10:.3g} mm with 95 % probability, above "
+            f"the target {target_mm:g} mm; plan more {more}",
             err=True,
         )
-    if result.unidentified:
+    if unidentified:
+        typer.echo("warning: not identifiable from this plan: " + ", ".join(unidentified),
+                   err=True)  # fmt: skip
+
+
+def _sweep_plan(
+    out: str,
+    robot: Any,
+    sensor: Sensor,
+    plane_sigma_deg: float | None,
+    center_sigma_cm: float | None,
+    target: float | None,
+    sigma: float | None,
+    points: int | None,
+    repeats: int,
+    json_out: bool,
+    force: bool,
+) -> None:
+    """``plan --sweeps``: :func:`pipeline.planning.sweeps.plan_sweeps`, written and printed."""
+    from pipeline.cli.output import print_json
+    from pipeline.planning.sweeps import plan_sweeps, write_sweep_plan
+
+    plan = plan_sweeps(robot, sensor.value, plane_sigma_deg, center_sigma_cm, target, sigma,
+                       points, repeats)  # fmt: skip
+    path = write_sweep_plan(out, robot, plan, force)
+    if json_out:
+        print_json({"path": str(path), **plan.to_dict()})
+        return
+    typer.echo(f"wrote {path}: {plan.positions} positions ({sensor.value}"
+               + (f", {plan.n_avg} cycles each" if plan.n_avg > 1 else "") + ")")  # fmt: skip
+    typer.echo("joint          range              radius  points  plane σ_δ   center σ_c  law")
+    for s in plan.sweeps:
         typer.echo(
-            "warning: not identifiable from this plan: " + ", ".join(result.unidentified), err=True
+            f"{s.joint} {s.name:11s} {s.first:7.1f} .. {s.last:7.1f} {s.radius_cm:6.2f} cm "
+            f"{s.points:6d}  {s.plane_sigma_deg:8.3g}°  {s.center_sigma_cm * 10:8.3g} mm  {s.law}"
         )
+    typer.echo(
+        f"predicted RMS tool error {plan.rms_cm * 10:.3g} mm (under {plan.rms_q95_cm * 10:.3g} "
+        f"mm with 95 % probability; 95 % of the workspace under {plan.p95_cm * 10:.3g} mm)"
+    )
+    more = "points (--target-rms-mm is capped at 1000 per sweep)"
+    target_mm = None if target is None else target * 10
+    _warn_plan(target, target_mm, plan.rms_q95_cm, plan.unidentified, more)

@@ -20,11 +20,21 @@ to 4.4 % near 212°. The thesis states both fits for sweeps of at least 180°
 written and return NaN only where the denominator is not positive (X ≤ 141° for
 (6.12), X ≤ 137° for (6.13)); for short sweeps use ``sigma_delta`` from
 :func:`revolute_accuracy`, which is valid at any sweep.
+
+**Planning a sweep** (issue 28, :mod:`pipeline.planning.sweeps`): :func:`sweep_accuracy`
+predicts both accuracies of ``n`` points equally spaced over a planned sweep, by the
+thesis's formulas where it states them (a sweep of at least 180°: (6.11) from a full
+turn, else (6.12), and (6.13)), and where it is silent (under 180°) by the exact
+linearised statistics of the same arc (:func:`arc_accuracy`: (6.9)/(6.10) and the
+circle fit's center covariance); :func:`points_for_accuracy` is its inverse, the fewest
+points for a wanted ``σ_δ`` and ``σ_c``. A sweep past a full turn is taken as a full
+turn (the formulas were fitted up to 360°; more travel only repeats directions).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -155,3 +165,83 @@ def revolute_accuracy(points: ArrayLike, plane: PlaneFit, circle: CircleFit) -> 
         radial_variance=var_r,
         sweep=circle.sweep,
     )
+
+
+#: The fewest points per sweep: the thesis identified signatures "using as few as five
+#: measurements per circle" (Section 6.4).
+MIN_POINTS = 5
+#: Most points per sweep a plan asks for (``simulate --points``' cap).
+MAX_POINTS = 1000
+_FULL_TURN = 2.0 * np.pi
+_HALF_TURN = np.pi  # (6.12)/(6.13) are stated for sweeps of at least 180°
+Law = Literal["(6.11)", "(6.12)", "arc"]
+
+
+def arc_accuracy(
+    sigma_n: float, sigma_r: float, radius: float, n: int, sweep: float
+) -> tuple[float, float]:
+    """Exact linearised ``σ_δ`` (rad, the largest of (6.9)/(6.10)) and ``σ_c`` (cm, the
+    largest center-coordinate σ) of ``n`` points equally spaced over ``sweep`` rad (a
+    full turn: ``n`` over 360°, none twice) on a circle of ``radius`` cm, with normal and
+    radial residual σ ``sigma_n``, ``sigma_r`` (cm).
+
+    The center: a radial residual ``w_j ≈ |p_j − c| − r`` has the gradient ``−(cos φ_j,
+    sin φ_j, 1)`` in ``(c_x, c_y, r)``, so ``Cov = σ_r² (ΦᵀΦ)⁻¹`` with those rows; ``σ_c²``
+    is the largest eigenvalue of its center block (the thesis's "maximum variance");
+    a full turn gives ``2 σ_r² / n``, what (6.13) approximates by ``σ_r² / (.511 n)``.
+    """
+    full = sweep >= _FULL_TURN
+    phi = np.linspace(0.0, _FULL_TURN if full else sweep, n, endpoint=not full)
+    pts = radius * np.stack([np.cos(phi), np.sin(phi), np.zeros(n)], axis=-1)
+    s_e, s_f = slope_sigmas(pts, np.array([0.0, 0.0, 1.0]), sigma_n)  # Eq. (6.9), (6.10)
+    Phi = np.stack([np.cos(phi), np.sin(phi), np.ones(n)], axis=-1)
+    cov = sigma_r**2 * np.linalg.inv(Phi.T @ Phi)
+    return float(max(s_e, s_f)), float(np.sqrt(np.linalg.eigvalsh(cov[:2, :2])[-1]))
+
+
+def sweep_accuracy(
+    sigma_n: float, sigma_r: float, radius: float, n: int, sweep: float
+) -> tuple[float, float, Law]:
+    """Predicted ``σ_δ`` (rad) and ``σ_c`` (cm) of ``n`` points over a sweep of ``sweep``
+    rad, and the law used: the thesis's (6.11) (a full turn) or (6.12) with (6.13) for a
+    sweep of at least 180°, else ``"arc"`` (:func:`arc_accuracy`). Module docstring."""
+    if sweep < _HALF_TURN:
+        return (*arc_accuracy(sigma_n, sigma_r, radius, n, sweep), "arc")
+    x = min(sweep, _FULL_TURN)
+    c = float(sigma_center(sigma_r, n, x))  # Eq. (6.13)
+    if sweep >= _FULL_TURN:
+        return float(sigma_delta_full(sigma_n, radius, n)), c, "(6.11)"  # Eq. (6.11)
+    return float(sigma_delta_partial(sigma_n, radius, n, x)), c, "(6.12)"  # Eq. (6.12)
+
+
+def points_for_accuracy(
+    sigma_n: float,
+    sigma_r: float,
+    radius: float,
+    sweep: float,
+    plane_sigma: float | None = None,
+    center_sigma: float | None = None,
+) -> int:
+    """The fewest points (at least :data:`MIN_POINTS`) over a sweep of ``sweep`` rad whose
+    :func:`sweep_accuracy` meets ``plane_sigma`` (rad) and ``center_sigma`` (cm), each
+    when given; :data:`MAX_POINTS` + 1 when even that many do not. Both σ fall as
+    ``1/√n`` ((6.11)-(6.13) exactly; the arc's nearly), so the search starts at the
+    ``n`` that scaling predicts and steps to the first that meets both."""
+
+    def meets(n: int) -> bool:
+        d, c, _ = sweep_accuracy(sigma_n, sigma_r, radius, n, sweep)
+        return (plane_sigma is None or d <= plane_sigma) and (
+            center_sigma is None or c <= center_sigma
+        )
+
+    d0, c0, _ = sweep_accuracy(sigma_n, sigma_r, radius, MIN_POINTS, sweep)
+    scale = max(
+        (d0 / plane_sigma) ** 2 if plane_sigma else 0.0,
+        (c0 / center_sigma) ** 2 if center_sigma else 0.0,
+    )
+    n = int(np.clip(np.ceil(MIN_POINTS * scale), MIN_POINTS, MAX_POINTS + 1))
+    while n <= MAX_POINTS and not meets(n):
+        n += 1
+    while n > MIN_POINTS and meets(n - 1):
+        n -= 1
+    return n

@@ -5,7 +5,8 @@ in front of the tracker (the simulated rig's placement and visibility, as ``pipe
 simulate --poses`` draws them), the design model predicts each candidate's information
 (:mod:`pipeline.refine.plan`: position noise of the tracker's law, or ``sigma_cm``, plus
 the encoders' rounding), and the poses that minimise the predicted RMS tool error over
-the workspace are chosen greedily, up to ``n_poses`` or until ``target_rms_cm`` is met.
+the workspace are chosen greedily, up to ``n_poses`` or until ``target_rms_cm`` is met
+with 95 % probability (:data:`pipeline.refine.plan.TARGET_QUANTILE`).
 The plan is a CSV of joint readings (:mod:`pipeline.rig.pose_file`); ``pipeline simulate
 --plan`` records exactly it.
 """
@@ -21,12 +22,17 @@ import numpy as np
 from pipeline.errors import ArmsigError
 from pipeline.refine.identifiability import analyse
 from pipeline.refine.kinematics import ChainModel, chain_model
-from pipeline.refine.plan import greedy_plan, predicted_rms_cm, workspace_information
+from pipeline.refine.plan import (
+    greedy_plan,
+    predicted_rms_cm,
+    rms_quantile_cm,
+    workspace_information,
+)
 from pipeline.refine.points import PointBlock
 from pipeline.refine.problem import reading_tangents
 from pipeline.refine.uncertainty import model_error_maps, predict, tool_model
 from pipeline.robots.description import RobotDescription
-from pipeline.sweeps import POSES_SWEEP
+from pipeline.sweeps import POSES_SWEEP, TOOL_SWEEP, WHOLE_ARM_SWEEPS
 from pipeline.units import joints_to_internal
 
 #: Candidates drawn by default: 10,000 random poses cover a 6-axis workspace densely
@@ -39,13 +45,14 @@ WORKSPACE = 1000
 @dataclass(frozen=True)
 class Plan:
     """A chosen pose set (joint values, boundary units), its predicted RMS and 95 % tool
-    errors (cm) over the workspace, the predicted RMS of every shorter prefix, the same
-    number of uniformly random candidates for comparison, and the parameters it cannot
-    identify."""
+    errors (cm) over the workspace, the RMS the audit stays under with 95 % probability,
+    the predicted RMS of every shorter prefix, the same number of uniformly random
+    candidates for comparison, and the parameters it cannot identify."""
 
     q: np.ndarray
     rms_cm: float
     p95_cm: float
+    rms_q95_cm: float
     rms_by_size_cm: np.ndarray
     random_rms_cm: float
     unidentified: tuple[str, ...] = field(default=())
@@ -57,39 +64,72 @@ class Plan:
             **({"session_steps": list(self.source_steps)} if self.source_steps else {}),
             "predicted_rms_cm": self.rms_cm,
             "predicted_p95_cm": self.p95_cm,
+            "predicted_rms_q95_cm": self.rms_q95_cm,
             "random_predicted_rms_cm": self.random_rms_cm,
             "rms_by_size_cm": self.rms_by_size_cm.tolist(),
             "unidentified": list(self.unidentified),
         }
 
 
-def _design_model(
-    robot: RobotDescription, sensor_from_base: np.ndarray, tool_local: np.ndarray, q: np.ndarray
+def design_model(
+    robot: RobotDescription,
+    sensor_from_base: np.ndarray,
+    sweep: np.ndarray,
+    local: dict[int, np.ndarray],
+    q: np.ndarray,
 ) -> tuple[ChainModel, np.ndarray]:
-    """The design model observing the tool point at joint values ``q`` (K, n, boundary),
-    its frames taken at zero readings (a gauge: any q̄ˢ predicts alike), and its ``x``."""
+    """The design model observing, at joint values ``q`` (K, n, boundary), the point of
+    each observation's ``sweep`` (K,): joint sweep ``j``'s target at ``local[j]`` (3,) in
+    the frame moving with joint ``j``, the tool point at ``local[TOOL_SWEEP]`` (the last
+    link's frame) for the tool sweep and a pose set; its frames taken at zero readings (a
+    gauge: any q̄ˢ predicts alike), and its ``x``."""
     from pipeline.kinematics.chain import link_frames
+    from pipeline.rig.plan import target_positions, tool_positions
 
     n, pris = robot.n_joints, robot.prismatic
-    F = sensor_from_base @ link_frames(robot.design_chain(), np.zeros(n))
-    p0 = F[n, :3, :3] @ tool_local + F[n, :3, 3]
-    K = len(q)
-    model = chain_model(
-        np.full(K, POSES_SWEEP), ["tool"] * K, joints_to_internal(q, pris), F[:n], pris
-    )
-    x = np.concatenate([np.zeros(model.n_axis_params), p0])
+    chain, zero = robot.design_chain(), np.zeros(n)
+    F = sensor_from_base @ link_frames(chain, zero)
+    model = chain_model(sweep, ["T1"] * len(q), joints_to_internal(q, pris), F[:n], pris)
+    seen = [int(sweep[np.argmax(model.point == j)]) for j in range(model.n_points)]
+    p0 = [
+        tool_positions(chain, sensor_from_base, zero, local[TOOL_SWEEP])
+        if s in WHOLE_ARM_SWEEPS
+        else target_positions(chain, sensor_from_base, zero, s, local[s])
+        for s in seen
+    ]
+    x = np.concatenate([np.zeros(model.n_axis_params), *p0])
     return model, x
 
 
-def _whitened(
-    model: ChainModel, x: np.ndarray, robot: RobotDescription, sigma_cm: np.ndarray
-) -> np.ndarray:
-    """Whitened Jacobians (K, 3, P): position noise ``sigma_cm`` (K,) plus the readings'."""
+def reading_noise(
+    model: ChainModel, x: np.ndarray, robot: RobotDescription
+) -> tuple[np.ndarray, np.ndarray]:
+    """``∂p/∂q`` (K, n, 3) of every observation and the variance (n,) of each joint's
+    reading: the encoders' rounding, ``resolution² / 12`` (internal units)."""
     res = joints_to_internal(robot.encoder_resolution, robot.prismatic)
-    g = reading_tangents(model, x)  # (K, n, 3)
-    cov = sigma_cm[:, None, None] ** 2 * np.eye(3) + np.einsum("kni,knj,n->kij", g, g, res**2 / 12)
-    W = np.linalg.inv(np.linalg.cholesky(cov))
-    return np.asarray(W @ model.position_jacobian(x))
+    return reading_tangents(model, x), res**2 / 12
+
+
+def whitening(
+    model: ChainModel,
+    x: np.ndarray,
+    robot: RobotDescription,
+    cov_cm2: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """``L⁻¹`` (K, 3, 3) of position noise ``cov_cm2`` (K, 3, 3) plus the readings', as
+    the refinement weighs (:func:`pipeline.refine.points.with_reading_noise`); ``noise``:
+    :func:`reading_noise` when already computed."""
+    g, var = reading_noise(model, x, robot) if noise is None else noise
+    cov = cov_cm2 + np.einsum("kni,knj,n->kij", g, g, var)
+    return np.asarray(np.linalg.inv(np.linalg.cholesky(cov)))
+
+
+def whitened(
+    model: ChainModel, x: np.ndarray, robot: RobotDescription, cov_cm2: np.ndarray
+) -> np.ndarray:
+    """Whitened Jacobians (K, 3, P): :func:`whitening` times the position Jacobians."""
+    return np.asarray(whitening(model, x, robot, cov_cm2) @ model.position_jacobian(x))
 
 
 def plan_poses(
@@ -101,10 +141,6 @@ def plan_poses(
     seed: int = 0,
 ) -> Plan:
     """The plan (module docstring): ``sigma_cm`` None takes the simulated tracker's law."""
-    from pipeline.rig import tracker
-    from pipeline.rig.plan import PROBE_LENGTH_CM, default_sensor_from_base
-    from pipeline.sensor.geometry import default_geometry
-
     if not (1 <= n_poses <= candidates and 1 <= candidates <= 1_000_000):
         raise ArmsigError(
             "plan sizes out of range",
@@ -112,19 +148,58 @@ def plan_poses(
             got=f"poses {n_poses}, candidates {candidates}",
             fix="--poses 50 --candidates 10000",
         )
+    q, model, x, J = _candidates(robot, sigma_cm, candidates, seed)
+    theta = robot.random_configurations(WORKSPACE, 0)  # the audit's; q̄ˢ = 0 (the gauge)
+    chosen, fields = _choose(J, model, x, theta, n_poses, target_rms_cm)
+    return Plan(q=q[chosen], **fields)
+
+
+def _candidates(
+    robot: RobotDescription, sigma_cm: float | None, candidates: int, seed: int
+) -> tuple[np.ndarray, ChainModel, np.ndarray, np.ndarray]:
+    """Random visible candidates (K, n, boundary units), their design model, its ``x``
+    and their whitened Jacobians (K, 3, P) (module docstring)."""
+    from pipeline.rig import tracker
+    from pipeline.rig.plan import PROBE_LENGTH_CM, default_sensor_from_base
+    from pipeline.sensor.geometry import default_geometry
+
     placement = default_sensor_from_base(robot)
     tool = tracker.pose_tool_local((0.0, 0.0, PROBE_LENGTH_CM))
     rng = np.random.default_rng(seed)
     q = tracker.check_configurations(
         candidates, robot.limits, robot.design_chain(), placement, tool, default_geometry(), rng
     )
-    model, x = _design_model(robot, placement, tool, q)
+    model, x = design_model(robot, placement, np.full(len(q), POSES_SWEEP), {TOOL_SWEEP: tool}, q)
     p = model.positions(x)
     sig = tracker.sigma_cm(p) if sigma_cm is None else np.full(len(p), float(sigma_cm))
-    J = _whitened(model, x, robot, sig)
-    theta = robot.random_configurations(WORKSPACE, 0)  # the audit's; q̄ˢ = 0 (the gauge)
-    chosen, prediction = _choose(J, model, x, theta, n_poses, target_rms_cm)
-    return Plan(q=q[chosen], **prediction)
+    return q, model, x, whitened(model, x, robot, sig[:, None, None] ** 2 * np.eye(3))
+
+
+def design_bounds(
+    robot: RobotDescription, n_poses: int, candidates: int = CANDIDATES, draws: int = 20
+) -> dict[str, float]:
+    """How much a plan of ``n_poses`` can gain over as many random poses, from the
+    information matrices alone (issue 28): the predicted RMS (cm) of the greedy plan, the
+    median over ``draws`` seeded random sets of the candidates, and the least any
+    ``n_poses`` of them can predict (:func:`pipeline.refine.plan.continuous_design`)."""
+    from pipeline.refine.plan import continuous_design
+
+    q, model, x, J = _candidates(robot, None, candidates, 0)
+    A, B = model_error_maps(tool_model(model, robot.random_configurations(WORKSPACE, 0)), x)
+    M = workspace_information(B)
+    units = model.param_units
+    rng = np.random.default_rng(1)
+    rand = [
+        predicted_rms_cm(J[rng.choice(len(J), n_poses, replace=False)], M, WORKSPACE, units)
+        for _ in range(draws)
+    ]
+    design = continuous_design(J, M, units)
+    return {
+        "greedy_cm": float(greedy_plan(J, M, WORKSPACE, units, n_poses).rms_cm[-1]),
+        "random_median_cm": float(np.median(rand)),
+        "continuous_cm": float(np.sqrt(design.criterion / n_poses / WORKSPACE)),
+        "bound_cm": float(np.sqrt(design.bound / n_poses / WORKSPACE)),
+    }
 
 
 def _choose(
@@ -144,13 +219,30 @@ def _choose(
     units = model.param_units
     plan = greedy_plan(J, M, WORKSPACE, units, n_poses, target_rms_cm)
     chosen = plan.chosen
-    ident = analyse(J[chosen].reshape(-1, J.shape[-1]), units, True, len(chosen))
-    pred = predict(A, B, plan.covariance)
-    return chosen, {
-        "rms_cm": float(plan.rms_cm[-1]),
-        "p95_cm": float(np.percentile(pred.position_aligned_cm, 95)),
+    fields = {
+        **prediction(J[chosen], model, A, B, M, plan.covariance),
+        "rms_cm": float(plan.rms_cm[-1]),  # the greedy's own (the same, to rounding)
+        "rms_q95_cm": plan.rms_quantile_cm,
         "rms_by_size_cm": plan.rms_cm,
         "random_rms_cm": predicted_rms_cm(J[: len(chosen)], M, WORKSPACE, units),
+    }
+    return chosen, fields
+
+
+def prediction(
+    J: np.ndarray, model: ChainModel, A: np.ndarray, B: np.ndarray, M: np.ndarray, cov: np.ndarray
+) -> dict[str, Any]:
+    """The predicted RMS, its 95 % quantile over robots, the 95 % over the workspace (cm)
+    and the parameters not identifiable, of a measurement whose whitened Jacobians are
+    ``J`` (K, 3, P) and covariance ``cov`` (P, P), with the workspace's error maps ``A``,
+    ``B`` and their information ``M`` (:func:`pipeline.refine.plan.workspace_information`)."""
+    units = model.param_units
+    ident = analyse(J.reshape(-1, J.shape[-1]), units, True, len(J))
+    pred = predict(A, B, cov)
+    return {
+        "rms_cm": float(np.sqrt(max(np.trace(M @ cov), 0.0) / WORKSPACE)),
+        "p95_cm": float(np.percentile(pred.position_aligned_cm, 95)),
+        "rms_q95_cm": rms_quantile_cm(cov, M, WORKSPACE),
         "unidentified": tuple(model.param_names[k] for k in np.flatnonzero(ident.held)),
     }
 
@@ -165,7 +257,8 @@ def write_plan(path: str | Path, robot: RobotDescription, plan: Plan, force: boo
     check_new_file(out, "pose plan", force)
     comment = (
         f"armsig pose plan: {robot.name}, {len(plan.q)} poses; predicted RMS "
-        f"{plan.rms_cm:.3g} cm, 95 % {plan.p95_cm:.3g} cm over the workspace "
+        f"{plan.rms_cm:.3g} cm (under {plan.rms_q95_cm:.3g} cm with 95 % probability), "
+        f"95 % {plan.p95_cm:.3g} cm over the workspace "
         f"(as many random poses: {plan.random_rms_cm:.3g} cm)"
     )
     return write_pose_plan(out, robot, plan.q, comment)

@@ -39,6 +39,23 @@ def write_pose_plan(path: Path, robot: RobotDescription, q: np.ndarray, comment:
     return path
 
 
+def write_sweep_plan(
+    path: Path, robot: RobotDescription, sweeps: list[tuple[str, np.ndarray]], comment: str
+) -> Path:
+    """Write a sweep plan: a ``sweep`` column (the joint swept, or ``tool``: the sweep names
+    of the recording, :mod:`pipeline.sweeps`) before :func:`plan_columns`, one row per
+    position, each sweep's joint values ``q`` (N_i, n, boundary units) as the robot's
+    readings, in the order given (the measuring order)."""
+    lines = [f"# {line}" for line in comment.splitlines()]
+    lines.append(",".join(["sweep", *plan_columns(robot)]))
+    for name, q in sweeps:
+        readings = robot.readings_from_joints(np.asarray(q, float))
+        lines += [f"{name},{k}," + ",".join(f"{v:.6f}" for v in row)
+                  for k, row in enumerate(readings)]  # fmt: skip
+    write_text_atomic(path, "\n".join(lines) + "\n")
+    return path
+
+
 def read_pose_plan(path: Path, robot: RobotDescription) -> np.ndarray:
     """Joint values (K, n, boundary units) of a pose plan file for ``robot``, in step order;
     refused with one line when its columns, steps or values do not fit the robot."""
