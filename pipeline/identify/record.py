@@ -34,6 +34,7 @@ from typing import Any
 
 from pipeline.atomic import write_text_atomic
 from pipeline.contract.digest import file_sha256
+from pipeline.errors import ArmsigError
 from pipeline.stages.base import StageRun
 from pipeline.stages.lock import LOCK_NAME
 
@@ -168,8 +169,8 @@ def remember(
     doc = {"key": key, "run": run, "digest": _digest(run)}
     try:
         write_text_atomic(sdir / RECORD, json.dumps(doc, indent=1))
-    except OSError:  # e.g. a read-only stages folder: warm runs then get the full check
-        pass
+    except ArmsigError:  # the write's OSError, one line (e.g. a read-only stages folder, the
+        pass  # record's name taken by a folder): a cache, so warm runs get the full check
 
 
 def replay(run: dict[str, Any]) -> list[StageRun]:
