@@ -190,7 +190,8 @@ def test_cli_writes_tables_figures_and_report(tmp_path) -> None:
     assert df.height == 5 * 6 * 34
     assert "machining" in (out / "montecarlo.md").read_text()
     bad = runner.invoke(app, ["montecarlo", "--study", "nope", "--out", str(out)])
-    assert bad.exit_code == 1 and "unknown study" in bad.output
+    # a usage error since --study is a choice (issue 30): exit 2, the choices listed
+    assert bad.exit_code == 2 and "'nope' is not one of" in bad.output and "'refine'" in bad.output
 
 
 def test_progress_redraws_on_a_terminal_and_logs_one_line_elsewhere() -> None:
