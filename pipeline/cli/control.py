@@ -22,6 +22,7 @@ from pipeline.cli.options import (
 )
 from pipeline.cli.output import NotReached, print_json, report, warn, warn_outside_limits
 from pipeline.errors import ArmsigError
+from pipeline.stages.base import session_or_robot
 
 commands = typer.Typer()
 
@@ -34,7 +35,9 @@ def fk(
     robot: Annotated[
         str,
         typer.Argument(
-            help="Identified session folder, built-in robot name or path to a .toml description."
+            help="Identified session (a folder or a NAME for sessions/NAME), built-in robot "
+            "name or path to a .toml description.",
+            callback=session_or_robot,
         ),
     ],
     q: Annotated[

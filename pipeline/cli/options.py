@@ -16,6 +16,7 @@ from typing import Annotated, Any
 import typer
 
 from pipeline.errors import ArmsigError, os_errors_refused
+from pipeline.stages.base import session_path
 
 
 class Method(StrEnum):
@@ -143,7 +144,13 @@ def choices_of(text: str, enum: type[StrEnum]) -> tuple[str, ...]:
     return tuple(item.lower() for item in items)
 
 
-SessionArg = Annotated[str, typer.Argument(help="Session folder, e.g. sessions/robot3.")]
+SessionArg = Annotated[
+    str,
+    typer.Argument(
+        help="Session: a folder (sessions/robot3, ./demo) or a NAME for sessions/NAME.",
+        callback=session_path,
+    ),
+]
 #: ``--json``: machine output on stdout (warnings and errors stay on stderr).
 JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON on stdout for machines.")]
 #: The ``NAME`` of ``simulate`` and ``import``: a new session's name or folder.

@@ -70,7 +70,11 @@ def _session_options(payload_kg: float | None, frame: str) -> None:
 
 
 def _pose_model(robot: str | Path) -> Any:
-    """What :func:`tool_pose` evaluates: a session's controller, else the robot description."""
+    """What :func:`tool_pose` evaluates: a session's controller (a folder, or a NAME of
+    ``sessions/NAME`` that is no built-in robot), else the robot description."""
+    from pipeline.stages.base import session_or_robot
+
+    robot = session_or_robot(str(robot))
     if Path(robot).is_dir():
         from pipeline.control.session import session_controller
 

@@ -20,12 +20,35 @@ if TYPE_CHECKING:
 RECORDING = "recording"
 
 
+def session_path(name: str) -> str:
+    """A session argument as ``simulate`` and ``import`` name it (issue 30): a folder path as
+    given; a bare NAME (no ``/``) that is not a folder here names ``sessions/NAME`` when that
+    is one, so ``pipeline simulate robot8`` then ``pipeline identify robot8`` is one session."""
+    if "/" in name or Path(name).is_absolute() or Path(name).is_dir():
+        return name
+    under = Path("sessions") / name
+    return str(under) if under.is_dir() else name
+
+
+def session_or_robot(name: str) -> str:
+    """``fk``'s argument: a built-in robot's name as it is, else a session argument
+    (:func:`pipeline.stages.base.session_path`: a NAME may name ``sessions/NAME``)."""
+    from pipeline.robots import builtin_names
+
+    return name if name in builtin_names() else session_path(name)
+
+
+def _no_folder(sdir: Path) -> str:
+    bare = len(sdir.parts) == 1 and not sdir.is_absolute()
+    return f" (no folder {sdir} here, nor sessions/{sdir})" if bare else " (no such folder)"
+
+
 def session_folder(session_dir: str | Path) -> Path:
     """``session_dir`` as a Path, refused with one line unless it holds a recording."""
     sdir = Path(session_dir)
     if not (sdir / "recording.mcap").is_file():
         raise StageError(
-            f"{sdir}: no recording.mcap" + ("" if sdir.is_dir() else " (no such folder)"),
+            f"{sdir}: no recording.mcap" + ("" if sdir.is_dir() else _no_folder(sdir)),
             expected="a session folder holding recording.mcap",
             fix="`pipeline simulate NAME` records a simulated session",
         )
