@@ -29,8 +29,9 @@ def test_a_name_names_the_session_simulate_wrote(here: Path) -> None:
     r = runner.invoke(app, ["identify", "robot8", "--no-report"])
     assert r.exit_code == 0, r.output
     assert (here / "sessions" / "robot8" / "signature.json").is_file()
+    pose = ["--pose", "40", "20", "60", "180", "0", "90"]
     for args in (["status", "robot8"], ["show", "robot8", "dh", "--rows", "1"],
-                 ["audit", "robot8"], ["ik", "robot8", "--pose", "40", "20", "60", "180", "0", "90"],
+                 ["audit", "robot8"], ["ik", "robot8", *pose],
                  ["export", "robot8", "--format", "dh"]):  # fmt: skip
         r = runner.invoke(app, args)
         assert r.exit_code == 0, (args, r.output)

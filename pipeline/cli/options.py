@@ -144,6 +144,11 @@ def choices_of(text: str, enum: type[StrEnum]) -> tuple[str, ...]:
     return tuple(item.lower() for item in items)
 
 
+def optional_session_path(name: str | None) -> str | None:
+    """:func:`~pipeline.stages.base.session_path` of an optional session option."""
+    return None if name is None else session_path(name)
+
+
 SessionArg = Annotated[
     str,
     typer.Argument(

@@ -21,6 +21,7 @@ from pipeline.cli.options import (
     choices_of,
     joint_values,
     new_session_folder,
+    optional_session_path,
 )
 from pipeline.cli.output import print_json, warn
 from pipeline.errors import ArmsigError
@@ -286,8 +287,10 @@ def plan_(
         str | None,
         typer.Option(
             "--from",
-            help="An identified session with a pose set: choose its most informative poses "
-            "(re-calibration with fewer), instead of random candidates of --robot.",
+            help="An identified session with a pose set (a folder, or a NAME for "
+            "sessions/NAME): choose its most informative poses (re-calibration with fewer), "
+            "instead of random candidates of --robot.",
+            callback=optional_session_path,
         ),
     ] = None,
     poses: Annotated[int | None, typer.Option(min=1, help="Poses to plan (at most; 50).")] = None,
