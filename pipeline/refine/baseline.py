@@ -93,5 +93,5 @@ def register_design(
     R, b, t = unpack(sol.x)
     base = np.eye(4)
     base[:3, :3], base[:3, 3] = R, b
-    fit = DesignBaseline(chain, base, t, np.zeros(0))
-    return DesignBaseline(chain, base, t, fit.errors(q, measured))
+    errors = np.linalg.norm(residuals(sol.x).reshape(-1, 3), axis=1)
+    return DesignBaseline(chain, base, t, errors)
