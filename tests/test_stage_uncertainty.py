@@ -10,6 +10,7 @@ import pytest
 
 from pipeline.errors import StageError
 from pipeline.kinematics.chain import forward_kinematics
+from pipeline.refine.unmodelled import Unmodelled
 from pipeline.schemas import validate_table
 from pipeline.stages import uncertainty
 from pipeline.stages.frames import chain_from_frames, matrices_from_columns
@@ -46,8 +47,11 @@ def _refine(frames: pa.Table, n_axis: int, Sigma: np.ndarray, deg: bool) -> pa.T
     })  # fmt: skip
 
 
-def test_uncertainty_stage(identified_session: Path) -> None:
+def test_uncertainty_stage(identified_session: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     read = lambda name: read_table(stage_path(identified_session, name))  # noqa: E731
+    # the stand-in refine table has no fit behind it: its unmodelled error is given
+    u = Unmodelled(rms_cm=0.003, residual_rms_cm=0.004, p_value=0.0, points=10)
+    monkeypatch.setattr(uncertainty, "fit_unmodelled", lambda inputs: u)
     session, frames = read("session"), read("frames")
     n_axis = 24
     rng = np.random.default_rng(0)
@@ -73,6 +77,10 @@ def test_uncertainty_stage(identified_session: Path) -> None:
     s = t.column("sigma_position_aligned_cm").to_numpy()
     np.testing.assert_allclose(t_deg.column("sigma_position_aligned_cm").to_numpy(), s, rtol=1e-9)
     np.testing.assert_allclose(t4.column("sigma_position_aligned_cm").to_numpy(), 2 * s, rtol=1e-9)
+    # the total: the parameters' part and the unmodelled part in quadrature (issue 41)
+    np.testing.assert_allclose(t.column("sigma_unmodelled_cm").to_numpy(), 0.003)
+    total = t.column("sigma_total_cm").to_numpy()
+    np.testing.assert_allclose(total, np.sqrt(s**2 + 0.003**2), rtol=1e-12)
     summ = uncertainty.summary(t)
     assert summ is not None
     assert summ["sigma_position_aligned_p95_cm"] <= summ["sigma_position_aligned_max_cm"]
@@ -84,3 +92,17 @@ def test_uncertainty_stage(identified_session: Path) -> None:
     with pytest.raises(StageError, match="does not match the session's chain"):
         uncertainty.compute({**inputs, "refine": _refine(frames, n_axis, Sigma, False).slice(1)},
                             params)  # fmt: skip
+
+
+def test_the_unmodelled_part_reads_the_fit_residuals(identified_session: Path) -> None:
+    """The refined chain's residuals at the fit positions are the refinement's (robot3's
+    sonic session: χ²/dof ~1, no unmodelled error, the prediction the parameters' alone)."""
+    read = lambda name: read_table(stage_path(identified_session, name))  # noqa: E731
+    names = ("session", "refine", "frames", "positions", "joints")
+    u = uncertainty.fit_unmodelled({n: read(n) for n in names})
+    assert u.rms_cm == 0.0 and u.p_value is not None and u.p_value > 1e-3
+    assert 0.01 < u.residual_rms_cm < 0.2  # triangulated noise of 2 cycles a position, 73 points
+    t = read("uncertainty")
+    np.testing.assert_array_equal(
+        t.column("sigma_total_cm").to_numpy(), t.column("sigma_position_aligned_cm").to_numpy()
+    )

@@ -26,24 +26,34 @@ from pipeline.refine.start import design_start
 @dataclass(frozen=True)
 class DesignBaseline:
     """The registered design model: ``base`` (4, 4) sensor from design base, ``tool``
-    (3,) the tool point in the last D-H frame (cm), and its error at the points it was
+    (3,) the tool point in the last D-H frame (cm) (``points`` (T, 3): every registered
+    point in its link's frame, ``tool`` the first), and its error at the points it was
     registered to (cm)."""
 
     chain: SerialChain
     base: Array
     tool: Array
     errors_cm: Array
+    targets: Array | None = None
 
-    def points(self, q: Array) -> Array:
-        """The registered design's tool point (m, 3), sensor frame, at joint values q (rad / cm)."""
-        flange = link_frames(self.chain, q)[:, self.chain.n_joints]
-        p = flange[:, :3, :3] @ self.tool + flange[:, :3, 3]
+    def points(self, q: Array, link: Array | None = None, target: Array | None = None) -> Array:
+        """The registered design's points (m, 3), sensor frame, at joint values q (rad /
+        cm): the tool point, or point ``target`` (m,) of link ``link`` (m,)."""
+        n = self.chain.n_joints
+        link = np.full(len(q), n) if link is None else np.asarray(link)
+        t = (self.tool[None] if self.targets is None else self.targets)[
+            np.zeros(len(q), np.int64) if target is None else np.asarray(target)
+        ]
+        F = link_frames(self.chain, q)[np.arange(len(q)), link]
+        p = np.einsum("kij,kj->ki", F[:, :3, :3], t) + F[:, :3, 3]
         out: Array = p @ self.base[:3, :3].T + self.base[:3, 3]
         return out
 
-    def errors(self, q: Array, measured: Array) -> Array:
+    def errors(
+        self, q: Array, measured: Array, link: Array | None = None, target: Array | None = None
+    ) -> Array:
         """Distances (m,) cm of measured points from the registered design at q."""
-        out: Array = np.linalg.norm(self.points(q) - measured, axis=1)
+        out: Array = np.linalg.norm(self.points(q, link, target) - measured, axis=1)
         return out
 
 
@@ -52,27 +62,44 @@ def register_design(
 ) -> DesignBaseline:
     """The design ``chain`` registered to ``measured`` (K, 3) cm at joint values ``q``
     (K, n) rad / cm, its tool point started at ``tool_local`` (3,) (module docstring)."""
-    from scipy.optimize import least_squares
-
     start = design_start(chain, q, measured, tool_local, q[0])
     n = chain.n_joints
-    flange = link_frames(chain, q)[:, n]
-    R_k, o_k = flange[:, :3, :3], flange[:, :3, 3]
-    B0 = start.base
-    # The start's tool point, back in the last D-H frame (design_start reports it at q̄^s).
-    t0 = np.linalg.lstsq(
-        R_k.reshape(-1, 3),
-        (((measured - B0[:3, 3]) @ B0[:3, :3]) - o_k).reshape(-1),
-        rcond=None,
-    )[0]
+    return register_design_points(
+        chain, q, measured, np.full(len(q), n), np.zeros(len(q), np.int64), start.base
+    )
+
+
+def register_design_points(
+    chain: SerialChain, q: Array, measured: Array, link: Array, target: Array, base0: Array
+) -> DesignBaseline:
+    """The design ``chain`` registered to ``measured`` (K, 3) cm at joint values ``q``
+    (K, n) rad / cm, each row a point ``target`` (K,) (0..T−1) fixed on link ``link``
+    (K,) (the frame ``link_frames(chain, q)[:, link]``; the tool point: link n): the
+    base ``B`` (6) and the T points (3 each) minimising ``Σ |B F_link(q_k) t_k − m_k|²``,
+    started at the base ``base0`` (4, 4), each point given ``base0`` in closed form
+    (the least-squares point, ``R_k`` orthonormal), then Gauss-Newton (module
+    docstring). Used for the tool point (:func:`register_design`) and for the joint
+    sweeps' link targets (the design's held-out errors of stage ``holdout``)."""
+    from scipy.optimize import least_squares
+
+    target = np.asarray(target, np.int64)
+    F = link_frames(chain, q)[np.arange(len(q)), np.asarray(link)]
+    R_k, o_k = F[:, :3, :3], F[:, :3, 3]
+    B0 = base0
+    local = ((measured - B0[:3, 3]) @ B0[:3, :3]) - o_k  # B0⁻¹ m_k − o_k
+    T = int(target.max()) + 1
+    t0 = np.zeros((T, 3))
+    for j in range(T):  # the least-squares point of each target given B0
+        at = target == j
+        t0[j] = np.linalg.lstsq(R_k[at].reshape(-1, 3), local[at].reshape(-1), rcond=None)[0]
 
     def unpack(x: Array) -> tuple[Array, Array, Array]:
         R = rotation_from_vector(x[:3]) @ B0[:3, :3]
-        return R, x[3:6], x[6:]
+        return R, x[3:6], x[6:].reshape(T, 3)
 
     def residuals(x: Array) -> Array:
         R, b, t = unpack(x)
-        p = R_k @ t + o_k
+        p = np.einsum("kij,kj->ki", R_k, t[target]) + o_k
         r: Array = (p @ R.T + b - measured).reshape(-1)
         return r
 
@@ -80,18 +107,19 @@ def register_design(
         R, _, t = unpack(x)
         # ∂(exp(ω)·Rp)/∂ω is −[Rp]× at ω = 0, times an invertible 3 × 3 elsewhere: the same
         # stationary points, so the optimum is exact.
-        Rp = (R_k @ t + o_k) @ R.T
-        J = np.zeros((len(measured), 3, 9))
+        Rp = (np.einsum("kij,kj->ki", R_k, t[target]) + o_k) @ R.T
+        J = np.zeros((len(measured), 3, 6 + 3 * T))
         J[:, :, :3] = -skew(Rp)
         J[:, :, 3:6] = np.eye(3)
-        J[:, :, 6:] = R @ R_k
-        out: Array = J.reshape(-1, 9)
+        for j in range(T):
+            J[target == j, :, 6 + 3 * j : 9 + 3 * j] = R @ R_k[target == j]
+        out: Array = J.reshape(-1, 6 + 3 * T)
         return out
 
-    x0 = np.r_[np.zeros(3), B0[:3, 3], t0]
+    x0 = np.r_[np.zeros(3), B0[:3, 3], t0.reshape(-1)]
     sol = least_squares(residuals, x0, jac=jacobian, method="lm", xtol=1e-15, ftol=1e-15)
     R, b, t = unpack(sol.x)
     base = np.eye(4)
     base[:3, :3], base[:3, 3] = R, b
     errors = np.linalg.norm(residuals(sol.x).reshape(-1, 3), axis=1)
-    return DesignBaseline(chain, base, t, errors)
+    return DesignBaseline(chain, base, t[0], errors, t)

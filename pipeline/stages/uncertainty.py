@@ -5,9 +5,14 @@ The refinement's covariance of the chain parameters (its rows of groups ``axis``
 to the tool, through the terms the signature applies (issue 27), at
 ``configurations`` random configurations within the joint limits (seeded, drawn as the
 audit draws them), raw and after what the audit's base and tool re-alignment absorbs
-(:mod:`pipeline.refine.uncertainty`, the formulas there). Zero rows when the refinement
-is disabled (no covariance). Summaries (RMS, 95 %, max) come from the rows:
-:func:`summary`.
+(:mod:`pipeline.refine.uncertainty`, the formulas there). Beside that parameter part,
+the error the model leaves out (issue 41): the fit's residual beyond the points' stated
+noise (:mod:`pipeline.refine.unmodelled`), ``sigma_unmodelled_cm``, and the two together,
+``sigma_total_cm = sqrt(aligned² + unmodelled²)``: how far the arm will be from where the
+signature sends it. The fit's 3-D residuals are those of the refined chain at every usable
+fit position of the ``positions`` table (a sonic session's triangulated ones). Zero rows
+when the refinement is disabled (no covariance). Summaries (RMS, 95 %, max) come from the
+rows: :func:`summary`.
 """
 
 from __future__ import annotations
@@ -104,12 +109,54 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     )
     x, Sigma = kinematic_covariance(refine, model.n_axis_params)
     pred = predict_model(model, x, Sigma, params.seed)
-    return _table(tool_poses(model, x)[0], pred, pred.max95_cm)
+    return _table(tool_poses(model, x)[0], pred, pred.max95_cm, fit_unmodelled(inputs))
 
 
-def _table(p: np.ndarray, pred: Any, max95: float) -> pa.Table:
+def fit_unmodelled(inputs: Mapping[str, Any]) -> Any:
+    """:class:`pipeline.refine.unmodelled.Unmodelled` of the refined chain's residuals at
+    the session's usable fit positions (finite, not of the check sweep), judged by the
+    refinement's χ² (none for an import without a stated σ: ``recorded_sigma_cm``)."""
+    from pipeline.kinematics.nongeometric import Terms
+    from pipeline.refine.unmodelled import unmodelled_error
+    from pipeline.stages.positions import positions, recorded_sigma_cm
+    from pipeline.stages.refine import refine_summary, refined_x
+    from pipeline.stages.refine_problem import model_for_keys
+    from pipeline.stages.session import session_sensor
+    from pipeline.sweeps import CHECK_SWEEP
+
+    refine, pos, session = inputs["refine"], inputs["positions"], inputs["session"]
+    xyz = positions(pos)
+    use = np.isfinite(xyz).all(axis=1) & (pos.column("sweep").to_numpy() != CHECK_SWEEP)
+    rows = pos.filter(pa.array(use))
+    names = refine.column("name").to_pylist()
+    terms = Terms.from_names(refine_summary(refine).get("nongeometric", {}).get("terms", []))
+    rotation = "tool_rotation" in refine.column("group").to_pylist()
+    keys = rows.select(["sweep", "step", "target"])
+    model = model_for_keys(keys, session, inputs["joints"], inputs["frames"], rotation, terms)
+    at = {n: i for i, n in enumerate(names)}
+    if any(n not in at for n in model.param_names):  # a bug: the tables disagree
+        raise StageError(
+            "uncertainty: the refine table lacks parameters of the session's chain model",
+            expected=", ".join(model.param_names),
+            got=", ".join(names),
+            fix="`pipeline identify SESSION --force` recomputes the refinement",
+        )
+    x = refined_x(refine)[[at[n] for n in model.param_names]]
+    stated = session_sensor(session) == "sonic" or recorded_sigma_cm(pos) is not None
+    summ = refine_summary(refine)
+    r = xyz[use] - model.positions(x)
+    return unmodelled_error(r, model.n_params, summ["chi2"], summ["dof"], stated)
+
+
+def _table(p: np.ndarray, pred: Any, max95: float, unmodelled: Any = None) -> pa.Table:
     m = len(p)
     cols = ("position_cm", "position_aligned_cm", "orientation_deg", "orientation_aligned_deg")
+    u = 0.0 if unmodelled is None else unmodelled.rms_cm
+    aligned = np.zeros(0) if pred is None else pred.position_aligned_cm
+
+    def each(v: float | None) -> pa.Array:
+        return pa.array(np.full(m, np.nan if v is None else v), pa.float64())
+
     return pa.table(
         {
             "configuration": pa.array(np.arange(m), pa.int32()),
@@ -118,7 +165,11 @@ def _table(p: np.ndarray, pred: Any, max95: float) -> pa.Table:
                 f"sigma_{c}": pa.array(np.zeros(0) if pred is None else getattr(pred, c))
                 for c in cols
             },
+            "sigma_unmodelled_cm": pa.array(np.full(len(aligned), u), pa.float64()),
+            "sigma_total_cm": pa.array(np.sqrt(aligned**2 + u**2), pa.float64()),
             "max95_cm": pa.array(np.full(m, max95), pa.float64()),
+            "fit_residual_rms_cm": each(None if unmodelled is None else unmodelled.residual_rms_cm),
+            "unmodelled_p_value": each(None if unmodelled is None else unmodelled.p_value),
         }
     )
 
@@ -128,6 +179,9 @@ def summary(table: pa.Table) -> dict[str, float] | None:
     if table.num_rows == 0:
         return None
     out = {"max95_cm": float(table.column("max95_cm")[0].as_py())}
+    for c in ("fit_residual_rms_cm", "unmodelled_p_value"):
+        if c in table.column_names:
+            out[c] = float(table.column(c).to_numpy()[0])
     for c in table.column_names:
         if c.startswith("sigma_"):
             v = table.column(c).to_numpy()
@@ -141,8 +195,9 @@ def summary(table: pa.Table) -> dict[str, float] | None:
 
 STAGE = Stage(
     "uncertainty",
-    2,  # 2: the non-geometric terms' covariance and deflection in the prediction (issue 27)
-    ("session", "refine", "frames"),
+    3,  # 2: the non-geometric terms' covariance and deflection in the prediction (issue 27);
+    # 3: the unmodelled error beside the parameters' (sigma_unmodelled_cm, sigma_total_cm)
+    ("session", "refine", "frames", "positions", "joints"),
     Params(),
     compute,
     "predicted tool error of the refined signature over random configurations",
