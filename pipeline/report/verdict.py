@@ -12,15 +12,21 @@ from pipeline.report.figures import few_ticks, save_png
 
 #: Rows of the verdict's numbers table: column, label, format.
 _NUMBERS = (
-    ("predicted_rms_cm", "predicted RMS tool error, aligned (cm)", ".4f"),
+    ("predicted_rms_cm", "predicted RMS tool error over the workspace (cm)", ".4f"),
+    ("predicted_parameters_rms_cm", "its parameters' part, aligned (cm)", ".4f"),
+    ("unmodelled_rms_cm", "its unmodelled part: the residual beyond the noise (cm)", ".4f"),
     ("predicted_limit_cm", "its limit: max_predicted_rms_reach × the design's reach (cm)", ".4g"),
     ("predicted_p95_cm", "95th percentile over the workspace (cm)", ".4f"),
-    ("predicted_max95_cm", "95 % bound of the largest error (cm)", ".4f"),
+    ("predicted_max95_cm", "95 % bound of the largest parameters' error (cm)", ".4f"),
     ("holdout_rms_cm", "held-out RMS position error (cm)", ".4f"),
+    ("holdout_p95_cm", "held-out 95th percentile (cm)", ".4f"),
     ("holdout_expected_rms_cm", "its prediction (cm)", ".4f"),
+    ("holdout_design_rms_cm", "the registered design model at the same points (cm)", ".4f"),
+    ("gain", "measured gain: design over signature, held out (×)", ".3g"),
+    ("worse_sigmas", "signature's squared error minus the design's (standard errors)", ".3g"),
     ("design_misfit_rms_cm", "design model vs signature, RMS after alignment (cm)", ".4f"),
     ("design_reach_cm", "the design's reach, the scale of that misfit (cm)", ".4g"),
-    ("improvement", "improvement over the design model (×)", ".3g"),
+    ("misfit_sigmas", "that misfit in the signature's predicted errors (σ; no rule)", ".3g"),
     ("chi2_per_dof", "χ²/dof, sensor self-calibrated", ".3f"),
     ("chi2_recorded_per_dof", "χ²/dof, sensor as recorded", ".3f"),
     ("stated_sigma_cm", "the points' stated σ, median (cm)", ".4g"),
@@ -56,6 +62,12 @@ def error_map(uncertainty: pa.Table, path: Path) -> Path:
 def verdict_section(verdict: dict[str, Any], figure: Path | None) -> str:
     """``## Verdict``: the line, one bullet per reason, the numbers, the error map."""
     out = [f"## Verdict: {verdict['verdict']}", f"**{verdict['line']}**"]
+    by = verdict.get("decided_by") or "rules"
+    out.append(
+        "Decided by the thresholds' rules (below)." if by == "rules" else
+        f"Decided by the stated requirement (`verdict.{by}`): the held-out and predicted errors "
+        "against it; the χ², held-out-ratio, predicted-limit and held-parameter rules not applied."
+    )  # fmt: skip
     if verdict["reasons"]:
         out.append("\n".join(f"- {r}" for r in verdict["reasons"]))
     rows = [

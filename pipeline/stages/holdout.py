@@ -9,7 +9,12 @@ scored. The measured position of a sonic session is the triangulated one (record
 calibration) also when the refinement fits the raw ranges. Each held-out position's
 expected error combines its measurement covariance and the (refit's) parameter
 covariance, both scaled by the fit's χ²/dof as the refinement scales its covariance.
-Zero rows when the refinement is disabled.
+Beside each, the design model's error at the same position (``design_error_cm``, issue
+41): the design chain with its base and every measured point registered to the positions
+the fit of that position used (the check configurations: every fit position; k-fold: the
+fold's kept positions) (:func:`pipeline.refine.baseline.register_design_points`), so the
+gain over the design is measured on data neither saw. Zero rows when the refinement is
+disabled.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from pipeline.refine.kinematics import TOOL_POINT
 from pipeline.stages.base import Stage, check_param
 
 REFITS = ("step", "full")
@@ -104,7 +110,61 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     rigid = None
     if sp.problem.model.terms:  # the same held-out positions without the terms (issue 27)
         rigid = _rigid_held_out(inputs, params, summ)
-    return _table(*keys, held, rigid)
+    return _table(*keys, held, rigid, _design_held_out(inputs, sp, held))
+
+
+def _design_held_out(inputs: Mapping[str, Any], sp: Any, held: Any) -> np.ndarray:
+    """The registered design model's error (cm) at each held-out position of ``held``
+    (module docstring); NaN where the positions it is registered to cannot fix it."""
+    from pipeline.errors import StageError
+    from pipeline.refine.baseline import register_design_points
+    from pipeline.signature.alignment import design_alignment
+    from pipeline.stages.frames import chain_from_frames
+    from pipeline.stages.positions import positions as xyz_of
+    from pipeline.stages.refine_problem import rows_at
+    from pipeline.stages.session import session_robot
+
+    out = np.full(len(held.index), np.nan)
+    if len(out) == 0:
+        return out
+    robot = session_robot(inputs["session"])
+    model = sp.problem.model
+    q_sig = chain_from_frames(inputs["frames"], robot.prismatic).joint_offsets
+    base0 = design_alignment(chain_from_frames(inputs["chain"], robot.prismatic), robot)[0]
+    pos = inputs["positions"]
+    at = rows_at(sp.problem.block.keys, pos)
+    m = np.vstack([xyz_of(pos), np.full((1, 3), np.nan)])[at]  # the block's positions
+    fit = np.isfinite(m).all(axis=1)
+    q = model.theta + q_sig
+    design = robot.design_chain()
+    if np.all(held.fold < 0):  # check configurations: registered to every fit position
+        check = _check_rows(inputs, pos)
+        if check is None:  # not reached: held-out rows of fold −1 are check rows
+            return out
+        rows, theta = check
+        tool = model.point_names.index(TOOL_POINT)
+        folds = [(fit, theta + q_sig, xyz_of(rows), np.full(len(theta), tool), np.arange(len(out)))]
+    else:
+        folds = [(fit & ~np.isin(np.arange(len(fit)), held.index[held.fold == f]),
+                  q[held.index[held.fold == f]], m[held.index[held.fold == f]],
+                  model.point[held.index[held.fold == f]], np.flatnonzero(held.fold == f))
+                 for f in np.unique(held.fold)]  # fmt: skip
+    link = _link_of_points(model)
+    for train, q_test, m_test, point_test, where in folds:
+        try:
+            reg = register_design_points(design, q[train], m[train], model.link[train],
+                                         model.point[train], base0)  # fmt: skip
+        except (StageError, np.linalg.LinAlgError):  # a fold that cannot fix the design
+            continue
+        out[where] = reg.errors(q_test, m_test, link[point_test], point_test)
+    return out
+
+
+def _link_of_points(model: Any) -> np.ndarray:
+    """The link (P,) each of ``model``'s points is fixed on, from its observations."""
+    link = np.zeros(len(model.point_names), np.int64)
+    link[model.point] = model.link
+    return link
 
 
 def _rigid_held_out(inputs: Mapping[str, Any], params: Params, summ: Any) -> Any:
@@ -210,9 +270,11 @@ def _check_rows(inputs: Mapping[str, Any], pos: pa.Table) -> tuple[pa.Table, np.
 
 
 def _table(
-    sweep: list[Any], step: list[Any], target: list[Any], held: Any, rigid: Any = None
-) -> pa.Table:
+    sweep: list[Any], step: list[Any], target: list[Any], held: Any, rigid: Any = None,
+    design: np.ndarray | None = None,
+) -> pa.Table:  # fmt: skip
     empty = np.zeros(0)
+    design = np.full(len(sweep), np.nan) if design is None else design
     if rigid is not None and not np.array_equal(rigid.index, held.index):
         raise ValueError("holdout: the rigid fit's held-out positions differ")  # a bug
     rigid_error = np.full(len(sweep), np.nan) if rigid is None else rigid.error_cm
@@ -228,6 +290,7 @@ def _table(
                 empty if held is None else held.measurement_cm, pa.float64()
             ),
             "rigid_error_cm": pa.array(rigid_error, pa.float64(), mask=np.isnan(rigid_error)),
+            "design_error_cm": pa.array(design, pa.float64(), mask=np.isnan(design)),
         }
     )
 
@@ -235,11 +298,12 @@ def _table(
 #: The sonic session's stage: the raw ranges too (level ``ranges`` rebuilds its problem).
 STAGE = Stage(
     "holdout",
-    4,  # 2: the folds' normal equations by the solver's structured products;
+    5,  # 2: the folds' normal equations by the solver's structured products;
     # 3: the problem rebuilt with every refine.* parameter (speed_knot_s crashed it), and
     # single-cycle sonic positions' covariances from the range noise law (issue 33);
-    # 4: rigid_error_cm, the same positions held out of the rigid fit (issue 27)
-    ("session", "refine", "positions", "joints", "frames", "ranges"),
+    # 4: rigid_error_cm, the same positions held out of the rigid fit (issue 27);
+    # 5: design_error_cm, the registered design model at the same positions (issue 41)
+    ("session", "refine", "positions", "joints", "frames", "chain", "ranges"),
     Params(),
     compute,
     "held-out position errors of the refined chain (k-fold or check configurations)",
