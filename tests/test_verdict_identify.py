@@ -54,7 +54,7 @@ def test_report_starts_with_the_verdict(identified_session: Path, tmp_path: Path
     text = write_report(d).read_text(encoding="utf-8")
     sections = [line for line in text.splitlines() if line.startswith("## ")]
     assert sections[0].startswith("## Verdict: ")
-    assert "| predicted RMS tool error, aligned (cm) |" in text
+    assert "| predicted RMS tool error over the workspace (cm) |" in text
     assert "![predicted tool error over the workspace](uncertainty.png)" in text
     assert (d / "report" / "uncertainty.png").stat().st_size > 1000
 

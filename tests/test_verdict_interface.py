@@ -19,7 +19,7 @@ from pipeline.signature.verdict import verdict_from_row, verdict_gate
 
 runner = CliRunner()
 FAIL_PARAM = "verdict.max_predicted_rms_reach=1e-8"  # below any session's predicted error
-CHECK_PARAM = "verdict.min_improvement=1e9"  # no signature is that much better
+CHECK_PARAM = "verdict.min_gain=1e9"  # no signature is that much better than the design
 
 
 def _identify(d: Path, *extra: str) -> Result:
@@ -74,7 +74,7 @@ def test_identify_check_and_pass_exit_0(identified_session: Path, checked: Path)
     r = _identify(checked, "--param", CHECK_PARAM, "--json")
     assert r.exit_code == 0, r.output
     v = json.loads(r.stdout)["verdict_detail"]
-    assert v["status"] == "CHECK" and v["reasons"][-1]["rule"] == "min_improvement"
+    assert v["status"] == "CHECK" and v["reasons"][-1]["rule"] == "min_gain"
     r = _identify(identified_session, "--json")
     assert r.exit_code == 0 and json.loads(r.stdout)["verdict_detail"]["status"] == "PASS"
 

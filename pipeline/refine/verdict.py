@@ -324,9 +324,17 @@ def _sweep_reasons(e: Evidence, t: Thresholds) -> list[Reason]:
     return [Reason(CHECK, "holdout_ratio", worst, t.holdout_ratio, text)]
 
 
-def _gain_reasons(e: Evidence, t: Thresholds) -> list[Reason]:
+#: Said of a held-out FAIL turned CHECK by a sensor whose recorded calibration is off.
+_SENSOR_OFF = (
+    " (a CHECK, not a FAIL: the held-out positions are triangulated with the recorded "
+    "calibration, which the self-calibration found off)"
+)
+
+
+def _gain_reasons(e: Evidence, t: Thresholds, sensor_off: bool) -> list[Reason]:
     """The measured gain over the design (module docstring): FAIL when the signature is
-    significantly worse on held-out data, CHECK when it is no better."""
+    significantly worse on held-out data, CHECK when it is no better, or when the held-out
+    positions were triangulated with a sensor calibration found off (``sensor_off``)."""
     g = e.gain
     if g is None or g >= t.min_gain:
         return []
@@ -339,8 +347,9 @@ def _gain_reasons(e: Evidence, t: Thresholds) -> list[Reason]:
     )
     if e.worse_sigmas is not None:
         text += f"; {e.worse_sigmas:.2g} standard errors worse"
-    text += ")" + (": do not ship it" if worse else "")
-    return [Reason(FAIL if worse else CHECK, "min_gain", g, t.min_gain, text)]
+    text += ")" + (": do not ship it" if worse and not sensor_off else "")
+    text += _SENSOR_OFF if worse and sensor_off else ""
+    return [Reason(FAIL if worse and not sensor_off else CHECK, "min_gain", g, t.min_gain, text)]
 
 
 def _requirement(e: Evidence, t: Thresholds) -> tuple[list[Reason], str]:
@@ -419,8 +428,9 @@ def judge(e: Evidence, t: Thresholds = Thresholds()) -> Verdict:
         found += _predicted_reasons(e, t)
         chi2 = _chi2_reason(e, t)
         found += [] if chi2 is None else [chi2]
-    found += _sensor_reasons(e, t)
-    found += _gain_reasons(e, t)
+    sensor = _sensor_reasons(e, t)
+    found += sensor
+    found += _gain_reasons(e, t, bool(sensor))
     h, hx = e.holdout_rms_cm, e.holdout_expected_rms_cm
     if h is not None and hx is not None and h > t.holdout_ratio * max(hx, t.floor_cm):
         floor = f" (floor {t.floor_cm:g} cm)" if hx < t.floor_cm else ""
@@ -429,14 +439,15 @@ def judge(e: Evidence, t: Thresholds = Thresholds()) -> Verdict:
             ratio, limit = (t.holdout_fail_ratio, "holdout_fail_ratio") if fails else (
                 t.holdout_ratio, "holdout_ratio")  # fmt: skip
             fire(
-                FAIL if fails else CHECK,
+                FAIL if fails and not sensor else CHECK,
                 limit,
                 h / hx if hx > 0 else None,
                 ratio,
                 f"held-out RMS error {h:.4g} cm > {ratio:g} × its prediction "
                 f"{hx:.4g} cm{floor}"
                 + (": the model does not generalise beyond the data it was fitted to, "
-                   "whatever its residual" if fails else ""),
+                   "whatever its residual" if fails else "")
+                + (_SENSOR_OFF if fails and sensor else ""),
             )  # fmt: skip
     found += _sweep_reasons(e, t)
     if e.held and accuracy:
