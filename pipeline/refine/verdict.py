@@ -346,7 +346,8 @@ def _gain_reasons(e: Evidence, t: Thresholds, sensor_off: bool) -> list[Reason]:
         f"{d:.4g} cm ({_pair(g, t.min_gain)[0]}× < {t.min_gain:g}×"
     )
     if e.worse_sigmas is not None:
-        text += f"; {e.worse_sigmas:.2g} standard errors worse"
+        z = e.worse_sigmas
+        text += f"; {abs(z):.2g} standard errors {'worse' if z > 0 else 'better'}"
     text += ")" + (": do not ship it" if worse and not sensor_off else "")
     text += _SENSOR_OFF if worse and sensor_off else ""
     return [Reason(FAIL if worse and not sensor_off else CHECK, "min_gain", g, t.min_gain, text)]
