@@ -38,8 +38,9 @@ def test_pass_when_no_rule_fires() -> None:
     v = judge(GOOD)
     assert v.level == PASS and v.reasons == ()
     assert v.line == (
-        "PASS  predicted 0.006 cm RMS (95 % 0.011), held-out 0.009 cm, 7.9× the design "
-        "model held out (0.071 → 0.009 cm), χ²/dof 1.02, mic biases within 3.6σ"
+        "PASS  predicted 0.006 cm RMS (95 % 0.011), held-out 0.009 cm (predicted there "
+        "0.008), 7.9× the design model held out (0.071 → 0.009 cm), χ²/dof 1.02, mic biases "
+        "within 3.6σ"
     )
 
 

@@ -226,6 +226,13 @@ def validate(
         f"  design model, base and tool registered:  mean {r['design_registered_mean_cm']:.4g}  "
         f"RMS {r['design_registered_rms_cm']:.4g}  max {r['design_registered_max_cm']:.4g} cm"
     )
+    if r["predicted_rms_cm"] is not None:  # issue 41: the prediction at these very poses
+        gain = "" if r["gain_registered"] is None else (
+            f"; measured gain {r['gain_registered']:.2f}× the registered design")  # fmt: skip
+        typer.echo(
+            f"  predicted at these poses: RMS {r['predicted_rms_cm']:.4g} cm (the parameters' "
+            f"part and the unmodelled error){gain}"
+        )
 
 
 def _validation(session: str) -> dict[str, Any] | None:

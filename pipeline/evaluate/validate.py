@@ -22,6 +22,7 @@ from pipeline.importers import OS_FIX, parse_foreign
 from pipeline.importers.mapping import ImportMap, load_map
 from pipeline.signature.file import FILE_NAME, Signature
 from pipeline.signature.session import load_session_signature
+from pipeline.units import joints_to_internal
 
 
 def _as_poses(imap: ImportMap) -> ImportMap:
@@ -88,6 +89,7 @@ def validate_against(
     model = model_points(sig.chain, q, sig.prismatic, sig.nongeometric)
     raw, reg = error_distances(model, measured[ok])
     design = position_errors(design_errors(sig, q, measured[ok]), None)
+    predicted = _predicted_rms_cm(sdir, joints_to_internal(q, sig.prismatic))
     return {
         "session": str(sdir),
         "file": Path(path).name,
@@ -98,4 +100,32 @@ def validate_against(
         "design_registered_mean_cm": design.mean_cm,
         "design_registered_rms_cm": design.rms_cm,
         "design_registered_max_cm": design.max_cm,
+        "predicted_rms_cm": predicted,
+        "gain_registered": None if reg is None else _gain(design, reg),
     }
+
+
+def _gain(design: Any, registered: np.ndarray) -> float | None:
+    """The registered design's RMS over the signature's (base registered), same points."""
+    rms = float(np.sqrt(np.mean(registered**2)))
+    return None if design.rms_cm is None or not rms > 0 else design.rms_cm / rms
+
+
+def _predicted_rms_cm(sdir: Path, q: np.ndarray) -> float | None:
+    """The session's predicted RMS tool error at these configurations (rad, cm): its
+    parameters' part there and its unmodelled part (issue 41,
+    :func:`pipeline.stages.uncertainty.predicted_at`); None when the session has no
+    prediction (refinement disabled, or stages from before it)."""
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.tables import read_table
+    from pipeline.stages.uncertainty import predicted_at
+
+    names = ("session", "refine", "frames", "uncertainty")
+    paths = {n: stage_path(sdir, n) for n in names}
+    if not all(p.is_file() for p in paths.values()):
+        return None
+    tables = {n: read_table(p) for n, p in paths.items()}
+    if "sigma_unmodelled_cm" not in tables["uncertainty"].column_names:
+        return None
+    pred = predicted_at(tables, q)
+    return None if pred is None else float(np.sqrt(np.mean(pred**2)))

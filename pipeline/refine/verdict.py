@@ -482,7 +482,9 @@ def _line(level: str, e: Evidence, reasons: tuple[str, ...], t: Thresholds) -> s
         inner = ", ".join(x for x in (p95, u) if x)
         parts.append(f"predicted {_g(e.predicted_rms_cm)} cm RMS" + (f" ({inner})" if inner else ""))
     if e.holdout_rms_cm is not None:
-        parts.append(f"held-out {_g(e.holdout_rms_cm)} cm")
+        hx = e.holdout_expected_rms_cm
+        there = "" if hx is None else f" (predicted there {_g(hx)})"
+        parts.append(f"held-out {_g(e.holdout_rms_cm)} cm{there}")
     if e.gain is not None:
         parts.append(
             f"{_times(e.gain)}× the design model held out ({_g(e.holdout_design_rms_cm or 0.0)} "

@@ -78,19 +78,30 @@ def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
-    from pipeline.kinematics.nongeometric import NO_TERMS
-    from pipeline.refine.kinematics import TOOL_POINT, ChainModel
     from pipeline.refine.uncertainty import predict_model, tool_poses
-    from pipeline.stages.frames import chain_from_frames, matrices_from_columns
-    from pipeline.stages.refine import nongeometric_model
 
     refine = inputs["refine"]
     if refine.num_rows == 0:  # refinement disabled: no covariance
         return _table(np.zeros((0, 3)), None, 0.0)
     robot = session_robot(inputs["session"])
+    q = robot.random_configurations(params.configurations, params.seed)
+    model, x, Sigma = _tool_model(inputs, q)
+    pred = predict_model(model, x, Sigma, params.seed)
+    return _table(tool_poses(model, x)[0], pred, pred.max95_cm, fit_unmodelled(inputs))
+
+
+def _tool_model(inputs: Mapping[str, Any], q: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray]:
+    """The refined chain's tool point at configurations ``q`` (m, n) (rad, cm) as a
+    :class:`ChainModel` (no payload), its ``x`` and covariance ``Σ`` (internal units)."""
+    from pipeline.kinematics.nongeometric import NO_TERMS
+    from pipeline.refine.kinematics import TOOL_POINT, ChainModel
+    from pipeline.stages.frames import chain_from_frames, matrices_from_columns
+    from pipeline.stages.refine import nongeometric_model
+
+    refine = inputs["refine"]
+    robot = session_robot(inputs["session"])
     n, pris = robot.n_joints, robot.prismatic
     frames = inputs["frames"]
-    q = robot.random_configurations(params.configurations, params.seed)
     m = len(q)
     q_sig = chain_from_frames(frames, pris).joint_offsets
     ng = nongeometric_model(refine, robot)
@@ -108,8 +119,24 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         payload_kg=np.full(m, 0.0 if ng is None else ng.payload_kg),
     )
     x, Sigma = kinematic_covariance(refine, model.n_axis_params)
-    pred = predict_model(model, x, Sigma, params.seed)
-    return _table(tool_poses(model, x)[0], pred, pred.max95_cm, fit_unmodelled(inputs))
+    return model, x, Sigma
+
+
+def predicted_at(inputs: Mapping[str, Any], q: np.ndarray) -> np.ndarray | None:
+    """The predicted tool error (m,) cm at configurations ``q`` (m, n) (rad, cm) of a
+    session's committed tables (``session``, ``refine``, ``frames``, ``uncertainty``):
+    the parameters' part there, aligned as over the workspace (the base and tool
+    re-alignment fitted over these configurations), and the session's unmodelled part, in
+    quadrature (module docstring); None when the refinement is disabled."""
+    from pipeline.refine.uncertainty import predict_model
+
+    if inputs["refine"].num_rows == 0 or inputs["uncertainty"].num_rows == 0:
+        return None
+    model, x, Sigma = _tool_model(inputs, np.asarray(q, float))
+    aligned = predict_model(model, x, Sigma).position_aligned_cm
+    u = float(inputs["uncertainty"].column("sigma_unmodelled_cm").to_numpy()[0])
+    out: np.ndarray = np.sqrt(aligned**2 + u**2)
+    return out
 
 
 def fit_unmodelled(inputs: Mapping[str, Any]) -> Any:
