@@ -48,6 +48,7 @@ class SimulationOptions:
     compliance_mm: float = 0.0  # the true joints deflect under gravity (RMS flange move, mm)
     harmonic_deg: float = 0.0  # the true joints' first-harmonic angle errors (RMS, deg)
     payloads_kg: tuple[float, ...] = ()  # payloads on the flange, cycled over the pose set
+    backlash_mm: float = 0.0  # the true joints' backlash under gravity (RMS flange move, mm)
 
 
 def check_options(opts: SimulationOptions) -> None:
@@ -84,7 +85,7 @@ def check_options(opts: SimulationOptions) -> None:
             got=repr(list(opts.payloads_kg)),
             fix="--payloads 0,10",
         )
-    for name, top in (("compliance_mm", 10.0), ("harmonic_deg", 1.0)):
+    for name, top in (("compliance_mm", 10.0), ("harmonic_deg", 1.0), ("backlash_mm", 10.0)):
         value = getattr(opts, name)
         if not (np.isfinite(value) and 0.0 <= value <= top):
             raise ArmsigError(
@@ -120,6 +121,7 @@ def options_for_truth(opts: SimulationOptions) -> dict[str, object]:
         ("resettle_counts", 0), ("air", "lab"), ("log_jitter_s", 0.0),
         ("poses", 0), ("sweeps", True), ("plan_file", ""), ("six_d", False),
         ("compliance_mm", 0.0), ("harmonic_deg", 0.0), ("payloads_kg", []),
+        ("backlash_mm", 0.0),
     ):  # fmt: skip
         if out[name] == default:
             del out[name]

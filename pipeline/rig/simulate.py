@@ -37,7 +37,12 @@ from pipeline.rig.plan import (
 from pipeline.rig.pose_file import read_pose_plan
 from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
 from pipeline.rig.resettle import resettle
-from pipeline.rig.true_robot import draw_nongeometric, draw_true_robot
+from pipeline.rig.true_robot import (
+    draw_backlash,
+    draw_nongeometric,
+    draw_true_robot,
+    where_joints_sit,
+)
 from pipeline.robots import get_robot
 from pipeline.robots.description import RobotDescription, description_to_dict
 from pipeline.sensor.geometry import W_AB_CM, W_AC_CM, W_BC_CM, DigitizerGeometry, default_geometry
@@ -154,6 +159,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
         nongeometric=draw_nongeometric(
             robot, opts.compliance_mm, opts.harmonic_deg, opts.seed, opts.payloads_kg
         ),
+        backlash=draw_backlash(robot, opts.backlash_mm, opts.seed),
     )
     geometry_true = default_geometry()
     geometry_recorded = default_geometry(W_AB_CM, W_BC_CM, W_AC_CM + opts.wac_error_cm)
@@ -249,8 +255,8 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     # Where the target sparker physically is at each configuration.
     qi = joints_to_internal(q_reached, pris)
     payload = command_payloads(commands, opts.payloads_kg)
-    if true.nongeometric is not None:  # where the joints sit: deflected, angle errors
-        qi = true.nongeometric.effective(qi, np.nan_to_num(payload, nan=0.0))
+    # Where the joints sit: deflected, angle errors, backlash.
+    qi = where_joints_sit(qi, true.nongeometric, true.backlash, np.nan_to_num(payload, nan=0.0))
     p_target = np.zeros((len(commands), 3))
     for k, (sweep_id, _, _) in enumerate(commands):
         if sweep_id in ("tool", "check", "poses"):
@@ -364,17 +370,19 @@ def _truth(
 
 def _nongeometric_truth(true: Any) -> dict[str, Any]:
     """``true_nongeometric`` of rig-truth.json (absent for a rigid robot): the terms and
-    their coefficients in internal units (rad/cm, rad)."""
+    their coefficients in internal units (rad/cm, rad); ``true_backlash`` (absent without
+    it): the error the model does not have (:meth:`pipeline.rig.backlash.Backlash.to_truth`)."""
     ng = true.nongeometric
-    if ng is None:
-        return {}
-    return {
-        "true_nongeometric": {
+    out: dict[str, Any] = {}
+    if ng is not None:
+        out["true_nongeometric"] = {
             "terms": list(ng.terms.names),
             "units": list(ng.terms.units),
             "coefficients": ng.coefficients.tolist(),
         }
-    }
+    if true.backlash is not None:
+        out["true_backlash"] = true.backlash.to_truth()
+    return out
 
 
 def _logged(messages: list[Message], opts: SimulationOptions) -> list[Message]:
