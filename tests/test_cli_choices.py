@@ -48,7 +48,7 @@ def _work_tuples() -> dict[type[StrEnum], tuple[str, ...]]:
     from pipeline.export import FORMATS as EXPORT_FORMATS
     from pipeline.importers import FORMATS as IMPORT_FORMATS
     from pipeline.montecarlo.studies import STUDY_NAMES
-    from pipeline.rig.simulate import AIRS, FAULTS, SENSORS
+    from pipeline.rig.options import AIRS, FAULTS, SENSORS
     from pipeline.robots.puma560 import BRANCHES
     from pipeline.signature.alignment import FRAMES
 

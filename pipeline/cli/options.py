@@ -43,21 +43,21 @@ class ExportFrame(StrEnum):
 
 
 class Sensor(StrEnum):
-    """``simulate --sensor`` (``pipeline.rig.simulate.SENSORS``)."""
+    """``simulate --sensor`` (``pipeline.rig.options.SENSORS``)."""
 
     sonic = "sonic"
     tracker = "tracker"
 
 
 class Air(StrEnum):
-    """``simulate --air`` (``pipeline.rig.simulate.AIRS``)."""
+    """``simulate --air`` (``pipeline.rig.options.AIRS``)."""
 
     lab = "lab"
     drifting = "drifting"
 
 
 class Fault(StrEnum):
-    """The items of ``simulate --faults`` (``pipeline.rig.simulate.FAULTS``)."""
+    """The items of ``simulate --faults`` (``pipeline.rig.options.FAULTS``)."""
 
     bias = "bias"
     dropouts = "dropouts"

@@ -183,6 +183,17 @@ def simulate(
             "predict a changed payload (with --compliance)."
         ),
     ] = "",
+    backlash_mm: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            max=10.0,
+            help="The true robot's joints have backlash under gravity, an error the model "
+            "does not have: each sits b_j off its reading on the side its gravity torque "
+            "pushes it to; RMS flange displacement over the joint ranges, mm "
+            "(docs/rig.md#unmodelled-error-backlash).",
+        ),
+    ] = 0.0,
     force: ForceRecording = False,
     as_json: JsonOption = False,
 ) -> None:
@@ -216,6 +227,7 @@ def simulate(
         compliance_mm=compliance,
         harmonic_deg=joint_harmonics,
         payloads_kg=tuple(joint_values(payloads, "--payloads", "0,10")),
+        backlash_mm=backlash_mm,
     )
     path = simulate_session(folder, opts, force=force)
     truth = folder / "rig-truth.json"

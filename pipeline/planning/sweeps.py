@@ -144,8 +144,9 @@ def plan_sweeps(
     :data:`DEFAULT_POINTS` when no target at all is given) and ``target_rms_cm`` scales
     them up. ``sigma_cm``: the point noise per coordinate instead of the sensor's law;
     ``n_avg``: cycles averaged per position (sonic; a tracker measures once)."""
+    from pipeline.rig.options import SENSORS
     from pipeline.rig.plan import default_sensor_from_base
-    from pipeline.rig.simulate import SENSORS, session_plan
+    from pipeline.rig.simulate import session_plan
     from pipeline.sensor.geometry import default_geometry
 
     if sensor not in SENSORS:

@@ -10,6 +10,8 @@ point the session measured as its tool), not at the flange: an error of the
 tool's orientation would otherwise count, on the lever from the tool point to the
 flange, as a position error the signature never claimed (issue 26: on 20 pose-set
 sessions audited/predicted was 1.31 at the flange and 1.01 at the tool point).
+The truth's joints sit where the simulator put them: its non-geometric terms and its
+backlash (an error no signature has, :mod:`pipeline.rig.backlash`) included.
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ from pipeline.kinematics.alignment import fit_alignment
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.nongeometric import NonGeometric, Terms
 from pipeline.kinematics.transforms import pose_error, trans
+from pipeline.rig.backlash import Backlash
+from pipeline.rig.true_robot import where_joints_sit
 from pipeline.robots.description import JOINT_TYPES
 from pipeline.stages.frames import chain_from_frames
 from pipeline.stages.runner import stage_path
@@ -150,14 +154,37 @@ def true_nongeometric(truth: dict[str, Any], robot: Any) -> NonGeometric | None:
             got=str(exc)[:80],
             fix=_RESIMULATE,
         ) from exc
-    payloads = sorted(float(p) for p in truth.get("options", {}).get("payloads_kg", []))
+    payloads = _payloads_kg(truth)
     return NonGeometric(
         terms,
         beta,
         robot.design_chain(),
         payload_kg=payloads[0] if payloads else 0.0,
-        measured_payloads_kg=tuple(payloads),
+        measured_payloads_kg=payloads,
     )
+
+
+def _payloads_kg(truth: dict[str, Any]) -> tuple[float, ...]:
+    """The payloads (kg) the session measured, smallest first (none: empty)."""
+    return tuple(sorted(float(p) for p in truth.get("options", {}).get("payloads_kg", [])))
+
+
+def true_backlash(truth: dict[str, Any], robot: Any) -> Backlash | None:
+    """The true joints' backlash of ``rig-truth.json`` (``true_backlash``,
+    :mod:`pipeline.rig.backlash`) on ``robot``'s design chain; None without."""
+    doc = truth.get("true_backlash")
+    if doc is None:
+        return None
+    if not isinstance(doc, dict):
+        raise ArmsigError(
+            "rig-truth.json: field 'true_backlash' is malformed",
+            expected="an object with offsets and masses_kg",
+            fix=_RESIMULATE,
+        )
+    n = robot.n_joints
+    offsets = _array(doc.get("offsets"), (n,), "true_backlash.offsets")
+    masses = _array(doc.get("masses_kg"), (n,), "true_backlash.masses_kg")
+    return Backlash(offsets, masses, robot.design_chain())
 
 
 def _aligned_errors(T_true: np.ndarray, T_model: np.ndarray) -> ModelError:
@@ -208,14 +235,18 @@ def _true_poses(
     sdir: Path, configurations: int, seed: int, payload_kg: float | None = None
 ) -> tuple[np.ndarray, Any, np.ndarray]:
     """The true tool poses (m, 4, 4) at ``configurations`` random readings of the session's
-    robot (its non-geometric terms included, under ``payload_kg`` when given), the robot,
-    and the readings (m, n)."""
+    robot (its non-geometric terms and its backlash included, under ``payload_kg`` when
+    given, else the smallest payload the session measured), the robot, and the readings
+    (m, n)."""
     truth, robot, doc = _truth_and_robot(sdir, configurations)
     q = robot.random_configurations(configurations, seed)
+    if payload_kg is None:
+        payload_kg = min(_payloads_kg(doc), default=0.0)
     ng = true_nongeometric(doc, robot)
-    if ng is not None and payload_kg is not None:
+    if ng is not None:
         ng = replace(ng, payload_kg=payload_kg)  # the truth has every payload's terms
-    return forward_kinematics(truth, q if ng is None else ng.effective(q)), robot, q
+    joints = where_joints_sit(q, ng, true_backlash(doc, robot), payload_kg)
+    return forward_kinematics(truth, joints), robot, q
 
 
 def table_errors(

@@ -11,10 +11,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
+from pipeline.errors import ArmsigError
 from pipeline.kinematics.chain import SerialChain, forward_kinematics
 from pipeline.kinematics.nongeometric import NonGeometric, Terms, all_terms
 from pipeline.kinematics.transforms import rot_x, rot_y, rot_z, trans, trans_z
+from pipeline.rig.backlash import Backlash
 from pipeline.robots import puma560
 from pipeline.robots.description import RobotDescription
 
@@ -39,12 +42,46 @@ class TrueRobot:
     ``chain`` maps *encoder readings* (rad / cm) to the flange pose in the
     robot's mounting (base) frame; ``errors`` records what was drawn;
     ``nongeometric``: where the joints sit for given readings (compliance under gravity,
-    joint-angle harmonics), None for a rigid robot.
+    joint-angle harmonics), None for a rigid robot; ``backlash``: the joints' backlash
+    under gravity, an error the model does not have (:mod:`pipeline.rig.backlash`), None
+    without.
     """
 
     chain: SerialChain
     errors: dict[str, object]
     nongeometric: NonGeometric | None = None
+    backlash: Backlash | None = None
+
+
+def where_joints_sit(
+    q: npt.ArrayLike,
+    nongeometric: NonGeometric | None,
+    backlash: Backlash | None,
+    payload_kg: npt.ArrayLike = 0.0,
+) -> np.ndarray:
+    """The true joint values (..., n) for readings ``q`` (..., n): the non-geometric terms'
+    ``q + Δ(q)`` plus the backlash's ``b sign(τ(q))``, both under ``payload_kg`` (kg; a
+    number or one per configuration): the simulator's and the audit's one definition."""
+    q = np.asarray(q, float)
+    out = q if nongeometric is None else nongeometric.effective(q, payload_kg)
+    return out if backlash is None else out + backlash.deflection(q, payload_kg)
+
+
+def _link_draws(seed: int, n: int) -> tuple[np.random.Generator, np.ndarray, np.ndarray]:
+    """The stream of the true non-geometric terms (issue 27: apart from the rig's streams)
+    after its first draws, the joint compliances ``c_j`` uniform in [0.5, 1.5] and the
+    lumped link masses ``m_k`` uniform in [1, 10] kg (n each), which the compliance and
+    the backlash share."""
+    rng = np.random.default_rng([seed, 27])
+    c = rng.uniform(0.5, 1.5, n)
+    return rng, c, rng.uniform(1.0, 10.0, n)
+
+
+def _rms_move_cm(design: SerialChain, q: np.ndarray, q_moved: np.ndarray) -> float:
+    """RMS displacement (cm) of the design's tool frame origin (the flange when the
+    description has no tool) from joint values ``q`` to ``q_moved`` (m, n)."""
+    move = forward_kinematics(design, q_moved) - forward_kinematics(design, q)
+    return float(np.sqrt(np.mean(np.sum(move[:, :3, 3] ** 2, axis=1))))
 
 
 def draw_nongeometric(
@@ -70,18 +107,15 @@ def draw_nongeometric(
     kinds += ("payload",) * (compliance_mm > 0 and len(payloads_kg) > 0)
     if not kinds:
         return None
-    rng = np.random.default_rng([seed, 27])  # issue 27: apart from the rig's streams
     terms = all_terms(robot.prismatic, kinds)
     design = robot.design_chain()
-    n = robot.n_joints
-    c, m = rng.uniform(0.5, 1.5, n), rng.uniform(1.0, 10.0, n)
+    rng, c, m = _link_draws(seed, robot.n_joints)
     beta = np.array([c[j - 1] * m[k - 1] for j, k in terms.compliance])
     gamma = np.array([c[j - 1] for j in terms.payload])
     if terms.compliance:
         q = robot.random_configurations(500, seed)
         unit = NonGeometric(Terms(compliance=terms.compliance), beta * 1e-9, design)
-        move = forward_kinematics(design, unit.effective(q)) - forward_kinematics(design, q)
-        rms = float(np.sqrt(np.mean(np.sum(move[:, :3, 3] ** 2, axis=1)))) / 1e-9  # cm
+        rms = _rms_move_cm(design, q, unit.effective(q)) / 1e-9  # cm
         beta *= compliance_mm / 10.0 / rms
         gamma *= compliance_mm / 10.0 / rms
     harm = rng.normal(0.0, np.radians(harmonic_deg) / np.sqrt(2.0), len(terms.harmonic))
@@ -93,6 +127,33 @@ def draw_nongeometric(
         payload_kg=measured[0] if measured else 0.0,
         measured_payloads_kg=measured,
     )
+
+
+def draw_backlash(robot: RobotDescription, backlash_mm: float, seed: int) -> Backlash | None:
+    """The true joints' backlash under gravity (:mod:`pipeline.rig.backlash`; None at 0):
+    ``b_j = s u_j`` per revolute joint, ``u_j`` uniform in [0.5, 1.5] from a stream of its
+    own (issue 41: the rig's and the compliance's draws keep their values), the torques'
+    lumped masses those of the compliance truth (:func:`_link_draws`), and ``s`` such that
+    the RMS displacement of the flange over 500 configurations drawn within the limits
+    is ``backlash_mm`` without a payload (as ``--compliance`` is stated). Refused for an
+    arm none of whose joints feels a gravity torque (a SCARA's axes are all vertical)."""
+    if backlash_mm <= 0:
+        return None
+    design = robot.design_chain()
+    _, _, m = _link_draws(seed, robot.n_joints)
+    u = np.random.default_rng([seed, 41]).uniform(0.5, 1.5, robot.n_joints)
+    u = np.where(robot.prismatic, 0.0, u)
+    q = robot.random_configurations(500, seed)
+    unit = Backlash(u * 1e-9, m, design)  # rad: small enough that the move is linear in it
+    rms = _rms_move_cm(design, q, q + unit.deflection(q)) / 1e-9  # cm per unit of s
+    if not rms > 0:
+        raise ArmsigError(
+            f"{robot.name}: no joint bears a gravity torque, so it has no backlash under gravity",
+            expected="an arm with a joint whose axis is not vertical",
+            got=f"--backlash-mm {backlash_mm:g}",
+            fix="simulate without --backlash-mm",
+        )
+    return Backlash(u * (backlash_mm / 10.0 / rms), m, design)
 
 
 def _small_rigid(rng: np.random.Generator, sig: ErrorSigmas) -> np.ndarray:

@@ -1,0 +1,178 @@
+"""What ``pipeline simulate`` can set (:class:`SimulationOptions`, boundary units), the checks
+it makes before simulating anything, and the options as ``rig-truth.json`` records them."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from pipeline.errors import ArmsigError
+from pipeline.rig import tracker
+from pipeline.rig.true_robot import ErrorSigmas
+from pipeline.robots import get_robot
+
+FAULTS = ("bias", "dropouts", "outliers")
+SENSORS = ("sonic", "tracker")
+#: ``lab``: temperature linear in height, one slow drift (uniform 70 °F when noiseless);
+#: ``drifting``: a speed of sound exactly linear in height drifting with periods of 8-45
+#: min (:func:`pipeline.rig.atmosphere.drifting_linear_air`), noiseless or not.
+AIRS = ("lab", "drifting")
+
+
+@dataclass(frozen=True)
+class SimulationOptions:
+    """Everything ``pipeline simulate`` can set (boundary units)."""
+
+    robot: str = "puma560"
+    seed: int = 1
+    sigmas: ErrorSigmas = field(default_factory=ErrorSigmas)
+    noise_factor: float = 1.0
+    points: int = 100  # N_i (Section 6.4)
+    repeats: int = 10  # N_avg (Section 6.4)
+    faults: tuple[str, ...] = ()
+    wac_error_cm: float = 0.0  # W_AC calibration error (Section 7.3)
+    noiseless: bool = False
+    max_sweep_deg: float = 300.0  # cap of every revolute sweep (B-3 experiments)
+    resettle_counts: int = 0  # held joints re-settle by ±1..K counts between sweeps
+    sensor: str = "sonic"  # or "tracker" (pipeline.rig.tracker)
+    targets: int = 1  # tracker: reflectors per sweep (a nest), ids T1..TK
+    nest_on_axis: int = 0  # tracker: joint whose sweep's last reflector is on its axis
+    check: int = 0  # tracker: validation configurations (sweep "check")
+    poses: int = 0  # tracker: random whole-arm configurations identified (sweep "poses")
+    sweeps: bool = True  # joint sweeps and the tool measurement (False: a pose set only)
+    plan_file: str = ""  # tracker: a pose plan (pipeline plan) recorded as the pose set
+    six_d: bool = False  # tracker: the pose set's tool target also measures its orientation
+    air: str = "lab"  # or "drifting" (AIRS)
+    log_jitter_s: float = 0.0  # each measurement logged U(0, this) s after it was measured
+    compliance_mm: float = 0.0  # the true joints deflect under gravity (RMS flange move, mm)
+    harmonic_deg: float = 0.0  # the true joints' first-harmonic angle errors (RMS, deg)
+    payloads_kg: tuple[float, ...] = ()  # payloads on the flange, cycled over the pose set
+    backlash_mm: float = 0.0  # the true joints' backlash under gravity (RMS flange move, mm)
+
+
+def check_options(opts: SimulationOptions) -> None:
+    bad = [f for f in opts.faults if f not in FAULTS]
+    if bad:
+        raise ArmsigError(
+            f"unknown fault {bad[0]!r}", expected=", ".join(FAULTS), fix="--faults bias,dropouts"
+        )
+    numbers = {
+        **{f"sigmas.{k}": v for k, v in asdict(opts.sigmas).items()},
+        "noise_factor": opts.noise_factor,
+        "max_sweep_deg": opts.max_sweep_deg,
+    }
+    for name, value in numbers.items():
+        if not (np.isfinite(value) and value >= 0.0):
+            raise ArmsigError(
+                f"simulation option {name} must be a finite number >= 0", got=repr(value)
+            )
+    if not (0.0 < opts.max_sweep_deg <= 720.0 and np.isfinite(opts.wac_error_cm)):
+        raise ArmsigError(
+            "simulation options out of range",
+            expected="0 < max_sweep_deg <= 720 and a finite wac_error_cm",
+            got=f"max_sweep_deg={opts.max_sweep_deg}, wac_error_cm={opts.wac_error_cm}",
+        )
+    _check_tracker(opts)
+    if opts.air not in AIRS:
+        raise ArmsigError(
+            f"unknown air {opts.air!r}", expected=" or ".join(AIRS), fix="--air drifting"
+        )
+    if not all(np.isfinite(m) and 0.0 <= m <= 1000.0 for m in opts.payloads_kg):
+        raise ArmsigError(
+            "simulation option payloads_kg out of range",
+            expected="masses from 0 to 1000 kg",
+            got=repr(list(opts.payloads_kg)),
+            fix="--payloads 0,10",
+        )
+    for name, top in (("compliance_mm", 10.0), ("harmonic_deg", 1.0), ("backlash_mm", 10.0)):
+        value = getattr(opts, name)
+        if not (np.isfinite(value) and 0.0 <= value <= top):
+            raise ArmsigError(
+                f"simulation option {name} out of range", expected=f"0 to {top}", got=repr(value)
+            )
+    if not (np.isfinite(opts.log_jitter_s) and 0.0 <= opts.log_jitter_s <= 60.0):
+        raise ArmsigError(
+            "simulation option log_jitter_s out of range",
+            expected="0 to 60 s",
+            got=repr(opts.log_jitter_s),
+            fix="--log-jitter-s 1",
+        )
+    if opts.points < 3 or opts.repeats < 1:
+        raise ArmsigError(
+            "too few measurements",
+            expected="--points >= 3 and --repeats >= 1",
+            got=f"points={opts.points}, repeats={opts.repeats}",
+        )
+    if opts.resettle_counts < 0:
+        raise ArmsigError(
+            "simulation option resettle_counts must be >= 0",
+            got=str(opts.resettle_counts),
+            fix="--resettle-counts 2 (or 0: held joints never move)",
+        )
+
+
+def options_for_truth(opts: SimulationOptions) -> dict[str, object]:
+    """The options as rig-truth.json records them; ``resettle_counts``, ``air`` and
+    ``log_jitter_s`` only when set, so that sessions simulated without them keep their
+    bytes."""
+    out = {**asdict(opts), "faults": list(opts.faults), "payloads_kg": list(opts.payloads_kg)}
+    for name, default in (
+        ("resettle_counts", 0), ("air", "lab"), ("log_jitter_s", 0.0),
+        ("poses", 0), ("sweeps", True), ("plan_file", ""), ("six_d", False),
+        ("compliance_mm", 0.0), ("harmonic_deg", 0.0), ("payloads_kg", []),
+        ("backlash_mm", 0.0),
+    ):  # fmt: skip
+        if out[name] == default:
+            del out[name]
+    return out
+
+
+def _check_tracker(opts: SimulationOptions) -> None:
+    if opts.sensor not in SENSORS:
+        raise ArmsigError(
+            f"unknown sensor {opts.sensor!r}", expected=", ".join(SENSORS), fix="--sensor tracker"
+        )
+    point_only = (
+        opts.targets != 1 or opts.nest_on_axis or opts.check or opts.poses or opts.plan_file
+    )
+    if opts.six_d and not (opts.poses or opts.plan_file):
+        raise ArmsigError(
+            "--six-d measures the pose set's tool orientation: there is no pose set",
+            expected="--poses N or --plan FILE with --sensor tracker",
+            fix="--poses 30 --six-d",
+        )
+    if opts.plan_file and opts.poses:
+        raise ArmsigError(
+            "--plan and --poses both give the pose set",
+            expected="one of them: the poses of a plan file, or N random poses",
+            fix="drop --poses (the plan file says how many)",
+        )
+    if opts.sensor == "sonic" and (point_only or not opts.sweeps):
+        raise ArmsigError(
+            "--targets, --nest-on-axis, --check, --poses and --no-sweeps need a point sensor",
+            expected="--sensor tracker",
+            got=f"--sensor {opts.sensor}",
+        )
+    in_range = 0 <= opts.check <= 10_000 and 0 <= opts.poses <= 100_000
+    if not 1 <= opts.targets <= tracker.MAX_TARGETS or not in_range:
+        raise ArmsigError(
+            "tracker options out of range",
+            expected=f"--targets 1 to {tracker.MAX_TARGETS}, --check 0 to 10000, "
+            "--poses 0 to 100000",
+            got=f"--targets {opts.targets}, --check {opts.check}, --poses {opts.poses}",
+        )
+    if not opts.sweeps and opts.poses == 0 and not opts.plan_file:
+        raise ArmsigError(
+            "--no-sweeps leaves nothing to identify",
+            expected="joint sweeps, or a pose set (--poses N)",
+            fix="--poses 50 --no-sweeps",
+        )
+    robot = get_robot(opts.robot)
+    j = opts.nest_on_axis
+    if j and not (1 <= j <= robot.n_joints and not robot.prismatic[j - 1] and opts.targets > 1):
+        raise ArmsigError(
+            f"--nest-on-axis {j}: no revolute joint {j} with a nest of several targets",
+            expected=f"a revolute joint of {robot.name} (1 to {robot.n_joints}) and --targets >= 2",
+            fix="--targets 3 --nest-on-axis 6",
+        )
