@@ -13,8 +13,11 @@ Beside each, the design model's error at the same position (``design_error_cm``,
 41): the design chain with its base and every measured point registered to the positions
 the fit of that position used (the check configurations: every fit position; k-fold: the
 fold's kept positions) (:func:`pipeline.refine.baseline.register_design_points`), so the
-gain over the design is measured on data neither saw. Zero rows when the refinement is
-disabled.
+gain over the design is measured on data neither saw. Not for a sonic session refined at
+its ranges: its held-out positions are triangulated with the recorded calibration, which
+the design registered to them absorbs and the self-calibrated signature does not (the
+SCARA walk-through read 0.5× "the design" held out where the audit gives 31.6×). Zero
+rows when the refinement is disabled.
 """
 
 from __future__ import annotations
@@ -110,7 +113,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     rigid = None
     if sp.problem.model.terms:  # the same held-out positions without the terms (issue 27)
         rigid = _rigid_held_out(inputs, params, summ)
-    return _table(*keys, held, rigid, _design_held_out(inputs, sp, held))
+    design = None if summ.get("level") == "ranges" else _design_held_out(inputs, sp, held)
+    return _table(*keys, held, rigid, design)
 
 
 def _design_held_out(inputs: Mapping[str, Any], sp: Any, held: Any) -> np.ndarray:
@@ -208,7 +212,7 @@ def _held_out(
     check = _check_rows(inputs, pos)
     if check is not None:
         rows, theta = check
-        cov_m = scale * _covariances(inputs, rows)
+        cov_m = _measurement_covariances(inputs, rows, scale)
         sweep, step = (rows.column(c).to_numpy() for c in ("sweep", "step"))
         payload = np.nan_to_num(payloads_at(inputs["joints"], sweep, step), nan=0.0)
         held = check_configurations(
@@ -219,7 +223,7 @@ def _held_out(
     keys = sp.problem.block.keys
     at = rows_at(keys, pos)
     rows = pos.take(pa.array(at, mask=at < 0))  # a key without a position: a null row
-    cov_m = scale * _covariances(inputs, rows)
+    cov_m = _measurement_covariances(inputs, rows, scale)
 
     def full_refit(keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         sol = refit(sp.problem, keep, x_hat)
@@ -234,6 +238,23 @@ def _held_out(
     step = keys.column("step").to_numpy()[k].tolist()
     target = [keys.column("target")[int(i)].as_py() for i in k]
     return (sweep[k].tolist(), step, target), held
+
+
+def _measurement_covariances(
+    inputs: Mapping[str, Any], rows: pa.Table, scale: float
+) -> np.ndarray:
+    """What a held-out position's error holds besides the fit's: its covariance scaled by
+    the fit's χ²/dof ``scale``; where the fit left unmodelled error (stage
+    ``uncertainty``'s ``sigma_unmodelled_cm``, issue 41), the covariance as stated and
+    that error's ``u²/3`` per axis instead (the arm's error the model leaves out, measured
+    on the fit's raw residuals, not the robust χ²'s scale)."""
+    unc = inputs.get("uncertainty")
+    u = 0.0
+    if unc is not None and unc.num_rows and "sigma_unmodelled_cm" in unc.column_names:
+        u = float(unc.column("sigma_unmodelled_cm").to_numpy()[0])
+    if not u > 0:
+        return scale * _covariances(inputs, rows)
+    return _covariances(inputs, rows) + (u**2 / 3.0) * np.eye(3)
 
 
 def _covariances(inputs: Mapping[str, Any], rows: pa.Table) -> np.ndarray:
@@ -302,8 +323,9 @@ STAGE = Stage(
     # 3: the problem rebuilt with every refine.* parameter (speed_knot_s crashed it), and
     # single-cycle sonic positions' covariances from the range noise law (issue 33);
     # 4: rigid_error_cm, the same positions held out of the rigid fit (issue 27);
-    # 5: design_error_cm, the registered design model at the same positions (issue 41)
-    ("session", "refine", "positions", "joints", "frames", "chain", "ranges"),
+    # 5: design_error_cm, the registered design model at the same positions, and the
+    # expected error with the fit's unmodelled error (issue 41)
+    ("session", "refine", "positions", "joints", "frames", "chain", "uncertainty", "ranges"),
     Params(),
     compute,
     "held-out position errors of the refined chain (k-fold or check configurations)",
