@@ -115,7 +115,10 @@ def test_check_warns_on_stderr_and_keeps_json_stdout(checked: Path, tmp_path: Pa
     r = runner.invoke(app, ["ik", str(checked), *_pose(checked), "--json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["verdict"] == "CHECK"
-    assert r.stderr.startswith("warning: ") and "verdict is CHECK (the signature is no better" in r.stderr
+    assert (
+        r.stderr.startswith("warning: ")
+        and "verdict is CHECK (the signature is no better" in r.stderr
+    )
     out = tmp_path / "s.dh.json"
     r = runner.invoke(app, ["export", str(checked), "--format", "dh", "--out", str(out)])
     assert r.exit_code == 0 and out.is_file() and "verdict is CHECK" in r.stderr, r.output

@@ -336,9 +336,11 @@ def _gain_reasons(e: Evidence, t: Thresholds, sensor_off: bool) -> list[Reason]:
     significantly worse on held-out data, CHECK when it is no better, or when the held-out
     positions were triangulated with a sensor calibration found off (``sensor_off``)."""
     g = e.gain
-    if g is None or g >= t.min_gain:
-        return []
     h, d = e.holdout_rms_cm, e.holdout_design_rms_cm
+    if g is None or h is None or d is None or g >= t.min_gain:
+        return []
+    if h - t.min_gain * d <= t.floor_cm:  # the excess is rounding (noiseless data)
+        return []
     worse = e.worse_sigmas is not None and e.worse_sigmas > t.gain_sigmas
     text = (
         f"the signature is {'worse than' if worse else 'no better than'} the design model on "
@@ -374,8 +376,7 @@ def _requirement(e: Evidence, t: Thresholds) -> tuple[list[Reason], str]:
                     rule,
                     max(over) * 10 if over else None,
                     req_mm,
-                    f"the requirement is not met: {why} {what} > {req_mm:g} mm "
-                    f"(verdict.{rule})",
+                    f"the requirement is not met: {why} {what} > {req_mm:g} mm (verdict.{rule})",
                 )
             )
         else:
@@ -480,12 +481,14 @@ def _line(level: str, e: Evidence, reasons: tuple[str, ...], t: Thresholds) -> s
         p95 = "" if e.predicted_p95_cm is None else f"95 % {_g(e.predicted_p95_cm)}"
         u = f"unmodelled {_g(e.unmodelled_rms_cm)}" if e.unmodelled_rms_cm else ""
         inner = ", ".join(x for x in (p95, u) if x)
-        parts.append(f"predicted {_g(e.predicted_rms_cm)} cm RMS" + (f" ({inner})" if inner else ""))
+        parts.append(
+            f"predicted {_g(e.predicted_rms_cm)} cm RMS" + (f" ({inner})" if inner else "")
+        )
     if e.holdout_rms_cm is not None:
         hx = e.holdout_expected_rms_cm
         there = "" if hx is None else f" (predicted there {_g(hx)})"
         parts.append(f"held-out {_g(e.holdout_rms_cm)} cm{there}")
-    if e.gain is not None:
+    if e.gain is not None and (e.holdout_design_rms_cm or 0.0) > t.floor_cm:
         parts.append(
             f"{_times(e.gain)}× the design model held out ({_g(e.holdout_design_rms_cm or 0.0)} "
             f"→ {_g(e.holdout_rms_cm or 0.0)} cm)"

@@ -240,21 +240,22 @@ def _held_out(
     return (sweep[k].tolist(), step, target), held
 
 
-def _measurement_covariances(
-    inputs: Mapping[str, Any], rows: pa.Table, scale: float
-) -> np.ndarray:
+def _measurement_covariances(inputs: Mapping[str, Any], rows: pa.Table, scale: float) -> np.ndarray:
     """What a held-out position's error holds besides the fit's: its covariance scaled by
     the fit's χ²/dof ``scale``; where the fit left unmodelled error (stage
     ``uncertainty``'s ``sigma_unmodelled_cm``, issue 41), the covariance as stated and
     that error's ``u²/3`` per axis instead (the arm's error the model leaves out, measured
     on the fit's raw residuals, not the robust χ²'s scale)."""
     unc = inputs.get("uncertainty")
-    u = 0.0
+    u, stated = 0.0, True
     if unc is not None and unc.num_rows and "sigma_unmodelled_cm" in unc.column_names:
         u = float(unc.column("sigma_unmodelled_cm").to_numpy()[0])
+        stated = bool(np.isfinite(unc.column("unmodelled_p_value").to_numpy()[0]))
     if not u > 0:
         return scale * _covariances(inputs, rows)
-    return _covariances(inputs, rows) + (u**2 / 3.0) * np.eye(3)
+    # without a stated noise the points' 1 cm weights are no covariance: the residual is all
+    cov = _covariances(inputs, rows) if stated else np.zeros((rows.num_rows, 3, 3))
+    return cov + (u**2 / 3.0) * np.eye(3)
 
 
 def _covariances(inputs: Mapping[str, Any], rows: pa.Table) -> np.ndarray:
