@@ -47,3 +47,28 @@ def test_the_optimum_is_the_converged_alternation() -> None:
     for d in np.vstack([np.eye(3), -np.eye(3)]) * 1e-4:
         e = b.errors(q, m - d)  # the same as the base translated by d
         assert np.sqrt(np.mean(e**2)) >= rms - 1e-12
+
+
+def test_points_on_every_link_register_exactly() -> None:
+    """Issue 41: the joint sweeps' targets sit on their links; the design with its base and
+    one point per link registered to noiseless points of it gives them back exactly, from
+    a base 2 cm and 3° off and every point at its link's origin."""
+    from pipeline.refine.baseline import register_design_points
+
+    rng = np.random.default_rng(5)
+    robot = get_robot(UR10)
+    chain = robot.design_chain()
+    lim = np.radians(robot.limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], (600, 6))
+    link = np.repeat(np.arange(1, 7), 100)
+    points = rng.uniform(-8.0, 8.0, (6, 3))
+    B = trans(100.0, -50.0, 20.0) @ rot_z(0.7) @ rot_x(0.1)
+    F = link_frames(chain, q)[np.arange(600), link]
+    p = np.einsum("kij,kj->ki", F[:, :3, :3], points[link - 1]) + F[:, :3, 3]
+    m = p @ B[:3, :3].T + B[:3, 3]
+    start = trans(102.0, -50.0, 20.0) @ rot_z(0.75) @ rot_x(0.1)
+    b = register_design_points(chain, q, m, link, link - 1, start)
+    assert b.errors_cm.max() < 1e-9
+    np.testing.assert_allclose(b.base, B, atol=1e-9)
+    np.testing.assert_allclose(b.targets, points, atol=1e-9)
+    np.testing.assert_allclose(b.errors(q, m, link, link - 1), b.errors_cm, atol=1e-12)
