@@ -249,12 +249,12 @@ def _chi2_reason(e: Evidence, t: Thresholds) -> Reason | None:
         return None
     chi2 = f"χ²/dof {_pair(c, t.chi2_check)[0]} > {t.chi2_check:g}"
     sigma, h, u = e.stated_sigma_cm, e.holdout_rms_cm, e.unmodelled_rms_cm
-    if sigma is None or not sigma > 0:
+    seen = h if h is not None else u
+    if sigma is None or not sigma > 0 or seen is None:
         text = f"{chi2}: the noise model underestimates the scatter"
         if u:
             text += f" (unmodelled error {10 * u:.2g} mm RMS)"
         return Reason(CHECK, "chi2_check", c, t.chi2_check, text)
-    seen = h if h is not None else u
     where = "held out" if h is not None else "beyond the noise in the fit"
     text = (
         f"accuracy limited by unmodelled error: {10 * seen:.2g} mm RMS {where}, "
