@@ -66,7 +66,7 @@ def test_tables_figures_and_report(small: StudyResult, tmp_path: Path) -> None:
 
 
 def test_compliance_runs_after_refine_in_all() -> None:
-    assert LATER == ("refine", "compliance")
+    assert LATER[:2] == ("refine", "compliance")
 
 
 def test_the_re_record_command_names_the_compliance() -> None:

@@ -86,7 +86,7 @@ def test_tables_figures_and_report(in_process: StudyResult, tmp_path: Path) -> N
 
 
 def test_refine_runs_last_in_all() -> None:
-    assert LATER[0] == "refine" and STUDY_NAMES[-3:] == ("refine", "compliance", "all")
+    assert LATER[0] == "refine" and STUDY_NAMES[-4:] == ("refine", "compliance", "verdict", "all")
 
 
 def test_a_failed_session_names_the_simulate_command_that_re_records_it() -> None:

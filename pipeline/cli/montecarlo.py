@@ -21,8 +21,10 @@ def montecarlo(
             "encoder, machining, noise, points, radius, misalignment, features, refine "
             "(S-Model against refined signature; whole simulate + identify sessions, seconds of "
             "CPU per robot and setting: docs/montecarlo.md), compliance (rigid fit against a "
-            "fit with joint compliance on compliant robots; seconds of CPU per robot) or all "
-            "(refine, compliance last)."
+            "fit with joint compliance on compliant robots; seconds of CPU per robot), verdict "
+            "(the verdict's false alarms on clean sessions of six kinds, --robots sessions per "
+            "kind, seeds --seed onwards; ~1 s of CPU per session) or all (refine, compliance, "
+            "verdict last)."
         ),
     ],
     robots: Annotated[

@@ -84,6 +84,7 @@ class Study(StrEnum):
     features = "features"
     refine = "refine"
     compliance = "compliance"
+    verdict = "verdict"
     all = "all"
 
 

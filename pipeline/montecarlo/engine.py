@@ -4,6 +4,8 @@ A :class:`Study` names the swept parameter, its values and a function that
 evaluates a batch of robots (one seed sequence each) at one value. Batches are
 independent and each robot has its own stream (:func:`~.stats.robot_seeds`),
 so the result is the same for any batch size and any number of workers.
+:func:`run_tasks` is where every study's tasks run (this process, a process pool or
+Dask), the swept studies' batches and the ``verdict`` study's sessions alike.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from typing import Any, TextIO
+from typing import Any, TextIO, TypeVar
 
 import numpy as np
 
@@ -25,6 +27,7 @@ from pipeline.progress import Progress
 Evaluate = Callable[[float, list[np.random.SeedSequence]], Array]
 #: ``(all parameter values, seeds of a batch) -> values (settings, batch, K)``.
 EvaluateAll = Callable[[tuple[float, ...], list[np.random.SeedSequence]], Array]
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -127,26 +130,39 @@ def run_study(
             jobs += [([s], a, seeds[a : a + size]) for a in range(0, robots, size)]
     bar = Progress(study.name, len(jobs), progress)
     t0 = time.perf_counter()
-    results: list[Array] = []
-    if client is not None:
-        futures = client.map(
-            _run_batch, [study] * len(jobs), *zip(*[(st, sd) for st, _, sd in jobs], strict=True),
-            pure=False,
-        )  # fmt: skip
-        for f in futures:  # in submission order: deterministic assembly
-            results.append(f.result())
-            bar.step()
-    elif workers <= 1:
-        for settings, _, seeds in jobs:
-            results.append(_run_batch(study, settings, seeds))
-            bar.step()
-    else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = [pool.submit(_run_batch, study, st, seeds) for st, _, seeds in jobs]
-            for f in futures:  # in submission order: deterministic assembly
-                results.append(f.result())
-                bar.step()
+    tasks = [(study, st, sd) for st, _, sd in jobs]
+    results = run_tasks(_run_batch, tasks, workers, bar, client)
     values = np.empty((n_set, robots, len(study.index_names)))
     for (settings, a, seeds), res in zip(jobs, results, strict=True):
         values[settings, a : a + len(seeds)] = res
     return StudyResult(study, values, summarize(values), seed, time.perf_counter() - t0)
+
+
+def run_tasks(
+    fn: Callable[..., T],
+    tasks: list[tuple[Any, ...]],
+    workers: int,
+    bar: Progress,
+    client: Any = None,
+) -> list[T]:
+    """``fn(*task)`` of every task, in submission order (deterministic assembly): as Dask
+    tasks on ``client`` when given, else in a pool of ``workers`` processes, else (one
+    worker) in this process. ``fn`` is a plain module-level function (picklable);
+    placement and scheduling are the pool's or Dask's. ``bar`` steps once per task."""
+    results: list[T] = []
+    if client is not None:
+        futures = client.map(fn, *zip(*tasks, strict=True), pure=False) if tasks else []
+        for f in futures:
+            results.append(f.result())
+            bar.step()
+    elif workers <= 1:
+        for task in tasks:
+            results.append(fn(*task))
+            bar.step()
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = [pool.submit(fn, *task) for task in tasks]
+            for f in futures:
+                results.append(f.result())
+                bar.step()
+    return results

@@ -8,6 +8,8 @@
 ``OUT/features/features.arrow``, ``features.png``  Section 6.6
 ``OUT/refine/rms.png``, ``gain.png``, ``calibration.png``  issue 15 (:mod:`.refine_report`)
 ``OUT/compliance/fits.png``, ``calibration.png``  issue 27 (:mod:`.compliance_report`)
+``OUT/verdict/sessions.arrow``, ``summary.arrow``, ``rules.arrow``, ``ratio.png``  issue 41
+                               (:mod:`.verdict_report`)
 
 Each table carries ``schema_name`` and ``schema_version`` in its schema metadata and
 ``armsig.package_version`` beside its other provenance, as the stage tables do.
@@ -33,7 +35,11 @@ SCHEMA_VERSION = "1"
 #: Studies with their own indices, figures and ``montecarlo.md`` section (not the 12-vertex
 #: grid's), in the report's order: the module of each (``write_figures``, ``section``,
 #: ``HEADING``).
-OWN_REPORTS = {"refine": "refine_report", "compliance": "compliance_report"}
+OWN_REPORTS = {
+    "refine": "refine_report",
+    "compliance": "compliance_report",
+    "verdict": "verdict_report",
+}
 
 
 def own_report(study: str) -> Any:
@@ -43,8 +49,11 @@ def own_report(study: str) -> Any:
     return importlib.import_module(f"pipeline.montecarlo.{OWN_REPORTS[study]}")
 
 
-def _write(path: Path, table: Any, schema_name: str, provenance: dict[str, Any]) -> None:
-    """``table`` written as a stage table is: schema name and version, package version."""
+def write_montecarlo_table(
+    path: Path, table: Any, schema_name: str, provenance: dict[str, Any]
+) -> None:
+    """``table`` written as a stage table is: schema name and version, package version (every
+    Monte-Carlo table)."""
     meta = dict(table.schema.metadata or {})
     meta.update({b"schema_name": schema_name.encode(), b"schema_version": SCHEMA_VERSION.encode()})
     prov = {**provenance, "package_version": __version__}
@@ -71,13 +80,13 @@ def write_study(out_dir: Path, res: StudyResult) -> Path:
     names, units = list(st.index_names), list(st.index_units)
     values = np.asarray(st.values, float)
     prov = _provenance(res)
-    _write(
+    write_montecarlo_table(
         d / "indices.arrow",
         indices_table(st.name, st.parameter, st.parameter_unit, values, res.values, names, units),
         "montecarlo_indices",
         prov,
     )
-    _write(
+    write_montecarlo_table(
         d / "summary.arrow",
         summary_table(
             st.name,
@@ -218,7 +227,7 @@ def write_features(out_dir: Path, res: Any) -> Path:
         "fit_6_13": list(res.fit_613),
         "wall_s": round(res.wall_s, 3),
     }
-    _write(d / "features.arrow", features_table(res), "montecarlo_features", prov)
+    write_montecarlo_table(d / "features.arrow", features_table(res), "montecarlo_features", prov)
     fig = Figure(figsize=(10.0, 3.8))
     fig.subplots_adjust(left=0.07, right=0.98, bottom=0.14, top=0.86, wspace=0.25)
     ax1, ax2 = fig.subplots(1, 2)

@@ -19,13 +19,15 @@ are the same bits, and two workers on two cores do not oversubscribe them.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import shutil
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
+from typing import Any, TypeVar
 
 import numpy as np
 import scipy.linalg  # noqa: F401  (its OpenBLAS loaded before the thread limit is set)
@@ -47,6 +49,7 @@ INDEX_NAMES = (
 )  # fmt: skip
 INDEX_UNITS = ("cm", "cm", "cm", "cm", "", "cm", "cm", "", "", "", "")
 INDEX_SIGNED = (False,) * len(INDEX_NAMES)
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -84,7 +87,7 @@ def session_accuracy(session_dir: str | Path) -> SessionAccuracy:
     d = Path(session_dir)
     errors = table_errors(d, ("frames", "chain"))
     scale = float(refine_summary(read_table(stage_path(d, "refine"))).get("noise_scale", math.nan))
-    verdict = read_table(stage_path(d, "verdict")).to_pylist()[0]
+    verdict = verdict_row(d)
     predicted = verdict["predicted_rms_cm"]
     predicted = math.nan if predicted is None else float(predicted)
     return SessionAccuracy(
@@ -95,6 +98,15 @@ def session_accuracy(session_dir: str | Path) -> SessionAccuracy:
         chi2_per_dof=scale**2,
         verdict=str(verdict["verdict"]),
     )
+
+
+def verdict_row(session_dir: Path) -> dict[str, Any]:
+    """The one row of an identified session's ``verdict`` stage table, by column name."""
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.tables import read_table
+
+    row: dict[str, Any] = read_table(stage_path(session_dir, "verdict")).to_pylist()[0]
+    return row
 
 
 def simulate_seed(seed: np.random.SeedSequence) -> int:
@@ -117,23 +129,32 @@ def indices(acc: SessionAccuracy, sim_seed: int) -> Array:
 
 
 def simulate_command(opts: SimulationOptions) -> str:
-    """The ``pipeline simulate`` command that re-records a study's session of ``opts``."""
+    """The ``pipeline simulate`` command that re-records a study's session of ``opts`` (the
+    options the studies set; the others at their defaults)."""
     flags = (
         f"--seed {opts.seed} --noise-factor {opts.noise_factor:g} --points {opts.points} "
         f"--repeats {opts.repeats}"
     )
+    if opts.sensor != "sonic":
+        flags += f" --sensor {opts.sensor}"
+    if opts.poses:
+        flags += f" --poses {opts.poses}"
+    if not opts.sweeps:
+        flags += " --no-sweeps"
     if opts.compliance_mm:
         flags += f" --compliance {opts.compliance_mm:g}"
+    if opts.backlash_mm:
+        flags += f" --backlash-mm {opts.backlash_mm:g}"
     return f"pipeline simulate NAME {flags}"
 
 
 def run_session(
     folder: Path,
     opts: SimulationOptions,
-    measure: Callable[[Path], Array],
+    measure: Callable[[Path], T],
     study: str = "refine",
     identify: str = "pipeline identify sessions/NAME",
-) -> Array:
+) -> T:
     """Simulate the session of ``opts`` in ``folder`` (deleted after) and return
     ``measure(folder)``, which identifies and audits it; a failure names the commands
     (``identify``: the study's identification) that re-record and re-identify it."""
@@ -159,19 +180,27 @@ def each_session(
 ) -> Array:
     """Indices (settings, robots, ``n_indices``) of ``session(folder, simulate seed,
     setting)`` for every robot (its :func:`simulate_seed`) and setting, each in its own
-    folder of one temporary directory, with one BLAS thread (the module docstring)."""
+    folder of :func:`session_folders`."""
+    out = np.empty((len(values), len(seeds), n_indices))
+    with session_folders() as tmp:
+        for r, seq in enumerate(seeds):
+            sim_seed = simulate_seed(seq)
+            for s, value in enumerate(values):
+                out[s, r] = session(tmp / f"robot{r}-setting{s}", sim_seed, float(value))
+    return out
+
+
+@contextlib.contextmanager
+def session_folders() -> Iterator[Path]:
+    """A temporary directory for a task's sessions, its work done with one BLAS thread (the
+    module docstring); removed after."""
     from pipeline.stages.runner import one_blas_thread
 
-    out = np.empty((len(values), len(seeds), n_indices))
     with (
         one_blas_thread(),
         tempfile.TemporaryDirectory(prefix="armsig-montecarlo-") as tmp,
     ):
-        for r, seq in enumerate(seeds):
-            sim_seed = simulate_seed(seq)
-            for s, value in enumerate(values):
-                out[s, r] = session(Path(tmp) / f"robot{r}-setting{s}", sim_seed, float(value))
-    return out
+        yield Path(tmp)
 
 
 def _identified(folder: Path, sim_seed: int) -> Array:

@@ -61,7 +61,8 @@ def summarize(values: Array) -> Summary:
     return Summary(mean, std, std / np.sqrt(r), std / np.sqrt(2.0 * (r - 1)), r)
 
 
-def _field(name: str, typ: pa.DataType, unit: str, description: str) -> pa.Field:
+def arrow_field(name: str, typ: pa.DataType, unit: str, description: str) -> pa.Field:
+    """A nullable column of a Monte-Carlo table, its unit and description in its metadata."""
     return pa.field(name, typ, nullable=True, metadata={"unit": unit, "description": description})
 
 
@@ -107,13 +108,15 @@ def indices_table(
     what = {"cm": "a length", "deg": "an angle", "": "without unit"}
     schema = pa.schema(
         [
-            _field("study", pa.string(), "", "study name"),
-            _field("setting", pa.int32(), "", "setting number, 0-based"),
-            _field(parameter, pa.float64(), parameter_unit, "swept parameter"),
-            _field("robot", pa.int32(), "", "robot number within the setting, 0-based"),
-            _field("index", pa.string(), "", "performance index (Section 7.2.1), unit suffixed"),
+            arrow_field("study", pa.string(), "", "study name"),
+            arrow_field("setting", pa.int32(), "", "setting number, 0-based"),
+            arrow_field(parameter, pa.float64(), parameter_unit, "swept parameter"),
+            arrow_field("robot", pa.int32(), "", "robot number within the setting, 0-based"),
+            arrow_field(
+                "index", pa.string(), "", "performance index (Section 7.2.1), unit suffixed"
+            ),
             *(
-                _field(_suffixed("value", u), pa.float64(), u, f"index value when {what[u]}")
+                arrow_field(_suffixed("value", u), pa.float64(), u, f"index value when {what[u]}")
                 for u in cols
             ),
         ]
@@ -144,12 +147,12 @@ def summary_table(
     """One row per (setting, index): mean, std and their standard errors."""
     s, k = summary.mean.shape
     fields = [
-        _field("study", pa.string(), "", "study name"),
-        _field("setting", pa.int32(), "", "setting number, 0-based"),
-        _field(parameter, pa.float64(), parameter_unit, "swept parameter"),
-        _field("index", pa.string(), "", "performance index, unit suffixed"),
-        _field("signed", pa.bool_(), "", "index takes any real value (19 of 34)"),
-        _field("robots", pa.int32(), "", "robots in the setting"),
+        arrow_field("study", pa.string(), "", "study name"),
+        arrow_field("setting", pa.int32(), "", "setting number, 0-based"),
+        arrow_field(parameter, pa.float64(), parameter_unit, "swept parameter"),
+        arrow_field("index", pa.string(), "", "performance index, unit suffixed"),
+        arrow_field("signed", pa.bool_(), "", "index takes any real value (19 of 34)"),
+        arrow_field("robots", pa.int32(), "", "robots in the setting"),
     ]
     arrays = [
         pa.array([study] * (s * k)),
@@ -166,6 +169,6 @@ def summary_table(
         ("se_std", "standard error of the std, std / sqrt(2 (R - 1))"),
     ):
         for unit, col in _by_unit(getattr(summary, stat), units).items():
-            fields.append(_field(_suffixed(stat, unit), pa.float64(), unit, desc))
+            fields.append(arrow_field(_suffixed(stat, unit), pa.float64(), unit, desc))
             arrays.append(_masked(col))
     return pa.table(arrays, schema=pa.schema(fields))

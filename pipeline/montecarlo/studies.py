@@ -12,12 +12,14 @@ misalignment   W_AC error −1 … +1 cm (11 values)            signature (7.3)
 features       sweep X, N, noise (Section 6.6)              feature fits only
 refine         k = 1, 4.6, 10 times (7.9)                   audit: S-Model, refined
 compliance     true compliance 0, 0.3 mm                    audit: rigid, with terms
+verdict        kind of session (6 kinds)                    verdict; audit
 =============  ==========================================  ======================
 
 ``refine`` (issue 15) runs whole ``pipeline simulate`` + ``identify`` sessions, seconds of
 CPU per robot and setting (the thesis studies: ~0.02 s; measured in docs/montecarlo.md);
-``compliance`` (issue 27) two such sessions per robot, each identified twice; ``--study
-all`` runs them last.
+``compliance`` (issue 27) two such sessions per robot, each identified twice; ``verdict``
+(issue 41) one session per kind and seed, counting the verdict's false alarms (not a swept
+study of the engine: its records are rules by name); ``--study all`` runs them last.
 """
 
 from __future__ import annotations
@@ -142,7 +144,7 @@ def _registry() -> dict[str, Study]:
 #: The thesis's swept studies in the order ``--study all`` runs them (then ``features``).
 SWEPT = ("encoder", "machining", "noise", "points", "radius", "misalignment")
 #: Studies of issues after the thesis, run by ``--study all`` after the thesis's.
-LATER = ("refine", "compliance")
+LATER = ("refine", "compliance", "verdict")
 STUDY_NAMES = (*SWEPT, "features", *LATER, "all")
 
 
@@ -157,18 +159,22 @@ def get_study(name: str) -> Study:
 @dataclass(frozen=True)
 class StudyRun:
     """One study of a ``montecarlo`` run: where its tables went and, for a swept study,
-    its settings and the mean and std of every index over the robots (settings × indices)."""
+    its settings and the mean and std of every index over the robots (settings × indices);
+    for the verdict study, each kind's verdict counts, rules and audited / predicted."""
 
     name: str
     folder: Path
     wall_s: float
-    robots: int  # robots per setting; the features study: trials per configuration
-    result: Any  # StudyResult, or the features study's result
+    robots: int  # robots per setting; features: trials per configuration; verdict: sessions
+    result: Any  # StudyResult, or the features or verdict study's result
 
     @property
     def line(self) -> str:
         if self.name == "features":
             return f"features: 36 configurations, {self.wall_s:.1f} s"
+        if self.name == "verdict":
+            kinds = len(self.result.kinds)
+            return f"verdict: {self.robots} sessions x {kinds} kinds, {self.wall_s:.1f} s"
         settings = len(self.result.study.values)
         return f"{self.name}: {self.robots} robots x {settings} settings, {self.wall_s:.1f} s"
 
@@ -179,6 +185,14 @@ class StudyRun:
             r = self.result
             return {**out, "trials": r.trials, "radius_cm": r.radius_cm,
                     "fit_6_12": list(r.fit_612), "fit_6_13": list(r.fit_613)}  # fmt: skip
+        if self.name == "verdict":
+            kinds = [
+                {"kind": k.kind, "clean": k.clean, "sessions": k.sessions, "counts": k.counts,
+                 "rules": [{"rule": r, "level": lv, "sessions": c} for r, lv, c in k.rules],
+                 "audited_over_predicted_p05_p50_p95": list(k.ratio_percentiles)}
+                for k in self.result.summaries()
+            ]  # fmt: skip
+            return {**out, "sessions": self.robots, "seed": self.result.seed, "kinds": kinds}
         st, summary = self.result.study, self.result.summary
         return {
             **out,
@@ -220,7 +234,7 @@ def run_montecarlo(
 ) -> MonteCarloRun:
     """Run ``study`` (or ``all``), write tables, figures and ``montecarlo.md`` under ``out``
     (``client``: a Dask client to run the batches on instead of ``workers`` processes)."""
-    from pipeline.montecarlo import features_study, output, report
+    from pipeline.montecarlo import features_study, output, report, verdict_report, verdict_study
 
     if study not in STUDY_NAMES:
         raise ArmsigError(f"unknown study {study!r}", expected=", ".join(STUDY_NAMES))
@@ -234,6 +248,11 @@ def run_montecarlo(
             feat = features_study.run_features(seed=seed, progress=progress)
             folder = output.write_features(out_dir, feat)
             done.append(StudyRun(name, folder, feat.wall_s, feat.trials, feat))
+            continue
+        if name == "verdict":
+            ver = verdict_study.run_verdict(robots, seed, workers, progress, client=client)
+            folder = verdict_report.write_tables(out_dir, ver)
+            done.append(StudyRun(name, folder, ver.wall_s, robots, ver))
             continue
         res = run_study(get_study(name), robots, seed, workers, progress, client=client)
         done.append(StudyRun(name, output.write_study(out_dir, res), res.wall_s, robots, res))
