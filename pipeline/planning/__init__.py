@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import ArmsigError
+from pipeline.refine.held_joints import whitening
 from pipeline.refine.identifiability import analyse
 from pipeline.refine.kinematics import ChainModel, chain_model
 from pipeline.refine.plan import (
@@ -29,7 +30,6 @@ from pipeline.refine.plan import (
     workspace_information,
 )
 from pipeline.refine.points import PointBlock
-from pipeline.refine.problem import reading_tangents
 from pipeline.refine.uncertainty import model_error_maps, predict, tool_model
 from pipeline.robots.description import RobotDescription
 from pipeline.sweeps import POSES_SWEEP, TOOL_SWEEP, WHOLE_ARM_SWEEPS
@@ -99,30 +99,6 @@ def design_model(
     ]
     x = np.concatenate([np.zeros(model.n_axis_params), *p0])
     return model, x
-
-
-def reading_noise(
-    model: ChainModel, x: np.ndarray, robot: RobotDescription
-) -> tuple[np.ndarray, np.ndarray]:
-    """``∂p/∂q`` (K, n, 3) of every observation and the variance (n,) of each joint's
-    reading: the encoders' rounding, ``resolution² / 12`` (internal units)."""
-    res = joints_to_internal(robot.encoder_resolution, robot.prismatic)
-    return reading_tangents(model, x), res**2 / 12
-
-
-def whitening(
-    model: ChainModel,
-    x: np.ndarray,
-    robot: RobotDescription,
-    cov_cm2: np.ndarray,
-    noise: tuple[np.ndarray, np.ndarray] | None = None,
-) -> np.ndarray:
-    """``L⁻¹`` (K, 3, 3) of position noise ``cov_cm2`` (K, 3, 3) plus the readings', as
-    the refinement weighs (:func:`pipeline.refine.points.with_reading_noise`); ``noise``:
-    :func:`reading_noise` when already computed."""
-    g, var = reading_noise(model, x, robot) if noise is None else noise
-    cov = cov_cm2 + np.einsum("kni,knj,n->kij", g, g, var)
-    return np.asarray(np.linalg.inv(np.linalg.cholesky(cov)))
 
 
 def whitened(

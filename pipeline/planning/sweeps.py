@@ -254,6 +254,7 @@ def _whole_fit(
 ) -> SweepPlan:
     """The plan of ``specs`` with the whole fit's prediction (module docstring)."""
     from pipeline.planning import WORKSPACE, design_model, prediction
+    from pipeline.refine.held_joints import sweep_covariance
     from pipeline.refine.plan import workspace_information
     from pipeline.refine.uncertainty import model_error_maps, tool_model
 
@@ -273,44 +274,6 @@ def _whole_fit(
 
     return replace(plan, rms_cm=pred["rms_cm"], rms_q95_cm=pred["rms_q95_cm"],
                    p95_cm=pred["p95_cm"], unidentified=pred["unidentified"])  # fmt: skip
-
-
-def sweep_covariance(
-    model: Any, x: np.ndarray, robot: RobotDescription, cov_cm2: np.ndarray, sweep: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The whitened Jacobians (K, 3, P) of a sweep session's observations (their
-    ``sweep`` ids (K,), in measuring order) and the covariance (P, P) of its whole fit.
-
-    The refinement weighs each position by its own noise, ``cov_cm2`` plus every joint's
-    reading noise, as if independent (:func:`pipeline.planning.whitening`). A joint held
-    still is read once and stays put (the simulated servo, and a real arm's brakes): its
-    reading's rounding is one error shared by every position until the joint moves again,
-    i.e. by the sweeps measured before its own and by those after it (and the tool), which
-    more points do not average. The fit's covariance is then the sandwich
-    ``Σ₀ (Σ_k F_k C_k F_kᵀ + Σ_h Σ_runs var_h v vᵀ) Σ₀`` with ``F_k = J_kᵀ W_kᵀ W_k``
-    (the fit's weights), ``C_k`` the independent part (the sensor and the swept joint's
-    reading), ``v = Σ_{k ∈ run} F_k ∂p_k/∂q_h`` over a run of positions holding joint
-    ``h``, and ``Σ₀`` the fit's own covariance
-    (:func:`pipeline.refine.plan.design_covariance`)."""
-    from pipeline.planning import reading_noise, whitening
-    from pipeline.refine.plan import design_covariance
-
-    g, var = reading_noise(model, x, robot)
-    W = whitening(model, x, robot, cov_cm2, (g, var))
-    J = W @ model.position_jacobian(x)
-    Sigma0 = design_covariance(J, model.param_units)
-    n = g.shape[1]
-    swept = sweep[:, None] == np.arange(1, n + 1)[None, :]  # (K, n): the joint moving
-    F = np.einsum("kip,kij->kpj", J, W)  # J_kᵀ W_k (P, 3) per observation (whitened J)
-    C = cov_cm2 + np.einsum("kni,knj,n,kn->kij", g, g, var, swept)
-    H = np.einsum("kpi,kij,kqj->pq", F, C, F)
-    for h in range(n):
-        run = np.cumsum(swept[:, h])  # a held run ends where joint h moves
-        for r in np.unique(run[~swept[:, h]]):
-            at = ~swept[:, h] & (run == r)
-            v = np.einsum("kpi,ki->p", F[at], g[at, h])
-            H += var[h] * np.outer(v, v)
-    return J, Sigma0 @ H @ Sigma0
 
 
 def _scaled_to(plan: SweepPlan, target_cm: float, evaluate: Any) -> SweepPlan:

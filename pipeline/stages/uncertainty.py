@@ -49,11 +49,14 @@ class Params:
         check_param(self, "uncertainty", "configurations", ok, f"1 to {MAX_CONFIGURATIONS}")
 
 
-def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.ndarray]:
+def kinematic_covariance(
+    refine: pa.Table, n_axis: int, covariance: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """``x`` and ``Σ`` (internal units: rad, cm) of the axis parameters, the tool point (and
     rotation) and the non-geometric terms, in the order of :class:`ChainModel`'s
     parameters, rows picked from the ``refine`` table by group and name (joined by key,
-    not position)."""
+    not position); ``covariance``: another covariance of the rows (internal units) to
+    pick from, e.g. :func:`held_joint_covariance`."""
     group = refine.column("group").to_pylist()
     name = refine.column("name").to_pylist()
     axis = [i for i, g in enumerate(group) if g == "axis"]
@@ -74,6 +77,8 @@ def kinematic_covariance(refine: pa.Table, n_axis: int) -> tuple[np.ndarray, np.
     scale = internal_factors(refine)
     x = refined_x(refine)
     C = np.array(refine.column("covariance").to_pylist(), float) * np.outer(scale, scale)
+    if covariance is not None:
+        C = covariance
     return x[idx], C[np.ix_(idx, idx)]
 
 
@@ -85,14 +90,17 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         return _table(np.zeros((0, 3)), None, 0.0)
     robot = session_robot(inputs["session"])
     q = robot.random_configurations(params.configurations, params.seed)
-    model, x, Sigma = _tool_model(inputs, q)
+    model, x, Sigma = _tool_model(inputs, q, held_joint_covariance(inputs))
     pred = predict_model(model, x, Sigma, params.seed)
     return _table(tool_poses(model, x)[0], pred, pred.max95_cm, fit_unmodelled(inputs))
 
 
-def _tool_model(inputs: Mapping[str, Any], q: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray]:
+def _tool_model(
+    inputs: Mapping[str, Any], q: np.ndarray, covariance: np.ndarray | None = None
+) -> tuple[Any, np.ndarray, np.ndarray]:
     """The refined chain's tool point at configurations ``q`` (m, n) (rad, cm) as a
-    :class:`ChainModel` (no payload), its ``x`` and covariance ``Σ`` (internal units)."""
+    :class:`ChainModel` (no payload), its ``x`` and covariance ``Σ`` (internal units; from
+    ``covariance`` of the refine rows when given, else the refinement's)."""
     from pipeline.kinematics.nongeometric import NO_TERMS
     from pipeline.refine.kinematics import TOOL_POINT, ChainModel
     from pipeline.stages.frames import chain_from_frames, matrices_from_columns
@@ -118,7 +126,7 @@ def _tool_model(inputs: Mapping[str, Any], q: np.ndarray) -> tuple[Any, np.ndarr
         reading_zero=q_sig,
         payload_kg=np.full(m, 0.0 if ng is None else ng.payload_kg),
     )
-    x, Sigma = kinematic_covariance(refine, model.n_axis_params)
+    x, Sigma = kinematic_covariance(refine, model.n_axis_params, covariance)
     return model, x, Sigma
 
 
@@ -139,21 +147,18 @@ def predicted_at(inputs: Mapping[str, Any], q: np.ndarray) -> np.ndarray | None:
     return out
 
 
-def fit_unmodelled(inputs: Mapping[str, Any]) -> Any:
-    """:class:`pipeline.refine.unmodelled.Unmodelled` of the refined chain's residuals at
-    the session's usable fit positions (finite, not of the check sweep), judged by the
-    refinement's χ² (none for an import without a stated σ: ``recorded_sigma_cm``)."""
+def _fit_model(inputs: Mapping[str, Any]) -> tuple[Any, np.ndarray, pa.Table]:
+    """The refined chain observing the session's usable fit positions (finite, not of the
+    check sweep): its :class:`ChainModel`, its ``x`` (joined to the ``refine`` rows by
+    name) and those rows of ``positions``."""
     from pipeline.kinematics.nongeometric import Terms
-    from pipeline.refine.unmodelled import unmodelled_error
-    from pipeline.stages.positions import positions, recorded_sigma_cm
+    from pipeline.stages.positions import positions
     from pipeline.stages.refine import refine_summary, refined_x
     from pipeline.stages.refine_problem import model_for_keys
-    from pipeline.stages.session import session_sensor
     from pipeline.sweeps import CHECK_SWEEP
 
     refine, pos, session = inputs["refine"], inputs["positions"], inputs["session"]
-    xyz = positions(pos)
-    use = np.isfinite(xyz).all(axis=1) & (pos.column("sweep").to_numpy() != CHECK_SWEEP)
+    use = np.isfinite(positions(pos)).all(axis=1) & (pos.column("sweep").to_numpy() != CHECK_SWEEP)
     rows = pos.filter(pa.array(use))
     names = refine.column("name").to_pylist()
     terms = Terms.from_names(refine_summary(refine).get("nongeometric", {}).get("terms", []))
@@ -168,11 +173,80 @@ def fit_unmodelled(inputs: Mapping[str, Any]) -> Any:
             got=", ".join(names),
             fix="`pipeline identify SESSION --force` recomputes the refinement",
         )
-    x = refined_x(refine)[[at[n] for n in model.param_names]]
-    stated = session_sensor(session) == "sonic" or recorded_sigma_cm(pos) is not None
-    summ = refine_summary(refine)
-    r = xyz[use] - model.positions(x)
+    return model, refined_x(refine)[[at[n] for n in model.param_names]], rows
+
+
+def fit_unmodelled(inputs: Mapping[str, Any]) -> Any:
+    """:class:`pipeline.refine.unmodelled.Unmodelled` of the refined chain's residuals at
+    the session's usable fit positions (finite, not of the check sweep), judged by the
+    refinement's χ² (none for an import without a stated σ: ``recorded_sigma_cm``)."""
+    from pipeline.refine.unmodelled import unmodelled_error
+    from pipeline.stages.positions import positions, recorded_sigma_cm
+    from pipeline.stages.refine import refine_summary
+    from pipeline.stages.session import session_sensor
+
+    model, x, rows = _fit_model(inputs)
+    stated = session_sensor(inputs["session"]) == "sonic" or (
+        recorded_sigma_cm(inputs["positions"]) is not None
+    )
+    summ = refine_summary(inputs["refine"])
+    r = positions(rows) - model.positions(x)
     return unmodelled_error(r, model.n_params, summ["chi2"], summ["dof"], stated)
+
+
+def held_joint_covariance(inputs: Mapping[str, Any]) -> np.ndarray | None:
+    """The refined parameters' covariance (refine-row order, internal units) with the held
+    joints' reading errors shared by every position until the joint moves
+    (:func:`pipeline.refine.held_joints.sweep_covariance`), for a point-sensor session
+    with joint sweeps; None otherwise (a pose set moves every joint at every pose; a sonic
+    session's ranges have their own noise law). Scaled by the fit's χ²/dof where that is
+    above 1 (noise understated), never below: a χ²/dof under 1 is the shared errors'
+    doing, the residuals do not see what the held joints' points absorb (tracker sweeps
+    read 0.56-0.66, and were audited at 2.0× their prediction, issue 41)."""
+    from pipeline.refine.held_joints import sweep_covariance
+    from pipeline.stages.refine import refine_summary
+    from pipeline.stages.refine_problem import table_covariances
+    from pipeline.stages.session import session_sensor
+
+    refine = inputs["refine"]
+    summ = refine_summary(refine)
+    if session_sensor(inputs["session"]) == "sonic" or summ.get("level") != "points":
+        return None
+    model, x, rows = _fit_model(inputs)
+    sweep = rows.column("sweep").to_numpy().astype(np.int64)
+    if not (sweep >= 1).any():
+        return None
+    order = np.argsort(_measured_at(inputs["joints"], rows), kind="stable")
+    cov = table_covariances(rows)[order]
+    robot = session_robot(inputs["session"])
+    sub = _rows_of(model, order)
+    _, Sigma = sweep_covariance(sub, x, robot, cov, sweep[order])
+    Sigma *= max(1.0, float(summ["chi2"]) / float(summ["dof"]))
+    names = refine.column("name").to_pylist()
+    at = np.array([names.index(n) for n in model.param_names])
+    out = np.full((len(names), len(names)), np.nan)
+    out[np.ix_(at, at)] = Sigma
+    return out
+
+
+def _measured_at(joints: pa.Table, rows: pa.Table) -> np.ndarray:
+    """When each row's configuration was read (s): the joints table's first time at its
+    (sweep, step), the measuring order."""
+    t = {}
+    for sw, st, ts in zip(*(joints.column(c).to_pylist() for c in ("sweep", "step", "t_s")),
+                          strict=True):  # fmt: skip
+        t.setdefault((sw, st), ts)
+    keys = zip(rows.column("sweep").to_pylist(), rows.column("step").to_pylist(), strict=True)
+    return np.array([t.get(k, np.inf) for k in keys], float)
+
+
+def _rows_of(model: Any, order: np.ndarray) -> Any:
+    """``model`` observing its observations in ``order``."""
+    import dataclasses
+
+    payload = None if model.payload_kg is None else model.payload_kg[order]
+    return dataclasses.replace(model, link=model.link[order], theta=model.theta[order],
+                               point=model.point[order], payload_kg=payload)  # fmt: skip
 
 
 def _table(p: np.ndarray, pred: Any, max95: float, unmodelled: Any = None) -> pa.Table:
@@ -222,8 +296,9 @@ def summary(table: pa.Table) -> dict[str, float] | None:
 
 STAGE = Stage(
     "uncertainty",
-    3,  # 2: the non-geometric terms' covariance and deflection in the prediction (issue 27);
-    # 3: the unmodelled error beside the parameters' (sigma_unmodelled_cm, sigma_total_cm)
+    4,  # 2: the non-geometric terms' covariance and deflection in the prediction (issue 27);
+    # 3: the unmodelled error beside the parameters' (sigma_unmodelled_cm, sigma_total_cm);
+    # 4: a point-sensor sweep session's held joints' shared reading errors (issue 41)
     ("session", "refine", "frames", "positions", "joints"),
     Params(),
     compute,
