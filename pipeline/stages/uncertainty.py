@@ -232,7 +232,7 @@ def held_joint_covariance(inputs: Mapping[str, Any]) -> np.ndarray | None:
 def _measured_at(joints: pa.Table, rows: pa.Table) -> np.ndarray:
     """When each row's configuration was read (s): the joints table's first time at its
     (sweep, step), the measuring order."""
-    t = {}
+    t: dict[tuple[int, int], float] = {}
     for sw, st, ts in zip(*(joints.column(c).to_pylist() for c in ("sweep", "step", "t_s")),
                           strict=True):  # fmt: skip
         t.setdefault((sw, st), ts)
