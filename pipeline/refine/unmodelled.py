@@ -19,7 +19,7 @@ error of RMS length ``u`` that behaves like noise across the poses gives
 Whether there is any: the fit's ``χ²`` against ``χ²(dof)``, p-value below
 :data:`SIGNIFICANCE` (a session of the model's own noise says "none" but once in a
 thousand); without it ``u = 0`` and the prediction is the parameters' alone, as before
-issue 41. A sonic session's ``χ²`` is of its raw ranges, judged the same way. Without a
+issue 41. (A sonic session's is not estimated, :mod:`pipeline.stages.uncertainty`.) Without a
 stated noise (an import without σ: every point weighs 1 cm) nothing separates noise from
 unmodelled error: the whole residual counts, ``u² = ms``, the conservative reading.
 """
