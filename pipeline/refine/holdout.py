@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from pipeline.optim.block import Linearization
 from pipeline.optim.lm import rho
 from pipeline.refine.kinematics import TOOL_POINT, ChainModel
 from pipeline.refine.solve import Problem, linearize, normal_equations
@@ -135,6 +136,33 @@ def fold_mse(held: HeldOut, k: int = FOLDS) -> Array:
     return np.where(n > 0, sse / np.maximum(n, 1), np.nan)
 
 
+def measured_positions(lin: Linearization, predicted: Array, w: Array | None = None) -> Array:
+    """The position (K, 3) each key's rows measure: one Gauss-Newton step of the position
+    alone from ``predicted`` (where the model puts it, at which ``lin`` linearizes the
+    block), ``p − (Σ w d_p d_pᵀ)⁻¹ Σ w d_p r`` over its rows (robust weights ``w``).
+    The rows of a measured position are linear in it (``r = L⁻¹ (p − m)``): the step
+    gives ``m`` itself. Raw ranges give the position the block's sensor parameters
+    triangulate, to second order in the residuals. NaN where the rows do not fix a point
+    (fewer than three independent ranges, or none)."""
+    K = len(predicted)
+    on = lin.pos >= 0
+    key, d_p, r = lin.pos[on], lin.d_p[on], lin.r[on]
+    wk = np.ones(len(r)) if w is None else w[on]
+    H = np.zeros((K, 3, 3))
+    g = np.zeros((K, 3))
+    for i in range(3):
+        g[:, i] = np.bincount(key, wk * d_p[:, i] * r, K)
+        for j in range(i, 3):
+            H[:, i, j] = H[:, j, i] = np.bincount(key, wk * d_p[:, i] * d_p[:, j], K)
+    lam = np.linalg.eigvalsh(H)
+    # 1e-10: a rank-deficient H (two ranges, or none) leaves its smallest eigenvalue at
+    # round-off of the largest; three microphones' ranges are 1e-3 to 1 of it
+    fixed = lam[:, 0] > 1e-10 * np.maximum(lam[:, -1], 1e-300)
+    out = np.full((K, 3), np.nan)
+    out[fixed] = predicted[fixed] - np.linalg.solve(H[fixed], g[fixed][..., None])[..., 0]
+    return out
+
+
 @dataclass(frozen=True)
 class StepRefit:
     """A :data:`Refit` of ``problem``: one Gauss-Newton step from its fit ``x_hat`` on the
@@ -159,6 +187,14 @@ class StepRefit:
         w = rho(full.loss, (lin.r / full.f_scale) ** 2)[1]  # the solver's robust weights
         normal = normal_equations(full, self.x_hat, lin)
         object.__setattr__(self, "_at_x_hat", (full, lin, w, normal))
+
+    @property
+    def measured(self) -> Array:
+        """The positions (K, 3) the block measures with its own parameters at ``x_hat``
+        (:func:`measured_positions`): for a block of positions, its measured positions;
+        for raw ranges, the positions the fitted sensor's ranges put there."""
+        full, lin, w, _ = self._at_x_hat  # type: ignore[attr-defined]
+        return measured_positions(lin, full.model.positions(self.x_hat[: full.n_kin]), w)
 
     def __call__(self, keep: npt.NDArray[np.bool_]) -> tuple[Array, Array]:
         full, lin, w, normal = self._at_x_hat  # type: ignore[attr-defined]

@@ -55,8 +55,9 @@ ROUNDING = 1e-14
 #: A joint's harmonic is a candidate when its variance anywhere on the turn is at most this
 #: many times its variance at the readings (:func:`harmonic_extrapolation`): its σ at most
 #: doubles away from the data. Uniform readings reach it over ~165° of the joint (a full
-#: turn: 1, 180°: 3.1, 128°: 9.4); random poses within a Puma's limits (200-530° per
-#: joint) pass, the UR10's Series C passes joints 4 and 6 (558°, 513°) and not 1, 2, 3, 5.
+#: turn: 1, 180°: 3.1, 128°: 9.4); the UR10's Series C passes joint 4 (3.9) and not joints
+#: 1, 2, 3, 5 and 6 (21, 220, 28, 12, 6.7: joint 6 spans 513°, but nine readings in ten
+#: lie within 45° of 0° modulo a turn).
 HARMONIC_EXTRAPOLATION = 4.0
 
 
