@@ -183,3 +183,18 @@ def test_the_report_tables_the_candidates_and_each_terms_signal(tmp_path: Path) 
     )
     assert "| harmonic | " in section and "| **yes** |" in section
     assert "| term | unit | fitted | σ | \\|β\\|/σ |" in section
+
+
+@pytest.mark.parametrize("compliance_mm", [0.0, 0.3])
+def test_sonic_sweeps_score_the_ranges_with_the_folds_own_sensor(
+    tmp_path: Path, compliance_mm: float
+) -> None:
+    """Default sonic joint sweeps (the refine study's plan, the sensor calibrated at its raw
+    ranges): the rigid robot gets no terms, the compliant one its compliance. Before, a
+    fold's held-out positions were measured by the recorded sensor (the committed robot2
+    and robot5 took terms) and then by the full fit's sensor (a compliant robot kept the
+    rigid chain, 5 of 6 seeds): the chain and the sensor it is fitted with move together
+    when a fold is left out."""
+    simulate_session(tmp_path, SimulationOptions(seed=1, compliance_mm=compliance_mm))
+    identify(tmp_path, report=False)
+    assert _cv(tmp_path)["chosen"] == ("compliance" if compliance_mm else "rigid")

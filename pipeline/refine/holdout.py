@@ -105,6 +105,7 @@ def kfold(
     model: ChainModel, sweep: npt.ArrayLike, step: npt.ArrayLike,
     measured: Array, cov_m: Array, refit: Refit, k: int = FOLDS,
     fold: npt.NDArray[np.int64] | None = None,
+    measured_by: Callable[[npt.NDArray[np.bool_]], Array] | None = None,
 ) -> HeldOut:  # fmt: skip
     """Held-out errors of the joint sweeps' and the pose set's positions, k-fold (the
     targets of one pose share its fold: a pose is held out whole).
@@ -112,7 +113,8 @@ def kfold(
     ``model`` observes the block's K positions (``measured`` (K, 3), NaN rows not
     scored; their covariances ``cov_m`` (K, 3, 3)); ``refit(keep)`` fits without the
     positions ``~keep``; ``fold`` (K,): each position's fold in ``0..k−1``, by default
-    :func:`fold_of_steps`.
+    :func:`fold_of_steps`; ``measured_by(keep)``: the positions measured by the refit's
+    own block parameters, when the block calibrates its sensor (else ``measured``).
     """
     fold = fold_of_steps(step, k) if fold is None else np.asarray(fold, np.int64)
     sweep = np.asarray(sweep)
@@ -123,8 +125,9 @@ def kfold(
         if not held.any():
             continue
         x, cov = refit(~held)
+        m = measured if measured_by is None else measured_by(~held)
         idx = np.flatnonzero(held)
-        out.append((idx, np.full(len(idx), f), *_score(model, x, cov, held, measured, cov_m)))
+        out.append((idx, np.full(len(idx), f), *_score(model, x, cov, held, m, cov_m)))
     return _held_out(out)
 
 
@@ -187,6 +190,29 @@ class StepRefit:
         w = rho(full.loss, (lin.r / full.f_scale) ** 2)[1]  # the solver's robust weights
         normal = normal_equations(full, self.x_hat, lin)
         object.__setattr__(self, "_at_x_hat", (full, lin, w, normal))
+        object.__setattr__(self, "_last", {})  # the last fold's step, for measured_without
+
+    def step(self, keep: npt.NDArray[np.bool_]) -> tuple[Array, Array]:
+        """The whole step's ``x`` (kinematics and block) without the positions ``~keep``,
+        and ``(Jᵀ W J)⁺`` (unscaled)."""
+        last = self._last  # type: ignore[attr-defined]
+        if last.get("keep") is not None and np.array_equal(last["keep"], keep):
+            return last["x"], last["N"]  # type: ignore[no-any-return]
+        full, lin, w, normal = self._at_x_hat  # type: ignore[attr-defined]
+        kept = (lin.pos < 0) | keep[np.maximum(lin.pos, 0)]  # as kept_rows keeps them
+        A, g = normal(np.where(kept, w, 0.0))  # a row of weight zero is out of the fit
+        free = np.ones(len(g), bool) if full.held is None else ~full.held[: len(g)]
+        N = np.zeros_like(A)  # held parameters (not identifiable) stay where the fit held them
+        N[np.ix_(free, free)] = np.linalg.pinv(A[np.ix_(free, free)])
+        x = self.x_hat.copy()
+        x[: len(g)] -= N @ g
+        last.update(keep=np.array(keep), x=x, N=N)
+        return x, N
+
+    def __call__(self, keep: npt.NDArray[np.bool_]) -> tuple[Array, Array]:
+        x, N = self.step(keep)
+        n = self.problem.model.n_params
+        return x[:n], (N * self.noise_var)[:n, :n]
 
     @property
     def measured(self) -> Array:
@@ -196,16 +222,17 @@ class StepRefit:
         full, lin, w, _ = self._at_x_hat  # type: ignore[attr-defined]
         return measured_positions(lin, full.model.positions(self.x_hat[: full.n_kin]), w)
 
-    def __call__(self, keep: npt.NDArray[np.bool_]) -> tuple[Array, Array]:
-        full, lin, w, normal = self._at_x_hat  # type: ignore[attr-defined]
-        kept = (lin.pos < 0) | keep[np.maximum(lin.pos, 0)]  # as kept_rows keeps them
-        A, g = normal(np.where(kept, w, 0.0))  # a row of weight zero is out of the fit
-        free = np.ones(len(g), bool) if full.held is None else ~full.held[: len(g)]
-        N = np.zeros_like(A)  # held parameters (not identifiable) stay where the fit held them
-        N[np.ix_(free, free)] = np.linalg.pinv(A[np.ix_(free, free)])
-        x = self.x_hat - N @ g
-        n = self.problem.model.n_params
-        return x[:n], (N * self.noise_var)[:n, :n]
+    def measured_without(self, keep: npt.NDArray[np.bool_]) -> Array:
+        """:attr:`measured` with the block's own parameters of the step without the
+        positions ``~keep``: the chain and the sensor it is fitted with (its frame, its
+        speed of sound) move together when a fold is left out, so the fold's chain is
+        judged by the fold's sensor. The residuals move by ``d_x δb`` (linear); for a block
+        of positions (no parameters of its own) the same as :attr:`measured`."""
+        full, lin, w, _ = self._at_x_hat  # type: ignore[attr-defined]
+        n = full.n_kin
+        x, _ = self.step(keep)
+        moved = dataclasses.replace(lin, r=lin.r + lin.d_x @ (x[n:] - self.x_hat[n:]))
+        return measured_positions(moved, full.model.positions(self.x_hat[:n]), w)
 
 
 def check_configurations(
