@@ -82,6 +82,12 @@ def harmonic_joints(theta: Array, revolute: npt.NDArray[np.bool_]) -> dict[int, 
     return {int(j) + 1: harmonic_extrapolation(q[:, j]) for j in np.flatnonzero(revolute)}
 
 
+def fits_to_rounding(chi2: float, dof: int) -> bool:
+    """Whether a fit of χ² ``chi2`` (whitened) on ``dof`` degrees of freedom is at
+    :data:`ROUNDING`."""
+    return bool(dof > 0 and chi2 / dof <= ROUNDING)
+
+
 def candidate_kinds(candidate: str) -> frozenset[str]:
     """The term kinds of a candidate (``rigid``: none)."""
     return frozenset() if candidate == "rigid" else frozenset(candidate.split("+"))

@@ -254,12 +254,18 @@ def cross_validated(
     without fitting the others. Returns the chosen problem, its solution and
     identifiability summary, the record (``nongeometric.cv``), and the rigid solution
     when terms replace it (stage ``holdout`` compares with it)."""
-    from pipeline.refine.model_choice import CANDIDATES, ROUNDING, choose, harmonic_joints, record
+    from pipeline.refine.model_choice import (
+        CANDIDATES,
+        choose,
+        fits_to_rounding,
+        harmonic_joints,
+        record,
+    )
     from pipeline.stages.refine_problem import with_terms
 
     sol, ident = fit_session(rigid, inputs)
     fits = {"rigid": (rigid, sol, ident)}
-    exact = sol.dof > 0 and sol.chi2 / sol.dof <= ROUNDING
+    exact = fits_to_rounding(sol.chi2, sol.dof)
     skipped: dict[str, str] = {}
     extrapolation = harmonic_joints(rigid.problem.model.theta, ~np.asarray(prismatic, bool))
     for name in CANDIDATES[1:]:
@@ -329,7 +335,7 @@ def _scored(name: str, sp: Any, sol: Any, ident: dict[str, Any], k: int) -> Any:
     kept the rigid chain (a fold's chain and sensor move together); with the fold's own
     sensor 6 of 6 took the compliance and 6 of 6 rigid robots none."""
     from pipeline.refine.holdout import StepRefit, fold_mse, fold_of_blocks, kfold
-    from pipeline.refine.model_choice import ROUNDING, Scored
+    from pipeline.refine.model_choice import Scored, fits_to_rounding
 
     held = np.isin(np.array(sp.names), [h["name"] for h in ident.get("held", [])])
     problem = replace(sp.problem, held=held, f_scale=sol.f_scale)
@@ -343,7 +349,7 @@ def _scored(name: str, sp: Any, sol: Any, ident: dict[str, Any], k: int) -> Any:
     out = kfold(problem.model, sweep, step, measured, cov_m, refit, k, fold,
                 refit.measured_without)  # fmt: skip
     n = np.bincount(out.fold, minlength=k)[:k]
-    exact = bool(sol.dof > 0 and sol.chi2 / sol.dof <= ROUNDING)
+    exact = fits_to_rounding(sol.chi2, sol.dof)
     n_terms = int((~held[problem.model.beta_slice]).sum())  # the identified ones
     return Scored(name, n_terms, fold_mse(out, k), n, exact)
 
