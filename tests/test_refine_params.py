@@ -25,6 +25,7 @@ VALUES = {
     "f_scale": 2.0,
     "speed_knot_s": 30.0,
     "nongeometric": "compliance",  # issue 27: auto leaves the terms out of a sweep session
+    "cv_folds": 3,
 }
 
 

@@ -16,10 +16,10 @@ what the terms cost where there is nothing to fit) and 0.3 mm (a UR10's, issue 2
 compliant k would be a point on the refine study's k axis with other indices and another
 truth. What both share is the refine study's: its sessions, seeds, runner and accuracy.
 
-The session is the refine study's, joint sweeps alone: they see the compliance, although
-``refine.nongeometric=auto`` leaves the terms out of a sweep session (so the study names
-both fits). A sweep moves the links beyond its joint, so the gravity torques on the joints
-change along it and bend its circle: noiseless, the fit with the terms is exact
+The session is the refine study's, joint sweeps alone: they see the compliance. The study
+names both fits rather than ``refine.nongeometric=auto``, whose choice between them is
+docs/nongeometric.md's. A sweep moves the links beyond its joint, so the gravity torques
+on the joints change along it and bend its circle: noiseless, the fit with the terms is exact
 (tests/test_montecarlo_compliance.py; sonic and tracker sweeps); at the default noise
 the 9 independent terms lowered χ² by 158 on one robot (seed 5), and the audited RMS
 3.3× (median) on 10 (docs/montecarlo.md). The coefficients one by one are not identified

@@ -86,15 +86,18 @@ def _pose_tables(sdir: Path) -> dict[str, Any] | None:
 
 def _nongeometric_part(sdir: Path, robot: Any) -> list[str]:
     """The non-geometric section (:mod:`pipeline.report.nongeometric`) when the signature
-    has such terms, with the readings of every configuration the fit used."""
+    has such terms or ``refine.nongeometric=auto`` chose among them, with the readings of
+    every configuration the fit used."""
     import pyarrow.compute as pc
 
     from pipeline.kinematics.nongeometric import KINDS
     from pipeline.report.nongeometric import nongeometric_section
     from pipeline.stages.frames import readings_at
+    from pipeline.stages.refine import refine_summary
 
     refine = read_table(stage_path(sdir, "refine"))
-    if not np.isin(refine.column("group").to_pylist(), KINDS).any():
+    chose = "cv" in refine_summary(refine).get("nongeometric", {})
+    if not chose and not np.isin(refine.column("group").to_pylist(), KINDS).any():
         return []
     joints = read_table(stage_path(sdir, "joints"))
     fitted = joints.filter(pc.not_equal(joints.column("sweep"), CHECK_SWEEP))

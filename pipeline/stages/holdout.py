@@ -40,8 +40,9 @@ REFITS = ("step", "full")
 class Params:
     """``folds``: k of the k-fold (5: each refit keeps 80 % of every sweep). ``refit``:
     ``step``, one Gauss-Newton step from the full fit without the fold (robust weights of
-    the full fit kept): on a default Puma session its held-out RMS equals the full
-    refit's to 0.1 % (0.02319 vs 0.02317 cm), at ~0.05 s a fold instead of ~2.7 s;
+    the full fit kept, :class:`pipeline.refine.holdout.StepRefit`): on a default Puma
+    session its held-out RMS equals the full refit's to 0.1 % (0.02319 vs 0.02317 cm), at
+    ~0.05 s a fold instead of ~2.7 s;
     ``full``, the solver's warm-started refit (:func:`pipeline.refine.solve.refit`)."""
 
     folds: int = 5
@@ -50,42 +51,6 @@ class Params:
     def __post_init__(self) -> None:
         check_param(self, "holdout", "folds", 2 <= self.folds <= 100, "2 to 100")
         check_param(self, "holdout", "refit", self.refit in REFITS, " or ".join(REFITS))
-
-
-@dataclass(frozen=True)
-class StepRefit:
-    """One Gauss-Newton step from ``x_hat`` on the rows of the positions kept, robust
-    weights at ``x_hat``: the kinematic part of the step and its covariance
-    ``(Jᵀ W J)⁺ · noise_var`` (as the solver scales its covariance). The block is
-    linearized once, at ``x_hat``; each fold's normal equations are built from its rows
-    by the solver's structured products (:func:`pipeline.refine.solve.normal_equations`),
-    linear in the rows: the dense ``J`` (rows × parameters, whose speed-spline columns
-    grow with the session's length) took 13 s at 1,600 points per sweep."""
-
-    problem: Any
-    x_hat: np.ndarray
-    noise_var: float
-
-    def __post_init__(self) -> None:
-        from pipeline.refine.solve import linearize
-
-        full = dataclasses.replace(self.problem, keep=None)
-        object.__setattr__(self, "_at_x_hat", (full, linearize(full, self.x_hat)))
-
-    def __call__(self, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        from pipeline.optim.lm import rho
-        from pipeline.refine.solve import kept_rows, normal_equations
-
-        full, lin = self._at_x_hat  # type: ignore[attr-defined]
-        kept = kept_rows(lin, keep)
-        w = rho(full.loss, (kept.r / full.f_scale) ** 2)[1]  # the solver's robust weights
-        A, g = normal_equations(full, self.x_hat, kept)(w)
-        free = np.ones(len(g), bool) if full.held is None else ~full.held[: len(g)]
-        N = np.zeros_like(A)  # held parameters (not identifiable) stay where the fit held them
-        N[np.ix_(free, free)] = np.linalg.pinv(A[np.ix_(free, free)])
-        x = self.x_hat - N @ g
-        n = self.problem.model.n_params
-        return x[:n], (N * self.noise_var)[:n, :n]
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
@@ -201,7 +166,7 @@ def _held_out(
     """The held-out positions' keys (sweep, step, target) and errors of the problem ``sp``
     fitted to ``x_hat`` with covariance ``cov`` (internal units), χ²/dof ``scale``: the
     check configurations when the session has them, else k-fold (module docstring)."""
-    from pipeline.refine.holdout import check_configurations, kfold
+    from pipeline.refine.holdout import StepRefit, check_configurations, kfold
     from pipeline.refine.solve import refit
     from pipeline.stages.positions import positions as xyz_of
     from pipeline.stages.refine_problem import payloads_at, rows_at

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -52,11 +52,13 @@ class Params:
     of the speed-of-sound spline (level ranges), 0: chosen from the rods (120 s, halved
     down to 15 s while the rods' speed ratios ask for it,
     :meth:`pipeline.sensor.speed_spline.TimeSpline.chosen`); ``nongeometric``: the
-    non-geometric terms (:mod:`pipeline.kinematics.nongeometric`), ``auto``: joint
-    compliance under gravity when the data show it above their noise
-    (:func:`nongeometric_kinds`, :func:`significance`). Every parameter is recorded in the
-    table's summary (:func:`refine_summary`); later stages rebuild the problem from it
-    (:func:`problem_params`)."""
+    non-geometric terms (:mod:`pipeline.kinematics.nongeometric`), ``auto``: the rigid
+    chain, joint compliance under gravity, joint-angle harmonics or both, chosen by
+    k-fold cross-validation over blocks of the measurement order
+    (:mod:`pipeline.refine.model_choice`, :func:`cross_validated`); ``cv_folds``: that
+    k (5: each fold's refit keeps 80 % of every sweep). Every parameter is recorded in
+    the table's summary (:func:`refine_summary`); later stages rebuild the problem from
+    it (:func:`problem_params`)."""
 
     enabled: bool = True
     level: str = "auto"
@@ -64,6 +66,7 @@ class Params:
     f_scale: float = 3.0
     speed_knot_s: float = 0.0
     nongeometric: str = "auto"
+    cv_folds: int = 5
 
     def __post_init__(self) -> None:
         check_param(self, "refine", "level", self.level in LEVELS, " or ".join(LEVELS))
@@ -74,6 +77,7 @@ class Params:
         check_param(self, "refine", "speed_knot_s", ok, ">= 0 (0: chosen from the rods), finite")
         ok = self.nongeometric in NONGEOMETRIC
         check_param(self, "refine", "nongeometric", ok, " or ".join(NONGEOMETRIC))
+        check_param(self, "refine", "cv_folds", 2 <= self.cv_folds <= 20, "2 to 20")
 
 
 def refine_summary(table: pa.Table) -> dict[str, Any]:
@@ -93,16 +97,15 @@ def problem_params(summary: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def nongeometric_kinds(setting: str) -> tuple[str, ...]:
-    """The term kinds of ``refine.nongeometric``: ``auto`` is compliance, kept only when
-    the data show it above their noise (:func:`significance`; a joint sweep sees the
-    gravity torque of the joints it moves change too). The harmonics are never
-    automatic: a joint's first harmonic identified over part of a turn extrapolates
-    (issue 27: fitted on the UR10's Series C, whose first joint covers 128°, it tripled
-    the error on every other series)."""
-    if setting == "auto":
-        return ("compliance",)
-    return () if setting == "none" else tuple(setting.split("+"))
+def nongeometric_kinds(setting: str, payloads: tuple[float, ...] = ()) -> tuple[str, ...]:
+    """The term kinds of an explicit ``refine.nongeometric`` setting or a candidate of
+    ``auto`` (:data:`pipeline.refine.model_choice.CANDIDATES`; ``none`` and ``rigid``:
+    none), with the payload terms beside the compliance when the session measured two
+    payloads or more (``payloads``, kg): a changed payload is then predicted."""
+    kinds = () if setting in ("none", "rigid") else tuple(setting.split("+"))
+    if "compliance" in kinds and len(payloads) > 1:
+        kinds += ("payload",)
+    return kinds
 
 
 def internal_factors(refine: pa.Table) -> np.ndarray:
@@ -176,39 +179,19 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
             fix="--param refine.level=auto",
         )
     from pipeline.kinematics.nongeometric import all_terms
-    from pipeline.stages.refine_problem import measured_payloads, with_terms
+    from pipeline.stages.refine_problem import measured_payloads
 
     robot = session_robot(inputs["session"])
-    kinds = nongeometric_kinds(params.nongeometric)
     payloads = measured_payloads(inputs["joints"])
-    if "compliance" in kinds and len(payloads) > 1:  # a changed payload is then predicted
-        kinds += ("payload",)
-    terms = all_terms(robot.prismatic, kinds)
     args = (inputs, params.loss, params.f_scale, level, params.speed_knot_s)
-    left_out: dict[str, Any] | None = None
-    rigid_fit: dict[str, Any] | None = None  # the rigid solution, when the terms replace it
-    if params.nongeometric == "auto" and terms:
-        # The rigid chain first (from the design, exactly as before issue 27); the terms
-        # only when its solution shows them (never fitted to noise), from that solution.
-        sp = session_problem(*args)
-        sol, identifiability = fit_session(sp, inputs)
-        with_them = with_terms(sp, terms, inputs)
-        if not with_them.problem.model.terms:
-            left_out = {"significant": False, "why": "no term the readings excite"}
-        elif _too_few_for(with_them):
-            left_out = {"significant": False, "why": "too few coordinates (2 per parameter)"}
-        else:
-            x_start = with_rigid_solution(with_them, sp, sol.x)
-            left_out = significance(with_them.problem, x_start, sol, identifiability)
-            if left_out["significant"]:  # the rigid fit kept: the holdout compares with it
-                rigid_fit = {
-                    "x": sol.x.tolist(),
-                    "noise_scale": sol.noise_scale,
-                    "held": [h["name"] for h in identifiability.get("held", [])],
-                }
-                sp = with_them
-                sol, identifiability = fit_session(sp, inputs, (x_start, sol.f_scale))
+    cv: dict[str, Any] | None = None
+    rigid_fit: dict[str, Any] | None = None  # the rigid solution, when terms replace it
+    if params.nongeometric == "auto":
+        sp, sol, identifiability, cv, rigid_fit = cross_validated(
+            session_problem(*args), inputs, robot.prismatic, payloads, params.cv_folds
+        )
     else:
+        terms = all_terms(robot.prismatic, nongeometric_kinds(params.nongeometric, payloads))
         sp = session_problem(*args, terms)
         sol, identifiability = fit_session(sp, inputs)
     spline = getattr(sp.problem.block, "spline", None)
@@ -230,18 +213,19 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "loss": params.loss,
         "f_scale": params.f_scale,
         "speed_knot_s": params.speed_knot_s,
+        "cv_folds": params.cv_folds,
         "speed_knot_spacing_s": None if spline is None else spline.spacing_s,
         "rows_down_weighted": sol.down_weighted,
         "f_scale_used": sol.f_scale,
     }
     if identifiability:
         summary["identifiability"] = identifiability
-    if sp.problem.model.terms or left_out:
+    if sp.problem.model.terms or cv:
         summary["nongeometric"] = {
             "setting": params.nongeometric,
             "terms": list(sp.problem.model.terms.names),
             "measured_payloads_kg": list(payloads),
-            **({"test": left_out} if left_out else {}),
+            **({"cv": cv} if cv else {}),
             **({"rigid_fit": rigid_fit} if rigid_fit else {}),
         }
     rows = {
@@ -256,62 +240,118 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     return _table(rows, summary)
 
 
-#: ``refine.nongeometric=auto`` keeps the terms when the F-test of their χ² reduction has a
-#: p-value below this: a rigid robot's noise passes it once in a thousand sessions.
-SIGNIFICANCE = 1e-3
+def cross_validated(
+    rigid: Any, inputs: Mapping[str, Any], prismatic: np.ndarray, payloads: tuple[float, ...],
+    k: int,
+) -> tuple[Any, Any, dict[str, Any], dict[str, Any], dict[str, Any] | None]:  # fmt: skip
+    """``refine.nongeometric=auto``: the rigid problem ``rigid`` fitted from the design
+    (exactly as before issue 27), then each further candidate of
+    :data:`pipeline.refine.model_choice.CANDIDATES` whose terms the readings excite and
+    the coordinates can carry (:func:`_too_few_for`), warm-started at the rigid solution
+    (:func:`with_rigid_solution`); each scored by k-fold over blocks of the measurement
+    order and the model chosen by :func:`pipeline.refine.model_choice.choose` (its rule
+    there). A rigid chain that fits to rounding (noiseless data of a rigid robot) is kept
+    without fitting the others. Returns the chosen problem, its solution and
+    identifiability summary, the record (``nongeometric.cv``), and the rigid solution
+    when terms replace it (stage ``holdout`` compares with it)."""
+    from pipeline.refine.model_choice import (
+        CANDIDATES,
+        choose,
+        fits_to_rounding,
+        harmonic_joints,
+        record,
+    )
+    from pipeline.stages.refine_problem import with_terms
+
+    sol, ident = fit_session(rigid, inputs)
+    fits = {"rigid": (rigid, sol, ident)}
+    exact = fits_to_rounding(sol.chi2, sol.dof)
+    skipped: dict[str, str] = {}
+    extrapolation = harmonic_joints(rigid.problem.model.theta, ~np.asarray(prismatic, bool))
+    for name in CANDIDATES[1:]:
+        terms = candidate_terms(name, prismatic, payloads, extrapolation)
+        if exact:
+            skipped[name] = "not fitted: the rigid chain fits the data to rounding"
+            continue
+        if "harmonic" in name and not terms.harmonic:
+            skipped[name] = "not fitted: no joint's readings span enough of a turn for a harmonic"
+            continue
+        sp = with_terms(rigid, terms, inputs)
+        same = [
+            o for o, fit in fits.items() if fit[0].problem.model.terms == sp.problem.model.terms
+        ]
+        if not sp.problem.model.terms:
+            skipped[name] = "not fitted: no term the readings excite"
+        elif same:
+            skipped[name] = f"not fitted: the same terms as {same[0]}"
+        elif _too_few_for(sp):
+            skipped[name] = "not fitted: too few coordinates (2 per parameter)"
+        else:
+            warm = (with_rigid_solution(sp, rigid, sol.x), sol.f_scale)
+            fits[name] = (sp, *fit_session(sp, inputs, warm))
+    scored = [_scored(name, *fit, k) for name, fit in fits.items()]
+    choice = choose(scored)
+    sp, chosen, chosen_ident = fits[choice.chosen]
+    rigid_fit = None
+    if choice.chosen != "rigid":  # the rigid fit kept: the holdout compares with it
+        rigid_fit = {
+            "x": sol.x.tolist(),
+            "noise_scale": sol.noise_scale,
+            "held": [h["name"] for h in ident.get("held", [])],
+        }
+    cv = record(scored, choice, k, skipped)
+    cv["harmonic_extrapolation"] = {f"j{j}": v for j, v in extrapolation.items()}
+    return sp, chosen, chosen_ident, cv, rigid_fit
 
 
-def significance(
-    problem: Any, x_start: np.ndarray, rigid: Any, identifiability: dict[str, Any]
-) -> dict[str, Any]:
-    """Whether the non-geometric terms of ``problem`` would explain more than noise, judged
-    at the rigid chain's solution ``rigid`` (``x_start``: that solution with the terms at
-    zero; ``identifiability``: its summary, whose held parameters stay out): the score
-    (Lagrange multiplier) test of the nested models, ``LM = gᵀ A⁻¹ g / s²`` with ``A``,
-    ``g`` the normal equations of the problem with the terms at ``x_start`` (the rigid
-    parameters' gradient is zero there, so ``g`` is the terms'), ``s²`` the rigid fit's
-    χ²/dof; ``F = LM / p`` over the ``p`` terms, p-value of ``F(p, dof − p)`` below
-    :data:`SIGNIFICANCE`. One linearization: a rigid robot costs no second fit. A rigid
-    chain that fits to rounding (noiseless data of a rigid robot) keeps no terms."""
-    # The F distribution's survival function; not scipy.stats, which imports
-    # scipy.optimize and scipy.interpolate (~0.3 s of a cold run, issue 18).
-    from scipy.special import fdtrc
+def candidate_terms(
+    name: str, prismatic: np.ndarray, payloads: tuple[float, ...], extrapolation: dict[int, float]
+) -> Any:
+    """The terms of a candidate of ``refine.nongeometric=auto``: those of its kinds
+    (:func:`nongeometric_kinds`), the harmonics only of joints whose readings span enough
+    of a turn (``extrapolation``: per joint, :func:`pipeline.refine.model_choice.
+    harmonic_extrapolation` at most :data:`~pipeline.refine.model_choice.
+    HARMONIC_EXTRAPOLATION`)."""
+    from pipeline.kinematics.nongeometric import all_terms
+    from pipeline.refine.model_choice import HARMONIC_EXTRAPOLATION
 
-    from pipeline.optim.lm import rho
-    from pipeline.refine.solve import linearize, normal_equations
+    terms = all_terms(prismatic, nongeometric_kinds(name, payloads))
+    covered = {j for j, v in extrapolation.items() if v <= HARMONIC_EXTRAPOLATION}
+    return replace(terms, harmonic=tuple(h for h in terms.harmonic if h[0] in covered))
 
-    if rigid.dof <= 0:
-        return {"significant": False, "why": "no degree of freedom"}
-    lin = linearize(problem, x_start)
-    s2 = float(np.sum(lin.r**2)) / rigid.dof
-    if s2 <= 1e-14:  # residuals ~1e-7 σ: the rigid chain is exact
-        return {"significant": False, "why": "the rigid chain fits the data to rounding"}
-    w = np.ones_like(lin.r)
-    if problem.loss != "linear":  # the rigid fit's robust weights (its loss scale)
-        w = rho(problem.loss, (lin.r / rigid.f_scale) ** 2)[1]
-        s2 = float(np.sum(w * lin.r**2)) / rigid.dof
-    A, g = normal_equations(problem, x_start, lin)(w)
-    names = {h["name"] for h in identifiability.get("held", [])}
-    held = np.array([n in names for n in problem_names(problem)], bool)
-    free = ~held & (np.abs(np.diag(A)) > 0)
-    b = np.zeros(len(g), bool)
-    b[problem.model.beta_slice] = True
-    p = int((free & b).sum())
-    dof = rigid.dof - p
-    if p == 0 or dof <= 0:
-        return {"significant": False, "why": "no identifiable term"}
-    gf = g[free]
-    LM = float(gf @ np.linalg.lstsq(A[np.ix_(free, free)], gf, rcond=None)[0]) / s2
-    F = LM / p
-    p_value = float(fdtrc(p, dof, F))
-    return {
-        "significant": p_value < SIGNIFICANCE,
-        "F": F,
-        "p_value": p_value,
-        "terms_tested": p,
-        "why": f"score test of the terms at the rigid solution, p "
-        f"{'<' if p_value < SIGNIFICANCE else '>='} {SIGNIFICANCE:g}",
-    }
+
+def _scored(name: str, sp: Any, sol: Any, ident: dict[str, Any], k: int) -> Any:
+    """The cross-validation of one candidate's fit ``sol`` of ``sp`` (identifiability
+    summary ``ident``): each fold of :func:`pipeline.refine.holdout.fold_of_blocks` held
+    out, refit by one Gauss-Newton step from ``sol`` at its robust scale, the parameters
+    the fit held staying held (:class:`pipeline.refine.holdout.StepRefit`), and scored
+    on its held-out positions (:func:`pipeline.refine.holdout.kfold`) against what the
+    fold's block measures there (:meth:`~pipeline.refine.holdout.StepRefit.
+    measured_without`): a pose set's or a point sensor's positions; for raw ranges, the
+    positions the ranges give with the sensor that fold calibrated without them. Measured
+    on simulated sonic sweeps (100 points per sweep, seeds 1-6): scored against the
+    positions the recorded sensor triangulates, the committed rigid robot2 and robot5
+    took terms; against the full fit's sensor, 5 of 6 robots with a 0.3 mm compliance
+    kept the rigid chain (a fold's chain and sensor move together); with the fold's own
+    sensor 6 of 6 took the compliance and 6 of 6 rigid robots none."""
+    from pipeline.refine.holdout import StepRefit, fold_mse, fold_of_blocks, kfold
+    from pipeline.refine.model_choice import Scored, fits_to_rounding
+
+    held = np.isin(np.array(sp.names), [h["name"] for h in ident.get("held", [])])
+    problem = replace(sp.problem, held=held, f_scale=sol.f_scale)
+    keys = problem.block.keys
+    sweep, step = (keys.column(c).to_numpy() for c in ("sweep", "step"))
+    noise_var = sol.noise_scale**2 if np.isfinite(sol.noise_scale) else 1.0
+    refit = StepRefit(problem, sol.x, noise_var)
+    measured = refit.measured
+    cov_m = np.zeros((len(measured), 3, 3))  # the expected errors are not needed here
+    fold = fold_of_blocks(sweep, step, k)
+    out = kfold(problem.model, sweep, step, measured, cov_m, refit, k, fold,
+                refit.measured_without)  # fmt: skip
+    n = np.bincount(out.fold, minlength=k)[:k]
+    exact = fits_to_rounding(sol.chi2, sol.dof)
+    n_terms = int((~held[problem.model.beta_slice]).sum())  # the identified ones
+    return Scored(name, n_terms, fold_mse(out, k), n, exact)
 
 
 def problem_names(problem: Any) -> tuple[str, ...]:
@@ -405,12 +445,15 @@ def held_parameters(refine: pa.Table) -> np.ndarray:
 
 STAGE = Stage(
     "refine",
-    6,  # 3: the rods' speed spline fit on its normal equations (linear in the samples);
+    7,  # 3: the rods' speed spline fit on its normal equations (linear in the samples);
     # 4: the speed spline's knots chosen from the rods, every parameter in the summary,
     # single-cycle sonic positions weighed by the range noise law (level points);
     # 5: non-geometric terms (refine.nongeometric), the robust scale follows understated
     # noise (f_scale_used); 6: a target on the last link (plan.tool_targets) is one point
-    # in every joint sweep that measures it, named tool/<target> (was poses/<target>)
+    # in every joint sweep that measures it, named tool/<target> (was poses/<target>);
+    # 7: refine.nongeometric=auto chooses rigid, compliance, harmonic (joints covered over
+    # enough of a turn) or both by k-fold over blocks of the measurement order
+    # (refine.cv_folds, summary nongeometric.cv), no longer by a score test (issue 41)
     ("session", "joints", "positions", "frames", "ranges"),
     Params(),
     compute,
