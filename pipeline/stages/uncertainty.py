@@ -181,12 +181,10 @@ def fit_unmodelled(inputs: Mapping[str, Any]) -> Any:
     the session's usable fit positions (finite, not of the check sweep), judged by the
     refinement's χ² (none for an import without a stated σ: ``recorded_sigma_cm``); a
     point sensor's only: a sonic session's is 0 (below)."""
-    from pipeline.refine.unmodelled import unmodelled_error
+    from pipeline.refine.unmodelled import Unmodelled, unmodelled_error
     from pipeline.stages.positions import positions, recorded_sigma_cm
     from pipeline.stages.refine import refine_summary
     from pipeline.stages.session import session_sensor
-
-    from pipeline.refine.unmodelled import Unmodelled
 
     model, x, rows = _fit_model(inputs)
     summ = refine_summary(inputs["refine"])
