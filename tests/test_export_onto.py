@@ -236,11 +236,15 @@ def _elements(path: Path) -> dict[str, list[bytes]]:
 def test_real_ur10_onto_example_robot_data(ur10_c70: Path, tmp_path: Path) -> None:  # noqa: F811
     vendor = vendor_file("ur10_robot.urdf")
     sig = load_session_signature(ur10_c70 / "signature.json")
-    default = Path(export(ur10_c70, "urdf", out=tmp_path / "d.urdf", accept_verdict=True).path)
+    # issue 41: the real UR10 is a CHECK (accuracy limited by unmodelled error), which
+    # export and --onto take without --accept-verdict (a warning); a FAIL is refused
+    default = Path(export(ur10_c70, "urdf", out=tmp_path / "d.urdf").path)
+    failed = shutil.copytree(ur10_c70, tmp_path / "failed")  # a requirement it misses
+    identify(failed, report=False, overrides={"verdict": {"required_rms_mm": 0.3}})
     with pytest.raises(ArmsigError, match="verdict is FAIL"):  # issue 30 item 2, as export
-        export_onto(ur10_c70, vendor, out=tmp_path / "ur10.urdf")
-    assert not (tmp_path / "ur10.urdf").exists()
-    r = export_onto(ur10_c70, vendor, out=tmp_path / "ur10.urdf", accept_verdict=True)
+        export_onto(failed, vendor, out=tmp_path / "f.urdf")
+    assert not (tmp_path / "f.urdf").exists()
+    r = export_onto(ur10_c70, vendor, out=tmp_path / "ur10.urdf")
     assert r.joints == {j.name: f"{j.name}_joint" for j in sig.robot.joints}
     assert r.vendor_sign == [1.0] * 6 and r.conventions_warning is None
     np.testing.assert_allclose(r.vendor_offset, 0.0, atol=1e-9)  # π/2 written 1.57079632679

@@ -35,7 +35,7 @@ def test_identify_prints_the_verdict_last(identified_session: Path, tmp_path: Pa
     assert last == f"s: {v['line']}"
     assert v["verdict"] in ("PASS", "CHECK", "FAIL")
     assert last.startswith(f"s: {v['verdict']}  predicted ")
-    assert " cm RMS (95 % " in last and "× the design model" in last
+    assert " cm RMS (95 % " in last and "held-out " in last and "(predicted there " in last
 
 
 def test_a_verdict_parameter_changes_the_line(identified_session: Path, tmp_path: Path) -> None:

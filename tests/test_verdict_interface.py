@@ -19,7 +19,7 @@ from pipeline.signature.verdict import verdict_from_row, verdict_gate
 
 runner = CliRunner()
 FAIL_PARAM = "verdict.max_predicted_rms_reach=1e-8"  # below any session's predicted error
-CHECK_PARAM = "verdict.min_gain=1e9"  # no signature is that much better than the design
+CHECK_PARAM = "verdict.chi2_check=0.5"  # below a clean session's χ²/dof ~0.9
 
 
 def _identify(d: Path, *extra: str) -> Result:
@@ -74,7 +74,7 @@ def test_identify_check_and_pass_exit_0(identified_session: Path, checked: Path)
     r = _identify(checked, "--param", CHECK_PARAM, "--json")
     assert r.exit_code == 0, r.output
     v = json.loads(r.stdout)["verdict_detail"]
-    assert v["status"] == "CHECK" and v["reasons"][-1]["rule"] == "min_gain"
+    assert v["status"] == "CHECK" and v["reasons"][-1]["rule"] == "chi2_check"
     r = _identify(identified_session, "--json")
     assert r.exit_code == 0 and json.loads(r.stdout)["verdict_detail"]["status"] == "PASS"
 
@@ -115,10 +115,7 @@ def test_check_warns_on_stderr_and_keeps_json_stdout(checked: Path, tmp_path: Pa
     r = runner.invoke(app, ["ik", str(checked), *_pose(checked), "--json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["verdict"] == "CHECK"
-    assert (
-        r.stderr.startswith("warning: ")
-        and "verdict is CHECK (the signature is no better" in r.stderr
-    )
+    assert r.stderr.startswith("warning: ") and "verdict is CHECK (χ²/dof" in r.stderr
     out = tmp_path / "s.dh.json"
     r = runner.invoke(app, ["export", str(checked), "--format", "dh", "--out", str(out)])
     assert r.exit_code == 0 and out.is_file() and "verdict is CHECK" in r.stderr, r.output

@@ -215,7 +215,7 @@ def _measurement_covariances(inputs: Mapping[str, Any], rows: pa.Table, scale: f
     u, stated = 0.0, True
     if unc is not None and unc.num_rows and "sigma_unmodelled_cm" in unc.column_names:
         u = float(unc.column("sigma_unmodelled_cm").to_numpy()[0])
-        stated = bool(np.isfinite(unc.column("unmodelled_p_value").to_numpy()[0]))
+        stated = unc.column("unmodelled_p_value")[0].as_py() is not None
     if not u > 0:
         return scale * _covariances(inputs, rows)
     # without a stated noise the points' 1 cm weights are no covariance: the residual is all

@@ -205,8 +205,9 @@ def held_joint_covariance(inputs: Mapping[str, Any]) -> np.ndarray | None:
     """The refined parameters' covariance (refine-row order, internal units) with the held
     joints' reading errors shared by every position until the joint moves
     (:func:`pipeline.refine.held_joints.sweep_covariance`), for a point-sensor session
-    with joint sweeps; None otherwise (a pose set moves every joint at every pose; a sonic
-    session's ranges have their own noise law). Scaled by the fit's χ²/dof where that is
+    with joint sweeps and a stated point noise; None otherwise (a pose set moves every
+    joint at every pose; a sonic session's ranges have their own noise law; without a
+    stated noise every point weighs 1 cm, no covariance). Scaled by the fit's χ²/dof where that is
     above 1 (noise understated), never below: a χ²/dof under 1 is the shared errors'
     doing, the residuals do not see what the held joints' points absorb (tracker sweeps
     read 0.56-0.66, and were audited at 2.0× their prediction, issue 41)."""
@@ -215,9 +216,13 @@ def held_joint_covariance(inputs: Mapping[str, Any]) -> np.ndarray | None:
     from pipeline.stages.refine_problem import table_covariances
     from pipeline.stages.session import session_sensor
 
+    from pipeline.stages.positions import recorded_sigma_cm
+
     refine = inputs["refine"]
     summ = refine_summary(refine)
     if session_sensor(inputs["session"]) == "sonic" or summ.get("level") != "points":
+        return None
+    if recorded_sigma_cm(inputs["positions"]) is None:  # 1 cm weights are no noise to share
         return None
     model, x, rows = _fit_model(inputs)
     sweep = rows.column("sweep").to_numpy().astype(np.int64)
@@ -262,8 +267,9 @@ def _table(p: np.ndarray, pred: Any, max95: float, unmodelled: Any = None) -> pa
     u = 0.0 if unmodelled is None else unmodelled.rms_cm
     aligned = np.zeros(0) if pred is None else pred.position_aligned_cm
 
-    def each(v: float | None) -> pa.Array:
-        return pa.array(np.full(m, np.nan if v is None else v), pa.float64())
+    def each(v: float | None) -> pa.Array:  # null, not NaN, where there is none
+        none = v is None or not np.isfinite(v)
+        return pa.array(np.full(m, 0.0 if none else v), pa.float64(), mask=np.full(m, none))
 
     return pa.table(
         {
@@ -289,7 +295,8 @@ def summary(table: pa.Table) -> dict[str, float] | None:
     out = {"max95_cm": float(table.column("max95_cm")[0].as_py())}
     for c in ("fit_residual_rms_cm", "unmodelled_p_value"):
         if c in table.column_names:
-            out[c] = float(table.column(c).to_numpy()[0])
+            v = table.column(c)[0].as_py()
+            out[c] = float("nan") if v is None else float(v)
     for c in table.column_names:
         if c.startswith("sigma_"):
             v = table.column(c).to_numpy()
