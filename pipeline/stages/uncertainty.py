@@ -212,11 +212,10 @@ def held_joint_covariance(inputs: Mapping[str, Any]) -> np.ndarray | None:
     doing, the residuals do not see what the held joints' points absorb (tracker sweeps
     read 0.56-0.66, and were audited at 2.0× their prediction, issue 41)."""
     from pipeline.refine.held_joints import sweep_covariance
+    from pipeline.stages.positions import recorded_sigma_cm
     from pipeline.stages.refine import refine_summary
     from pipeline.stages.refine_problem import table_covariances
     from pipeline.stages.session import session_sensor
-
-    from pipeline.stages.positions import recorded_sigma_cm
 
     refine = inputs["refine"]
     summ = refine_summary(refine)
