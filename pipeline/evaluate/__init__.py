@@ -116,11 +116,15 @@ def _record_and_run(
     first_runs = run(sdir, modules=EVALUATE_STAGE_MODULES[:2], progress=bar)
     first = {r.name: r for r in first_runs if r.action == "ran"}
     if simulated:
-        from pipeline.stages.evaluate_measurements import program_matches
+        from pipeline.stages.evaluate_measurements import COMMAND_TOL, program_matches
 
         program = read_table(stage_path(sdir, "evaluate_program"))
         rec = read_evaluation(path)
-        if not program_matches(rec.program, program):  # exact: the rig logs full precision
+        # The rig re-records a program the measurement stage would refuse, not one within its
+        # COMMAND_TOL (1e-6 deg / cm): another CPU's BLAS kernels move the solved joints by
+        # ~1e-13 deg (AMD EPYC against the machine that recorded robot1-7), and the exact
+        # test rewrote the committed evaluation.mcap of every session on such a machine.
+        if not program_matches(rec.program, program, COMMAND_TOL):
             units = rec.teach[0]["units"]
             record_evaluation(sdir, _program_payloads(program, units), opts)
             recorded.append("program")
