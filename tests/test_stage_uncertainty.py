@@ -51,7 +51,8 @@ def test_uncertainty_stage(identified_session: Path, monkeypatch: pytest.MonkeyP
     read = lambda name: read_table(stage_path(identified_session, name))  # noqa: E731
     # the stand-in refine table has no fit behind it: its unmodelled error is given
     u = Unmodelled(rms_cm=0.003, residual_rms_cm=0.004, p_value=0.0, points=10)
-    monkeypatch.setattr(uncertainty, "fit_unmodelled", lambda inputs: u)
+    monkeypatch.setattr(uncertainty, "_fit_model", lambda inputs: None)
+    monkeypatch.setattr(uncertainty, "fit_unmodelled", lambda inputs, fit: u)
     session, frames = read("session"), read("frames")
     n_axis = 24
     rng = np.random.default_rng(0)

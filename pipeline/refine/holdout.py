@@ -89,11 +89,7 @@ def _score(
     measured: Array, cov_m: Array,
 ) -> tuple[Array, Array, Array]:  # fmt: skip
     """Errors, expected errors and the measurement parts of the rows ``sel``."""
-    payload = None if model.payload_kg is None else model.payload_kg[sel]
-    sub = dataclasses.replace(
-        model, link=model.link[sel], theta=model.theta[sel], point=model.point[sel],
-        payload_kg=payload,
-    )  # fmt: skip
+    sub = model.observing(sel)
     J = sub.position_jacobian(x)
     fit_var = np.einsum("kip,pq,kiq->k", J, cov, J)
     meas_var = np.trace(cov_m[sel], axis1=1, axis2=2)

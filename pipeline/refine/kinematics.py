@@ -50,7 +50,7 @@ Non-geometric terms (issue 27, :mod:`pipeline.kinematics.nongeometric`): the joi
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -146,6 +146,14 @@ class ChainModel:
     @property
     def n_points(self) -> int:
         return len(self.point_names)
+
+    def observing(self, rows: npt.ArrayLike) -> ChainModel:
+        """This model observing only its observations ``rows`` (a boolean mask or indices,
+        in their order)."""
+        r = np.asarray(rows)
+        payload = None if self.payload_kg is None else self.payload_kg[r]
+        return replace(self, link=self.link[r], theta=self.theta[r], point=self.point[r],
+                       payload_kg=payload)  # fmt: skip
 
     @cached_property
     def axis_offsets(self) -> Array:

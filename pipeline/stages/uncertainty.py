@@ -90,9 +90,10 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         return _table(np.zeros((0, 3)), None, 0.0)
     robot = session_robot(inputs["session"])
     q = robot.random_configurations(params.configurations, params.seed)
-    model, x, Sigma = _tool_model(inputs, q, held_joint_covariance(inputs))
+    fit = _fit_model(inputs)  # the fit's own observations, for both parts below
+    model, x, Sigma = _tool_model(inputs, q, held_joint_covariance(inputs, fit))
     pred = predict_model(model, x, Sigma, params.seed)
-    return _table(tool_poses(model, x)[0], pred, pred.max95_cm, fit_unmodelled(inputs))
+    return _table(tool_poses(model, x)[0], pred, pred.max95_cm, fit_unmodelled(inputs, fit))
 
 
 def _tool_model(
@@ -176,17 +177,18 @@ def _fit_model(inputs: Mapping[str, Any]) -> tuple[Any, np.ndarray, pa.Table]:
     return model, refined_x(refine)[[at[n] for n in model.param_names]], rows
 
 
-def fit_unmodelled(inputs: Mapping[str, Any]) -> Any:
+def fit_unmodelled(inputs: Mapping[str, Any], fit: Any = None) -> Any:
     """:class:`pipeline.refine.unmodelled.Unmodelled` of the refined chain's residuals at
     the session's usable fit positions (finite, not of the check sweep), judged by the
     refinement's χ² (none for an import without a stated σ: ``recorded_sigma_cm``); a
-    point sensor's only: a sonic session's is 0 (below)."""
+    point sensor's only: a sonic session's is 0 (below). ``fit``: :func:`_fit_model`'s,
+    when already built."""
     from pipeline.refine.unmodelled import Unmodelled, unmodelled_error
     from pipeline.stages.positions import positions, recorded_sigma_cm
     from pipeline.stages.refine import refine_summary
     from pipeline.stages.session import session_sensor
 
-    model, x, rows = _fit_model(inputs)
+    model, x, rows = _fit_model(inputs) if fit is None else fit
     summ = refine_summary(inputs["refine"])
     r = positions(rows) - model.positions(x)
     if session_sensor(inputs["session"]) == "sonic":
@@ -201,7 +203,7 @@ def fit_unmodelled(inputs: Mapping[str, Any]) -> Any:
     return unmodelled_error(r, model.n_params, summ["chi2"], summ["dof"], stated)
 
 
-def held_joint_covariance(inputs: Mapping[str, Any]) -> np.ndarray | None:
+def held_joint_covariance(inputs: Mapping[str, Any], fit: Any = None) -> np.ndarray | None:
     """The refined parameters' covariance (refine-row order, internal units) with the held
     joints' reading errors shared by every position until the joint moves
     (:func:`pipeline.refine.held_joints.sweep_covariance`), for a point-sensor session
@@ -210,7 +212,8 @@ def held_joint_covariance(inputs: Mapping[str, Any]) -> np.ndarray | None:
     stated noise every point weighs 1 cm, no covariance). Scaled by the fit's χ²/dof where that is
     above 1 (noise understated), never below: a χ²/dof under 1 is the shared errors'
     doing, the residuals do not see what the held joints' points absorb (tracker sweeps
-    read 0.56-0.66, and were audited at 2.0× their prediction, issue 41)."""
+    read 0.56-0.66, and were audited at 2.0× their prediction, issue 41). ``fit``:
+    :func:`_fit_model`'s, when already built."""
     from pipeline.refine.held_joints import sweep_covariance
     from pipeline.stages.positions import recorded_sigma_cm
     from pipeline.stages.refine import refine_summary
@@ -223,14 +226,14 @@ def held_joint_covariance(inputs: Mapping[str, Any]) -> np.ndarray | None:
         return None
     if recorded_sigma_cm(inputs["positions"]) is None:  # 1 cm weights are no noise to share
         return None
-    model, x, rows = _fit_model(inputs)
+    model, x, rows = _fit_model(inputs) if fit is None else fit
     sweep = rows.column("sweep").to_numpy().astype(np.int64)
     if not (sweep >= 1).any():
         return None
     order = np.argsort(_measured_at(inputs["joints"], rows), kind="stable")
     cov = table_covariances(rows)[order]
     robot = session_robot(inputs["session"])
-    sub = _rows_of(model, order)
+    sub = model.observing(order)
     _, Sigma = sweep_covariance(sub, x, robot, cov, sweep[order])
     Sigma *= max(1.0, float(summ["chi2"]) / float(summ["dof"]))
     names = refine.column("name").to_pylist()
@@ -249,15 +252,6 @@ def _measured_at(joints: pa.Table, rows: pa.Table) -> np.ndarray:
         t.setdefault((sw, st), ts)
     keys = zip(rows.column("sweep").to_pylist(), rows.column("step").to_pylist(), strict=True)
     return np.array([t.get(k, np.inf) for k in keys], float)
-
-
-def _rows_of(model: Any, order: np.ndarray) -> Any:
-    """``model`` observing its observations in ``order``."""
-    import dataclasses
-
-    payload = None if model.payload_kg is None else model.payload_kg[order]
-    return dataclasses.replace(model, link=model.link[order], theta=model.theta[order],
-                               point=model.point[order], payload_kg=payload)  # fmt: skip
 
 
 def _table(p: np.ndarray, pred: Any, max95: float, unmodelled: Any = None) -> pa.Table:
