@@ -4,6 +4,7 @@ verdict without them, and control with them."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -219,3 +220,73 @@ def test_one_payload_cannot_predict_another(compliant: Path) -> None:
     with pytest.raises(ArmsigError, match="cannot predict a payload of 5 kg"):
         ctl.with_payload(5.0)
     assert ctl.with_payload(0.0).signature.nongeometric is not None  # the one it measured
+
+
+def test_a_payload_far_beyond_those_measured_is_refused_and_beyond_them_warned(
+    payloads: Path, tmp_path: Path
+) -> None:
+    """Issue 44: ``--payload-kg 1e308`` printed NaN joints as converged and 1e6 kg was
+    extrapolated without a word. The linear payload terms are predicted up to
+    PAYLOAD_EXTRAPOLATION × the largest payload measured (0 and 10 kg here), with a
+    warning beyond the measured range, and refused above it in one line; ``fk --q-file``
+    takes the payload as ``fk --q`` does."""
+    from typer.testing import CliRunner
+
+    from pipeline.cli import EXIT_REFUSED, app
+    from pipeline.errors import ArmsigError
+    from pipeline.kinematics.nongeometric import PAYLOAD_EXTRAPOLATION
+
+    ctl = session_controller(payloads)
+    assert ctl.with_payload(5.0).payload_warning is None  # inside 0-10 kg
+    assert "extrapolated" in (ctl.with_payload(15.0).payload_warning or "")
+    for kg in (20.001, 1e6, 1e308):
+        with pytest.raises(ArmsigError, match=f"at most {10 * PAYLOAD_EXTRAPOLATION:g} kg"):
+            ctl.with_payload(kg)
+    run = CliRunner()
+    q = "10 -30 20 0 40 0"
+    for kg in ("1e308", "10001"):
+        for cmd in (
+            ["fk", str(payloads), "--q", q],
+            ["ik", str(payloads), "--pose", *"40 20 60 180 0 90".split()],
+        ):
+            r = run.invoke(app, [*cmd, "--payload-kg", kg])
+            assert r.exit_code == EXIT_REFUSED, r.output
+            assert r.stderr.count("\n") == 1 and "at most 20 kg" in r.stderr, r.stderr
+    r = run.invoke(app, ["fk", str(payloads), "--q", q, "--payload-kg", "15", "--json"])
+    assert r.exit_code == 0 and "extrapolated" in r.stderr, r.output
+    at_15 = json.loads(r.stdout)["xyz_cm"]
+    (tmp_path / "q.csv").write_text(
+        "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\n" + q.replace(" ", ",") + "\n"
+    )
+    r = run.invoke(
+        app,
+        ["fk", str(payloads), "--q-file", str(tmp_path / "q.csv"), "--json", "--payload-kg", "15"],
+    )
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["poses"][0]["xyz_cm"] == at_15
+    r = run.invoke(app, ["fk", str(payloads), "--q-file", str(tmp_path / "q.csv"), "--json"])
+    assert json.loads(r.stdout)["poses"][0]["xyz_cm"] != at_15  # the payload moves the tool
+
+
+def test_validation_rows_are_predicted_under_their_own_payload(payloads: Path) -> None:
+    """Issue 44: the validation stage evaluated every row under the signature's payload
+    (0 kg here), so the rows measured with 10 kg showed the payload's sag as error."""
+    from pipeline.evaluation.validation import model_points
+    from pipeline.stages.refine_problem import payloads_at
+
+    table = read_table(stage_path(payloads, "validation"))
+    err = table.column("error_cm").to_numpy()
+    assert err.max() <= 1e-6
+    joints = read_table(stage_path(payloads, "joints"))
+    sweep, step = (table.column(c).to_numpy() for c in ("sweep", "step"))
+    kg = payloads_at(joints, sweep, step)
+    assert set(kg.tolist()) == {0.0, 10.0}
+    ctl = session_controller(payloads)
+    q = joints_to_boundary(PUMA.random_configurations(50, 2), PUMA.prismatic)
+    sig = ctl.signature
+    at_10 = model_points(sig.chain, q, PUMA.prismatic, sig.nongeometric, np.full(50, 10.0))
+    at_own = model_points(sig.chain, q, PUMA.prismatic, sig.nongeometric, np.full(50, np.nan))
+    assert np.abs(at_10 - at_own).max() > 1e-3  # the payload matters at these rows
+    np.testing.assert_array_equal(
+        at_own, model_points(sig.chain, q, PUMA.prismatic, sig.nongeometric)
+    )

@@ -113,3 +113,12 @@ def test_plan_from_a_session_picks_its_most_informative_poses(tmp_path) -> None:
         plan_from_session(d, 121)
     r = CliRunner().invoke(app, ["plan", str(out), "--from", str(d), "--robot", "puma560"])
     assert r.exit_code != 0 and "one of --robot and --from" in r.output
+    # Issue 44: a session whose recording was replaced is stale, refused as `export` does.
+    other = tmp_path / "other"
+    simulate_session(other, SimulationOptions(sensor="tracker", poses=120, sweeps=False, seed=5))
+    (d / "recording.mcap").write_bytes((other / "recording.mcap").read_bytes())
+    r = CliRunner().invoke(
+        app, ["plan", str(tmp_path / "stale.csv"), "--from", str(d), "--poses", "30"]
+    )
+    assert r.exit_code == 1 and "identified from another recording.mcap" in r.output, r.output
+    assert not (tmp_path / "stale.csv").exists()

@@ -81,7 +81,7 @@ def fk(
     """
     import numpy as np
 
-    from pipeline.control.poses import poses_of_file, tool_pose
+    from pipeline.control.poses import payload_warning, poses_of_file, tool_pose
 
     if (q is None) == (q_file is None):  # a usage error (exit 2), as a missing option
         raise typer.BadParameter(
@@ -90,11 +90,21 @@ def fk(
     if q_file is not None:
         if out is None and not as_json:
             raise ArmsigError("--q-file needs --out or --json", fix="--out poses.arrow")
-        done = poses_of_file(robot, q_file, design=design, out=out, force=force, frame=frame.value)
+        done = poses_of_file(
+            robot,
+            q_file,
+            design=design,
+            out=out,
+            force=force,
+            frame=frame.value,
+            payload_kg=payload_kg,
+        )
         if as_json:
             print_json(done.to_dict())
         else:
             typer.echo(f"wrote {done.out}: {len(done.q)} poses of {done.robot} ({done.frame})")
+        if note := payload_warning(robot, payload_kg):
+            warn(note)
         outside = sum(1 for names in done.poses.outside_limits if names)
         if outside:
             warn(f"{outside} configuration(s) outside joint limits (column outside_limits)")
@@ -123,6 +133,8 @@ def fk(
             typer.echo(f"rpy_deg = {pose.rpy_deg}")
             typer.echo("T =")
             typer.echo(str(pose.matrix))
+    if note := payload_warning(robot, payload_kg):
+        warn(note)
     warn_outside_limits(pose.outside_limits)
 
 

@@ -119,6 +119,13 @@ class Controller:
         sig = replace(self.signature, nongeometric=ng.with_payload(kg))
         return Controller(sig, self.robot, self.sensor_from_base, self.flange_to_tool)
 
+    @property
+    def payload_warning(self) -> str | None:
+        """A warning when the payload lies outside those the session measured
+        (:meth:`NonGeometric.payload_extrapolated`), else None."""
+        ng = self.signature.nongeometric
+        return None if ng is None else ng.payload_extrapolated()
+
     @cached_property
     def resolution(self) -> np.ndarray:
         """Encoder resolution in math units (rad / cm), shape (n,)."""

@@ -47,15 +47,23 @@ def tool_pose(
     else a built-in robot name or a ``.toml`` description (the pose of its design flange
     in its base frame).
     """
-    model = _pose_model(robot)
+    model = _pose_model(robot, payload_kg)
     if not isinstance(model, RobotDescription):
-        if payload_kg is not None:
-            model = model.with_payload(payload_kg)
         return model.pose(list(q), design=design, frame=frame)  # type: ignore[no-any-return]
     _session_options(payload_kg, frame)
     from pipeline.robots.fk import design_pose
 
     return design_pose(model, list(q))
+
+
+def payload_warning(robot: str | Path, payload_kg: float | None) -> str | None:
+    """The warning for a ``payload_kg`` outside the payloads the session ``robot``
+    measured (:meth:`~pipeline.kinematics.nongeometric.NonGeometric.payload_extrapolated`;
+    None without one, or for a robot description)."""
+    if payload_kg is None:
+        return None
+    model = _pose_model(robot, payload_kg)
+    return None if isinstance(model, RobotDescription) else model.payload_warning
 
 
 def _session_options(payload_kg: float | None, frame: str) -> None:
@@ -69,16 +77,18 @@ def _session_options(payload_kg: float | None, frame: str) -> None:
         )
 
 
-def _pose_model(robot: str | Path) -> Any:
+def _pose_model(robot: str | Path, payload_kg: float | None = None) -> Any:
     """What :func:`tool_pose` evaluates: a session's controller (a folder, or a NAME of
-    ``sessions/NAME`` that is no built-in robot), else the robot description."""
+    ``sessions/NAME`` that is no built-in robot) under ``payload_kg`` when given
+    (:meth:`Controller.with_payload`), else the robot description."""
     from pipeline.stages.base import session_or_robot
 
     robot = session_or_robot(str(robot))
     if Path(robot).is_dir():
         from pipeline.control.session import session_controller
 
-        return session_controller(robot)
+        ctl = session_controller(robot)
+        return ctl if payload_kg is None else ctl.with_payload(payload_kg)
     from pipeline.robots import get_robot
 
     return get_robot(str(robot))
@@ -125,9 +135,11 @@ def poses_of_file(
     out: str | Path | None = None,
     force: bool = False,
     frame: str = DEFAULT_FRAME,
+    payload_kg: float | None = None,
 ) -> PosesFile:
     """:func:`tool_pose` of every configuration of ``q_file`` (Arrow IPC or CSV, columns
-    ``q1_deg`` ... as ``ik --targets`` writes: :func:`pipeline.control.targets.read_joints`).
+    ``q1_deg`` ... as ``ik --targets`` writes: :func:`pipeline.control.targets.read_joints`),
+    under ``payload_kg`` as :func:`tool_pose`.
 
     ``out``: an Arrow file of the input's columns plus the poses (``x_cm`` ... ``rz_deg``,
     an ``ik --targets`` input in the design base frame) and ``outside_limits``, written
@@ -141,7 +153,7 @@ def poses_of_file(
     from pipeline.robots.fk import chain_poses
     from pipeline.stages.tables import write_table
 
-    model = _pose_model(robot)
+    model = _pose_model(robot, payload_kg)
     desc = model if isinstance(model, RobotDescription) else model.robot
     table, q = read_joints(q_file, desc)
     if out is not None:
@@ -154,7 +166,7 @@ def poses_of_file(
             raise ArmsigError(f"--out {out} is the --q-file file", fix="--out poses.arrow")
         check_new_file(out, "--out", force)
     if isinstance(model, RobotDescription):
-        _session_options(None, frame)
+        _session_options(payload_kg, frame)
         poses = chain_poses(desc, desc.design_chain(), q)
     else:
         poses = model.poses(q, design=design, frame=frame)
@@ -166,6 +178,8 @@ def poses_of_file(
         for name, values_ in extra.items():
             table = table.append_column(name, values_)
         meta = {"robot": desc.name, "design": str(design), "frame": frame}
+        if payload_kg is not None:
+            meta["payload_kg"] = repr(float(payload_kg))
         write_table(Path(out), table, meta)
     joints = tuple(j.name for j in desc.joints)
     return PosesFile(desc.name, joints, q, poses, None if out is None else str(out), frame)
@@ -174,7 +188,8 @@ def poses_of_file(
 @dataclass(frozen=True)
 class ToolController:
     """The controller of a session's signature, the label of its tool, and its verdict
-    (``verdict``: status, None without one; ``warning``: a CHECK or an accepted FAIL)."""
+    (``verdict``: status, None without one; ``warning``: a CHECK or an accepted FAIL, and a
+    payload outside those the session measured)."""
 
     controller: Controller
     label: str
@@ -209,6 +224,7 @@ def tool_controller(
     ctl = Controller.from_signature(sig)
     if payload_kg is not None:
         ctl = ctl.with_payload(payload_kg)
+        warning = "; ".join(w for w in (warning, ctl.payload_warning) if w) or None
     if tool is None:
         return ToolController(ctl, "signature", status, warning)
     t = np.asarray(tool, float)

@@ -86,7 +86,11 @@ def validate_against(
     if not ok.any():
         raise ArmsigError(f"{Path(path).name}: no row with finite readings and coordinates")
     q = sig.robot.joints_from_readings(rows.q[ok])
-    model = model_points(sig.chain, q, sig.prismatic, sig.nongeometric)
+    kg = None if rows.payload_kg is None else rows.payload_kg[ok]
+    if kg is not None and sig.nongeometric is not None:
+        for m in np.unique(kg[np.isfinite(kg)]):
+            sig.nongeometric.with_payload(float(m))  # a payload it cannot predict: refused
+    model = model_points(sig.chain, q, sig.prismatic, sig.nongeometric, kg)
     raw, reg = error_distances(model, measured[ok])
     design = position_errors(design_errors(sig, q, measured[ok]), None)
     predicted = _predicted_rms_cm(sdir, joints_to_internal(q, sig.prismatic))

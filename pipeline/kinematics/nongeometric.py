@@ -50,6 +50,10 @@ KINDS = ("compliance", "payload", "harmonic")
 #: (relative to max(1, |q|)): 1e-13 rad is 1e-11 cm at a 1 m lever, far inside the IK's
 #: 1e-7 cm, and one fixed-point iteration of five fewer.
 READINGS_TOLERANCE = 1e-13
+#: :meth:`NonGeometric.with_payload` predicts payloads up to this many times the largest the
+#: session measured (the payload terms are linear in the mass; a joint's sag is linear only
+#: while its gear stays in its linear range, which no calibration of smaller loads shows).
+PAYLOAD_EXTRAPOLATION = 2.0
 #: Gravity in the design's base frame (unit vector).
 GRAVITY = np.array([0.0, 0.0, -1.0])
 
@@ -197,6 +201,16 @@ class NonGeometric:
         if not (np.isfinite(kg) and kg >= 0):
             raise ArmsigError("bad payload", expected="a mass >= 0 kg", got=repr(kg))
         measured = self.measured_payloads_kg or (0.0,)
+        top = PAYLOAD_EXTRAPOLATION * max(measured)
+        if self.terms.payload and kg > top:
+            raise ArmsigError(
+                f"the signature cannot predict a payload of {kg:g} kg",
+                expected=f"at most {top:g} kg ({PAYLOAD_EXTRAPOLATION:g}× the largest payload "
+                f"measured, {max(measured):g} kg: the payload terms are linear fits over "
+                f"{min(measured):g}-{max(measured):g} kg)",
+                got=f"{kg:g} kg",
+                fix="measure the arm under that payload (docs/nongeometric.md#payload)",
+            )
         if not self.terms.payload and not any(abs(kg - m) <= 1e-9 for m in measured):
             said = ", ".join(f"{m:g} kg" for m in self.measured_payloads_kg)
             raise ArmsigError(
@@ -208,6 +222,20 @@ class NonGeometric:
                 "(docs/nongeometric.md#payload)",
             )
         return replace(self, payload_kg=float(kg))
+
+    def payload_extrapolated(self) -> str | None:
+        """A warning when :attr:`payload_kg` lies outside the payloads the session measured
+        (the linear payload terms extrapolated), else None."""
+        measured = self.measured_payloads_kg
+        if not self.terms.payload or not measured:
+            return None
+        lo, hi = min(measured), max(measured)
+        if lo - 1e-9 <= self.payload_kg <= hi + 1e-9:
+            return None
+        return (
+            f"payload {self.payload_kg:g} kg is outside the {lo:g}-{hi:g} kg the session "
+            "measured: the payload terms are extrapolated"
+        )
 
     def readings_for(
         self, q_eff: npt.ArrayLike, tol: float = READINGS_TOLERANCE, max_iter: int = 50

@@ -249,6 +249,8 @@ def plan_from_session(
     refinement's whitening) and the Jacobian of the session's signature (its refined
     chain and non-geometric terms), chosen as :func:`plan_poses` chooses. The random
     comparison is the session's first ``n_poses`` poses in step order."""
+    from pipeline.signature.file import FILE_NAME
+    from pipeline.signature.session import load_session_document
     from pipeline.stages.frames import chain_from_frames, pose_tool_target, readings_at
     from pipeline.stages.refine import problem_params, refine_summary, refined_x
     from pipeline.stages.refine_problem import session_problem
@@ -260,6 +262,7 @@ def plan_from_session(
     names = ("session", "joints", "positions", "frames", "refine")
     if not all(stage_path(sdir, n).is_file() for n in names):
         raise ArmsigError(f"{sdir}: not identified", fix=f"run `pipeline identify {sdir}` first")
+    load_session_document(sdir / FILE_NAME)  # refused when stale, as `export` refuses it
     tables = {n: read_table(stage_path(sdir, n)) for n in names}
     summary = refine_summary(tables["refine"])
     plan = session_plan(tables["session"])

@@ -2,11 +2,12 @@
 
 For every measured position of the tool target (``plan.tool_target``) the model's
 prediction is the S-Model chain's forward kinematics with its tool at the recorded
-joint values (:func:`pipeline.evaluation.validation.model_points`). Rows of sweep
-``check`` are validation configurations the identification never used (role
-``check``); the tool measurement, and the joint sweeps' rows of the tool target when
-they measured the tool point itself (``plan.sweeps_measure_tool``, SScanSS-2 style:
-every row measures the end effector), are fit data (role ``fit``). Each role's
+joint values under the recorded payload
+(:func:`pipeline.evaluation.validation.model_points`). Rows of sweep ``check`` are
+validation configurations the identification never used (role ``check``); the tool
+measurement, and the joint sweeps' rows of the tool target when they measured the tool
+point itself (``plan.sweeps_measure_tool``, SScanSS-2 style: every row measures the end
+effector), are fit data (role ``fit``). Each role's
 distances are also given after registering the base: the least-squares rigid motion
 of that role's predicted points onto its measured ones.
 
@@ -31,6 +32,7 @@ from pipeline.stages.frames import chain_from_frames, readings_at
 from pipeline.stages.positions import positions, sweep_rows
 from pipeline.stages.recording import CHECK_SWEEP
 from pipeline.stages.refine import nongeometric_model
+from pipeline.stages.refine_problem import payloads_at
 from pipeline.stages.session import session_plan, session_robot
 
 ROLES = ("check", "fit")
@@ -72,7 +74,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
             at = sweep[sel] == s
             q[at] = readings_at(inputs["joints"], int(s), step[sel][at], n, pris)
         arrays["q"].append(q)
-        model = model_points(chain, q, pris, nongeometric)
+        kg = payloads_at(inputs["joints"], sweep[sel], step[sel])
+        model = model_points(chain, q, pris, nongeometric, kg)
         raw, reg = error_distances(model, xyz[sel])
         cols["sweep"] += sweep[sel].tolist()
         cols["step"] += step[sel].tolist()
@@ -125,8 +128,9 @@ def _design_errors(
 
 STAGE = Stage(
     "validation",
-    4,  # 2: from the signature chain (stage chain); 3: with its non-geometric terms;
-    # 4: design_error_cm, the registered design model beside it (issue 29)
+    5,  # 2: from the signature chain (stage chain); 3: with its non-geometric terms;
+    # 4: design_error_cm, the registered design model beside it (issue 29);
+    # 5: each row under its recorded payload (issue 44: the check rows' payload ignored)
     ("positions", "joints", "chain", "session", "refine"),
     NoParams(),
     compute,
