@@ -256,3 +256,26 @@ def test_a_bad_payload_is_refused_in_one_line(tmp_path: Path) -> None:
     mp.write_text('payload_column = "load"\npayload_kg = 2\n' + pose_set_map())
     with pytest.raises(ImportFileError, match="payload_kg: is stated and payload_column is given"):
         import_file(src, "table", UR10, tmp_path / "t", mp)
+
+
+def test_a_byte_order_mark_is_read_and_a_row_wider_than_the_header_refused(tmp_path: Path) -> None:
+    """Issue 44: Excel's "CSV UTF-8" (a BOM before the header) was refused with an invisible
+    character in the message; a row with a cell too many was read by position, shifted."""
+    plain, _ = _import(tmp_path / "plain")
+    src = tmp_path / "plain" / "poses.csv"
+    bom = tmp_path / "bom"
+    bom.mkdir()
+    (bom / "poses.csv").write_bytes(b"\xef\xbb\xbf" + src.read_bytes())
+    import_file(bom / "poses.csv", "table", UR10, bom / "s", tmp_path / "plain" / "map.toml")
+    assert _messages(bom / "s") == _messages(plain)
+    lines = src.read_text().splitlines()
+    lines[3] = "0;" + lines[3]  # a cell too many at the front: every column shifted
+    lines[5] += ";;"  # empty cells after the last column: a trailing delimiter, harmless
+    wide = tmp_path / "wide.csv"
+    wide.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ImportFileError, match=r"wide.csv: line 4: \d+ cells for the header's \d+"):
+        import_file(wide, "table", UR10, tmp_path / "w", tmp_path / "plain" / "map.toml")
+    assert not (tmp_path / "w").exists()
+    lines[3] = lines[3][2:]
+    wide.write_text("\n".join(lines) + "\n")
+    import_file(wide, "table", UR10, tmp_path / "w", tmp_path / "plain" / "map.toml")

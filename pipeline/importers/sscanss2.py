@@ -27,9 +27,10 @@ TARGET = "ee"
 
 
 def read_text(path: Path) -> str:
-    """A text file's content; an unreadable file is refused."""
+    """A text file's content (UTF-8, a leading byte-order mark dropped: Excel's "CSV
+    UTF-8" writes one); an unreadable file is refused."""
     try:
-        return path.read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise ImportFileError(
             f"cannot read {path}", got=str(exc), fix="check the path and that it is a text file"

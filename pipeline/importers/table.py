@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import replace
 from pathlib import Path
 
@@ -134,6 +134,7 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
     hl = imap.skip_rows + 1  # the header's line
     if imap.header:
         header = [h.strip() for h in next(reader, (hl, []))[1]]
+        reader = _no_wider(reader, header, src)
     length = unit_factor(imap.length_unit, LENGTH_CM, "length", f"{mname}: length_unit")
     # the tool target first: its id is plan.tool_target, its orientation the recorded one
     targets = sorted(imap.targets, key=lambda t: t.id != (imap.tool_target or imap.targets[0].id))
@@ -203,6 +204,27 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
             )
         rows = replace(rows, sweep=infer_sweeps(rows, robot, tol))  # a wrap is a change
     return _unwrapped(rows, imap, robot)
+
+
+def _no_wider(
+    reader: Iterator[tuple[int, list[str]]], header: list[str], src: str
+) -> Iterator[tuple[int, list[str]]]:
+    """The rows of ``reader``, a row with more non-empty cells than the header has columns
+    refused naming its line (its cells would be read shifted: a delimiter too many, or a
+    decimal comma in a comma-separated file); empty cells past the header (a trailing
+    delimiter) are allowed."""
+    for line, fields in reader:
+        extra = [f for f in fields[len(header) :] if f.strip()]
+        if extra:
+            raise ImportFileError(
+                f"{src}: line {line}: {len(fields)} cells for the header's {len(header)} "
+                "columns",
+                expected="at most one cell per header column",
+                got=f"extra cells {', '.join(repr(f) for f in extra[:3])}",
+                fix="check the delimiter and decimal mark in the row (and the map's "
+                "delimiter / decimal), or delete the row",
+            )
+        yield line, fields
 
 
 def _payload_cell(kg: float, src: str, line: int) -> float:
