@@ -374,3 +374,103 @@ def test_check_urdf_accepts_every_export(sessions, tmp_path) -> None:
     for p in paths:
         run = subprocess.run([str(_check_urdf()), p], capture_output=True, text=True)
         assert run.returncode == 0 and "Successfully Parsed XML" in run.stdout, run.stdout
+
+
+# --- vendor files as vendors write them (issue 44) ----------------------------------
+
+
+def _vendor_text(d: Path, tmp_path: Path) -> str:
+    return Path(export(d, "urdf", out=tmp_path / "design.urdf", design=True).path).read_text()
+
+
+def _onto_text(d: Path, vendor: Path, out: Path) -> str:
+    """The calibrated file of ``vendor`` as text (decoded as the vendor wrote it)."""
+    export_onto(d, vendor, out=out)
+    raw = out.read_bytes()
+    for mark, codec in ((b"\xff\xfe", "utf-16-le"), (b"\xef\xbb\xbf", "utf-8")):
+        if raw.startswith(mark):
+            return raw[len(mark) :].decode(codec)
+    return raw.decode("latin-1" if b"ISO-8859-1" in raw[:60] else "utf-8")
+
+
+def test_vendor_files_in_other_encodings_and_with_comments_calibrate_alike(
+    sessions, tmp_path
+) -> None:
+    """Issue 44: a UTF-8 byte-order mark, ``</origin>`` inside a comment, latin-1 link
+    names, and UTF-16 were refused (and the message named the output file). Each now
+    gives the plain file's calibration in the vendor's own encoding, every byte outside
+    the edits the vendor's."""
+    d = sessions["ur10"]
+    text = _vendor_text(d, tmp_path)
+    plain = tmp_path / "plain.urdf"
+    plain.write_text(text)
+    want = _onto_text(d, plain, tmp_path / "plain.cal.urdf")
+    decl_end = text.index("?>") + 2 if text.startswith("<?xml") else 0
+    body = text[decl_end:]
+
+    def same(t: str) -> str:  # the text after the XML declaration, which names the encoding
+        return t[t.index("?>") + 2 :] if t.startswith("<?xml") else t
+
+    comment = "  <!-- an old <origin xyz='0 0 0'></origin> -->\n"
+    cases = {
+        "bom": (b"\xef\xbb\xbf" + text.encode(), str),
+        "utf16": (
+            b"\xff\xfe" + ('<?xml version="1.0" encoding="UTF-16"?>' + body).encode("utf-16-le"),
+            str,
+        ),
+        "comment": (text.replace("</robot>", comment + "</robot>").encode(),
+                    lambda t: t.replace(comment, "")),
+        "latin1": (
+            ('<?xml version="1.0" encoding="ISO-8859-1"?>'
+             + body.replace('"base_link"', '"basé"')).encode("latin-1"),
+            lambda t: t.replace('"basé"', '"base_link"'),
+        ),
+    }  # fmt: skip
+    for name, (data, back) in cases.items():
+        vendor = tmp_path / f"{name}.urdf"
+        vendor.write_bytes(data)
+        got = _onto_text(d, vendor, tmp_path / f"{name}.cal.urdf")
+        assert same(back(got)) == same(want), name
+
+
+def test_a_vendor_tree_with_a_cycle_is_refused_and_a_mobile_base_is_read(
+    sessions, tmp_path
+) -> None:
+    """Issue 44: a link with two parents was accepted (the last joint won); a planar or
+    floating joint elsewhere in the file (a mobile base) was refused. A mobile base's
+    arm is calibrated from the link below the base's joint."""
+    d = sessions["ur10"]
+    text = _vendor_text(d, tmp_path)
+    root = re.search(r'<link name="([^"]+)"', text).group(1)
+    extra = (f'  <link name="extra"/>\n  <joint name="loop" type="fixed">\n'
+             f'    <parent link="extra"/>\n    <child link="{root}"/>\n  </joint>\n'
+             f'  <joint name="back" type="fixed">\n    <parent link="tool0"/>\n'
+             f'    <child link="extra"/>\n  </joint>\n')  # fmt: skip
+    cyc = tmp_path / "cycle.urdf"
+    cyc.write_text(text.replace("</robot>", extra + "</robot>"))
+    with pytest.raises(ArmsigError, match="do not form one tree") as e:
+        export_onto(d, cyc, out=tmp_path / "c.urdf")
+    assert "\n" not in str(e.value) and not (tmp_path / "c.urdf").exists()
+    two = tmp_path / "two.urdf"  # tool0 with a second parent
+    two.write_text(text.replace("</robot>", '  <joint name="again" type="fixed">\n'
+                                f'    <parent link="{root}"/>\n    <child link="tool0"/>\n'
+                                "  </joint>\n</robot>"))  # fmt: skip
+    with pytest.raises(ArmsigError, match=r"links with two parents \['tool0'\]"):
+        export_onto(d, two, out=tmp_path / "t.urdf")
+    sig = load_session_signature(d / "signature.json")
+    default = Path(export(d, "urdf", out=tmp_path / "default.urdf").path)
+    plain = tmp_path / "plain.urdf"
+    plain.write_text(text)
+    want = export_onto(d, plain, out=tmp_path / "plain.cal.urdf")
+    for kind in ("floating", "planar"):
+        base = (f'  <link name="world"/>\n  <joint name="mobile" type="{kind}">\n'
+                f'    <parent link="world"/>\n    <child link="{root}"/>\n'
+                '    <origin xyz="1 2 0" rpy="0 0 0.5"/>\n  </joint>\n')  # fmt: skip
+        vendor = tmp_path / f"{kind}.urdf"
+        vendor.write_text(text.replace("</robot>", base + "</robot>"))
+        r = export_onto(d, vendor, out=tmp_path / f"{kind}.cal.urdf")
+        np.testing.assert_allclose(
+            r.vendor_root_from_design_base, want.vendor_root_from_design_base, atol=1e-12
+        )
+        assert f'type="{kind}"' in (tmp_path / f"{kind}.cal.urdf").read_text()
+    assert check_onto(sig, want, default) <= 1e-12

@@ -54,6 +54,7 @@ from pipeline.export.urdf import M_PER_CM, origin_element
 from pipeline.export.vendor import (
     VendorJoint,
     VendorURDF,
+    arm_root,
     axis_frame,
     motion,
     parse_vendor_urdf,
@@ -146,7 +147,7 @@ def vendor_chain(urdf: VendorURDF, names: list[str]) -> VendorChain:
     refusal (a moving joint between them, or not in this order)."""
     joints: list[VendorJoint] = []
     before: list[Array] = []
-    link = urdf.root
+    link = arm_root(urdf, names[0])
     for name in names:
         j = urdf.joints[name]
         path = path_to(urdf, j.parent, link)
@@ -188,11 +189,11 @@ def joint_names(sig: Signature, urdf: VendorURDF, joint_map: str | None) -> dict
         raise ArmsigError(
             f"--joint-map names unknown armsig joints {extra}", expected=", ".join(mine)
         )
-    moving = [j.name for j in urdf.joints.values() if j.moving]
+    moving = [j.name for j in urdf.joints.values() if j.arm_joint]
     out = {}
     for j in sig.robot.joints:
         v = given.get(j.name) or next((x for x in (j.name, f"{j.name}_joint") if x in moving), None)
-        if v is None or v not in urdf.joints or not urdf.joints[v].moving:
+        if v is None or v not in urdf.joints or not urdf.joints[v].arm_joint:
             raise ArmsigError(
                 f"{urdf.path}: no moving joint for armsig's joint {j.name!r}"
                 + (f" (--joint-map gives {v!r})" if v else ""),
@@ -410,8 +411,8 @@ def export_onto(
     side_warning = write_sidecar(sig, section, path, random_readings(sig, CHECK_CONFIGURATIONS),
                                  "URDF", own_folder=out is None)  # fmt: skip
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_write(path) as f:  # the vendor's bytes, whatever their encoding
-        f.write(data)  # type: ignore[arg-type]
+    with atomic_write(path) as f:  # the vendor's bytes, in the vendor's encoding
+        f.write(urdf.encoded(data))  # type: ignore[arg-type]
     moves_mm, moves_deg = {}, {}
     for j, origin in zip(cal.chain.joints, cal.origins, strict=True):
         dp, dr = pose_error(j.origin, origin)

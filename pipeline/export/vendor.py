@@ -2,15 +2,20 @@
 ``<origin>`` sits in the file's bytes (so that only those bytes change), and the forward
 kinematics of a serial path through it.
 
-The file is read with the standard library's expat parser (the XML as it is: no xacro).
-Only ``<joint>`` and ``<link>`` elements directly under ``<robot>`` count; a ``<joint>``
-inside ``<transmission>`` is not a kinematic joint.
+The file is read with the standard library's expat parser (the XML as it is: no xacro),
+in the encoding it declares (a byte-order mark, else its XML declaration, else UTF-8:
+XML 1.0 appendix F); its text is held as UTF-8 and written back in that encoding, so
+every byte outside the edits is the vendor's. Only ``<joint>`` and ``<link>`` elements
+directly under ``<robot>`` count; a ``<joint>`` inside ``<transmission>`` is not a
+kinematic joint. A ``planar`` or ``floating`` joint (a mobile base) is read as a joint
+that moves; it may not lie between the mapped joints.
 """
 
 from __future__ import annotations
 
+import codecs
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from xml.parsers import expat
 
@@ -21,7 +26,17 @@ from pipeline.kinematics.transforms import Array, rot_z, trans_z, transform_from
 
 M_PER_CM = 0.01
 MOVING = ("revolute", "continuous", "prismatic")
-KINDS = (*MOVING, "fixed")
+#: Joints of more than one freedom (a mobile base): read, never mapped to an arm joint.
+FREE = ("planar", "floating")
+KINDS = (*MOVING, *FREE, "fixed")
+#: Byte-order marks and their codecs, the 4-byte ones first (UTF-32 LE starts as UTF-16 LE).
+_BOMS = (
+    (codecs.BOM_UTF32_LE, "utf-32-le"), (codecs.BOM_UTF32_BE, "utf-32-be"),
+    (codecs.BOM_UTF8, "utf-8"), (codecs.BOM_UTF16_LE, "utf-16-le"),
+    (codecs.BOM_UTF16_BE, "utf-16-be"),
+)  # fmt: skip
+#: Without a mark, a document's first bytes ``<?`` in a wider encoding (XML 1.0 app. F).
+_WIDE = ((b"<\0?\0", "utf-16-le"), (b"\0<\0?", "utf-16-be"))
 #: A start tag, its attribute values may hold ``>``.
 _TAG = r'(?:[^>"\']|"[^"]*"|\'[^\']*\')*'
 _ORIGIN = re.compile(rb"<origin\b" + _TAG.encode() + rb"?(/?)>")  # lazy: "/" stays out
@@ -44,21 +59,37 @@ class VendorJoint:
 
     @property
     def moving(self) -> bool:
+        """A joint with a freedom (an arm joint, or a mobile base's planar / floating)."""
+        return self.type != "fixed"
+
+    @property
+    def arm_joint(self) -> bool:
+        """A joint of one freedom, which an armsig joint may map to."""
         return self.type in MOVING
 
 
 @dataclass(frozen=True)
 class VendorURDF:
+    """A vendor file: ``data`` its text as UTF-8 (byte offsets of the spans are in it),
+    ``encoding`` and ``bom`` how the file wrote it (:meth:`encoded`)."""
+
     path: Path
     data: bytes
     name: str
     links: tuple[str, ...]
     joints: dict[str, VendorJoint]
     root: str
+    encoding: str = "utf-8"
+    bom: bytes = b""
 
     @property
     def joint_of_child(self) -> dict[str, VendorJoint]:
         return {j.child: j for j in self.joints.values()}
+
+    def encoded(self, data: bytes) -> bytes:
+        """UTF-8 ``data`` (this file's text, edited) in the file's own encoding and mark;
+        a character the encoding lacks (in armsig's comments) as a character reference."""
+        return self.bom + data.decode("utf-8").encode(self.encoding, "xmlcharrefreplace")
 
 
 def _numbers(text: str | None, n: int, what: str) -> Array:
@@ -78,22 +109,61 @@ def read_vendor_urdf(path: str | Path) -> VendorURDF:
     tree that is not one robot (no single root, a joint whose links are unknown)."""
     p = Path(path)
     try:
-        data = p.read_bytes()
+        raw = p.read_bytes()
     except OSError as exc:
         raise ArmsigError(
             f"cannot read the vendor URDF {p}", got=exc.strerror or str(exc),
             fix="give the path of a .urdf file (xacro files: run xacro first)",
         ) from exc  # fmt: skip
-    return parse_vendor_urdf(data, p)
+    bom, encoding = _encoding(raw, p)
+    try:
+        text = raw[len(bom) :].decode(encoding)
+    except UnicodeDecodeError as exc:
+        raise ArmsigError(
+            f"{p} is not {encoding} text as it declares",
+            got=f"byte {exc.start + len(bom)}: {exc.reason}",
+            fix="save the file in the encoding its XML declaration names",
+        ) from None
+    urdf = parse_vendor_urdf(text.encode("utf-8"), p)
+    return replace(urdf, encoding=encoding, bom=bom)
+
+
+def _encoding(raw: bytes, p: Path) -> tuple[bytes, str]:
+    """The byte-order mark of ``raw`` (b"" without one) and the codec of its text: the
+    mark's, else a UTF-16 document's first bytes', else the XML declaration's (read by
+    expat), else UTF-8."""
+    for bom, codec in _BOMS:
+        if raw.startswith(bom):
+            return bom, codec
+    for head, codec in _WIDE:
+        if raw.startswith(head):
+            return b"", codec
+    declared: list[str] = []
+    parser = expat.ParserCreate()
+    parser.XmlDeclHandler = lambda version, encoding, standalone: declared.append(encoding or "")
+    try:
+        parser.Parse(raw[: raw.find(b"?>") + 2] if raw.startswith(b"<?xml") else b"", True)
+    except expat.ExpatError:
+        pass  # a declaration expat cannot read: the whole parse says what is wrong
+    name = declared[0] if declared and declared[0] else "utf-8"
+    try:
+        return b"", codecs.lookup(name).name
+    except LookupError:
+        raise ArmsigError(
+            f"{p}: unknown encoding {name!r} in its XML declaration",
+            expected="an encoding Python knows (UTF-8, UTF-16, ISO-8859-1, ...)",
+            fix="save the file as UTF-8",
+        ) from None
 
 
 def parse_vendor_urdf(data: bytes, p: Path) -> VendorURDF:
-    """The URDF text ``data`` (read from ``p``, named in messages) as a :class:`VendorURDF`."""
+    """The URDF text ``data`` (UTF-8, whatever its declaration says; read from ``p``,
+    named in messages) as a :class:`VendorURDF`."""
     stack: list[str] = []
     robot: list[str] = []
     links: list[str] = []
     raw: list[dict[str, object]] = []
-    parser = expat.ParserCreate()
+    parser = expat.ParserCreate("UTF-8")  # overrides the declaration: the text is UTF-8
 
     def start(tag: str, attrs: dict[str, str]) -> None:
         depth = len(stack)
@@ -144,14 +214,24 @@ def parse_vendor_urdf(data: bytes, p: Path) -> VendorURDF:
             transform_from_xyz_rpy(xyz / M_PER_CM, rpy), axis / np.linalg.norm(axis),
             _span(data, j.get("at")), int(j["body"]),  # type: ignore[call-overload]
         )  # fmt: skip
-    children = {j.child for j in joints.values()}
+    children = [j.child for j in joints.values()]
     roots = [x for x in links if x not in children]
     unknown = {x for j in joints.values() for x in (j.parent, j.child)} - set(links)
-    if unknown or len(roots) != 1:
+    twice = sorted({c for c in children if children.count(c) > 1})
+    if unknown or len(roots) != 1 or twice:
         raise ArmsigError(
             f"{p}: the links do not form one tree",
-            expected="one root link, every joint's links declared",
-            got=f"roots {roots}, undeclared {sorted(unknown)}",
+            expected="one root link, every joint's links declared, one parent per link",
+            got=f"roots {roots}, undeclared {sorted(unknown)}, links with two parents {twice}",
+        )
+    below = {roots[0]}
+    for _ in range(len(links)):  # every link reached from the root: no cycle apart from it
+        below |= {j.child for j in joints.values() if j.parent in below}
+    if len(below) != len(links):
+        raise ArmsigError(
+            f"{p}: the links do not form one tree",
+            expected="every link below the root link",
+            got=f"a cycle of joints through {sorted(set(links) - below)}",
         )
     return VendorURDF(p, data, robot[0], tuple(links), joints, roots[0])
 
@@ -184,6 +264,16 @@ def path_to(urdf: VendorURDF, link: str, stop: str) -> list[VendorJoint] | None:
         out.append(j)
         link = j.parent
     return list(reversed(out))
+
+
+def arm_root(urdf: VendorURDF, first: str) -> str:
+    """The link the arm's chain starts from, above its first joint ``first``: the root,
+    or below a mobile base (the child of the last planar / floating joint on the way)."""
+    link = urdf.root
+    for j in path_to(urdf, urdf.joints[first].parent, urdf.root) or []:
+        if j.type in FREE:
+            link = j.child
+    return link
 
 
 def motion(j: VendorJoint, v: Array) -> Array:
