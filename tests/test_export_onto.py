@@ -383,6 +383,14 @@ def _vendor_text(d: Path, tmp_path: Path) -> str:
     return Path(export(d, "urdf", out=tmp_path / "design.urdf", design=True).path).read_text()
 
 
+def _origin_with_comment(text: str) -> str:
+    """``text`` with its first joint's ``<origin .../>`` written as an element holding a
+    comment that holds ``</origin>``."""
+    m = re.search(r"<origin ([^>]*?)/>", text)
+    assert m
+    return text.replace(m.group(0), f"<origin {m.group(1)}><!-- was </origin> --></origin>", 1)
+
+
 def _onto_text(d: Path, vendor: Path, out: Path) -> str:
     """The calibrated file of ``vendor`` as text (decoded as the vendor wrote it)."""
     export_onto(d, vendor, out=out)
@@ -420,6 +428,7 @@ def test_vendor_files_in_other_encodings_and_with_comments_calibrate_alike(
         ),
         "comment": (text.replace("</robot>", comment + "</robot>").encode(),
                     lambda t: t.replace(comment, "")),
+        "comment_inside": (_origin_with_comment(text).encode(), str),
         "latin1": (
             ('<?xml version="1.0" encoding="ISO-8859-1"?>'
              + body.replace('"base_link"', '"basé"')).encode("latin-1"),

@@ -187,7 +187,13 @@ def parse_vendor_urdf(data: bytes, p: Path) -> VendorURDF:
         stack.append(tag)
 
     parser.StartElementHandler = start
-    parser.EndElementHandler = lambda tag: stack.pop()
+
+    def end(tag: str) -> None:
+        stack.pop()
+        if len(stack) == 2 and stack[1] == "joint" and tag == "origin" and raw:
+            raw[-1]["end"] = parser.CurrentByteIndex  # its end tag (expat: not a comment's)
+
+    parser.EndElementHandler = end
     try:
         parser.Parse(data, True)
     except expat.ExpatError as exc:
@@ -212,7 +218,7 @@ def parse_vendor_urdf(data: bytes, p: Path) -> VendorURDF:
         joints[name] = VendorJoint(
             name, str(j["type"]), str(j["parent"]), str(j["child"]),
             transform_from_xyz_rpy(xyz / M_PER_CM, rpy), axis / np.linalg.norm(axis),
-            _span(data, j.get("at")), int(j["body"]),  # type: ignore[call-overload]
+            _span(data, j.get("at"), j.get("end")), int(j["body"]),  # type: ignore[call-overload]
         )  # fmt: skip
     children = [j.child for j in joints.values()]
     roots = [x for x in links if x not in children]
@@ -236,8 +242,9 @@ def parse_vendor_urdf(data: bytes, p: Path) -> VendorURDF:
     return VendorURDF(p, data, robot[0], tuple(links), joints, roots[0])
 
 
-def _span(data: bytes, at: object) -> tuple[int, int] | None:
-    """Bytes of the ``<origin>`` element that starts at byte ``at``."""
+def _span(data: bytes, at: object, end_at: object) -> tuple[int, int] | None:
+    """Bytes of the ``<origin>`` element that starts at byte ``at`` and whose end tag
+    expat found at byte ``end_at`` (a ``</origin>`` in a comment inside it is text)."""
     if at is None:
         return None
     start = int(at)  # type: ignore[call-overload]
@@ -246,7 +253,7 @@ def _span(data: bytes, at: object) -> tuple[int, int] | None:
         raise ArmsigError("an <origin> start tag could not be delimited", got=f"byte {start}")
     if m.group(1):  # <origin .../>
         return start, m.end()
-    end = _END_ORIGIN.search(data, m.end())
+    end = _END_ORIGIN.match(data, int(end_at))  # type: ignore[call-overload]
     if end is None:
         raise ArmsigError("an <origin> element is not closed", got=f"byte {start}")
     return start, end.end()
