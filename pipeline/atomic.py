@@ -10,7 +10,7 @@ import contextlib
 import json
 import os
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import IO
 
@@ -133,12 +133,46 @@ def _check_writable(p: Path, what: str, folder: bool) -> Path:
     return p
 
 
-def check_new_file(path: str | Path, what: str, force: bool) -> Path:
+def check_new_file(
+    path: str | Path, what: str, force: bool, inputs: Sequence[str | Path] = ()
+) -> Path:
     """:func:`check_writable`, and refuse a file that exists unless ``force`` (a user's
-    file is never replaced without asking)."""
+    file is never replaced without asking). ``force`` replaces a user's output, never one
+    of the command's ``inputs`` nor a session's own files (:func:`session_own_file`)."""
     from pipeline.errors import ArmsigError
 
     p = check_writable(path, what)
-    if p.exists() and not force:
+    if not p.exists():
+        return p
+    same = next((str(i) for i in inputs if Path(i).exists() and Path(i).samefile(p)), None)
+    if same is not None:
+        raise ArmsigError(
+            f"{what} {p} is an input of this command ({same})",
+            expected="an output file other than the inputs, which --force never replaces",
+            fix="give another path",
+        )
+    own = session_own_file(p)
+    if own is not None:
+        raise ArmsigError(
+            f"{what} {p} is {own}, which only `pipeline identify` writes",
+            expected="an output file outside the session's stages, report and signature",
+            fix=f"give another path, e.g. {p.parent / ('my-' + p.name)}",
+        )
+    if not force:
         raise ArmsigError(f"{what} {p} already exists", fix="another path, or --force")
     return p
+
+
+#: A session's own files and folders (beside its ``recording.mcap``), which identify writes.
+SESSION_OWN = ("signature.json", "rig-truth.json", "stages", "report")
+
+
+def session_own_file(path: str | Path) -> str | None:
+    """What ``path`` is when it is a session's own file: its ``signature.json``, its
+    simulator's truth, or a file under its ``stages/`` or ``report/`` folder (a folder
+    holding a ``recording.mcap``); else None."""
+    p = Path(path).resolve()
+    for top in (p, *p.parents[:-1]):
+        if top.name in SESSION_OWN and (top.parent / SESSION_INPUTS[0]).is_file():
+            return f"session {top.parent.name}'s {top.relative_to(top.parent)}"
+    return None

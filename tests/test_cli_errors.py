@@ -344,6 +344,33 @@ def test_no_output_replaces_a_users_file_or_a_sessions_measurements(
     assert not (session / "evaluation.mcap").exists()
 
 
+def test_force_replaces_an_output_never_an_input_or_a_sessions_own_files(
+    session: Path, tmp_path: Path
+) -> None:
+    """Issue 44: ``plan OUT --robot OUT --force`` replaced the robot description it read
+    with the plan; ``--force`` let ``plan``, ``export`` and ``ik`` write over a session's
+    ``signature.json`` or a stage table."""
+    robot = tmp_path / "arm.toml"
+    shutil.copy(Path(__file__).resolve().parents[1] / "examples" / "ur10_ipa" / "ur10.toml", robot)
+    before = robot.read_bytes()
+    for extra in (("--poses", "20"), ("--sweeps",)):
+        r = invoke("plan", str(robot), "--robot", str(robot), "--force", *extra)
+        assert_one_error(r, EXIT_REFUSED, f"{robot} is an input of this command")
+    assert robot.read_bytes() == before
+    own = [session / "signature.json", *sorted((session / "stages").glob("*.arrow"))[:2]]
+    kept = {p: p.read_bytes() for p in own}
+    t = str(targets(tmp_path))
+    for path in own:
+        for argv in (
+            ("plan", str(path), "--robot", "puma560", "--poses", "20", "--force"),
+            ("export", str(session), "--format", "dh", "--out", str(path), "--force"),
+            ("ik", str(session), "--targets", t, "--out", str(path), "--force"),
+        ):
+            r = invoke(*argv)
+            assert_one_error(r, EXIT_REFUSED, "which only `pipeline identify` writes")
+    assert {p: p.read_bytes() for p in own} == kept
+
+
 def test_non_finite_joint_values_and_poses_are_refused(session: Path) -> None:
     # fk printed a NaN pose with exit 0; ik blamed the design inverse.
     r = invoke("fk", "puma560", "--q", "nan 0 0 0 0 0")

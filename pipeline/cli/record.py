@@ -368,7 +368,7 @@ def plan_(
         assert robot is not None
         _sweep_plan(out, get_robot(robot), sensor or Sensor.sonic, plane_sigma_deg,
                     None if center_sigma_mm is None else center_sigma_mm / 10.0, target, sigma,
-                    points, repeats, json_out, force)  # fmt: skip
+                    points, repeats, json_out, force, robot)  # fmt: skip
         return
     given = [k for k, v in sweep_only.items() if v is not None]
     if given or sensor == Sensor.sonic:
@@ -385,7 +385,7 @@ def plan_(
         assert robot is not None
         rob = get_robot(robot)
         result = plan_poses(rob, n_poses, target, sigma, candidates, seed)
-    path = write_plan(out, rob, result, force)
+    path = write_plan(out, rob, result, force, inputs=[robot] if robot else [])
     if json_out:
         print_json({"path": str(path), **result.to_dict()})
         return
@@ -426,14 +426,16 @@ def _sweep_plan(
     repeats: int,
     json_out: bool,
     force: bool,
+    source: str,
 ) -> None:
-    """``plan --sweeps``: :func:`pipeline.planning.sweeps.plan_sweeps`, written and printed."""
+    """``plan --sweeps``: :func:`pipeline.planning.sweeps.plan_sweeps`, written and printed
+    (``source``: the robot as given, an input ``--force`` never replaces)."""
     from pipeline.cli.output import print_json
     from pipeline.planning.sweeps import plan_sweeps, write_sweep_plan
 
     plan = plan_sweeps(robot, sensor.value, plane_sigma_deg, center_sigma_cm, target, sigma,
                        points, repeats)  # fmt: skip
-    path = write_sweep_plan(out, robot, plan, force)
+    path = write_sweep_plan(out, robot, plan, force, inputs=(source,))
     if json_out:
         print_json({"path": str(path), **plan.to_dict()})
         return

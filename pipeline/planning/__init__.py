@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -223,14 +224,21 @@ def prediction(
     }
 
 
-def write_plan(path: str | Path, robot: RobotDescription, plan: Plan, force: bool = False) -> Path:
+def write_plan(
+    path: str | Path,
+    robot: RobotDescription,
+    plan: Plan,
+    force: bool = False,
+    inputs: Sequence[str | Path] = (),
+) -> Path:
     """Write ``plan`` as a pose plan file (:mod:`pipeline.rig.pose_file`); an existing file
-    is refused unless ``force``."""
+    is refused unless ``force``, and never one of the command's ``inputs``
+    (:func:`pipeline.atomic.check_new_file`)."""
     from pipeline.atomic import check_new_file
     from pipeline.rig.pose_file import write_pose_plan
 
     out = Path(path)
-    check_new_file(out, "pose plan", force)
+    check_new_file(out, "pose plan", force, inputs)
     comment = (
         f"armsig pose plan: {robot.name}, {len(plan.q)} poses; predicted RMS "
         f"{plan.rms_cm:.3g} cm (under {plan.rms_q95_cm:.3g} cm with 95 % probability), "

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -307,15 +308,20 @@ def _scaled_to(plan: SweepPlan, target_cm: float, evaluate: Any) -> SweepPlan:
 
 
 def write_sweep_plan(
-    path: str | Path, robot: RobotDescription, plan: SweepPlan, force: bool = False
+    path: str | Path,
+    robot: RobotDescription,
+    plan: SweepPlan,
+    force: bool = False,
+    inputs: Sequence[str | Path] = (),
 ) -> Path:
     """Write ``plan`` as a sweep plan file (:func:`pipeline.rig.pose_file.write_sweep_plan`);
-    an existing file is refused unless ``force``."""
+    an existing file is refused unless ``force``, and never one of the command's
+    ``inputs``."""
     from pipeline.atomic import check_new_file
     from pipeline.rig.pose_file import write_sweep_plan as write
 
     out = Path(path)
-    check_new_file(out, "sweep plan", force)
+    check_new_file(out, "sweep plan", force, inputs)
     lines = [
         f"armsig sweep plan: {robot.name}, {plan.sensor}, {plan.positions} positions "
         f"(x {plan.n_avg} cycles); predicted RMS tool error {plan.rms_cm:.3g} cm (under "
