@@ -217,8 +217,7 @@ def _no_wider(
         extra = [f for f in fields[len(header) :] if f.strip()]
         if extra:
             raise ImportFileError(
-                f"{src}: line {line}: {len(fields)} cells for the header's {len(header)} "
-                "columns",
+                f"{src}: line {line}: {len(fields)} cells for the header's {len(header)} columns",
                 expected="at most one cell per header column",
                 got=f"extra cells {', '.join(repr(f) for f in extra[:3])}",
                 fix="check the delimiter and decimal mark in the row (and the map's "

@@ -13,9 +13,9 @@ The plan is a CSV of joint readings (:mod:`pipeline.rig.pose_file`); ``pipeline 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np

@@ -26,9 +26,9 @@ The file a robot program reads: :func:`pipeline.rig.pose_file.write_sweep_plan`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
