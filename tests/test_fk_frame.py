@@ -75,3 +75,28 @@ def test_sensor_frame_refused_where_it_has_no_meaning(table_session: Path, tmp_p
     r = runner.invoke(app, ["fk", str(table_session), "--q-file", str(qf), "--out",
                             str(tmp_path / "o.arrow"), "--frame", "sensor"])  # fmt: skip
     assert r.exit_code == 1 and "--out writes an `ik --targets` input" in r.output, r.output
+
+
+def test_fk_of_a_description_names_its_tool_point(tmp_path: Path) -> None:
+    """Issue 44: ``fk ROBOT`` was documented as the design flange, but its pose includes
+    the description's ``[tool]``. The output names the point, and the pose is the last
+    D-H frame times that tool."""
+    from pipeline.kinematics.chain import link_frames
+    from pipeline.robots import get_robot
+
+    text = (Path(__file__).resolve().parents[1] / "pipeline/robots/data/scara.toml").read_text()
+    desc = tmp_path / "scara_tool.toml"
+    desc.write_text(text + "\n[tool]\nxyz_cm = [0.0, 0.0, 8.0]\nrpy_deg = [0.0, 0.0, 0.0]\n")
+    r = runner.invoke(app, ["fk", str(desc), "--q", "10 20 5 30", "--json"])
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    assert out["point"].startswith("the design tool") and "[tool]" in out["point"]
+    robot = get_robot(desc)
+    q = np.radians([10.0, 20.0, 0.0, 30.0])
+    q[2] = 5.0
+    last = link_frames(robot.design_chain(), q[None])[0, -2]  # the last D-H frame
+    want = last @ robot.tool.matrix()
+    np.testing.assert_allclose(out["matrix"], want, atol=1e-12)
+    assert np.linalg.norm(np.asarray(out["matrix"])[:3, 3] - last[:3, 3]) > 7.9
+    r = runner.invoke(app, ["fk", str(desc), "--q", "10 20 5 30"])
+    assert "point   = the design tool" in r.stdout

@@ -75,8 +75,9 @@ def fk(
     For a session: the pose of its signature's tool in the design base frame (what
     `pipeline ik SESSION --pose` takes back), or with --frame sensor in the sensor frame
     (what the tracker would measure); with --design, the design model's pose of that
-    tool. For a robot: the pose of its design flange in its base frame. The output names
-    the frame. --json prints every number at full precision; --q-file takes many
+    tool. For a robot: the pose of its design tool frame (the last D-H frame times the
+    description's [tool]: the flange when it states none) in its base frame. The output
+    names the frame and the point. --json prints every number at full precision; --q-file takes many
     configurations (with --out or --json).
     """
     import numpy as np
@@ -115,11 +116,13 @@ def fk(
     values = joint_values(q, "--q")
     pose = tool_pose(robot, values, design=design, payload_kg=payload_kg, frame=frame.value)
     where = frame.value if Path(robot).is_dir() else "base"  # a description: its base frame
+    point = _fk_point(robot, design)
     if as_json:
         print_json(
             {
                 "q": values,
                 "frame": where,
+                "point": point,
                 "xyz_cm": pose.xyz_cm.tolist(),
                 "rpy_deg": pose.rpy_deg.tolist(),
                 "matrix": pose.matrix.tolist(),
@@ -129,6 +132,7 @@ def fk(
     else:
         with np.printoptions(precision=6, suppress=True):
             typer.echo(f"frame   = {where}")
+            typer.echo(f"point   = {point}")
             typer.echo(f"xyz_cm  = {pose.xyz_cm}")
             typer.echo(f"rpy_deg = {pose.rpy_deg}")
             typer.echo("T =")
@@ -136,6 +140,15 @@ def fk(
     if note := payload_warning(robot, payload_kg):
         warn(note)
     warn_outside_limits(pose.outside_limits)
+
+
+def _fk_point(robot: str, design: bool) -> str:
+    """What ``fk`` gives the pose of: a session's signature tool (or the design model's
+    pose of it), or a description's design tool frame, the last D-H frame times its
+    ``[tool]`` (the flange when it states none)."""
+    if Path(robot).is_dir():
+        return "the signature's tool, by the design model" if design else "the signature's tool"
+    return "the design tool: the last D-H frame times the description's [tool]"
 
 
 @commands.command()

@@ -44,8 +44,8 @@ def tool_pose(
     ``frame``: the design base frame, what :func:`solve_pose` takes back, or the sensor
     frame, the model's prediction of a measured point; under ``payload_kg`` when given
     (:meth:`Controller.with_payload`); ``design``: the design model's pose of that tool),
-    else a built-in robot name or a ``.toml`` description (the pose of its design flange
-    in its base frame).
+    else a built-in robot name or a ``.toml`` description (the pose of its design tool
+    frame, the last D-H frame times the description's ``[tool]``, in its base frame).
     """
     model = _pose_model(robot, payload_kg)
     if not isinstance(model, RobotDescription):
