@@ -246,3 +246,15 @@ def test_refused_while_another_run_holds_the_session(session: Path, tmp_path: Pa
         r = runner.invoke(app, ["viz", str(session), "--out", str(tmp_path / "v.mcap")])
     assert r.exit_code == 1 and "another pipeline run" in r.output, r.output
     assert not (tmp_path / "v.mcap").exists()
+
+
+def test_a_pose_set_has_a_named_topic(tmp_path: Path) -> None:
+    """Issue 44: a pose set's points went to ``/measured/joint_-2`` (its table sweep id)."""
+    from pipeline.rig.simulate import SimulationOptions, simulate_session
+
+    d = tmp_path / "poses"
+    simulate_session(d, SimulationOptions(sensor="tracker", poses=30, sweeps=False, check=5))
+    identify(d, report=False)
+    topics = {c.topic for _, c, _ in read_viz(viz(d).path)}
+    measured = {t for t in topics if t.startswith("/measured/")}
+    assert measured == {"/measured/poses", "/measured/check"}, measured

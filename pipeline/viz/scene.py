@@ -18,6 +18,7 @@ import pyarrow as pa
 from pipeline.kinematics.chain import link_frames
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.signature.file import Signature
+from pipeline.sweeps import WHOLE_ARM_SWEEPS, sweep_name
 from pipeline.viz import foxglove as fg
 
 SENSOR = "sensor"
@@ -44,9 +45,11 @@ class VizMessage:
 
 
 def measured_topic(sweep: int) -> str:
-    """Topic of a sweep's measured positions: ``/measured/joint_<i>``; 0 is the tool probe,
-    -1 the validation configurations (sweep 'check')."""
-    return {0: "/measured/tool", -1: "/measured/check"}.get(sweep, f"/measured/joint_{sweep}")
+    """Topic of a sweep's measured positions: ``/measured/joint_<i>`` for joint i's sweep,
+    ``/measured/<name>`` for the whole-arm ones (tool, check, poses: :func:`sweep_name`)."""
+    if sweep in WHOLE_ARM_SWEEPS:
+        return f"/measured/{sweep_name(sweep)}"
+    return f"/measured/joint_{sweep}"
 
 
 def frame_messages(sig: Signature, q: np.ndarray) -> list[VizMessage]:
