@@ -68,6 +68,13 @@ OUT_OF_BOUNDS = [
     ("notes a number", lambda d: d.update(notes=3), "'notes'"),
     ("joints a table", lambda d: d.update(joints={"a": 1}), "'joints'"),
     ("joint a number", lambda d: d["joints"].__setitem__(1, 5), "joints[1]"),
+    # issue 44: an empty joint name passed simulate and import; identify then refused the
+    # signature.json it wrote itself, and its advice (re-run identify) looped
+    ("joint name empty", _joint(1, name=""), "'name' is not a usable name"),
+    ("joint name spaces", _joint(1, name=" elbow "), "'name' is not a usable name"),
+    ("joint name newline", _joint(1, name="el\nbow"), "'name' is not a usable name"),
+    ("joint name a comma", _joint(1, name="a,b"), "'name' is not a usable name"),
+    ("robot name empty", lambda d: d.update(name=""), "'name' is not a usable name"),
 ]
 
 

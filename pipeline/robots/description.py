@@ -257,6 +257,20 @@ def _field(table: dict[str, Any], key: str, where: str, kind: type) -> Any:
     return value
 
 
+def _name(table: dict[str, Any], key: str, where: str) -> str:
+    """A name field: a non-empty printable string without surrounding spaces, commas or
+    ``=`` (names key the signature, the URDF's links and ``--joint-map a=b,c=d``)."""
+    value: str = _field(table, key, where, str)
+    if not value or value != value.strip() or not value.isprintable() or set(value) & {",", "="}:
+        raise RobotDescriptionError(
+            f"{where}: field '{key}' is not a usable name",
+            expected="a non-empty name without surrounding spaces, control characters, ',' or '='",
+            got=repr(value),
+            fix='e.g. name = "shoulder"',
+        )
+    return value
+
+
 def _known(table: dict[str, Any], allowed: tuple[str, ...], where: str) -> None:
     """Reject keys outside ``allowed``: a misspelt optional field would be ignored."""
     for key in table:
@@ -291,7 +305,7 @@ def _joint(jt: Any, where: str) -> JointSpec:
         raise RobotDescriptionError(f"{where} is not a table", got=repr(jt))
     _known(jt, ("name", "type", "limits", "encoder_resolution", "dh", *(k for k, *_ in _RATES)),
            where)  # fmt: skip
-    jname = _field(jt, "name", where, str)
+    jname = _name(jt, "name", where)
     jtype = _field(jt, "type", where, str)
     if jtype not in JOINT_TYPES:
         raise RobotDescriptionError(
@@ -378,7 +392,7 @@ def description_from_dict(data: Any, source: str = "<dict>") -> RobotDescription
     if not isinstance(data, dict):
         raise RobotDescriptionError(f"{source} is not a table", got=repr(data)[:80])
     _known(data, ("name", "notes", "base", "tool", "joints", "coupling"), source)
-    name = _field(data, "name", source, str)
+    name = _name(data, "name", source)
     notes = data.get("notes", "")
     if not isinstance(notes, str):
         raise RobotDescriptionError(
