@@ -70,6 +70,7 @@ class ImportFormat(StrEnum):
     sscanss2 = "sscanss2"
     table = "table"
     rct = "rct"
+    rosbag2 = "rosbag2"
 
 
 class Study(StrEnum):

@@ -242,7 +242,7 @@ def simulate(
 def import_(
     file: Annotated[str, typer.Argument(help="The foreign file of measured points.")],
     name: NewSessionArg,
-    format: Annotated[ImportFormat, choice("sscanss2, table or rct (docs/import.md).")],
+    format: Annotated[ImportFormat, choice("sscanss2, table, rct or rosbag2 (docs/import.md).")],
     robot: Annotated[str, typer.Option(help="Robot description .toml of the measured machine.")],
     map: Annotated[
         str | None, typer.Option(help="Map file (TOML): columns, units, sweeps (docs/import.md).")
@@ -269,6 +269,7 @@ def import_(
                 "poses": n_poses,
                 "check": n_check,
                 "targets": sorted(out.rows.targets),
+                "notes": list(out.rows.notes),
                 "tool": {
                     "note": out.tool.note,
                     "rows": out.tool.rows.tolist(),
@@ -283,6 +284,8 @@ def import_(
             f"wrote {out.recording}: {len(out.rows.where)} configurations "
             f"({poses}{n_check} for validation), tool from {out.tool.note}"
         )
+    for note in out.rows.notes:
+        typer.echo(f"note: {note}", err=True)
     if out.tool.warning:
         warn(out.tool.warning)
 

@@ -189,7 +189,7 @@ def audit(
 def validate(
     session: SessionArg,
     against: Annotated[str, typer.Option(help="A second file of measured points.")],
-    format: Annotated[ImportFormat, choice("sscanss2, table or rct (docs/import.md).")],
+    format: Annotated[ImportFormat, choice("sscanss2, table, rct or rosbag2 (docs/import.md).")],
     map: Annotated[str | None, typer.Option(help="Map file (TOML) of the second file.")] = None,
     as_json: JsonOption = False,
 ) -> None:

@@ -27,7 +27,7 @@ from pipeline.importers.sweeps import (
 from pipeline.importers.write import source_metadata, write_imported
 from pipeline.robots.description import RobotDescription, load_description
 
-FORMATS = ("sscanss2", "table", "rct")
+FORMATS = ("sscanss2", "table", "rct", "rosbag2")
 #: The most rows one import takes. Measured on 2 cores (docs/import.md, "Size"): 100,000
 #: rows import in 22 s (0.67 GB) and identify in 37 s (0.87 GB); time and memory grow at
 #: least in proportion (a million rows: minutes and ~7 GB each), for no better signature.
@@ -64,6 +64,8 @@ def parse_foreign(
         raise ImportFileError(
             f"unknown import format {fmt!r}", expected=" | ".join(FORMATS), fix="--format sscanss2"
         )
+    if fmt == "rosbag2":
+        return _rosbag2(path, robot, imap)
     if not path.is_file():
         raise ImportFileError(f"{path}: no such file", fix="check the path")
     if fmt == "sscanss2":
@@ -89,6 +91,36 @@ def parse_foreign(
             rows = pose_set(rows, imap)
         elif imap.select:
             rows = select_sweeps(rows, imap, robot, _tolerances(fmt, imap, robot).held)
+    if not (rows.sweep > 0).any():
+        return rows, np.zeros(robot.n_joints)
+    return rows, home_readings(rows, imap, robot)
+
+
+def _rosbag2(
+    path: Path, robot: RobotDescription, imap: ImportMap
+) -> tuple[MeasuredRows, np.ndarray]:
+    """A ROS 2 bag's stops (:mod:`pipeline.importers.rosbag2`) formed into sweeps or a
+    pose set as a table's rows are; the settle rule's counts in the rows' notes."""
+    from dataclasses import replace
+
+    from pipeline.importers.rosbag2 import read_rosbag2
+    from pipeline.importers.sweeps import infer_sweeps
+
+    bag = read_rosbag2(path, imap, robot)
+    rows = replace(bag.rows.with_sigma(imap.sigma_cm), notes=(bag.note,))
+    if not rows.where:
+        raise ImportFileError(
+            f"{path.name}: no stop with a point: {bag.note}",
+            expected="the arm still for settle_s with points measured then",
+            fix="check rosbag2.still (deg / cm) and settle_s against the bag's joint states",
+        )
+    if imap.poses:
+        return pose_set(rows, imap), np.zeros(robot.n_joints)
+    tol = tolerances(imap, robot).held
+    if imap.select:
+        rows = select_sweeps(rows, imap, robot, tol)
+    else:
+        rows = replace(rows, sweep=infer_sweeps(rows, robot, tol))
     if not (rows.sweep > 0).any():
         return rows, np.zeros(robot.n_joints)
     return rows, home_readings(rows, imap, robot)
@@ -137,6 +169,10 @@ def import_file(
             local = np.array(imap.tool_offset) * LENGTH_CM[imap.length_unit]
         note = f"{fmt} file {src.name} (imported)"
         messages = session_messages(rows, robot, tool, note, local)
+        if fmt == "rosbag2":  # a bag folder: its data is its .mcap file
+            from pipeline.importers.rosbag2 import bag_file
+
+            src = bag_file(src)
         recording = write_imported(
             Path(session_dir), messages, source_metadata(src, fmt, mp), force
         )

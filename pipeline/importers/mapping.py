@@ -18,6 +18,8 @@ from pipeline.errors import ImportFileError, one_line
 from pipeline.schemas import compiled_validator
 
 SCHEMA = "import/map.json"
+#: The ``[rosbag2]`` table's own schema (``--format rosbag2``).
+BAG_SCHEMA = "import/rosbag2.json"
 #: Sweep value of a map whose rows are all configurations of the pose set.
 POSES = "poses"
 _SHOWN = 80  # characters of a bad value shown in an error
@@ -100,6 +102,7 @@ class ImportMap:
     payload_column: str | int | None = None  # or a column of it (kg)
     orientation: OrientationColumns | None = None
     check: CheckSplit | None = None
+    rosbag2: dict[str, Any] | None = None  # the [rosbag2] table, checked (importers.rosbag2)
 
     @property
     def name(self) -> str:
@@ -174,14 +177,19 @@ def check_map(src: str, data: Any) -> dict[str, Any]:
     from fastjsonschema import JsonSchemaValueException
 
     _finite(src, "", data)
-    try:
-        compiled_validator(SCHEMA)(data)
-    except JsonSchemaValueException as exc:
-        name = str(exc.name)
-        key = name.removeprefix("data").removeprefix(".") or "map"
-        what = one_line(exc.message.removeprefix(name).strip(), _SHOWN)
-        expected = _expected(str(exc.rule), exc.definition or {})
-        raise _refuse(src, key, what, expected, exc.value) from None
+    for schema, part, prefix in ((SCHEMA, data, ""), (BAG_SCHEMA, None, "rosbag2")):
+        if prefix:
+            if not isinstance(data, dict) or "rosbag2" not in data:
+                continue
+            part = data["rosbag2"]
+        try:
+            compiled_validator(schema)(part)
+        except JsonSchemaValueException as exc:
+            name = str(exc.name)
+            key = ".".join(k for k in (prefix, name.removeprefix("data").removeprefix(".")) if k)
+            what = one_line(exc.message.removeprefix(name).strip(), _SHOWN)
+            expected = _expected(str(exc.rule), exc.definition or {})
+            raise _refuse(src, key or "map", what, expected, exc.value) from None
     _check_combinations(src, data)
     return data  # type: ignore[no-any-return]
 
@@ -220,6 +228,7 @@ def _check_combinations(src: str, data: dict[str, Any]) -> None:
     ids = [str(t.get("id", f"t{k + 1}")) for k, t in enumerate(targets)]
     if len(set(ids)) != len(ids):
         raise _refuse(src, "targets", "names a target id twice", "distinct ids", ids)
+    ids += [str(t["id"]) for t in data.get("rosbag2", {}).get("targets", [])]
     if "tool_target" in data and data["tool_target"] not in ids:
         raise _refuse(src, "tool_target", "is not the id of a [[targets]] table",
                       " | ".join(ids) or "a [[targets]] table", data["tool_target"])  # fmt: skip
@@ -296,4 +305,5 @@ def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
             orient.get("sigma_deg"),
         ),
         check=None if check is None else CheckSplit(float(check["fraction"]), int(check["seed"])),
+        rosbag2=data.get("rosbag2"),
     )

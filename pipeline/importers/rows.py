@@ -47,6 +47,8 @@ class MeasuredRows:
         Target id -> standard deviation of x, y, z (cm), when the file states it.
     payload_kg : ndarray, shape (R,), optional
         The payload on the flange (kg) at each row, when the map states it.
+    notes : tuple of str
+        What the reader dropped or assumed, said to the user (e.g. a bag's moving samples).
     """
 
     source: Path
@@ -58,6 +60,7 @@ class MeasuredRows:
     sigma: dict[str, np.ndarray] | None = None
     orientation_sigma_deg: float | None = None
     payload_kg: np.ndarray | None = None
+    notes: tuple[str, ...] = ()
 
     def take(self, keep: np.ndarray) -> MeasuredRows:
         """The rows ``keep`` (indices or mask), in that order."""
