@@ -12,6 +12,7 @@ dropped and counted; a bag without a topic, a frame or a still period is one lin
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from pipeline.cli import EXIT_REFUSED, app
 from pipeline.errors import ImportFileError
 from pipeline.identify import identify
 from pipeline.importers import import_file
+from pipeline.rig.audit import audit
 from pipeline.robots.description import load_description
 from pipeline.signature.session import load_session_signature
 from pipeline.stages.runner import stage_path
@@ -141,7 +143,7 @@ def _chain(session: Path) -> np.ndarray:
 def sweeps(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
     """A simulated Puma tracker sweep session's stops, as a table and as a bag; both imported."""
     d = tmp_path_factory.mktemp("bag")
-    src, _ = tracker_file(d, PUMA)
+    src, sim = tracker_file(d, PUMA)
     rows = np.loadtxt(src, skiprows=1)
     robot = load_description(PUMA)
     names = [j.name for j in robot.joints]
@@ -151,6 +153,7 @@ def sweeps(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
     import_file(src, "table", PUMA, d / "table", tracker_map(d))
     mp = bag_map(d, names, how, '[sweeps]\ncolumn = "infer"')
     out = import_file(d / "bag", "rosbag2", PUMA, d / "fromBag", mp)
+    shutil.copy(sim / "rig-truth.json", d / "fromBag" / "rig-truth.json")  # for the audit
     assert out.rows.notes and f"{sum(far.values())} point samples" in out.rows.notes[0]
     return d / "table", d / "fromBag", d
 
@@ -162,6 +165,8 @@ def test_a_bag_of_sweeps_imports_as_its_table(sweeps: tuple[Path, Path, Path]) -
     np.testing.assert_allclose(_chain(bag), _chain(table), rtol=0, atol=1e-9)
     fit = read_table(stage_path(bag, "validation")).column("error_cm").to_numpy()
     assert fit.max() <= 1e-6
+    r = audit(bag, configurations=500)  # the simulated arm's truth, as its recording gives
+    assert r.signature.max_position_cm <= 1e-6, r.signature
 
 
 def test_a_bag_of_a_pose_set_imports_as_its_table(tmp_path: Path) -> None:
