@@ -250,13 +250,28 @@ def ik(
 def compensate(
     session: SessionArg,
     targets: Annotated[
-        str,
+        str | None,
         typer.Option(
             help="Arrow file of desired poses: x_cm y_cm z_cm rx_deg ry_deg rz_deg [branch], "
             "design base frame (as `ik --targets`)."
         ),
-    ],
-    out: Annotated[str, typer.Option(help="Arrow file for the compensated poses and joints.")],
+    ] = None,
+    program: Annotated[
+        str | None,
+        typer.Option(
+            help="Or a robot program (URScript .script, KUKA KRL .src/.dat, ABB RAPID .mod) "
+            "whose motion targets are rewritten, every other byte kept (docs/compensate.md)."
+        ),
+    ] = None,
+    dialect: Annotated[
+        str | None,
+        typer.Option(
+            help="The --program's language when its suffix does not say: urscript, krl or rapid."
+        ),  # fmt: skip
+    ] = None,
+    out: Annotated[
+        str, typer.Option(help="The compensated file (Arrow for --targets, else a program).")
+    ] = "",
     force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
     tool: Annotated[
         Pose | None,
@@ -273,11 +288,21 @@ def compensate(
     real arm reaches the desired ones (docs/compensate.md)."""
     from pipeline.control.compensate import compensate_targets
 
+    if (targets is None) == (program is None):
+        raise ArmsigError("give one of --targets and --program", fix="--targets poses.arrow")
+    if not out:
+        raise ArmsigError("--out is needed", fix="--out compensated.arrow (or a program file)")
+    user_tool = None if tool is None else finite(tool, "--tool")
+    if program is not None:
+        _compensate_program(session, program, dialect, out, user_tool, method, force,
+                            accept_verdict, as_json)  # fmt: skip
+        return
+    assert targets is not None
     done = compensate_targets(
         session,
         targets,
         out,
-        tool=None if tool is None else finite(tool, "--tool"),
+        tool=user_tool,
         method=method.value,
         force=force,
         accept_verdict=accept_verdict,
@@ -290,6 +315,29 @@ def compensate(
     )
     if done.failed:
         warn(f"{done.failed} target(s) not reached: no compensated pose (null; column status)")
+        raise NotReached
+
+
+def _compensate_program(
+    session: str, program: str, dialect: str | None, out: str, tool: list[float] | None,
+    method: Method, force: bool, accept_verdict: bool, as_json: bool,
+) -> None:  # fmt: skip
+    """``compensate --program``: :func:`pipeline.control.programs.compensate_program`."""
+    from pipeline.control.programs import compensate_program
+
+    done = compensate_program(session, program, out, dialect=dialect, tool=tool,
+                              method=method.value, force=force,
+                              accept_verdict=accept_verdict)  # fmt: skip
+    report(
+        done,
+        as_json,
+        done.summary,
+        f"largest correction {done.max_correction_cm:.4f} cm, {done.max_correction_deg:.4f} deg",
+    )
+    if done.partial_lines:
+        warn(f"targets stating only some axes left as they are: lines {done.partial_lines}")
+    if done.failed_lines:
+        warn(f"not reached, left as they are: lines {done.failed_lines}")
         raise NotReached
 
 

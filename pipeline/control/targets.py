@@ -128,16 +128,20 @@ def numeric_columns(table: Any, columns: tuple[str, ...], where: str) -> np.ndar
 
 
 def check_output(
-    out: str | Path, targets: str | Path, force: bool, suggest: str = "joints.arrow"
+    out: str | Path,
+    targets: str | Path,
+    force: bool,
+    suggest: str = "joints.arrow",
+    option: str = "--targets",
 ) -> None:
-    """Refuse an ``--out`` that is the ``--targets`` file (the fix suggests ``suggest``), or
-    (unless ``force``) an existing file (:func:`pipeline.atomic.check_new_file`): checked
+    """Refuse an ``--out`` that is the input file (``option``; the fix suggests ``suggest``),
+    or (unless ``force``) an existing file (:func:`pipeline.atomic.check_new_file`): checked
     before any solving."""
     from pipeline.atomic import check_new_file
 
     if Path(out).resolve() == Path(targets).resolve():
         raise ArmsigError(
-            f"--out {out} is the --targets file",
+            f"--out {out} is the {option} file",
             expected="an output file other than the input",
             fix=f"--out {suggest}",
         )
