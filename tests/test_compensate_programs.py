@@ -80,7 +80,8 @@ def urscript(q: np.ndarray, W: np.ndarray) -> str:
 
 
 def krl(q: np.ndarray, W: np.ndarray) -> str:
-    out = ["&ACCESS RVP", "DEFDAT prog", "DECL FRAME TOOL_DATA1={X 0.0,Y 0.0,Z 100.0,A 0.0,B 0.0,C 0.0}",
+    out = ["&ACCESS RVP", "DEFDAT prog",
+           "DECL FRAME TOOL_DATA1={X 0.0,Y 0.0,Z 100.0,A 0.0,B 0.0,C 0.0}",
            ";DECL E6POS XOLD={X 1.0,Y 2.0,Z 3.0,A 0.0,B 0.0,C 0.0,S 2,T 10}"]  # fmt: skip
     for k, T in enumerate(W):
         if _joint_target(k):
@@ -96,8 +97,10 @@ def krl(q: np.ndarray, W: np.ndarray) -> str:
 
 
 def rapid(q: np.ndarray, W: np.ndarray) -> str:
-    out = ["MODULE Prog", "  PERS tooldata tGun:=[TRUE,[[0,0,100],[1,0,0,0]],[1,[0,0,1],[1,0,0,0],0,0,0]];",
-           "  ! CONST robtarget pOld:=[[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];"]  # fmt: skip
+    out = ["MODULE Prog",
+           "  PERS tooldata tGun:=[TRUE,[[0,0,100],[1,0,0,0]],[1,[0,0,1],[1,0,0,0],0,0,0]];",
+           "  ! CONST robtarget pOld:=[[1,2,3],[1,0,0,0],[0,0,0,0],"
+           "[9E9,9E9,9E9,9E9,9E9,9E9]];"]  # fmt: skip
     moves = []
     for k, T in enumerate(W):
         if _joint_target(k):
