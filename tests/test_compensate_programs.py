@@ -201,3 +201,37 @@ def test_program_refusals_are_one_line(
     assert r.exit_code == EXIT_REFUSED and "is the --program file" in r.stderr, r.output
     assert odd.read_text() == "movel(p[0.1, 0.2, 0.3, 0, 0, 0])\n"
     assert not re.search(r"Traceback", r.output)
+
+
+def test_plain_csv_of_poses_or_joints(
+    setup: tuple[Path, np.ndarray, np.ndarray], tmp_path: Path
+) -> None:
+    """``compensate --targets`` reads and writes plain CSV: poses as the Arrow file does,
+    and joint readings taught on the nominal model (the signature's readings for their
+    pose come back in the same columns, the taught ones in ``taught_q...``)."""
+    import polars as pl
+
+    from pipeline.control.compensate import compensate_targets
+
+    d, q, W = setup
+    ctl = session_controller(d)
+    xyz, rpy = xyz_rpy_from_transform(W[:50])
+    values = np.column_stack([xyz, np.degrees(rpy)]).T
+    names = ("x_cm", "y_cm", "z_cm", "rx_deg", "ry_deg", "rz_deg")
+    poses = pl.DataFrame(dict(zip(names, values, strict=True)))
+    poses.write_csv(tmp_path / "poses.csv")
+    poses.write_ipc(tmp_path / "poses.arrow")
+    compensate_targets(d, tmp_path / "poses.csv", tmp_path / "out.csv")
+    compensate_targets(d, tmp_path / "poses.arrow", tmp_path / "out.arrow")
+    a, b = pl.read_csv(tmp_path / "out.csv"), pl.read_ipc(tmp_path / "out.arrow")
+    for c in ("x_cm", "rz_deg", "q1_deg", "correction_cm"):
+        np.testing.assert_allclose(a[c].to_numpy(), b[c].to_numpy(), rtol=0, atol=1e-12)
+    cols = [f"q{i}_deg" for i in range(1, 7)]
+    pl.DataFrame(dict(zip(cols, q[:50].T, strict=True))).write_csv(tmp_path / "joints.csv")
+    r = compensate_targets(d, tmp_path / "joints.csv", tmp_path / "jout.csv")
+    assert r.failed == 0 and r.max_correction_cm > 0.05
+    out = pl.read_csv(tmp_path / "jout.csv")
+    np.testing.assert_array_equal(out[[f"taught_{c}" for c in cols]].to_numpy(), q[:50])
+    reached = ctl.poses(out[cols].to_numpy()).matrix  # the real arm at the new readings
+    err = np.linalg.norm(reached[:, :3, 3] - W[:50, :3, 3], axis=1)
+    assert err.max() <= 1e-6, err.max()

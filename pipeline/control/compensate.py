@@ -31,7 +31,10 @@ from pipeline.control.poses import RunRecord, tool_controller
 from pipeline.control.targets import (
     TARGET_COLUMNS,
     check_output,
+    holds_joints,
+    joint_columns,
     reached_summary,
+    read_joints,
     read_targets,
     solved_columns,
     write_columns,
@@ -89,6 +92,8 @@ def compensate_targets(
 
     tc = tool_controller(session, tool, accept_verdict)
     ctl = tc.controller
+    if holds_joints(targets, ctl.robot):
+        return _compensate_joints(tc, targets, out, method, force)
     table, desired, branches = read_targets(targets)
     check_output(out, targets, force, "compensated.arrow")
     q, res, solved = solved_columns(ctl, desired, branches, method)
@@ -125,3 +130,55 @@ def compensate_targets(
         verdict=tc.verdict,
         verdict_warning=tc.warning,
     )
+
+
+def _taught(names: tuple[str, ...]) -> list[str]:
+    """Columns of the taught joint readings in a ``compensate`` output of a joints file."""
+    return [f"taught_{c}" for c in names]
+
+
+def _compensate_joints(
+    tc: Any, targets: str | Path, out: str | Path, method: str, force: bool
+) -> CompensatedTargets:
+    """:func:`compensate_targets` of a file of joint readings taught on the nominal model
+    (columns :func:`joint_columns`): each is the pose ``design(q) · Y``, for which the
+    signature's readings are solved from the taught ones; the output's joint columns hold
+    them, ``taught_q...`` the input's, the pose columns the taught pose, and
+    ``correction_cm`` / ``correction_deg`` how far the real arm is from it at the taught
+    readings (what the compensation removes)."""
+    import pyarrow as pa
+
+    from pipeline.kinematics.transforms import pose_error
+
+    ctl = tc.controller
+    table, taught = read_joints(targets, ctl.robot, "--targets")
+    check_output(out, targets, force, "compensated.csv")
+    pose = ctl.poses(taught, design=True)
+    desired = np.concatenate([pose.xyz_cm, pose.rpy_deg], axis=1)
+    q, res, solved = solved_columns(ctl, desired, None, method, near=taught)
+    dp, dth = pose_error(pose.matrix, ctl.poses(taught).matrix)
+    dth = np.degrees(dth)
+    missed = ~res.converged
+    names = joint_columns(ctl.robot)
+    extra: dict[str, Any] = {}
+    for k, name in enumerate(_taught(names)):
+        extra[name] = pa.array(taught[:, k], pa.float64())
+    for k, name in enumerate(TARGET_COLUMNS):
+        extra[name] = pa.array(desired[:, k], pa.float64())
+    extra["correction_cm"] = pa.array(dp, pa.float64())
+    extra["correction_deg"] = pa.array(dth, pa.float64())
+    extra.update(solved)
+    for name in names:  # not reached: no compensated readings
+        extra[name] = pa.array(extra[name].to_numpy(zero_copy_only=False), mask=missed)
+    meta = {"signature": ctl.robot.name, "tool": tc.label, "method": method,
+            "joints": "compensated: the readings to command, for the taught pose"}  # fmt: skip
+    note = write_columns(table.drop_columns(list(names)), extra, out, meta)
+    summary, failed = reached_summary(res, out)
+    reached = ~missed
+    return CompensatedTargets(
+        targets=len(q), converged=len(q) - failed, failed=failed, out=str(out),
+        tool=tc.label,
+        max_correction_cm=float(dp[reached].max()) if reached.any() else 0.0,
+        max_correction_deg=float(dth[reached].max()) if reached.any() else 0.0,
+        summary=summary + note, verdict=tc.verdict, verdict_warning=tc.warning,
+    )  # fmt: skip

@@ -21,14 +21,15 @@ TARGET_COLUMNS = ("x_cm", "y_cm", "z_cm", "rx_deg", "ry_deg", "rz_deg")
 
 
 def read_targets(path: str | Path) -> tuple[Any, np.ndarray, list[str | None] | None]:
-    """The table of an ``ik --targets`` Arrow IPC file, its poses (m, 6) (cm, deg) and
+    """The table of an ``ik --targets`` Arrow IPC file (or CSV with a header when the name
+    ends ``.csv``), its poses (m, 6) (cm, deg) and
     its optional ``branch`` column; a one-line error naming the file and the column
     for anything else (a missing file, a column that is missing, repeated, not numeric,
     null, NaN or infinite, a branch that is not text)."""
     import pyarrow as pa
 
     p = Path(path)
-    table = _read_table(p, "--targets", TARGET_COLUMNS, csv=False)
+    table = _read_table(p, "--targets", TARGET_COLUMNS, csv=p.suffix.lower() == ".csv")
     poses = numeric_columns(table, TARGET_COLUMNS, f"--targets {p}")
     branches = None
     if "branch" in table.column_names:
@@ -50,17 +51,29 @@ def joint_columns(robot: RobotDescription) -> tuple[str, ...]:
     return tuple(f"q{i + 1}_{j.unit}" for i, j in enumerate(robot.joints))
 
 
-def read_joints(path: str | Path, robot: RobotDescription) -> tuple[Any, np.ndarray]:
+def read_joints(
+    path: str | Path, robot: RobotDescription, option: str = "--q-file"
+) -> tuple[Any, np.ndarray]:
     """The table of an ``fk --q-file`` file (Arrow IPC, or CSV with a header when the name
     ends ``.csv``) and its joint readings (m, n) (deg / cm) from the columns of
     :func:`joint_columns` (what ``ik --targets`` writes); one-line errors as
     :func:`read_targets`."""
     p = Path(path)
     names = joint_columns(robot)
-    table = _read_table(p, "--q-file", names, csv=p.suffix.lower() == ".csv")
+    table = _read_table(p, option, names, csv=p.suffix.lower() == ".csv")
     if not table.num_rows:
-        raise ArmsigError(f"--q-file {p}: no rows", expected="one configuration per row")
-    return table, numeric_columns(table, names, f"--q-file {p}")
+        raise ArmsigError(f"{option} {p}: no rows", expected="one configuration per row")
+    return table, numeric_columns(table, names, f"{option} {p}")
+
+
+def holds_joints(path: str | Path, robot: RobotDescription) -> bool:
+    """Whether the targets file ``path`` holds joint readings (:func:`joint_columns`) and
+    no poses: a program's joint targets, taught on the nominal model."""
+    p = Path(path)
+    if not p.is_file():
+        return False
+    names = _read_table(p, "--targets", (), csv=p.suffix.lower() == ".csv").column_names
+    return TARGET_COLUMNS[0] not in names and all(c in names for c in joint_columns(robot))
 
 
 def _read_table(p: Path, option: str, columns: tuple[str, ...], csv: bool) -> Any:
@@ -181,17 +194,30 @@ def solved_columns(
     return q, res, extra
 
 
+def write_csv(path: Path, table: Any) -> None:
+    """``table`` as CSV with a header (pyarrow's writer, numbers at full precision), atomically."""
+    import pyarrow.csv as pacsv
+
+    from pipeline.atomic import atomic_write
+
+    with atomic_write(path, "wb") as fh:
+        pacsv.write_csv(table, fh)
+
+
 def write_columns(table: Any, extra: dict[str, Any], out: str | Path, meta: dict[str, str]) -> str:
     """Write ``table`` with the columns ``extra`` (by name, replacing the table's columns
-    of the same names) to ``out`` (atomically); the note on what was replaced ("" if
-    nothing)."""
+    of the same names) to ``out`` (atomically: Arrow IPC, or CSV when its name ends
+    ``.csv``); the note on what was replaced ("" if nothing)."""
     from pipeline.stages.tables import write_table
 
     replaced = [c for c in table.column_names if c in extra]
     table = table.drop_columns(replaced)
     for name, values in extra.items():
         table = table.append_column(name, values)
-    write_table(Path(out), table, meta)
+    if Path(out).suffix.lower() == ".csv":  # plain CSV for the tools that read no Arrow
+        write_csv(Path(out), table)
+    else:
+        write_table(Path(out), table, meta)
     return f" (replaced the input's {', '.join(replaced)})" if replaced else ""
 
 
