@@ -87,6 +87,14 @@ def export(
         str | None,
         typer.Option(help="With --onto: armsig=vendor joint names, comma separated."),
     ] = None,
+    over: Annotated[
+        str | None,
+        typer.Option(
+            help="A signature with non-geometric terms: fit the file's rigid chain over the "
+            "configurations of this file (fk --q-file's: q1_deg, ...; Arrow or CSV), where "
+            "the robot works, instead of 5,000 within the joint limits."
+        ),
+    ] = None,
     force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
     accept_verdict: AcceptVerdict = False,
     as_json: JsonOption = False,
@@ -103,7 +111,7 @@ def export(
             )
         from pipeline.export.onto import export_onto
 
-        o = export_onto(session, onto, out, joint_map, force, accept_verdict)
+        o = export_onto(session, onto, out, joint_map, force, accept_verdict, over)
         moved = max(o.origin_moves_mm.values())
         report(
             o,
@@ -132,6 +140,7 @@ def export(
         frame=None if frame is None else frame.value,
         force=force,
         accept_verdict=accept_verdict,
+        over=over,
     )
     report(
         r,

@@ -50,17 +50,19 @@ def joint_columns(robot: RobotDescription) -> tuple[str, ...]:
     return tuple(f"q{i + 1}_{j.unit}" for i, j in enumerate(robot.joints))
 
 
-def read_joints(path: str | Path, robot: RobotDescription) -> tuple[Any, np.ndarray]:
+def read_joints(
+    path: str | Path, robot: RobotDescription, option: str = "--q-file"
+) -> tuple[Any, np.ndarray]:
     """The table of an ``fk --q-file`` file (Arrow IPC, or CSV with a header when the name
     ends ``.csv``) and its joint readings (m, n) (deg / cm) from the columns of
     :func:`joint_columns` (what ``ik --targets`` writes); one-line errors as
-    :func:`read_targets`."""
+    :func:`read_targets`, naming ``option`` (``export --over`` reads the same files)."""
     p = Path(path)
     names = joint_columns(robot)
-    table = _read_table(p, "--q-file", names, csv=p.suffix.lower() == ".csv")
+    table = _read_table(p, option, names, csv=p.suffix.lower() == ".csv")
     if not table.num_rows:
-        raise ArmsigError(f"--q-file {p}: no rows", expected="one configuration per row")
-    return table, numeric_columns(table, names, f"--q-file {p}")
+        raise ArmsigError(f"{option} {p}: no rows", expected="one configuration per row")
+    return table, numeric_columns(table, names, f"{option} {p}")
 
 
 def _read_table(p: Path, option: str, columns: tuple[str, ...], csv: bool) -> Any:
