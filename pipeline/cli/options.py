@@ -33,6 +33,7 @@ class ExportFormat(StrEnum):
     dh = "dh"
     mdh = "mdh"
     json = "json"
+    ur_kinematics = "ur-kinematics"
 
 
 class ExportFrame(StrEnum):

@@ -62,7 +62,11 @@ def export(
     session: SessionArg,
     format_: Annotated[
         ExportFormat | None,
-        choice("urdf, dh, mdh (Craig) or json (docs/export.md); urdf with --onto.", "--format"),
+        choice(
+            "urdf, dh, mdh (Craig), json, or ur-kinematics (UR's kinematics.yaml) "
+            "(docs/export.md); urdf with --onto.",
+            "--format",
+        ),
     ] = None,
     out: Annotated[
         str | None,
@@ -124,6 +128,25 @@ def export(
         for w in (o.conventions_warning, o.sidecar_warning):
             if w:
                 warn(w)
+        return
+    if format_ is ExportFormat.ur_kinematics:
+        if design or frame is not None or joint_map is not None:
+            raise ArmsigError(
+                "--format ur-kinematics writes the signature in UR's own frames",
+                expected="no --design, --frame or --joint-map",
+            )
+        from pipeline.export.ur_kinematics import export_ur_kinematics
+
+        u = export_ur_kinematics(session, out, force, accept_verdict, over)
+        report(
+            u,
+            as_json,
+            f"wrote {u.path} (UR kinematics.yaml of {session}, hash {u.hash}); the xacro's "
+            f"chain reproduces the signature at {u.configurations} configurations to "
+            f"{u.max_position_error_m:.1e} m, {u.max_orientation_error_rad:.1e} rad",
+        )
+        if u.sidecar_warning:
+            warn(u.sidecar_warning)
         return
     if format_ is None or joint_map is not None:
         raise ArmsigError(

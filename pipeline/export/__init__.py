@@ -48,7 +48,10 @@ from pipeline.signature.session import load_session_document
 from pipeline.signature.verdict import verdict_gate
 from pipeline.units import joints_to_internal
 
-FORMATS = ("urdf", "dh", "mdh", "json")
+#: The formats of :func:`export` (a chain in armsig's frames), and every ``--format``:
+#: ``ur-kinematics`` is :func:`pipeline.export.ur_kinematics.export_ur_kinematics`.
+CHAIN_FORMATS = ("urdf", "dh", "mdh", "json")
+FORMATS = (*CHAIN_FORMATS, "ur-kinematics")
 #: The world frame of each format when ``--frame`` is not given: a URDF's root is the robot's
 #: base (ROS's ``base_link``); the tables and the chain JSON keep the signature's own frame.
 DEFAULT_FRAME = {"urdf": "design-base", "dh": "sensor", "mdh": "sensor", "json": "sensor"}
@@ -263,8 +266,14 @@ def export(
     file), its loss in ``rigid_loss`` (:mod:`pipeline.export.rigid`). A rigid signature is
     exported as before (and its default folder loses a stale sidecar).
     """
-    if fmt not in FORMATS:
-        raise ArmsigError(f"unknown export format {fmt!r}", expected=", ".join(FORMATS))
+    if fmt not in CHAIN_FORMATS:
+        raise ArmsigError(
+            f"unknown export format {fmt!r}",
+            expected=", ".join(CHAIN_FORMATS),
+            fix="ur-kinematics: pipeline.export.ur_kinematics.export_ur_kinematics"
+            if fmt == "ur-kinematics"
+            else "",
+        )
     frame = DEFAULT_FRAME[fmt] if frame is None else frame
     if frame not in FRAMES:
         raise ArmsigError(f"unknown export frame {frame!r}", expected=", ".join(FRAMES))
