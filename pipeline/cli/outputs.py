@@ -91,6 +91,14 @@ def export(
         str | None,
         typer.Option(help="With --onto: armsig=vendor joint names, comma separated."),
     ] = None,
+    offsets_only: Annotated[
+        bool,
+        typer.Option(
+            help="With --onto: the signature as joint offsets alone, in <calibration "
+            "rising> tags (robot_calibration's drivers), the vendor's geometry kept; "
+            "states what that loses."
+        ),
+    ] = False,
     over: Annotated[
         str | None,
         typer.Option(
@@ -113,6 +121,15 @@ def export(
                 "--onto writes the signature into the vendor's URDF, in the vendor's root frame",
                 expected="no --design, --frame, or --format other than urdf",
             )
+        if offsets_only:
+            from pipeline.export.offsets import export_offsets
+
+            f = export_offsets(session, onto, out, joint_map, force, accept_verdict, over)
+            shown = ", ".join(f"{k} {v:+.6g}" for k, v in f.offsets.items())
+            report(f, as_json, f"wrote {f.path} ({f.vendor} with joint offsets of {session}: "
+                   f"{shown} deg / cm; held: {', '.join(f.held) or 'none'})")  # fmt: skip
+            warn(f.text())
+            return
         from pipeline.export.onto import export_onto
 
         o = export_onto(session, onto, out, joint_map, force, accept_verdict, over)
@@ -129,6 +146,8 @@ def export(
             if w:
                 warn(w)
         return
+    if offsets_only:
+        raise ArmsigError("--offsets-only goes with --onto VENDOR.urdf")
     if format_ is ExportFormat.ur_kinematics:
         if design or frame is not None or joint_map is not None:
             raise ArmsigError(

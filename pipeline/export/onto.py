@@ -71,6 +71,7 @@ from pipeline.kinematics.transforms import (
     trans_z,
     wrap_angle,
 )
+from pipeline.robots.description import RobotDescription
 from pipeline.signature.alignment import ALIGNMENT_SAMPLES
 from pipeline.signature.file import FILE_NAME, Signature, signature_from_document
 from pipeline.signature.session import load_session_document
@@ -249,10 +250,13 @@ class Calibration:
     same_robot: tuple[float, float]
 
 
-def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> Calibration:
-    """The same-robot check and the calibrated origins (module docstring); ArmsigError
-    when the file is another robot."""
-    robot, chain = sig.robot, sig.chain
+def match_vendor(
+    robot: RobotDescription, urdf: VendorURDF, names: list[str]
+) -> tuple[VendorChain, Conventions, list[Array], tuple[float, float]]:
+    """The vendor joints ``names`` as a chain, how the vendor reads them, the constant
+    ``C_i`` of each link against the design's, and how constant they stayed (m, rad):
+    the same-robot check (module docstring, 1.), ArmsigError when the file is another
+    robot."""
     vc = vendor_chain(urdf, names)
     design = robot.design_chain()
     try:
@@ -281,6 +285,19 @@ def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> Calibration
             )
         worst_m, worst_rad = max(worst_m, m), max(worst_rad, r)
     C = [mean_transform(Cq[:, i]) for i in range(len(vc.joints))]
+    return vc, conv, C, (worst_m, worst_rad)
+
+
+def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> Calibration:
+    """The same-robot check and the calibrated origins (module docstring); ArmsigError
+    when the file is another robot."""
+    robot, chain = sig.robot, sig.chain
+    vc, conv, C, worst = match_vendor(robot, urdf, names)
+    B = conv.world  # the vendor root in the design base
+
+    def v_of(q: Array) -> Array:
+        return q * conv.sign + conv.offset
+
     # 2. the calibrated vendor link frames, G_i in the signature's frame i
     X = sig.sensor_from_design_base
     XB = X @ invert_transform(B)
@@ -305,7 +322,7 @@ def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> Calibration
     ])  # fmt: skip
     tool = invert_transform(G[-1]) @ chain.tool
     BX = invert_transform(XB)
-    return Calibration(vc, conv, origins, tool, B, G, BX, (worst_m, worst_rad))
+    return Calibration(vc, conv, origins, tool, B, G, BX, worst)
 
 
 def _comment(text: str) -> str:
