@@ -154,3 +154,18 @@ def test_fleet_figures_are_not_clipped(fleet_dir: Path, threads) -> None:  # noq
     FigureCanvasAgg(fig)
     axes[0].set_xticks(range(4), [r["robot_id"] for r in rows[:4]], rotation=30, ha="right")
     assert _clipped(fig)
+
+
+def test_an_older_fleet_table_is_refused_in_one_line(tmp_path: Path) -> None:
+    """A fleet.arrow of schema 1 (no robot_id column) made ``fleet report`` fail with a
+    KeyError (exit 70); it is refused in one line."""
+    from pipeline.fleet.row import fleet_table
+    from pipeline.stages.tables import write_table
+
+    old = fleet_table([]).drop_columns(["robot_id"])
+    meta = {b"schema_name": b"fleet", b"schema_version": b"1"}
+    write_table(tmp_path / TABLE_NAME, old.replace_schema_metadata(meta), {"command": "identify"})
+    res = CliRunner().invoke(app, ["fleet", "report", str(tmp_path)])
+    lines = res.stderr.splitlines()
+    assert res.exit_code == EXIT_REFUSED and len(lines) == 1, res.output
+    assert "written by another armsig (fleet.arrow schema 1)" in lines[0]

@@ -104,7 +104,8 @@ def export(
         typer.Option(
             help="A signature with non-geometric terms: fit the file's rigid chain over the "
             "configurations of this file (fk --q-file's: q1_deg, ...; Arrow or CSV), where "
-            "the robot works, instead of 5,000 within the joint limits."
+            "the robot works, instead of 5,000 within the joint limits (a rigid signature is "
+            "written exactly: not read)."
         ),
     ] = None,
     force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,

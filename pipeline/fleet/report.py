@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import ArmsigError, one_line
-from pipeline.fleet.run import TABLE_NAME
+from pipeline.fleet.run import SCHEMA_VERSION, TABLE_NAME
 from pipeline.report.figures import panel_figure, save_png
 from pipeline.report.identification import markdown_table, sig
 from pipeline.signature.alignment import chain_alignment
@@ -27,13 +27,23 @@ REPORT_DIR = "fleet-report"
 
 
 def load_rows(folder: Path) -> list[dict[str, Any]]:
-    """The rows of ``folder/fleet.arrow`` (checked on read, as every armsig table)."""
+    """The rows of ``folder/fleet.arrow`` (checked on read, as every armsig table); one
+    written by an older armsig (another schema version: no robot ids) is refused in one
+    line."""
     from pipeline.stages.tables import read_table
 
     path = folder / TABLE_NAME
     if not path.is_file():
         raise ArmsigError(f"{path}: no such file", fix=f"`pipeline fleet identify {folder}`")
-    return read_table(path).to_pylist()
+    table = read_table(path)
+    version = (table.schema.metadata or {}).get(b"schema_version", b"?").decode()
+    if version != SCHEMA_VERSION:
+        raise ArmsigError(
+            f"{path}: written by another armsig (fleet.arrow schema {version})",
+            expected=f"schema {SCHEMA_VERSION} (with robot ids)",
+            fix=f"`pipeline fleet identify {folder}` again (the stages are cached)",
+        )
+    return table.to_pylist()
 
 
 def current_signatures(rows: list[dict[str, Any]]) -> dict[str, tuple[Any, str]]:
