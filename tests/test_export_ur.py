@@ -198,6 +198,7 @@ def test_cli_writes_armsigs_folder_and_keeps_a_users_file(ur10_sim, tmp_path) ->
     res = export_ur_kinematics(ur10_sim, out=tmp_path / "a.yaml")
     B = np.array(res.base_link_from_design_base)
     best = rigid_signature(sig, ur10_sim)[0]
+    assert sig.nongeometric is None and best is sig  # a rigid signature: its own FK
     T = B @ invert_transform(sig.sensor_from_design_base) @ forward_kinematics(best.chain, q)
     assert np.abs(point - T[:, :3, 3] * 0.01).max() <= TOL_M
     mine = tmp_path / "mine.yaml"
