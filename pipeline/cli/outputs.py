@@ -162,7 +162,7 @@ def export(
             u,
             as_json,
             f"wrote {u.path} (UR kinematics.yaml of {session}, hash {u.hash}); the xacro's "
-            f"chain reproduces the signature at {u.configurations} configurations to "
+            f"chain reproduces the calibrated chain at {u.configurations} configurations to "
             f"{u.max_position_error_m:.1e} m, {u.max_orientation_error_rad:.1e} rad",
         )
         if u.sidecar_warning:
