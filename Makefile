@@ -26,9 +26,9 @@ test: $(STAMP)
 	$(BIN)/pytest $(PYTEST_ARGS)
 
 lint: $(STAMP)
-	$(BIN)/ruff check pipeline tests bench
-	$(BIN)/ruff format --check pipeline tests bench
-	$(BIN)/mypy pipeline
+	$(BIN)/ruff check pipeline armsig tests bench
+	$(BIN)/ruff format --check pipeline armsig tests bench
+	$(BIN)/mypy pipeline armsig
 	$(BIN)/lint-imports --no-cache
 
 # The peer comparison needs the optional `bench` extra (rtb); installed here when absent,

@@ -240,7 +240,8 @@ def test_a_wrong_export_is_never_written(sessions, tmp_path, monkeypatch) -> Non
     assert not (tmp_path / "r.urdf").exists()
 
 
-# Issue 27: a signature's non-geometric terms beside the exports that hold its rigid chain.
+# Issue 27: a signature's non-geometric terms beside the exports that hold a rigid chain;
+# issue 43: the file holds the rigid chain nearest the whole signature (test_export_rigid.py).
 FORMATS = ("urdf", "dh", "mdh", "json")
 SUFFIXES = {"urdf": ".urdf", "dh": ".dh.json", "mdh": ".mdh.json", "json": ".chain.json"}
 
@@ -280,19 +281,25 @@ def test_nongeometric_terms_are_written_beside_the_rigid_export(compliant, fmt, 
     assert r.sidecar == str(side) and side.is_file()
     section = _section(compliant["terms"])
     n = len(section["terms"])
-    assert r.sidecar_warning is not None and "holds the rigid chain only" in r.sidecar_warning
-    assert f"{n} non-geometric terms are written beside it in {side}" in r.sidecar_warning
+    w = r.sidecar_warning
+    assert w is not None and "holds the rigid chain nearest the whole signature: it loses" in w
+    assert r.rigid_loss is not None and f"{r.rigid_loss.rms_mm:.3f} mm RMS" in w
+    assert (
+        f"(its {n} non-geometric terms and the chain they go with) is written beside it in {side}"
+        in w
+    )
     doc = json.loads(side.read_text())
     keys = ("name", "unit", "value", "sigma")
     assert [{k: t[k] for k in keys} for t in doc["terms"]] == section["terms"]
     assert doc["gravity_in_design_base"] == section["gravity_in_design_base"]
     assert doc["beside"] == out.name and doc["angle_unit"] == "deg"
-    # the export itself is the rigid chain's, byte for byte; a rigid one has no sidecar
+    # the export is the nearest rigid chain, not the signature's rigid part; a rigid
+    # signature has no sidecar and no loss
     rigid_out = tmp_path / "rigid" / out.name
     rigid_out.parent.mkdir()
     rr = export(compliant["rigid"], fmt, out=rigid_out)
-    assert rr.sidecar is None and rr.sidecar_warning is None
-    assert rigid_out.read_bytes() == out.read_bytes()
+    assert rr.sidecar is None and rr.sidecar_warning is None and rr.rigid_loss is None
+    assert rigid_out.read_bytes() != out.read_bytes()
     assert [p.name for p in rigid_out.parent.iterdir()] == [out.name]
 
 
@@ -330,7 +337,9 @@ def test_export_cli_warns_once_and_keeps_armsig_folder_clean(compliant, tmp_path
     assert r.exit_code == 0, r.output
     side = d / "export" / "signature.nongeometric.json"
     lines = r.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("warning: the URDF holds the rigid chain only")
+    assert len(lines) == 1 and lines[0].startswith(
+        "warning: the URDF holds the rigid chain nearest the whole signature: it loses"
+    )
     assert lines[0].endswith(f"written beside it in {side}") and side.is_file()
     # the design model is rigid: no sidecar, no warning
     r = CliRunner().invoke(app, ["export", str(d), "--format", "urdf", "--design"])

@@ -148,18 +148,20 @@ def test_fleet_report_marks_a_signature_gone_stale(recorded: Path, tmp_path: Pat
     from pipeline.fleet.report import load_rows, write_fleet_report
 
     fleet = tmp_path / "fleet"
-    for name in ("r6", "r7"):
-        shutil.copytree(recorded / name, fleet / name)
+    for i in (6, 7):  # r6, r7 measured as one arm (issue 43: drift is per robot id)
+        opts = SimulationOptions(seed=i + 1, points=12, repeats=2, sensor="tracker", check=8,
+                                 robot_id="P-1")  # fmt: skip
+        simulate_session(fleet / f"r{i}", opts)
     run_fleet("identify", [str(fleet)], threads, fleet, progress=None)
     text = write_fleet_report(fleet).read_text()
     # The later of the two in identification order (the workers may finish r7 first).
     earlier, later = (Path(r["session"]) for r in sorted(
         load_rows(fleet), key=lambda r: (r["identified_utc"], r["session"])))  # fmt: skip
-    assert re.search(rf"\| puma560 \| .*{later.name} \| \d", text), text  # a drift value
+    assert re.search(rf"\| P-1 \| .*{later.name} \| \d", text), text  # a drift value
     shutil.copyfile(earlier / "recording.mcap", later / "recording.mcap")
     text = write_fleet_report(fleet).read_text()
-    assert "2 sessions, 0 failed, 1 no longer as fleet.arrow recorded them" in text
-    drift_row = next(line for line in text.splitlines() if line.startswith("| puma560 |"))
+    assert "2 sessions, 0 failed, 0 with verdict FAIL, 1 no longer as fleet.arrow" in text
+    drift_row = next(line for line in text.splitlines() if line.startswith("| P-1 |"))
     assert "stale: identified from another recording.mcap" in drift_row, drift_row
 
 

@@ -45,23 +45,34 @@ def _fleet(
     as_json: bool,
 ) -> None:
     """Run ``command`` over the sessions; print one line per session (``as_json``: the
-    rows of fleet.arrow as one JSON document), and refuse (exit 1) when any session
-    failed, after every other one is done and fleet.arrow is written."""
+    rows of fleet.arrow as one JSON document), and, after every other one is done and
+    fleet.arrow is written, refuse (exit 1) when any session failed, else exit 4 when any
+    session's verdict is FAIL (as ``identify`` does)."""
+    from pipeline.errors import VerdictFailError
     from pipeline.fleet.run import fleet
 
     r = fleet(command, dirs, scheduler, workers, out, progress=sys.stderr)
     if as_json:  # the warnings are in the rows, and on stderr as without --json
         print_json({"table": str(r.table), "wall_s": r.wall_s, "failed": len(r.failed),
-                    "sessions": r.rows})  # fmt: skip
+                    "verdict_fail": len(r.verdict_failed), "sessions": r.rows})  # fmt: skip
         for row in r.rows:
             for w in row["warnings"]:
                 warn(f"{row['session']}: {w}")
     else:
         _print_rows(r)
+    fails = [row["session"] for row in r.verdict_failed]
+    also = f"; {len(fails)} more identified with verdict FAIL" if fails else ""
     if r.failed:
         raise ArmsigError(
-            f"{len(r.failed)} of {len(r.rows)} sessions failed (the others are done)",
+            f"{len(r.failed)} of {len(r.rows)} sessions failed (the others are done){also}",
             fix=f"see the error column of {r.table}; a rerun redoes only what is stale",
+        )
+    if fails:
+        raise VerdictFailError(
+            f"{len(fails)} of {len(r.rows)} sessions have the verdict FAIL: "
+            + ", ".join(fails[:3])
+            + (f" and {len(fails) - 3} more" if len(fails) > 3 else ""),
+            fix="see their reasons (`pipeline identify SESSION`, docs/verdict.md)",
         )
 
 

@@ -33,6 +33,7 @@ class ExportFormat(StrEnum):
     dh = "dh"
     mdh = "mdh"
     json = "json"
+    ur_kinematics = "ur-kinematics"
 
 
 class ExportFrame(StrEnum):
@@ -181,6 +182,14 @@ PayloadOption = Annotated[
 ]
 ForceRecording = Annotated[
     bool, typer.Option(help="Replace the recording of an existing session (else refused).")
+]
+#: ``--robot-id`` of ``simulate`` and ``import``: the arm's own id, for ``pipeline fleet``.
+RobotIdOption = Annotated[
+    str | None,
+    typer.Option(
+        help="The arm's own id (its serial number), recorded in the session: `pipeline fleet` "
+        "tells arms of one model apart by it (drift per robot id)."
+    ),
 ]
 
 

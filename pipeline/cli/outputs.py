@@ -62,7 +62,11 @@ def export(
     session: SessionArg,
     format_: Annotated[
         ExportFormat | None,
-        choice("urdf, dh, mdh (Craig) or json (docs/export.md); urdf with --onto.", "--format"),
+        choice(
+            "urdf, dh, mdh (Craig), json, or ur-kinematics (UR's kinematics.yaml) "
+            "(docs/export.md); urdf with --onto.",
+            "--format",
+        ),
     ] = None,
     out: Annotated[
         str | None,
@@ -87,6 +91,23 @@ def export(
         str | None,
         typer.Option(help="With --onto: armsig=vendor joint names, comma separated."),
     ] = None,
+    offsets_only: Annotated[
+        bool,
+        typer.Option(
+            help="With --onto: the signature as joint offsets alone, in <calibration "
+            "rising> tags (robot_calibration's drivers), the vendor's geometry kept; "
+            "states what that loses."
+        ),
+    ] = False,
+    over: Annotated[
+        str | None,
+        typer.Option(
+            help="A signature with non-geometric terms: fit the file's rigid chain over the "
+            "configurations of this file (fk --q-file's: q1_deg, ...; Arrow or CSV), where "
+            "the robot works, instead of 5,000 within the joint limits (a rigid signature is "
+            "written exactly: not read)."
+        ),
+    ] = None,
     force: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
     accept_verdict: AcceptVerdict = False,
     as_json: JsonOption = False,
@@ -101,9 +122,18 @@ def export(
                 "--onto writes the signature into the vendor's URDF, in the vendor's root frame",
                 expected="no --design, --frame, or --format other than urdf",
             )
+        if offsets_only:
+            from pipeline.export.offsets import export_offsets
+
+            f = export_offsets(session, onto, out, joint_map, force, accept_verdict, over)
+            shown = ", ".join(f"{k} {v:+.6g}" for k, v in f.offsets.items())
+            report(f, as_json, f"wrote {f.path} ({f.vendor} with joint offsets of {session}: "
+                   f"{shown} deg / cm; held: {', '.join(f.held) or 'none'})")  # fmt: skip
+            warn(f.text())
+            return
         from pipeline.export.onto import export_onto
 
-        o = export_onto(session, onto, out, joint_map, force, accept_verdict)
+        o = export_onto(session, onto, out, joint_map, force, accept_verdict, over)
         moved = max(o.origin_moves_mm.values())
         report(
             o,
@@ -116,6 +146,27 @@ def export(
         for w in (o.conventions_warning, o.sidecar_warning):
             if w:
                 warn(w)
+        return
+    if offsets_only:
+        raise ArmsigError("--offsets-only goes with --onto VENDOR.urdf")
+    if format_ is ExportFormat.ur_kinematics:
+        if design or frame is not None or joint_map is not None:
+            raise ArmsigError(
+                "--format ur-kinematics writes the signature in UR's own frames",
+                expected="no --design, --frame or --joint-map",
+            )
+        from pipeline.export.ur_kinematics import export_ur_kinematics
+
+        u = export_ur_kinematics(session, out, force, accept_verdict, over)
+        report(
+            u,
+            as_json,
+            f"wrote {u.path} (UR kinematics.yaml of {session}, hash {u.hash}); the xacro's "
+            f"chain reproduces the calibrated chain at {u.configurations} configurations to "
+            f"{u.max_position_error_m:.1e} m, {u.max_orientation_error_rad:.1e} rad",
+        )
+        if u.sidecar_warning:
+            warn(u.sidecar_warning)
         return
     if format_ is None or joint_map is not None:
         raise ArmsigError(
@@ -132,6 +183,7 @@ def export(
         frame=None if frame is None else frame.value,
         force=force,
         accept_verdict=accept_verdict,
+        over=over,
     )
     report(
         r,

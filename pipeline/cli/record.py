@@ -15,6 +15,7 @@ from pipeline.cli.options import (
     ImportFormat,
     JsonOption,
     NewSessionArg,
+    RobotIdOption,
     Sensor,
     choice,
     choice_list,
@@ -194,6 +195,7 @@ def simulate(
             "(docs/rig.md#unmodelled-error-backlash).",
         ),
     ] = 0.0,
+    robot_id: RobotIdOption = None,
     force: ForceRecording = False,
     as_json: JsonOption = False,
 ) -> None:
@@ -228,6 +230,7 @@ def simulate(
         harmonic_deg=joint_harmonics,
         payloads_kg=tuple(joint_values(payloads, "--payloads", "0,10")),
         backlash_mm=backlash_mm,
+        robot_id=robot_id or "",
     )
     path = simulate_session(folder, opts, force=force)
     truth = folder / "rig-truth.json"
@@ -247,6 +250,7 @@ def import_(
     map: Annotated[
         str | None, typer.Option(help="Map file (TOML): columns, units, sweeps (docs/import.md).")
     ] = None,
+    robot_id: RobotIdOption = None,
     force: ForceRecording = False,
     as_json: JsonOption = False,
 ) -> None:
@@ -255,7 +259,7 @@ def import_(
     from pipeline.sweeps import CHECK_SWEEP, POSES_SWEEP
 
     folder = new_session_folder(name)
-    out = import_file(file, format.value, robot, folder, map, force)
+    out = import_file(file, format.value, robot, folder, map, force, robot_id)
     n_check = int((out.rows.sweep == CHECK_SWEEP).sum())
     n_poses = int((out.rows.sweep == POSES_SWEEP).sum())
     if as_json:

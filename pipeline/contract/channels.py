@@ -27,6 +27,27 @@ EVAL_CHANNELS = {
     "/eval/program": "eval_program",
     "/eval/measurement": "eval_measurement",
 }
+#: A robot id (its serial) in ``/robot/description`` ``robot_id``: what a fleet tells arms
+#: of one model apart by (schemas/mcap/robot_description.json holds the same pattern).
+ROBOT_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._:/-]{0,63}$"
+
+
+def check_robot_id(robot_id: str) -> str:
+    """``robot_id`` if it is one (:data:`ROBOT_ID_PATTERN`), else a one-line refusal."""
+    import re
+
+    from pipeline.errors import ArmsigError
+
+    if not re.fullmatch(ROBOT_ID_PATTERN, robot_id):
+        raise ArmsigError(
+            "bad --robot-id",
+            expected="1 to 64 letters, digits and . _ : / - (a serial number), "
+            "starting with a letter or digit",
+            got=repr(robot_id),
+        )
+    return robot_id
+
+
 #: Words of older recordings, read as today's: (topic, field) -> {old: new}.
 LEGACY_VALUES = {("/robot/description", "mode"): {"real": "hardware"}}
 

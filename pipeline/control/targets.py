@@ -57,7 +57,7 @@ def read_joints(
     """The table of an ``fk --q-file`` file (Arrow IPC, or CSV with a header when the name
     ends ``.csv``) and its joint readings (m, n) (deg / cm) from the columns of
     :func:`joint_columns` (what ``ik --targets`` writes); one-line errors as
-    :func:`read_targets`."""
+    :func:`read_targets`, naming ``option`` (``export --over`` reads the same files)."""
     p = Path(path)
     names = joint_columns(robot)
     table = _read_table(p, option, names, csv=p.suffix.lower() == ".csv")

@@ -4,9 +4,10 @@
 session's stages, builds the exported model, checks that the numbers as written reproduce
 the chain's forward kinematics at :data:`CHECK_CONFIGURATIONS` random configurations within
 the joint limits (to :data:`CHECK_POSITION_M`, :data:`CHECK_ORIENTATION_RAD`) and only then
-writes the file atomically. Every format holds the rigid chain only: a signature's
-non-geometric terms go beside it (:mod:`pipeline.export.sidecar`). Formats and frames:
-docs/export.md.
+writes the file atomically. Every format holds a rigid chain: for a signature with
+non-geometric terms the one nearest the whole signature (:mod:`pipeline.export.rigid`,
+its loss stated), the whole signature beside it (:mod:`pipeline.export.sidecar`).
+Formats and frames: docs/export.md.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from pipeline.export.dh_table import (
     modified_from_dh,
 )
 from pipeline.export.documents import chain_document, chain_from_document, dh_document, mdh_document
+from pipeline.export.rigid import RigidLoss, rigid_signature
 from pipeline.export.sidecar import check_sidecar, sidecar_document, sidecar_path
 from pipeline.export.urdf import (
     M_PER_CM,
@@ -46,13 +48,16 @@ from pipeline.signature.session import load_session_document
 from pipeline.signature.verdict import verdict_gate
 from pipeline.units import joints_to_internal
 
-FORMATS = ("urdf", "dh", "mdh", "json")
+#: The formats of :func:`export` (a chain in armsig's frames), and every ``--format``:
+#: ``ur-kinematics`` is :func:`pipeline.export.ur_kinematics.export_ur_kinematics`.
+CHAIN_FORMATS = ("urdf", "dh", "mdh", "json")
+FORMATS = (*CHAIN_FORMATS, "ur-kinematics")
 #: The world frame of each format when ``--frame`` is not given: a URDF's root is the robot's
 #: base (ROS's ``base_link``); the tables and the chain JSON keep the signature's own frame.
 DEFAULT_FRAME = {"urdf": "design-base", "dh": "sensor", "mdh": "sensor", "json": "sensor"}
 EXPORT_DIR = "export"
 _SUFFIX = {"urdf": ".urdf", "dh": ".dh.json", "mdh": ".mdh.json", "json": ".chain.json"}
-#: What the warning calls each format: all four hold the rigid chain only.
+#: What the warning calls each format (each holds a rigid chain).
 _NAME = {"urdf": "URDF", "dh": "D-H table", "mdh": "modified D-H table", "json": "chain JSON"}
 
 #: The acceptance of issue 16: the export reproduces armsig's FK to 1e-9 m and 1e-9 rad
@@ -76,7 +81,8 @@ class ExportResult:
     verdict: str | None = None  # the signature's verdict (None: it has none)
     verdict_warning: str | None = None  # a CHECK, or a FAIL accepted (accept_verdict)
     sidecar: str | None = None  # the signature's non-geometric terms, beside the file
-    sidecar_warning: str | None = None  # that the file holds the rigid chain only
+    sidecar_warning: str | None = None  # what the file loses, and where the terms are
+    rigid_loss: RigidLoss | None = None  # the file against the whole signature
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -245,6 +251,7 @@ def export(
     frame: str | None = None,
     force: bool = False,
     accept_verdict: bool = False,
+    over: str | Path | None = None,
 ) -> ExportResult:
     """Export a session's signature (``design``: its design model) as ``fmt``, its world
     in ``frame`` (None: the format's :data:`DEFAULT_FRAME`).
@@ -254,11 +261,19 @@ def export(
     is refused unless ``accept_verdict`` (:func:`pipeline.signature.verdict.verdict_gate`).
     A signature with non-geometric terms also gets the sidecar of
     :func:`pipeline.export.sidecar.sidecar_path` (checked, and refused like ``out``), and
-    the result says so in ``sidecar_warning``; a rigid one is exported as before (and its
-    default folder loses a stale sidecar).
+    the result says so in ``sidecar_warning``; the file then holds the rigid chain nearest
+    the whole signature over the joint limits (or the configurations of the ``over``
+    file), its loss in ``rigid_loss`` (:mod:`pipeline.export.rigid`). A rigid signature is
+    exported as before (and its default folder loses a stale sidecar).
     """
-    if fmt not in FORMATS:
-        raise ArmsigError(f"unknown export format {fmt!r}", expected=", ".join(FORMATS))
+    if fmt not in CHAIN_FORMATS:
+        raise ArmsigError(
+            f"unknown export format {fmt!r}",
+            expected=", ".join(CHAIN_FORMATS),
+            fix="ur-kinematics: pipeline.export.ur_kinematics.export_ur_kinematics"
+            if fmt == "ur-kinematics"
+            else "",
+        )
     frame = DEFAULT_FRAME[fmt] if frame is None else frame
     if frame not in FRAMES:
         raise ArmsigError(f"unknown export frame {frame!r}", expected=", ".join(FRAMES))
@@ -276,18 +291,21 @@ def export(
     if section and out is not None:  # armsig's own folder is rewritten, a user's file is not
         check_new_file(side, "sidecar", force)
     model = "design" if design else "signature"
-    chain = export_chain(sig, design, frame)
-    text, written, frames = render(sig, chain, fmt, model, frame)
+    best, loss = (sig, None) if design else rigid_signature(sig, sdir, over)
+    chain = export_chain(best, design, frame)
+    text, written, frames = render(best, chain, fmt, model, frame)
     q = random_readings(sig, CHECK_CONFIGURATIONS)
     pos, rot = _check(chain, written, q)
     for intended, as_text in frames:  # the URDF's tool0 (its flange is tool0 turned)
         _check(intended, as_text, q)
-    side_warning = write_sidecar(sig, section, path, q, _NAME[fmt], own_folder=out is None)
+    full = export_chain(sig, design, frame)
+    side_warning = write_sidecar(sig, section, path, q, _NAME[fmt], out is None,
+                                 (full, frame, loss))  # fmt: skip
     write_text_atomic(path, text)
     status = None if sig.verdict is None else sig.verdict.status
     return ExportResult(
         str(path), fmt, model, frame, CHECK_CONFIGURATIONS, pos, rot, status, warning,
-        str(side) if section else None, side_warning,
+        str(side) if section else None, side_warning, loss if section else None,
     )  # fmt: skip
 
 
@@ -298,22 +316,27 @@ def write_sidecar(
     q: np.ndarray,
     what: str,
     own_folder: bool,
+    whole: tuple[SerialChain, str, RigidLoss | None],
 ) -> str | None:
-    """Before the export ``path`` (a ``what``: "URDF", ...) is written: the signature's
-    non-geometric ``section`` beside it (checked at readings ``q``), and the warning that
-    says so; None for a rigid signature (whose ``own_folder`` loses a stale sidecar). The
-    terms go first: the export never stands without them."""
+    """Before the export ``path`` (a ``what``: "URDF", ...) is written: the whole
+    signature beside it (its non-geometric ``section`` and ``whole``: its rigid chain in
+    the export's frame, that frame's name and what the file loses against it; checked at
+    readings ``q``), and the warning that says so; None for a rigid signature (whose
+    ``own_folder`` loses a stale sidecar). The terms go first: the export never stands
+    without them."""
     side = sidecar_path(path)
     if not section:
         if own_folder:  # no stale terms beside a rigid export in armsig's own folder
             side.unlink(missing_ok=True)
         return None
-    side_text = json_text(sidecar_document(sig, section, path.name))
-    check_sidecar(json.loads(side_text), sig, q)
+    full, frame, loss = whole
+    assert loss is not None  # a signature with terms has its rigid loss
+    side_text = json_text(sidecar_document(sig, section, path.name, full, frame, loss))
+    check_sidecar(json.loads(side_text), sig, q, full)
     write_text_atomic(side, side_text)
     n = len(section["terms"])
-    terms = "1 non-geometric term is" if n == 1 else f"{n} non-geometric terms are"
+    terms = "1 non-geometric term" if n == 1 else f"{n} non-geometric terms"
     return (
-        f"the {what} holds the rigid chain only; the signature's {terms} written "
-        f"beside it in {side}"
+        f"{loss.text(f'the {what}')}; the whole signature (its {terms} and the chain "
+        f"they go with) is written beside it in {side}"
     )

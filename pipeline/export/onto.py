@@ -49,6 +49,7 @@ from pipeline.export import (
     tool0_from_last,
     write_sidecar,
 )
+from pipeline.export.rigid import RigidLoss, rigid_signature
 from pipeline.export.sidecar import sidecar_path
 from pipeline.export.urdf import M_PER_CM, origin_element
 from pipeline.export.vendor import (
@@ -61,7 +62,7 @@ from pipeline.export.vendor import (
     path_to,
     read_vendor_urdf,
 )
-from pipeline.kinematics.chain import SerialChain, link_frames
+from pipeline.kinematics.chain import SerialChain, in_frame, link_frames
 from pipeline.kinematics.conventions import Conventions, reading_conventions
 from pipeline.kinematics.transforms import (
     Array,
@@ -71,6 +72,7 @@ from pipeline.kinematics.transforms import (
     trans_z,
     wrap_angle,
 )
+from pipeline.robots.description import RobotDescription
 from pipeline.signature.alignment import ALIGNMENT_SAMPLES
 from pipeline.signature.file import FILE_NAME, Signature, signature_from_document
 from pipeline.signature.session import load_session_document
@@ -109,6 +111,7 @@ class OntoResult:
     verdict_warning: str | None = None
     sidecar: str | None = None
     sidecar_warning: str | None = None
+    rigid_loss: RigidLoss | None = None  # the file against the whole signature
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -248,10 +251,13 @@ class Calibration:
     same_robot: tuple[float, float]
 
 
-def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> Calibration:
-    """The same-robot check and the calibrated origins (module docstring); ArmsigError
-    when the file is another robot."""
-    robot, chain = sig.robot, sig.chain
+def match_vendor(
+    robot: RobotDescription, urdf: VendorURDF, names: list[str]
+) -> tuple[VendorChain, Conventions, list[Array], tuple[float, float]]:
+    """The vendor joints ``names`` as a chain, how the vendor reads them, the constant
+    ``C_i`` of each link against the design's, and how constant they stayed (m, rad):
+    the same-robot check (module docstring, 1.), ArmsigError when the file is another
+    robot."""
     vc = vendor_chain(urdf, names)
     design = robot.design_chain()
     try:
@@ -280,6 +286,19 @@ def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> Calibration
             )
         worst_m, worst_rad = max(worst_m, m), max(worst_rad, r)
     C = [mean_transform(Cq[:, i]) for i in range(len(vc.joints))]
+    return vc, conv, C, (worst_m, worst_rad)
+
+
+def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> Calibration:
+    """The same-robot check and the calibrated origins (module docstring); ArmsigError
+    when the file is another robot."""
+    robot, chain = sig.robot, sig.chain
+    vc, conv, C, worst = match_vendor(robot, urdf, names)
+    B = conv.world  # the vendor root in the design base
+
+    def v_of(q: Array) -> Array:
+        return q * conv.sign + conv.offset
+
     # 2. the calibrated vendor link frames, G_i in the signature's frame i
     X = sig.sensor_from_design_base
     XB = X @ invert_transform(B)
@@ -304,7 +323,7 @@ def calibrate(sig: Signature, urdf: VendorURDF, names: list[str]) -> Calibration
     ])  # fmt: skip
     tool = invert_transform(G[-1]) @ chain.tool
     BX = invert_transform(XB)
-    return Calibration(vc, conv, origins, tool, B, G, BX, (worst_m, worst_rad))
+    return Calibration(vc, conv, origins, tool, B, G, BX, worst)
 
 
 def _comment(text: str) -> str:
@@ -380,11 +399,14 @@ def export_onto(
     joint_map: str | None = None,
     force: bool = False,
     accept_verdict: bool = False,
+    over: str | Path | None = None,
 ) -> OntoResult:
     """Write the vendor URDF ``vendor`` calibrated by the session's signature (module
     docstring). ``out`` defaults to ``SESSION/export/<vendor stem>.calibrated.urdf``
     (armsig's folder, rewritten); an existing ``out`` needs ``force``, and ``out`` is
-    never the vendor file itself."""
+    never the vendor file itself. A signature with non-geometric terms is written as the
+    rigid chain nearest it over the joint limits (or the ``over`` file's configurations;
+    :mod:`pipeline.export.rigid`)."""
     sdir, src = Path(session_dir), Path(vendor)
     urdf = read_vendor_urdf(src)
     if out is None:
@@ -405,11 +427,13 @@ def export_onto(
         check_new_file(sidecar_path(path), "sidecar", force)
     mapping = joint_names(sig, urdf, joint_map)
     names = list(mapping.values())
-    cal = calibrate(sig, urdf, names)
+    best, loss = rigid_signature(sig, sdir, over)  # the rigid chain nearest the whole signature
+    cal = calibrate(best, urdf, names)
     data = calibrated_bytes(urdf, cal, sdir.name)
-    pos, rot = check_calibrated(sig, data, path, names, cal)
+    pos, rot = check_calibrated(best, data, path, names, cal)
+    full = in_frame(sig.chain, invert_transform(cal.BX))  # the signature's, vendor root
     side_warning = write_sidecar(sig, section, path, random_readings(sig, CHECK_CONFIGURATIONS),
-                                 "URDF", own_folder=out is None)  # fmt: skip
+                                 "URDF", out is None, (full, "vendor-root", loss))  # fmt: skip
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(path) as f:  # the vendor's bytes, in the vendor's encoding
         f.write(urdf.encoded(data))  # type: ignore[arg-type]
@@ -428,6 +452,7 @@ def export_onto(
         max_orientation_error_rad=rot, vendor_root_from_design_base=cal.B.tolist(),
         verdict=None if sig.verdict is None else sig.verdict.status, verdict_warning=warning,
         sidecar=str(sidecar_path(path)) if section else None, sidecar_warning=side_warning,
+        rigid_loss=loss if section else None,
     )  # fmt: skip
 
 

@@ -1,9 +1,11 @@
 """``pipeline fleet report DIR``: Markdown and figures from ``DIR/fleet.arrow``.
 
-Figures: design-vs-signature gain per robot, the accuracy distribution, and the drift
-of a robot's S-Model parameters between its sessions. "Robot" is the robot description
-name recorded in the session (a plant that names one description per machine gets one
-robot per machine); sessions of a robot are ordered by their identification time.
+Figures: design-vs-signature gain per robot model, the accuracy distribution, and the
+drift of each arm's signature between its sessions. An arm is its robot id (its serial,
+recorded by ``simulate``/``import --robot-id``; issue 43), not its model: two arms of one
+model are two robots. Sessions without a robot id are not compared with any other (the
+drift table says so). An arm's sessions are ordered by their identification time. Every
+session's verdict (PASS, CHECK, FAIL) is a column of the table and counted in the title.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import ArmsigError, one_line
-from pipeline.fleet.run import TABLE_NAME
+from pipeline.fleet.run import SCHEMA_VERSION, TABLE_NAME
 from pipeline.report.figures import panel_figure, save_png
 from pipeline.report.identification import markdown_table, sig
 from pipeline.signature.alignment import chain_alignment
@@ -25,13 +27,23 @@ REPORT_DIR = "fleet-report"
 
 
 def load_rows(folder: Path) -> list[dict[str, Any]]:
-    """The rows of ``folder/fleet.arrow`` (checked on read, as every armsig table)."""
+    """The rows of ``folder/fleet.arrow`` (checked on read, as every armsig table); one
+    written by an older armsig (another schema version: no robot ids) is refused in one
+    line."""
     from pipeline.stages.tables import read_table
 
     path = folder / TABLE_NAME
     if not path.is_file():
         raise ArmsigError(f"{path}: no such file", fix=f"`pipeline fleet identify {folder}`")
-    return read_table(path).to_pylist()
+    table = read_table(path)
+    version = (table.schema.metadata or {}).get(b"schema_version", b"?").decode()
+    if version != SCHEMA_VERSION:
+        raise ArmsigError(
+            f"{path}: written by another armsig (fleet.arrow schema {version})",
+            expected=f"schema {SCHEMA_VERSION} (with robot ids)",
+            fix=f"`pipeline fleet identify {folder}` again (the stages are cached)",
+        )
+    return table.to_pylist()
 
 
 def current_signatures(rows: list[dict[str, Any]]) -> dict[str, tuple[Any, str]]:
@@ -60,18 +72,23 @@ def current_signatures(rows: list[dict[str, Any]]) -> dict[str, tuple[Any, str]]
     return out
 
 
+#: The drift table's word for sessions that record no robot id.
+NO_ROBOT_ID = "no robot id recorded: not compared with other sessions (import --robot-id)"
+
+
 def drift(
     rows: list[dict[str, Any]], current: dict[str, tuple[Any, str]]
 ) -> dict[str, list[tuple[str, float | None, str]]]:
-    """Per robot with two or more identified sessions, in identification order: each later
-    session's RMS tool position difference (cm) from the one before, after aligning the two
-    signatures' bases and tools (:func:`~pipeline.signature.alignment.chain_alignment`: no
-    ground truth, independent of each session's sensor frame). None, with why, when either
-    signature is not ``current`` (:func:`current_signatures`)."""
+    """Per robot id (the arm, not its model) with two or more identified sessions, in
+    identification order: each later session's RMS tool position difference (cm) from the
+    one before, after aligning the two signatures' bases and tools
+    (:func:`~pipeline.signature.alignment.chain_alignment`: no ground truth, independent
+    of each session's sensor frame). None, with why, when either signature is not
+    ``current`` (:func:`current_signatures`). Two arms of one model are never compared."""
     by_robot: dict[str, list[dict[str, Any]]] = {}
     for r in rows:
-        if r["error"] is None:
-            by_robot.setdefault(r["robot"], []).append(r)
+        if r["error"] is None and r["robot_id"] is not None:
+            by_robot.setdefault(r["robot_id"], []).append(r)
     out: dict[str, list[tuple[str, float | None, str]]] = {}
     for robot, rs in sorted(by_robot.items()):
         rs.sort(key=lambda r: (r["identified_utc"], r["session"]))
@@ -87,26 +104,39 @@ def drift(
     return out
 
 
-def _gain_figure(rows: list[dict[str, Any]], path: Path) -> Path:
-    robots = sorted({r["robot"] for r in rows if r["error"] is None})
+def arm(row: dict[str, Any]) -> str:
+    """What the figures call a session's arm: its robot id, else its session (no id)."""
+    return row["robot_id"] or f"{Path(row['session']).name} (no id)"
+
+
+def laid_out(fig: Any) -> Any:
+    """``fig`` with its panels moved so that no label, tick or title is cut off
+    (matplotlib's tight layout: the fixed margins of :func:`panel_figure` cut rotated
+    robot ids and long axis labels)."""
+    fig.tight_layout()
+    return fig
+
+
+def gain_figure(rows: list[dict[str, Any]]) -> Any:
+    robots = sorted({arm(r) for r in rows if r["error"] is None})
     fig, (ax_g, ax_m) = panel_figure(2)
     for k, robot in enumerate(robots):
-        rs = [r for r in rows if r["error"] is None and r["robot"] == robot]
+        rs = [r for r in rows if r["error"] is None and arm(r) == robot]
         g = [r["gain_evaluation"] for r in rs if r["gain_evaluation"] is not None]
         ax_g.plot([k] * len(g), g, "o", color="C0")
         ax_m.plot([k] * len(rs), [r["design_misfit_rms_cm"] for r in rs], "o", color="C1")
     for ax, label in (
-        (ax_g, "gain: design / signature error (evaluation)"),
-        (ax_m, "design vs signature RMS difference (cm)"),
+        (ax_g, "gain: design / signature\nerror (evaluation)"),
+        (ax_m, "design vs signature\nRMS difference (cm)"),
     ):
-        ax.set_xticks(range(len(robots)), robots, rotation=30)
+        ax.set_xticks(range(len(robots)), robots, rotation=30, ha="right")
         ax.set_ylabel(label, fontsize=8)
         ax.grid(alpha=0.3)
     fig.suptitle("Design model against signature, per robot")
-    return save_png(fig, path)
+    return laid_out(fig)
 
 
-def _accuracy_figure(rows: list[dict[str, Any]], path: Path) -> Path:
+def accuracy_figure(rows: list[dict[str, Any]]) -> Any:
     fig, axes = panel_figure(2)
     for ax, col, label in (
         (axes[0], "check_rms_cm", "validation RMS error (cm)"),
@@ -120,21 +150,23 @@ def _accuracy_figure(rows: list[dict[str, Any]], path: Path) -> Path:
         ax.set_xlabel(label)
         ax.set_ylabel("sessions")
     fig.suptitle("Accuracy across the fleet")
-    return save_png(fig, path)
+    return laid_out(fig)
 
 
-def _drift_figure(steps: dict[str, list[tuple[str, float | None, str]]], path: Path) -> Path:
+def drift_figure(steps: dict[str, list[tuple[str, float | None, str]]]) -> Any:
     fig, (ax,) = panel_figure(1)
     for robot, s in steps.items():
         ax.plot(range(1, len(s) + 1), [np.nan if v is None else v for _, v, _ in s], "o-",
                 label=robot)  # fmt: skip
-    ax.set_xlabel("session (identification order) vs the one before")
-    ax.set_ylabel("aligned RMS tool position difference (cm)")
+    longest = max((len(s) for s in steps.values()), default=1)
+    ax.set_xticks(range(1, longest + 1))
+    ax.set_xlabel("session vs the one before\n(identification order)")
+    ax.set_ylabel("RMS tool position difference\nafter alignment (cm)")
     ax.grid(alpha=0.3)
     if steps:
-        ax.legend(fontsize=7)
-    fig.suptitle("Drift of each robot's signature between its sessions")
-    return save_png(fig, path)
+        ax.legend(fontsize=7, title="robot id", title_fontsize=7)
+    fig.suptitle("Drift of each robot's signature\nbetween its sessions")
+    return laid_out(fig)
 
 
 def write_fleet_report(folder: str | Path) -> Path:
@@ -148,27 +180,34 @@ def write_fleet_report(folder: str | Path) -> Path:
     current = current_signatures(rows)
     steps = drift(rows, current)
     figs = {
-        "gain.png": _gain_figure(rows, out / "gain.png"),
-        "accuracy.png": _accuracy_figure(rows, out / "accuracy.png"),
-        "drift.png": _drift_figure(steps, out / "drift.png"),
+        name: save_png(make, out / name)
+        for name, make in (
+            ("gain.png", gain_figure(rows)),
+            ("accuracy.png", accuracy_figure(rows)),
+            ("drift.png", drift_figure(steps)),
+        )
     }
     failed = [r for r in rows if r["error"] is not None]
+    fail = [r for r in rows if r["error"] is None and r["verdict"] == "FAIL"]
     stale = {s: why for s, (_, why) in current.items() if why}
     table = markdown_table(
-        ["session", "robot", "sensor", "points", "σ normal max (cm)", "check RMS (cm)",
-         "gain", "warnings", "error"],
+        ["session", "robot", "robot id", "sensor", "verdict", "points", "σ normal max (cm)",
+         "check RMS (cm)", "gain", "warnings", "error"],
         [
-            [r["session"], r["robot"] or "—", r["sensor"] or "—", r["points"] or "—",
-             sig(r["sigma_normal_max_cm"]), sig(r["check_rms_cm"]), sig(r["gain_evaluation"]),
-             len(r["warnings"] or []), r["error"] or stale.get(r["session"], "")]
+            [r["session"], r["robot"] or "—", r["robot_id"] or "—", r["sensor"] or "—",
+             r["verdict"] or "—", r["points"] or "—", sig(r["sigma_normal_max_cm"]),
+             sig(r["check_rms_cm"]), sig(r["gain_evaluation"]), len(r["warnings"] or []),
+             r["error"] or stale.get(r["session"], "")]
             for r in rows
         ],
     )  # fmt: skip
     drift_rows = [
         [robot, s, why if v is None else sig(v)] for robot, vs in steps.items() for s, v, why in vs
     ]
+    drift_rows += [["—", r["session"], NO_ROBOT_ID] for r in rows
+                   if r["error"] is None and r["robot_id"] is None]  # fmt: skip
     parts = [
-        f"# Fleet: {len(rows)} sessions, {len(failed)} failed"
+        f"# Fleet: {len(rows)} sessions, {len(failed)} failed, {len(fail)} with verdict FAIL"
         + (f", {len(stale)} no longer as fleet.arrow recorded them (column error)" if stale else "")
         + "\n",
         table,
@@ -181,10 +220,11 @@ def write_fleet_report(folder: str | Path) -> Path:
         "\n## Accuracy\n",
         f"![accuracy]({figs['accuracy.png'].name})",
         "\n## Drift between sessions\n",
-        "Each session against the robot's session before it: RMS tool position difference "
-        "of the two signatures over 500 random configurations after aligning their bases "
-        "and tools (sensor frames differ between sessions).\n",
-        markdown_table(["robot", "session", "RMS difference (cm)"], drift_rows)
+        "Each session against the same arm's (robot id's) session before it: RMS tool "
+        "position difference of the two signatures over 500 random configurations after "
+        "aligning their bases and tools (sensor frames differ between sessions). Arms of one "
+        "model are different robots; a session without a robot id is compared with none.\n",
+        markdown_table(["robot id", "session", "RMS difference (cm)"], drift_rows)
         if drift_rows else "No robot has two identified sessions.",
         f"\n![drift]({figs['drift.png'].name})\n",
     ]  # fmt: skip

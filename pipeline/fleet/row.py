@@ -18,7 +18,7 @@ import pyarrow as pa
 from pipeline.signature.checks import DIGEST_KEY
 from pipeline.signature.file import FILE_NAME, read_signature_document
 from pipeline.stages.runner import stage_path
-from pipeline.stages.session import session_sensor
+from pipeline.stages.session import session_robot_id, session_sensor
 from pipeline.stages.tables import read_table
 
 #: The S-Model's parameters per joint (``signature.json`` ``smodel.parameters``).
@@ -45,7 +45,10 @@ def _c(name: str, t: pa.DataType, unit: str, description: str) -> Column:
 COLUMNS = (
     _c("session", pa.string(), "", "session folder as given on the command line"),
     _c("command", pa.string(), "", "fleet command that produced the row"),
-    _c("robot", pa.string(), "", "robot description name recorded in the session"),
+    _c("robot", pa.string(), "", "robot description name (the model) recorded in the session"),
+    _c("robot_id", pa.string(), "",
+       "the arm's own id (serial) recorded in the session (simulate or import --robot-id); "
+       "null: none recorded"),
     _c("sensor", pa.string(), "", "recorded sensor kind: sonic or points"),
     _c("recording_sha256", pa.string(), "", "SHA-256 of recording.mcap"),
     _c("signature_sha256", pa.string(), "", "self-digest of signature.json"),
@@ -116,6 +119,7 @@ def session_row(
     row = empty_row(str(sdir), command)
     row.update(
         robot=doc["robot"],
+        robot_id=session_robot_id(session),
         sensor=session_sensor(session),
         recording_sha256=doc["provenance"]["recording_sha256"],
         signature_sha256=doc[DIGEST_KEY],

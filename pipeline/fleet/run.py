@@ -24,7 +24,7 @@ from pipeline.fleet.row import empty_row, fleet_table, session_row
 COMMANDS = ("identify", "evaluate", "validate")
 TABLE_NAME = "fleet.arrow"
 SCHEMA_NAME = "fleet"
-SCHEMA_VERSION = "1"
+SCHEMA_VERSION = "2"  # 2: robot_id (issue 43)
 #: Reruns of a task that raised something other than a refusal (Dask's ``retries``).
 RETRIES = 2
 
@@ -85,7 +85,13 @@ class FleetResult:
 
     @property
     def failed(self) -> list[dict[str, Any]]:
+        """The sessions refused (their ``error``)."""
         return [r for r in self.rows if r["error"] is not None]
+
+    @property
+    def verdict_failed(self) -> list[dict[str, Any]]:
+        """The sessions identified whose verdict is FAIL (docs/verdict.md)."""
+        return [r for r in self.rows if r["error"] is None and r["verdict"] == "FAIL"]
 
 
 def run_fleet(
@@ -161,6 +167,7 @@ def write_fleet(path: Path, rows: list[dict[str, Any]], command: str, wall_s: fl
         "command": command,
         "sessions": len(rows),
         "failed": sum(r["error"] is not None for r in rows),
+        "verdict_fail": sum(r["error"] is None and r["verdict"] == "FAIL" for r in rows),
         "wall_s": round(wall_s, 3),
         "package_version": __version__,
     }

@@ -156,9 +156,15 @@ def import_file(
     session_dir: str | Path,
     map_path: str | Path | None = None,
     force: bool = False,
+    robot_id: str | None = None,
 ) -> Imported:
-    """Convert ``path`` into ``session_dir/recording.mcap`` (a point session)."""
+    """Convert ``path`` into ``session_dir/recording.mcap`` (a point session); ``robot_id``:
+    the measured arm's own id (serial), recorded for ``pipeline fleet``."""
     src = Path(path)
+    if robot_id is not None:
+        from pipeline.contract.channels import check_robot_id
+
+        check_robot_id(robot_id)
     with os_errors_refused(Path(session_dir) / "recording.mcap", OS_FIX):
         robot = load_description(robot_path)
         mp = None if map_path is None else Path(map_path)
@@ -168,7 +174,7 @@ def import_file(
         if imap.tool_offset is not None:
             local = np.array(imap.tool_offset) * LENGTH_CM[imap.length_unit]
         note = f"{fmt} file {src.name} (imported)"
-        messages = session_messages(rows, robot, tool, note, local)
+        messages = session_messages(rows, robot, tool, note, local, robot_id)
         if fmt == "rosbag2":  # a bag folder: its data is its .mcap file
             from pipeline.importers.rosbag2 import bag_file
 

@@ -85,10 +85,11 @@ def session_messages(
     tool: ToolChoice,
     instrument: str,
     tool_local_cm: np.ndarray | None = None,
+    robot_id: str | None = None,
 ) -> list[Message]:
     """The recording's messages: descriptions, then joint states and points by (sweep,
     step). ``tool_local_cm``: the design tool point in the last D-H frame (cm), else the
-    robot description's tool."""
+    robot description's tool; ``robot_id``: the arm's own id, recorded when given."""
     units = [j.unit for j in robot.joints]
     ids = list(rows.targets)
     values = robot.joints_from_readings(rows.q)
@@ -143,6 +144,7 @@ def session_messages(
                 "signature_q": [float(v) for v in tool.signature_q],
                 "plan": plan,
                 "mode": "imported",
+                **({"robot_id": robot_id} if robot_id is not None else {}),
             },
         ),
     ]

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from pipeline.kinematics.chain import SerialChain, link_frames
 from pipeline.kinematics.so3 import rotation_from_vector, skew
@@ -123,3 +124,72 @@ def register_design_points(
     base[:3, :3], base[:3, 3] = R, b
     errors = np.linalg.norm(residuals(sol.x).reshape(-1, 3), axis=1)
     return DesignBaseline(chain, base, t[0], errors, t)
+
+
+@dataclass(frozen=True)
+class OffsetsFit:
+    """``chain`` with only its joint offsets, its base and its tool point fitted to points:
+    ``offsets`` (n,) added to the readings (rad / cm; 0 where ``held``), ``base`` (4, 4)
+    the chain's world in the points' frame, ``tool`` (3,) in the last link frame (cm),
+    and each point's distance from the fit (cm)."""
+
+    offsets: Array
+    base: Array
+    tool: Array
+    errors_cm: Array
+    held: npt.NDArray[np.bool_]
+
+
+def register_offsets(
+    chain: SerialChain, q: Array, measured: Array, base0: Array, held: npt.NDArray[np.bool_]
+) -> OffsetsFit:
+    """The joint offsets ``δ``, base ``B`` and tool point ``t`` minimising
+    ``Σ |B F_n(q_k + δ) t − m_k|²`` (``measured`` (K, 3) cm at readings ``q`` (K, n)),
+    ``δ_j`` held at 0 where ``held`` (n,); started at :func:`register_design_points`'s
+    base and tool (``δ = 0``), then Gauss-Newton on all of them (its Jacobian: the tool
+    point turned about joint ``j``'s axis, ``z_j × (p − o_j)``, or moved along it)."""
+    from scipy.optimize import least_squares
+
+    n = chain.n_joints
+    start = register_design_points(
+        chain, q, measured, np.full(len(q), n), np.zeros(len(q), np.int64), base0
+    )
+    free = ~np.asarray(held, bool)
+    B0, pris = start.base, np.asarray(chain.prismatic, bool)
+
+    def unpack(x: Array) -> tuple[Array, Array, Array, Array]:
+        delta = np.zeros(n)
+        delta[free] = x[9:]
+        return rotation_from_vector(x[:3]) @ B0[:3, :3], x[3:6], x[6:9], delta
+
+    def frames(x: Array) -> tuple[Array, Array, Array, Array]:
+        R, b, t, delta = unpack(x)
+        F = link_frames(chain, q + delta)
+        p = np.einsum("kij,j->ki", F[:, n, :3, :3], t) + F[:, n, :3, 3]  # in the world
+        return R, b, F, p
+
+    def residuals(x: Array) -> Array:
+        R, b, _, p = frames(x)
+        r: Array = (p @ R.T + b - measured).reshape(-1)
+        return r
+
+    def jacobian(x: Array) -> Array:
+        R, _, F, p = frames(x)
+        J = np.zeros((len(q), 3, 9 + int(free.sum())))
+        J[:, :, :3] = -skew(p @ R.T)  # as register_design_points: the same stationary points
+        J[:, :, 3:6] = np.eye(3)
+        J[:, :, 6:9] = R @ F[:, n, :3, :3]
+        z, o = F[:, :n, :3, 2], F[:, :n, :3, 3]  # joint j's axis: frame j − 1's z
+        turn = np.cross(z, p[:, None, :] - o)
+        dp = np.where(pris[None, :, None], z, turn)  # (K, n, 3)
+        J[:, :, 9:] = np.einsum("ij,knj->kin", R, dp[:, free])
+        out: Array = J.reshape(-1, J.shape[-1])
+        return out
+
+    x0 = np.r_[np.zeros(3), B0[:3, 3], start.tool, np.zeros(int(free.sum()))]
+    sol = least_squares(residuals, x0, jac=jacobian, method="lm", xtol=1e-15, ftol=1e-15)
+    R, b, t, delta = unpack(sol.x)
+    base = np.eye(4)
+    base[:3, :3], base[:3, 3] = R, b
+    errors = np.linalg.norm(residuals(sol.x).reshape(-1, 3), axis=1)
+    return OffsetsFit(delta, base, t, errors, ~free)

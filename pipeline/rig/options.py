@@ -49,6 +49,7 @@ class SimulationOptions:
     harmonic_deg: float = 0.0  # the true joints' first-harmonic angle errors (RMS, deg)
     payloads_kg: tuple[float, ...] = ()  # payloads on the flange, cycled over the pose set
     backlash_mm: float = 0.0  # the true joints' backlash under gravity (RMS flange move, mm)
+    robot_id: str = ""  # the arm's own id (serial), recorded in /robot/description ("": none)
 
 
 def check_options(opts: SimulationOptions) -> None:
@@ -98,6 +99,10 @@ def check_options(opts: SimulationOptions) -> None:
             got=repr(opts.log_jitter_s),
             fix="--log-jitter-s 1",
         )
+    if opts.robot_id:
+        from pipeline.contract.channels import check_robot_id
+
+        check_robot_id(opts.robot_id)
     if opts.points < 3 or opts.repeats < 1:
         raise ArmsigError(
             "too few measurements",
@@ -121,7 +126,7 @@ def options_for_truth(opts: SimulationOptions) -> dict[str, object]:
         ("resettle_counts", 0), ("air", "lab"), ("log_jitter_s", 0.0),
         ("poses", 0), ("sweeps", True), ("plan_file", ""), ("six_d", False),
         ("compliance_mm", 0.0), ("harmonic_deg", 0.0), ("payloads_kg", []),
-        ("backlash_mm", 0.0),
+        ("backlash_mm", 0.0), ("robot_id", ""),
     ):  # fmt: skip
         if out[name] == default:
             del out[name]

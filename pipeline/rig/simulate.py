@@ -91,19 +91,21 @@ def command_payloads(commands: list[Any], payloads_kg: tuple[float, ...]) -> np.
                      for sweep, step, _ in commands])  # fmt: skip
 
 
-def _robot_message(robot: Any, signature_q: Any, plan: dict[str, Any]) -> Message:
-    """The ``/robot/description`` message: design model, q^s as readings, the plan."""
+def _robot_message(
+    robot: Any, signature_q: Any, plan: dict[str, Any], robot_id: str = ""
+) -> Message:
+    """The ``/robot/description`` message: design model, q^s as readings, the plan, and
+    the arm's ``robot_id`` when it has one."""
     readings = robot.readings_from_joints(np.array(signature_q))
-    return Message(
-        "/robot/description",
-        T0_NS,
-        {
-            "robot": description_to_dict(robot),
-            "signature_q": [float(v) for v in readings],
-            "plan": plan,
-            "mode": "simulated",
-        },
-    )
+    payload = {
+        "robot": description_to_dict(robot),
+        "signature_q": [float(v) for v in readings],
+        "plan": plan,
+        "mode": "simulated",
+    }
+    if robot_id:
+        payload["robot_id"] = robot_id
+    return Message("/robot/description", T0_NS, payload)
 
 
 def session_plan(
@@ -290,7 +292,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
 
     messages = [
         Message("/rig/description", T0_NS, geometry_recorded.to_dict()),
-        _robot_message(robot, plan.signature_q, plan.to_dict()),
+        _robot_message(robot, plan.signature_q, plan.to_dict(), opts.robot_id),
     ]
     digits = None if opts.noiseless else 2  # quantized ranges print as 0.01 cm
     for k, (sweep_id, step, _) in enumerate(commands):
@@ -462,6 +464,7 @@ def _record_points(
             robot,
             plan.signature_q,
             tracker.plan_dict(plan, opts.targets, opts.check, n_poses, opts.sweeps),
+            opts.robot_id,
         ),
     ]
     for k, (sweep_id, step, _) in enumerate(commands):

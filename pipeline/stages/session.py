@@ -31,6 +31,12 @@ STAGE = Stage(
 )
 
 
+def session_robot_id(session: pa.Table) -> str | None:
+    """The arm's own id (serial) recorded in the session; None when none was."""
+    robot_id = json.loads(session.column("robot_json")[0].as_py()).get("robot_id")
+    return None if robot_id is None else str(robot_id)
+
+
 def session_robot(session: pa.Table):  # -> RobotDescription
     """The design robot description recorded in the session."""
     from pipeline.robots.description import description_from_dict
