@@ -15,7 +15,7 @@ from pipeline.errors import SchemaError
 if TYPE_CHECKING:  # pyarrow where tables are made (a warm identify needs none: issue 18)
     import pyarrow as pa
 
-UNITS = ("", "cm", "cm2", "deg", "s", "degF", "kg")
+UNITS = ("", "cm", "cm2", "deg", "s", "degF", "kg", "px")
 
 
 @cache

@@ -102,7 +102,15 @@ def _run(
         overrides=overrides,
         progress=progress,
     )
-    if next(r for r in runs if r.name == PRODUCT[0]).action == "not written":
+    product = [r for r in runs if r.name == PRODUCT[0]]
+    if not product:  # a stage list without a product (a camera session, issue 39)
+        names = ", ".join(r.name for r in runs)
+        why = (
+            f"{FILE_NAME} not written: this session's stages ({names}) end before a "
+            "signature; the camera's whole-chain fit is not a stage yet (issue 39)"
+        )
+        return IdentifyResult(runs, None, None, [why])
+    if product[0].action == "not written":
         why = (
             f"{FILE_NAME} not written: stages after --only {only} are stale; "
             f"`pipeline identify {sdir}` brings them and the signature up to date"
