@@ -107,7 +107,8 @@ def _run(
         names = ", ".join(r.name for r in runs)
         why = (
             f"{FILE_NAME} not written: this session's stages ({names}) end before a "
-            "signature; the camera's whole-chain fit is not a stage yet (issue 39)"
+            "signature (stages/camera_fit.arrow holds the camera's fit; its signature and "
+            "report are not written yet, issue 39)"
         )
         return IdentifyResult(runs, None, None, [why])
     if product[0].action == "not written":

@@ -83,8 +83,8 @@ POINT_STAGE_MODULES = (
     "holdout_points",
     "verdict",
 )
-#: Stage modules of a camera session (issue 39): the detections as recorded.
-CAMERA_STAGE_MODULES = ("session", "joints", "detections")
+#: Stage modules of a camera session (issue 39): the detections, the whole-chain fit.
+CAMERA_STAGE_MODULES = ("session", "joints", "detections", "camera_fit")
 #: recorded sensor kind (``/rig/description`` sensor) -> its identification stage modules
 SENSOR_STAGE_MODULES = {
     "sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES, "camera": CAMERA_STAGE_MODULES
