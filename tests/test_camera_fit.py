@@ -161,3 +161,77 @@ def test_bad_stage_parameter_is_one_line() -> None:
         camera_fit.Params(intrinsics="guessed")
     assert "camera_fit.intrinsics" in str(err.value)
     assert "\n" not in str(err.value)
+
+
+def _synthetic(setup: str, move: str) -> tuple:
+    """40 images of a Puma whose poses are random (``random``), or where only joints 1 and
+    2 move a few degrees about one pose (``translate``: one target orientation), noise
+    0.2 px; detections, design, nominal lens."""
+    from pipeline.kinematics.chain import link_frames
+    from pipeline.refine.camera_fit import Detections
+    from pipeline.rig import camera
+    from pipeline.rig.true_robot import draw_true_robot
+    from pipeline.sensor.camera import project
+    from pipeline.units import joints_to_internal
+
+    robot = get_robot("puma560")
+    rng = np.random.default_rng(3)
+    true = draw_true_robot(robot, rng)
+    target = camera.DEFAULT_TARGET
+    fixed, onf = camera.placement(setup, true.chain, robot.limits, target, rng)
+    nominal = camera.nominal_intrinsics(1280, 960, 1000.0)
+    lens = camera.true_intrinsics(nominal, (-0.12, 0.05, 5e-4, -3e-4, 0.0), rng)
+    q, _ = camera.draw_images(40, setup, true.chain, robot.limits, target, fixed, onf, lens, rng)
+    if move == "translate":
+        q = q[0] + np.zeros_like(q)
+        q[:, 0] += np.linspace(-5, 5, 40)
+        q[:, 1] += np.tile(np.linspace(-3, 3, 8), 5)
+    _, local = target.points()
+    F = link_frames(true.chain, joints_to_internal(q, robot.prismatic))[:, robot.n_joints]
+    T = camera.camera_from_target(setup, fixed, onf, F)
+    kept, found, _ = camera.detect(target, T, lens, local)
+    T, found, q = T[kept], found[kept], q[kept]
+    uv = project(camera.camera_points(T, local), lens.vector())[found]
+    det = Detections(
+        np.repeat(np.arange(len(q)), found.sum(1)), np.tile(local, (len(q), 1, 1))[found],
+        uv + rng.normal(0, 0.2, uv.shape), np.full(len(uv), 0.2),
+        joints_to_internal(q, robot.prismatic), np.zeros(robot.n_joints),
+    )  # fmt: skip
+    return det, robot.design_chain(), nominal
+
+
+def test_random_poses_identify_every_parameter() -> None:
+    from pipeline.refine.camera_fit import held_line
+
+    det, design, lens = _synthetic("eye-to-hand", "random")
+    fit = fit_camera(det, design, lens, "eye-to-hand")
+    assert not fit.identifiability.held.any() and held_line(fit, 0.2) is None
+
+
+def test_one_target_orientation_holds_the_focal_length_and_says_what_to_measure() -> None:
+    """Only joints 1 and 2 move, a few degrees: the wrist's axes and the tool cannot be
+    seen (structural), nor the focal lengths apart from the distance (below the noise):
+    held at their start, named in one line that says what to measure."""
+    from pipeline.refine.camera_fit import held_line
+
+    det, design, lens = _synthetic("eye-to-hand", "translate")
+    fit = fit_camera(det, design, lens, "eye-to-hand")
+    held = {fit.names[k] for k in np.flatnonzero(fit.identifiability.held)}
+    assert {"camera.fx", "camera.fy", "joint4.rx", "tool_rot.rz"} <= held
+    line = held_line(fit, 0.2)
+    assert line is not None and "\n" not in line
+    assert "camera.fx" in line and "tilt the target" in line and "move joint3" in line
+    assert np.all(fit.solution.sigma[fit.identifiability.held] == 0)  # not fitted to noise
+
+
+def test_a_row_of_corners_is_no_detection() -> None:
+    from pipeline.rig import camera
+
+    board = camera.DEFAULT_TARGET
+    _, local = board.points()
+    one_row = np.zeros((1, len(local)), bool)
+    one_row[0, :7] = True  # the first row of the 7 × 5 corners
+    two_rows = one_row.copy()
+    two_rows[0, 7:14] = True
+    assert not camera._spread(one_row, local, board.spacing_cm)[0]
+    assert camera._spread(two_rows, local, board.spacing_cm)[0]

@@ -110,7 +110,7 @@ def _run(
             "signature (stages/camera_fit.arrow holds the camera's fit; its signature and "
             "report are not written yet, issue 39)"
         )
-        return IdentifyResult(runs, None, None, [why])
+        return IdentifyResult(runs, None, None, [why, *_camera_warnings(sdir, runs)])
     if product[0].action == "not written":
         why = (
             f"{FILE_NAME} not written: stages after --only {only} are stale; "
@@ -122,6 +122,18 @@ def _run(
     rep = _report_if_stale(sdir, doc["provenance"]["stages"]) if report else None
     line = verdict_line(sdir)
     return IdentifyResult(runs, sig, rep, doc["warnings"], line, verdict_of(doc))
+
+
+def _camera_warnings(sdir: Path, runs: list[Any]) -> list[str]:
+    """The camera fit's warning (parameters it held), when the session has that stage."""
+    if not any(r.name == "camera_fit" for r in runs):
+        return []
+    from pipeline.stages.camera_fit import camera_warning
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.tables import read_table
+
+    line = camera_warning(read_table(stage_path(sdir, "camera_fit")))
+    return [] if line is None else [line]
 
 
 def _report_if_stale(sdir: Path, hashes: dict[str, str | None]) -> Path:

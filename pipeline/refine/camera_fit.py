@@ -31,7 +31,6 @@ robust loss). The start is closed form, as the peers do it (:func:`camera_start`
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -42,9 +41,11 @@ from pipeline.kinematics.chain import SerialChain, link_frames
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.optim.block import Array
 from pipeline.refine.camera_block import EYE_IN_HAND, EYE_TO_HAND, CameraBlock
+from pipeline.refine.camera_start import CameraStart, camera_start
+from pipeline.refine.identifiability import Identifiability, fit_identifiable
 from pipeline.refine.kinematics import ChainModel, start_points
 from pipeline.refine.orientation import OrientationRows, start_rotation
-from pipeline.refine.solve import Problem, Solution, solve
+from pipeline.refine.solve import Problem, Solution
 from pipeline.sensor.camera import Intrinsics
 from pipeline.sweeps import POSES_SWEEP
 
@@ -78,18 +79,6 @@ class Detections:
 
 
 @dataclass(frozen=True)
-class CameraStart:
-    """The closed-form start: the lens, the target's pose in the camera per image (m, 4, 4),
-    OpenCV's hand-eye (``fixed_in_base``: camera or target in the design's base frame,
-    ``tool_in_flange``: target or camera in the design's last link frame, 4 × 4, cm)."""
-
-    intrinsics: Array
-    camera_from_target: Array
-    fixed_in_base: Array
-    tool_in_flange: Array
-
-
-@dataclass(frozen=True)
 class CameraFit:
     """The fit: its model and solution, the start, names, and the rms pixel residual."""
 
@@ -100,20 +89,67 @@ class CameraFit:
     names: tuple[str, ...]
     rms_px: float
     x_start: Array  # the closed-form start of every parameter
+    identifiability: Identifiability  # what the pixels could identify; the rest held
+    block_fixed: bool = False  # the lens held as given (not the data's verdict)
 
     @property
     def intrinsics(self) -> Array:
         return self.solution.x[self.model.n_params :]
 
+    def _at(self, q: Array, q_signature: Array) -> ChainModel:
+        """The fitted model observing the tool at joint values ``q`` (m, n)."""
+        m = self.model
+        return ChainModel(m.frames0, m.prismatic, np.full(len(q), m.n_joints), q - q_signature,
+                          np.zeros(len(q), np.int64), m.point_names, True)  # fmt: skip
+
     def tool_poses(self, q: Array, q_signature: Array) -> Array:
         """The tool body's pose in the sensor frame (m, 4, 4) at joint values ``q`` (m, n)."""
-        m = self.model
-        at = ChainModel(m.frames0, m.prismatic, np.full(len(q), m.n_joints), q - q_signature,
-                        np.zeros(len(q), np.int64), m.point_names, True)  # fmt: skip
-        x = self.solution.x[: m.n_params]
+        at, x = self._at(q, q_signature), self.solution.x[: self.model.n_params]
         T = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
         T[:, :3, :3], T[:, :3, 3] = at.tool_rotations(x), at.positions(x)
         return T
+
+    def tool_covariances(self, q: Array, q_signature: Array, bound: bool = False) -> Array:
+        """Covariance (m, 3, 3) of the tool point at joint values ``q`` (m, n), cm²: the
+        fit's (Gauss-Newton, scaled by χ²/dof) propagated, ``J Σ_θ Jᵀ`` with ``Σ_θ`` the
+        kinematic block (the intrinsics marginalised). ``bound``: unscaled, the stated
+        pixel noise taken as true: the Cramér-Rao bound of the session at the solution."""
+        s = self.solution
+        n = self.model.n_params
+        cov = s.covariance[:n, :n] / (s.noise_scale**2 if bound else 1.0)
+        J = self._at(q, q_signature).position_jacobian(s.x[:n])
+        return np.asarray(J @ cov @ np.swapaxes(J, 1, 2))
+
+
+def held_line(fit: CameraFit, sigma_px: float) -> str | None:
+    """One line naming the parameters the images could not identify (held at their start)
+    and what to measure so that they can be, or None when every one was identified."""
+    ident = fit.identifiability
+    held = np.flatnonzero(ident.held)
+    held = held[held < fit.model.n_params] if fit.block_fixed else held
+    if not len(held):
+        return None
+    names = [fit.names[k] for k in held]
+    heads = {n.split(".")[0] for n in names}
+    todo = []
+    joints = sorted(h for h in heads if h.startswith("joint"))
+    if joints:
+        todo.append(f"move {', '.join(joints)} between images (each over tens of degrees)")
+    if heads & {"tool", "tool_rot"}:
+        todo.append("turn the wrist between images so that the flange's body is seen from "
+                    "several sides")  # fmt: skip
+    lens = {n.split(".")[1] for n in names if n.startswith("camera.")}
+    if lens & {"fx", "fy"}:
+        todo.append("tilt the target against the camera (30° or more) and vary its distance: "
+                    "one target orientation leaves the focal length and the distance "
+                    "correlated")  # fmt: skip
+    if lens & {"cx", "cy", "k1", "k2", "p1", "p2", "k3"}:
+        todo.append("put the target in every part of the image, the corners too")
+    return (
+        f"camera fit: {len(held)} of {len(fit.names)} parameters held at their start, the "
+        f"images cannot tell them from the {sigma_px:g} px noise: {', '.join(names)}; "
+        f"measure more images: {'; '.join(todo)}"
+    )
 
 
 def _check(det: Detections, setup: str, intrinsics: str) -> None:
@@ -129,64 +165,6 @@ def _check(det: Detections, setup: str, intrinsics: str) -> None:
             expected=f"at least {MIN_IMAGES} images of {MIN_POINTS_PER_IMAGE} points or more",
             fix="record more images of the whole target, at poses spread over the workspace",
         )
-
-
-def _pose(R: Array, t: Array) -> Array:
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, np.ravel(t)
-    return T
-
-
-def camera_start(
-    det: Detections, design: SerialChain, lens: Intrinsics, setup: str, fit_lens: bool
-) -> CameraStart:
-    """The closed-form start (module docstring, steps 1 and 2)."""
-    import cv2
-
-    obj = [det.local[det.image == i].astype(np.float32) for i in range(det.n_images)]
-    img = [det.uv[det.image == i].astype(np.float32) for i in range(det.n_images)]
-    K0, dist0 = lens.opencv()
-    size = (lens.width_px, lens.height_px)
-    rvecs: Any = []
-    tvecs: Any = []
-    if fit_lens:  # float32: OpenCV's calibration takes points so; only the start
-        _, K, dist, rvecs, tvecs = cv2.calibrateCamera(
-            obj, img, size, K0.copy(), dist0.copy(), flags=cv2.CALIB_USE_INTRINSIC_GUESS
-        )
-    else:
-        K, dist = K0, dist0
-        for i, (o, u) in enumerate(zip(obj, img, strict=True)):
-            ok, rvec, tvec = cv2.solvePnP(o, u, K, dist, flags=cv2.SOLVEPNP_IPPE)
-            if ok:
-                ok, rvec, tvec = cv2.solvePnP(o, u, K, dist, rvec, tvec, True,
-                                              flags=cv2.SOLVEPNP_ITERATIVE)  # fmt: skip
-            if not ok:
-                raise StageError(
-                    f"camera fit: no pose of the target in image {i} (OpenCV solvePnP failed)",
-                    expected="the target's points as the detector found them",
-                    fix="check that the recorded target is the one in the images",
-                )
-            rvecs.append(rvec)
-            tvecs.append(tvec)
-    T = np.array([_pose(np.asarray(cv2.Rodrigues(r)[0], float), np.asarray(t, float))
-                  for r, t in zip(rvecs, tvecs, strict=True)])  # fmt: skip
-    n = design.n_joints
-    base_from_flange = link_frames(design, det.q)[:, n]
-    flange_from_base = invert_transform(base_from_flange)
-    # calibrateRobotWorldHandEye solves cTw · wTb = cTg · gTb for wTb and cTg, "c" moving
-    # with the gripper g, "w" fixed: eye-in-hand, c = the camera and w = the target;
-    # eye-to-hand, c = the target and w = the camera.
-    moving_from_fixed = T if setup == EYE_IN_HAND else invert_transform(T)
-    R_wb, t_wb, R_cg, t_cg = cv2.calibrateRobotWorldHandEye(
-        list(moving_from_fixed[:, :3, :3]), list(moving_from_fixed[:, :3, 3]),
-        list(flange_from_base[:, :3, :3]), list(flange_from_base[:, :3, 3]),
-        method=cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH,
-    )  # fmt: skip
-    fixed_in_base = invert_transform(_pose(R_wb, t_wb))
-    tool_in_flange = invert_transform(_pose(R_cg, t_cg))
-    Kf, df = np.asarray(K, float), np.asarray(dist, float).ravel()
-    k = np.concatenate([Kf[[0, 1, 0, 1], [0, 1, 2, 2]], df[:5]])
-    return CameraStart(k, T, fixed_in_base, tool_in_flange)
 
 
 def camera_model(
@@ -206,8 +184,9 @@ def camera_model(
     T = start.camera_from_target if setup == EYE_TO_HAND else invert_transform(
         start.camera_from_target)  # fmt: skip
     x = np.zeros(model.n_params)
-    x[model.point_slice(0)] = start_points(model, T[:, :3, 3])[0]
-    rows = OrientationRows(np.arange(det.n_images), T[:, :3, :3], np.ones(det.n_images))
+    x[model.point_slice(0)] = start_points(model, T[:, :3, 3])[0]  # NaN rows: no pose
+    seen = np.flatnonzero(np.isfinite(T).all(axis=(1, 2)))
+    rows = OrientationRows(seen, T[seen, :3, :3], np.ones(len(seen)))
     x[model.rotation_slice] = start_rotation(model, x, rows)
     return model, x
 
@@ -236,8 +215,10 @@ def fit_camera(
     block = CameraBlock(keys, det.image, det.local, det.uv, det.sigma_px, setup, k0, prior, prior_s)
     problem = Problem(model, block, loss, f_scale, fixed_block=intrinsics == "fixed")
     x_start = np.concatenate([x_kin, k0])
-    solution = solve(problem, x_start)
+    units = (*model.param_units, *block.param_units)
+    solution, ident = fit_identifiable(problem, x_start, units, True, len(det.image))
     r = block.predict(model, solution.x[: model.n_params], solution.x[model.n_params :]) - det.uv
     rms = float(np.sqrt(np.mean(np.sum(r**2, axis=1))))
     names = (*model.param_names, *block.param_names)
-    return CameraFit(model, block, solution, start, names, rms, x_start)
+    return CameraFit(model, block, solution, start, names, rms, x_start, ident,
+                     intrinsics == "fixed")  # fmt: skip

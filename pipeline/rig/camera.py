@@ -17,7 +17,8 @@ face is more than :data:`MAX_OBLIQUE_DEG` from the line of sight, when it is so 
 neighbouring points are closer than :data:`MIN_SPACING_PX` in the image, and when it is
 partly out of view: a checkerboard or circle grid with any point outside the image
 (minus :data:`BORDER_PX`), a ChArUco board or marker set with fewer than
-:data:`MIN_POINTS` points inside (a marker set keeps only markers wholly inside). Those
+:data:`MIN_POINTS` points inside (a marker set keeps only markers wholly inside) or with
+its points inside on one line (:func:`_spread`: no pose from one row of corners). Those
 configurations are never commanded (the rig draws until ``poses`` images are kept); the
 truth counts the drops by reason.
 
@@ -47,6 +48,8 @@ MAX_OBLIQUE_DEG = 60.0  # corner and marker detectors fail past ~60-70° of obli
 MIN_SPACING_PX = 10.0  # neighbouring points closer than this are not resolved
 BORDER_PX = 2.0  # a point this close to the image edge is not found
 MIN_POINTS = 8
+#: The found points' smaller principal spread, in spacings, below which they are one row.
+MIN_SPREAD = 0.5
 #: σ a camera session states when simulated with no pixel noise at all (--pixel-noise 0):
 #: the default's, so that its residuals are still weighed in px.
 STATED_SIGMA_PX = 0.2  # points a ChArUco or marker detection needs (PnP needs 4, coplanar)
@@ -177,12 +180,27 @@ def detect(
     spacing = target.marker_cm if target.kind in ("aruco", "apriltag") else target.spacing_cm
     spacing_px = lens.fx * spacing / np.maximum(np.linalg.norm(centre, axis=1), 1e-9)
     enough = inside.all(axis=1) if target.whole_board else inside.sum(axis=1) >= MIN_POINTS
+    enough &= _spread(inside, local, spacing)
     for k, bad in enumerate(
         [behind, cos_face <= 0, cos_face < np.cos(np.radians(MAX_OBLIQUE_DEG)),
          spacing_px < MIN_SPACING_PX, ~enough]
     ):  # fmt: skip
         reason[(reason < 0) & bad] = k
     return reason < 0, inside, reason
+
+
+def _spread(found: np.ndarray, local: np.ndarray, spacing: float) -> np.ndarray:
+    """Whether each image's found points (M, N) span the target in two directions: a
+    detector gives no pose from one row of corners (OpenCV's ChArUco pose needs points
+    off one line), and neither does a PnP. The smaller principal spread of the found
+    points must reach :data:`MIN_SPREAD` of a spacing."""
+    w = found.astype(float)
+    n = np.maximum(w.sum(axis=1), 1.0)
+    mean = (w @ local[:, :2]) / n[:, None]
+    d = local[None, :, :2] - mean[:, None, :]  # (M, N, 2)
+    C = np.einsum("mn,mni,mnj->mij", w, d, d) / n[:, None, None]
+    smaller = np.linalg.eigvalsh(C)[:, 0]
+    return np.asarray(smaller >= (MIN_SPREAD * spacing) ** 2)
 
 
 def draw_images(

@@ -87,7 +87,8 @@ def detections_for_fit(inputs: Mapping[str, Any]) -> tuple[Any, Any, Any, str]:
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
-    from pipeline.refine.camera_fit import fit_camera
+    from pipeline.refine.camera_fit import fit_camera, held_line
+    from pipeline.refine.identifiability import summary as identifiability_summary
 
     det, design, lens, setup = detections_for_fit(inputs)
     fit = fit_camera(det, design, lens, setup, params.intrinsics, params.prior_sigma(),
@@ -104,6 +105,9 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "message": s.message, "iterations": s.iterations, "n_images": det.n_images,
         "n_points": len(det.image), "n_residuals": s.n_residuals, "chi2": s.chi2,
         "dof": s.dof, "rms_px": fit.rms_px, "loss": params.loss, "f_scale": params.f_scale,
+        "identifiability": identifiability_summary(fit.identifiability, fit.names,
+                                                   det.n_images, len(det.image)),
+        "warning": held_line(fit, float(np.median(det.sigma_px))),
         "start_hand_eye": {"fixed_in_base": fit.start.fixed_in_base.tolist(),
                            "tool_in_flange": fit.start.tool_in_flange.tolist()},
     }  # fmt: skip
@@ -126,3 +130,9 @@ STAGE = Stage(
     compute,
     "the arm, both hand-eye transforms and the lens fitted to the pixels (camera)",
 )
+
+
+def camera_warning(table: pa.Table) -> str | None:
+    """The fit's one-line warning (parameters held: what to measure), None without one."""
+    meta = (table.schema.metadata or {}).get(b"armsig.camera_fit")
+    return None if meta is None else json.loads(meta).get("warning")
