@@ -68,6 +68,29 @@ def test_jacobian_matches_finite_differences(small) -> None:
         assert np.abs(fd - J[:, j]).max() < 1e-5 * scale, fit.names[j]
 
 
+def test_jacobian_with_the_fixed_pose_matches_finite_differences(small) -> None:
+    """The chain held at its design: the fixed body's pose is the block's (its rotation
+    vector off zero, where the left Jacobian matters)."""
+    fit0, det = small
+    fit = fit_camera(det, get_robot("puma560").design_chain(),
+                     Intrinsics.from_vector(1280, 960, fit0.intrinsics), fit0.block.setup,
+                     chain="design")  # fmt: skip
+    assert fit.block.param_names[:6] == ("fixed.rx", "fixed.ry", "fixed.rz", "fixed.x",
+                                         "fixed.y", "fixed.z")  # fmt: skip
+    problem = Problem(fit.model, fit.block, "linear")
+    x = fit.solution.x.copy()
+    n = fit.model.n_params
+    x[n : n + 3] += [0.3, -0.2, 0.1]  # rad: far from the start rotation
+    r, J = residuals_and_jacobian(problem, x)
+    for j in range(n, n + 6):
+        h = 1e-6
+        e = np.zeros(x.size)
+        e[j] = h
+        fd = residuals_and_jacobian(problem, x + e)[0] - residuals_and_jacobian(problem, x - e)[0]
+        fd /= 2 * h
+        assert np.abs(fd - J[:, j]).max() < 1e-5 * (1.0 + np.abs(fd).max()), fit.names[j]
+
+
 def test_normal_equations_are_the_dense_products(small) -> None:
     """The structured JᵀWJ, with the cross terms of rows that depend on a position and on
     the kinematics directly (pixels), equals the dense product."""

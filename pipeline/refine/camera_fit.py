@@ -42,10 +42,10 @@ from pipeline.kinematics.transforms import invert_transform
 from pipeline.optim.block import Array
 from pipeline.refine.camera_block import EYE_IN_HAND, EYE_TO_HAND, CameraBlock
 from pipeline.refine.camera_start import CameraStart, camera_start
-from pipeline.refine.identifiability import Identifiability, fit_identifiable
+from pipeline.refine.identifiability import Identifiability, analyse, fit_identifiable
 from pipeline.refine.kinematics import ChainModel, start_points
 from pipeline.refine.orientation import OrientationRows, start_rotation
-from pipeline.refine.solve import Problem, Solution
+from pipeline.refine.solve import Problem, Solution, residuals_and_jacobian, solve
 from pipeline.sensor.camera import Intrinsics
 from pipeline.sweeps import POSES_SWEEP
 
@@ -94,7 +94,15 @@ class CameraFit:
 
     @property
     def intrinsics(self) -> Array:
-        return self.solution.x[self.model.n_params :]
+        return self.solution.x[-9:]
+
+    @property
+    def fixed_in_base(self) -> Array | None:
+        """The fixed body in the design's base (4, 4) of a fit with the chain held at its
+        design; None otherwise (the sensor frame is then the fixed body's)."""
+        if self.block.fixed_start is None:
+            return None
+        return self.block.fixed_pose(self.solution.x[self.model.n_params :])
 
     def _at(self, q: Array, q_signature: Array) -> ChainModel:
         """The fitted model observing the tool at joint values ``q`` (m, n)."""
@@ -168,21 +176,24 @@ def _check(det: Detections, setup: str, intrinsics: str) -> None:
 
 
 def camera_model(
-    det: Detections, design: SerialChain, start: CameraStart, setup: str
+    det: Detections, design: SerialChain, start: CameraStart, setup: str, chain: str = "fitted"
 ) -> tuple[ChainModel, Array]:
     """The chain model (tool point and rotation) and its start ``x`` (module docstring,
-    step 3)."""
+    step 3); ``chain="design"``: in the design's base frame (the fixed body then a
+    parameter of the block)."""
     n = design.n_joints
-    sensor_from_base = invert_transform(start.fixed_in_base)
-    F = sensor_from_base @ link_frames(design, det.q_signature)
+    base = np.eye(4) if chain == "design" else invert_transform(start.fixed_in_base)
+    F = base @ link_frames(design, det.q_signature)
     model = ChainModel(
         frames0=F[:n], prismatic=np.asarray(design.prismatic, bool),
         link=np.full(det.n_images, n, np.int64), theta=det.q - det.q_signature,
         point=np.zeros(det.n_images, np.int64), point_names=("tool",), tool_rotation=True,
     )  # fmt: skip
-    # the tool body's measured pose per image, in the sensor frame
+    # the tool body's measured pose per image, in the model's frame
     T = start.camera_from_target if setup == EYE_TO_HAND else invert_transform(
         start.camera_from_target)  # fmt: skip
+    if chain == "design":
+        T = start.fixed_in_base @ T
     x = np.zeros(model.n_params)
     x[model.point_slice(0)] = start_points(model, T[:, :3, 3])[0]  # NaN rows: no pose
     seen = np.flatnonzero(np.isfinite(T).all(axis=(1, 2)))
@@ -200,23 +211,41 @@ def fit_camera(
     prior_sigma: Array | None = None,
     loss: str = "soft_l1",
     f_scale: float = 3.0,
+    chain: str = "fitted",
 ) -> CameraFit:
     """The whole fit (module docstring). ``lens``: the stated lens (the start, the fixed
-    values, or the prior's mean); ``prior_sigma`` (9,): the prior's σ (``intrinsics="prior"``)."""
+    values, or the prior's mean); ``prior_sigma`` (9,): the prior's σ (``intrinsics="prior"``).
+    ``chain="design"``: the hand-eye problem of the peers, the chain held at its design
+    (the sensor frame is then the design's base, the fixed body's pose six parameters of
+    the block: :class:`~pipeline.refine.camera_block.CameraBlock`)."""
     _check(det, setup, intrinsics)
     start = camera_start(det, design, lens, setup, fit_lens=intrinsics == "fitted")
-    model, x_kin = camera_model(det, design, start, setup)
+    model, x_kin = camera_model(det, design, start, setup, chain)
     k0 = lens.vector() if intrinsics != "fitted" else start.intrinsics
     keys = pa.table({"sweep": pa.array(np.full(det.n_images, POSES_SWEEP), pa.int32()),
                      "step": pa.array(np.arange(det.n_images), pa.int32()),
                      "target": ["tool"] * det.n_images})  # fmt: skip
     prior = lens.vector() if intrinsics == "prior" else None
     prior_s = None if prior is None else np.asarray(prior_sigma, float)
-    block = CameraBlock(keys, det.image, det.local, det.uv, det.sigma_px, setup, k0, prior, prior_s)
-    problem = Problem(model, block, loss, f_scale, fixed_block=intrinsics == "fixed")
-    x_start = np.concatenate([x_kin, k0])
-    units = (*model.param_units, *block.param_units)
-    solution, ident = fit_identifiable(problem, x_start, units, True, len(det.image))
+    held_design = chain == "design"
+    fixed = start.fixed_in_base if held_design else None
+    own = np.concatenate([np.zeros(3), start.fixed_in_base[:3, 3], k0]) if held_design else k0
+    block = CameraBlock(keys, det.image, det.local, det.uv, det.sigma_px, setup, own, prior,
+                        prior_s, fixed)  # fmt: skip
+    x_start = np.concatenate([x_kin, own])
+    if held_design:  # the axes at the design; the lens held by mask, the fixed pose free
+        held = np.zeros(len(x_start), bool)
+        held[: model.n_axis_params] = True
+        held[len(x_start) - 9 :] = intrinsics == "fixed"
+        problem = Problem(model, block, loss, f_scale, held=held)
+        solution = solve(problem, x_start)
+        units = (*model.param_units, *block.param_units)
+        J = residuals_and_jacobian(problem, solution.x)[1]
+        ident = analyse(J, units, True, len(det.image), held)
+    else:
+        problem = Problem(model, block, loss, f_scale, fixed_block=intrinsics == "fixed")
+        units = (*model.param_units, *block.param_units)
+        solution, ident = fit_identifiable(problem, x_start, units, True, len(det.image))
     r = block.predict(model, solution.x[: model.n_params], solution.x[model.n_params :]) - det.uv
     rms = float(np.sqrt(np.mean(np.sum(r**2, axis=1))))
     names = (*model.param_names, *block.param_names)
