@@ -98,3 +98,13 @@ def test_bad_target_file_is_one_line(text: str, words: str) -> None:
         target_from_toml(text, "board.toml")
     message = str(err.value)
     assert words in message and "board.toml" in message and "\n" not in message
+
+
+def test_the_example_target_file_is_the_simulators_default() -> None:
+    from pathlib import Path
+
+    from pipeline.rig.camera import DEFAULT_TARGET
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "charuco_6x8.toml"
+    target = target_from_toml(path.read_text(encoding="utf-8"), str(path))
+    assert target == DEFAULT_TARGET and len(target.points()[0]) == 35
