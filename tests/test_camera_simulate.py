@@ -173,8 +173,13 @@ def test_identify_writes_the_detections_table_and_says_no_signature(tmp_path: Pa
     from pipeline.identify import identify
 
     d = _session(tmp_path, "eye-in-hand", noiseless=True)
-    result = identify(d, report=False)
+    result = identify(d)
     assert result.signature is None and "camera" in result.warnings[0]
+    assert result.report is not None
+    report = result.report.read_text(encoding="utf-8")
+    per_image = report.split("## Reprojection per image")[1]
+    assert per_image.count("\n| ") == 12 + 1  # a header and one row per image
+    assert "camera.fx" in report and "tool_rot.rz" in report
     table = pl.read_ipc(d / "stages" / "detections.arrow")
     rec = read_recording(d / "recording.mcap")
     assert table.height == len(rec.detection_point) and table["image"].n_unique() == 12

@@ -107,10 +107,12 @@ def _run(
         names = ", ".join(r.name for r in runs)
         why = (
             f"{FILE_NAME} not written: this session's stages ({names}) end before a "
-            "signature (stages/camera_fit.arrow holds the camera's fit; its signature and "
-            "report are not written yet, issue 39)"
+            "signature (stages/camera_fit.arrow holds the camera's fit, report/report.md "
+            "its report; a camera session's signature is not written yet, issue 39)"
         )
-        return IdentifyResult(runs, None, None, [why, *_camera_warnings(sdir, runs)])
+        camera = any(r.name == "camera_fit" for r in runs)
+        rep = _camera_report(sdir) if camera and report else None
+        return IdentifyResult(runs, None, rep, [why, *_camera_warnings(sdir, runs)])
     if product[0].action == "not written":
         why = (
             f"{FILE_NAME} not written: stages after --only {only} are stale; "
@@ -134,6 +136,12 @@ def _camera_warnings(sdir: Path, runs: list[Any]) -> list[str]:
 
     line = camera_warning(read_table(stage_path(sdir, "camera_fit")))
     return [] if line is None else [line]
+
+
+def _camera_report(sdir: Path) -> Path:
+    from pipeline.report.camera import write_camera_report
+
+    return write_camera_report(sdir)
 
 
 def _report_if_stale(sdir: Path, hashes: dict[str, str | None]) -> Path:

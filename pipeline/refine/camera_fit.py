@@ -104,6 +104,19 @@ class CameraFit:
             return None
         return self.block.fixed_pose(self.solution.x[self.model.n_params :])
 
+    def image_residuals(self) -> tuple[Array, Array, Array]:
+        """Per image: detected points (m,), rms and largest reprojection error (m,), px."""
+        x = self.solution.x
+        n = self.model.n_params
+        r = np.linalg.norm(self.block.predict(self.model, x[:n], x[n:]) - self.block.measured,
+                           axis=1)  # fmt: skip
+        img, m = self.block.image, len(self.model.theta)
+        count = np.bincount(img, minlength=m)
+        rms = np.sqrt(np.bincount(img, r**2, m) / np.maximum(count, 1))
+        worst = np.zeros(m)
+        np.maximum.at(worst, img, r)
+        return count.astype(float), np.asarray(rms, float), worst
+
     def _at(self, q: Array, q_signature: Array) -> ChainModel:
         """The fitted model observing the tool at joint values ``q`` (m, n)."""
         m = self.model

@@ -105,6 +105,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "message": s.message, "iterations": s.iterations, "n_images": det.n_images,
         "n_points": len(det.image), "n_residuals": s.n_residuals, "chi2": s.chi2,
         "dof": s.dof, "rms_px": fit.rms_px, "loss": params.loss, "f_scale": params.f_scale,
+        "images": _image_rows(fit, table_images(inputs["detections"])),
         "identifiability": identifiability_summary(fit.identifiability, fit.names,
                                                    det.n_images, len(det.image)),
         "warning": held_line(fit, float(np.median(det.sigma_px))),
@@ -124,12 +125,30 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "camera_fit",
-    1,
+    2,  # 2: per-image reprojection errors and the identifiability in the summary
     ("session", "joints", "detections"),
     Params(),
     compute,
     "the arm, both hand-eye transforms and the lens fitted to the pixels (camera)",
 )
+
+
+def table_images(table: pa.Table) -> np.ndarray:
+    """The image numbers (steps) of the fit's images, in its order."""
+    use = table.column("sweep").to_numpy() == POSES_SWEEP
+    return np.unique(table.column("image").to_numpy()[use])
+
+
+def _image_rows(fit: Any, images: np.ndarray) -> list[list[float]]:
+    """Per image: [image, points, rms px, largest px] of the fit's reprojection."""
+    count, rms, worst = fit.image_residuals()
+    return [[int(i), int(c), float(r), float(w)]
+            for i, c, r, w in zip(images, count, rms, worst, strict=True)]  # fmt: skip
+
+
+def camera_summary(table: pa.Table) -> dict[str, Any]:
+    """The fit's summary (schema metadata ``armsig.camera_fit``)."""
+    return dict(json.loads((table.schema.metadata or {})[b"armsig.camera_fit"]))
 
 
 def camera_warning(table: pa.Table) -> str | None:
