@@ -188,6 +188,58 @@ def _held(fit, setup: str, det, F_s: np.ndarray) -> np.ndarray:
     return np.asarray(invert_transform(F_s) @ T)
 
 
+def beside_tracker(seeds: int = 3, images: int = 40) -> None:
+    """What a camera buys (issue 39): the camera session (Puma, eye-to-hand, 0.2 px) and a
+    laser tracker session of the same poses and the same true robot (the seed's), each
+    identified and audited as the tracker's audit does it (tool point, after the best
+    base and tool alignment: ``pipeline.rig.audit``), RMS over 1,000 configurations, mm."""
+    import subprocess
+    import sys
+
+    from pipeline.rig.audit import _aligned_errors, audit
+    from pipeline.rig.pose_file import write_pose_plan
+    from pipeline.robots import get_robot
+
+    robot = get_robot("puma560")
+    print(f"camera beside a tracker, same poses ({images}), Puma eye-to-hand: RMS tool mm")
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(1, seeds + 1):
+            cam = Path(tmp) / f"cam{seed}"
+            opts = SimulationOptions(sensor="camera", poses=images, seed=seed)
+            simulate_session(cam, opts)
+            t = tables(cam)
+            det, design, lens, setup = camera_fit.detections_for_fit(t)
+            from pipeline.refine.camera_fit import fit_camera
+
+            fit = fit_camera(det, design, lens, setup)
+            truth = json.loads((cam / "rig-truth.json").read_text())
+            rng = np.random.default_rng(0)
+            lim = robot.limits
+            q = joints_to_internal(rng.uniform(lim[:, 0], lim[:, 1], (1000, len(lim))),
+                                   robot.prismatic)  # fmt: skip
+            from pipeline.kinematics.chain import link_frames
+            from pipeline.rig.audit import true_chain
+
+            _, on_flange = true_hand_eye(truth)
+            T_true = link_frames(true_chain(truth), q)[:, robot.n_joints] @ on_flange
+            cam_err = _aligned_errors(T_true, fit.tool_poses(q, det.q_signature))
+            plan = write_pose_plan(Path(tmp) / f"plan{seed}.csv", robot,
+                                   t[RECORDING].q_commanded, "the camera's poses")  # fmt: skip
+            trk = Path(tmp) / f"trk{seed}"
+            simulate_session(trk, SimulationOptions(sensor="tracker", plan_file=str(plan),
+                                                    sweeps=False, seed=seed))  # fmt: skip
+            exe = [sys.executable, "-m", "pipeline", "identify", str(trk), "--no-report"]
+            out = subprocess.run(exe, capture_output=True, text=True)
+            if out.returncode not in (0, 4):
+                raise RuntimeError(f"identify {trk}: {out.stderr.strip()}")
+            trk_err = audit(trk).signature
+            print(
+                f"  seed {seed} | camera {10 * cam_err.rms_position_cm:.4f} | tracker "
+                f"{10 * trk_err.rms_position_cm:.4f}",
+                flush=True,
+            )
+
+
 def get_desc(t: dict):
     return description_from_dict(t[RECORDING].robot["robot"])
 
