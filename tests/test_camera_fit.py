@@ -258,3 +258,22 @@ def test_a_row_of_corners_is_no_detection() -> None:
     two_rows[0, 7:14] = True
     assert not camera._spread(one_row, local, board.spacing_cm)[0]
     assert camera._spread(two_rows, local, board.spacing_cm)[0]
+
+
+def test_pipeline_audit_of_an_identified_camera_session(tmp_path: Path) -> None:
+    """The camera_fit table alone rebuilds the fitted chain (its start frames, q̄^s and
+    parameters): `pipeline audit` of a noiseless session meets the acceptance."""
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+    from pipeline.identify import identify
+    from pipeline.rig.camera_audit import audit_camera_session
+
+    d, _ = _simulated(tmp_path, "puma560", "eye-in-hand", 40, noiseless=True)
+    identify(d, report=False)
+    audit = audit_camera_session(d)
+    assert audit.tool_position_cm <= 1e-6 and audit.tool_orientation_deg <= 1e-6
+    assert audit.fixed_position_cm <= 1e-6 and audit.flange_orientation_deg <= 1e-6
+    assert audit.intrinsics_relative <= 1e-6
+    out = CliRunner().invoke(app, ["audit", str(d), "--json"])
+    assert out.exit_code == 0 and json.loads(out.stdout)["tool_position_cm"] <= 1e-6

@@ -117,18 +117,9 @@ class CameraFit:
         np.maximum.at(worst, img, r)
         return count.astype(float), np.asarray(rms, float), worst
 
-    def _at(self, q: Array, q_signature: Array) -> ChainModel:
-        """The fitted model observing the tool at joint values ``q`` (m, n)."""
-        m = self.model
-        return ChainModel(m.frames0, m.prismatic, np.full(len(q), m.n_joints), q - q_signature,
-                          np.zeros(len(q), np.int64), m.point_names, True)  # fmt: skip
-
     def tool_poses(self, q: Array, q_signature: Array) -> Array:
         """The tool body's pose in the sensor frame (m, 4, 4) at joint values ``q`` (m, n)."""
-        at, x = self._at(q, q_signature), self.solution.x[: self.model.n_params]
-        T = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
-        T[:, :3, :3], T[:, :3, 3] = at.tool_rotations(x), at.positions(x)
-        return T
+        return tool_poses(self.model, self.solution.x[: self.model.n_params], q, q_signature)
 
     def tool_covariances(self, q: Array, q_signature: Array, bound: bool = False) -> Array:
         """Covariance (m, 3, 3) of the tool point at joint values ``q`` (m, n), cm²: the
@@ -138,8 +129,25 @@ class CameraFit:
         s = self.solution
         n = self.model.n_params
         cov = s.covariance[:n, :n] / (s.noise_scale**2 if bound else 1.0)
-        J = self._at(q, q_signature).position_jacobian(s.x[:n])
+        J = observing(self.model, q, q_signature).position_jacobian(s.x[:n])
         return np.asarray(J @ cov @ np.swapaxes(J, 1, 2))
+
+
+def observing(model: ChainModel, q: Array, q_signature: Array) -> ChainModel:
+    """``model`` observing the tool at joint values ``q`` (m, n), ``q̄^s`` ``q_signature``."""
+    m = len(q)
+    link, point = np.full(m, model.n_joints), np.zeros(m, np.int64)
+    return ChainModel(model.frames0, model.prismatic, link, q - q_signature, point,
+                      model.point_names, True)  # fmt: skip
+
+
+def tool_poses(model: ChainModel, x_kin: Array, q: Array, q_signature: Array) -> Array:
+    """The tool body's pose in the sensor frame (m, 4, 4) at joint values ``q`` (m, n) of
+    the chain ``model`` at its parameters ``x_kin``."""
+    at = observing(model, q, q_signature)
+    T = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
+    T[:, :3, :3], T[:, :3, 3] = at.tool_rotations(x_kin), at.positions(x_kin)
+    return T
 
 
 def held_line(fit: CameraFit, sigma_px: float) -> str | None:

@@ -20,16 +20,18 @@ Three comparisons, none of which the fit can pass by convention:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from pipeline.errors import ArmsigError
 from pipeline.kinematics.alignment import fit_alignment
 from pipeline.kinematics.chain import link_frames
 from pipeline.kinematics.so3 import vector_from_rotation
 from pipeline.kinematics.transforms import invert_transform
-from pipeline.refine.camera_fit import CameraFit
+from pipeline.refine.camera_fit import CameraFit, tool_poses
 from pipeline.rig.audit import true_chain
 from pipeline.sensor.camera import Intrinsics
 from pipeline.units import joints_to_internal
@@ -49,6 +51,9 @@ class CameraAudit:
     flange_position_cm: float  # target (eye-to-hand) or camera (eye-in-hand) on the flange
     flange_orientation_deg: float
     intrinsics_relative: float
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
 
 
 def pose_errors(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -71,6 +76,32 @@ def audit_camera_fit(
 ) -> CameraAudit:
     """The fit against the truth (module docstring); ``robot``: the design description
     (its limits), ``q_signature``: the fit's ``q̄^s`` (rad / cm)."""
+    x = fit.solution.x[: fit.model.n_params]
+    return _audit(fit.model, x, fit.intrinsics, q_signature, truth, robot, seed)
+
+
+def audit_camera_session(session_dir: str | Path, seed: int = 0) -> CameraAudit:
+    """The ``camera_fit`` stage of a simulated camera session against its truth."""
+    from pipeline.rig.audit import read_truth
+    from pipeline.stages.camera_fit import fitted_model
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.session import session_robot
+    from pipeline.stages.tables import read_table
+
+    sdir = Path(session_dir)
+    path = stage_path(sdir, "camera_fit")
+    if not path.is_file():
+        raise ArmsigError(f"{sdir}: no camera fit yet", fix=f"run `pipeline identify {sdir}`")
+    robot = session_robot(read_table(stage_path(sdir, "session")))
+    model, x, intrinsics, q_sig = fitted_model(read_table(path), robot)
+    truth = read_truth(sdir / "rig-truth.json")
+    return _audit(model, x, intrinsics, q_sig, truth, robot, seed)
+
+
+def _audit(
+    model: Any, x: np.ndarray, intrinsics: np.ndarray, q_signature: np.ndarray,
+    truth: dict[str, Any], robot: Any, seed: int,
+) -> CameraAudit:  # fmt: skip
     chain = true_chain(truth)  # in the sensor frame: the fixed body's
     lim = robot.limits
     rng = np.random.default_rng(seed)
@@ -78,13 +109,13 @@ def audit_camera_fit(
                            robot.prismatic)  # fmt: skip
     fixed, on_flange = true_hand_eye(truth)
     flange = link_frames(chain, q)[:, robot.n_joints]
-    T_fit = fit.tool_poses(q, q_signature)
+    T_fit = tool_poses(model, x, q, q_signature)
     tool_p, tool_a = pose_errors(flange @ on_flange, T_fit)
     world_flange = fixed @ flange  # the sensor frame is the fixed body's
     X, Y = fit_alignment(world_flange, T_fit)
     fix_p, fix_a = pose_errors(X, fixed)
     fl_p, fl_a = pose_errors(invert_transform(Y), on_flange)
     true_k = Intrinsics.from_dict(truth["camera"]["intrinsics_true"]).vector()
-    rel = np.abs(fit.intrinsics - true_k) / np.maximum(np.abs(true_k), 1.0)
+    rel = np.abs(intrinsics - true_k) / np.maximum(np.abs(true_k), 1.0)
     return CameraAudit(float(tool_p.max()), float(tool_a.max()), float(fix_p), float(fix_a),
                        float(fl_p), float(fl_a), float(rel.max()))  # fmt: skip

@@ -105,6 +105,9 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "message": s.message, "iterations": s.iterations, "n_images": det.n_images,
         "n_points": len(det.image), "n_residuals": s.n_residuals, "chi2": s.chi2,
         "dof": s.dof, "rms_px": fit.rms_px, "loss": params.loss, "f_scale": params.f_scale,
+        "start_frames_cm": fit.model.frames0.tolist(),
+        "q_signature": det.q_signature.tolist(),
+        "frames_cm": fit.model.signature_frames(s.x[: fit.model.n_params], 0).tolist(),
         "images": _image_rows(fit, table_images(inputs["detections"])),
         "identifiability": identifiability_summary(fit.identifiability, fit.names,
                                                    det.n_images, len(det.image)),
@@ -125,7 +128,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "camera_fit",
-    2,  # 2: per-image reprojection errors and the identifiability in the summary
+    3,  # 2: per-image reprojection errors and the identifiability in the summary; 3: the
+    # start frames, q̄^s (rad / cm) and the fitted frames S̄_0 … S̄_n and tool (cm)
     ("session", "joints", "detections"),
     Params(),
     compute,
@@ -149,6 +153,23 @@ def _image_rows(fit: Any, images: np.ndarray) -> list[list[float]]:
 def camera_summary(table: pa.Table) -> dict[str, Any]:
     """The fit's summary (schema metadata ``armsig.camera_fit``)."""
     return dict(json.loads((table.schema.metadata or {})[b"armsig.camera_fit"]))
+
+
+def fitted_model(table: pa.Table, robot: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
+    """The fitted chain of a ``camera_fit`` table: the model, its parameters ``x_kin``
+    (internal units), the intrinsics (9,) and ``q̄^s`` (rad / cm)."""
+    from pipeline.refine.kinematics import ChainModel
+
+    s = camera_summary(table)
+    rows = table.to_pylist()
+    value = np.array([r["value"] for r in rows])
+    value = np.where([r["unit"] == "deg" for r in rows], np.radians(value), value)
+    kin = np.array([r["group"] != "intrinsics" and r["group"] != "fixed" for r in rows])
+    empty = np.zeros(0, np.int64)
+    model = ChainModel(np.array(s["start_frames_cm"]), robot.prismatic, empty,
+                       np.zeros((0, robot.n_joints)), empty, ("tool",), True)  # fmt: skip
+    intrinsics = value[[r["group"] == "intrinsics" for r in rows]]
+    return model, value[kin], intrinsics, np.array(s["q_signature"])
 
 
 def camera_warning(table: pa.Table) -> str | None:

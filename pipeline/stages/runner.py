@@ -83,12 +83,9 @@ POINT_STAGE_MODULES = (
     "holdout_points",
     "verdict",
 )
-#: Stage modules of a camera session (issue 39): the detections, the whole-chain fit.
-CAMERA_STAGE_MODULES = ("session", "joints", "detections", "camera_fit")
 #: recorded sensor kind (``/rig/description`` sensor) -> its identification stage modules
-SENSOR_STAGE_MODULES = {
-    "sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES, "camera": CAMERA_STAGE_MODULES
-}  # fmt: skip
+SENSOR_STAGE_MODULES = {"sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES,
+                        "camera": ("session", "joints", "detections", "camera_fit")}  # fmt: skip
 #: The last identification stage: a stage list holding it (and ``session``) has a product.
 LAST_STAGE = "verdict"
 #: Stage modules of ``pipeline evaluate`` (run after the identification, same runner).
