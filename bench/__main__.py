@@ -29,6 +29,8 @@ if __name__ == "__main__":
     print()
     camera.timing()  # the accuracy study: python -m bench.camera (minutes)
     print()
+    camera.hand_eye_alone()
+    print()
     evaluate.main()
     print()
     montecarlo.main()

@@ -277,3 +277,24 @@ def test_pipeline_audit_of_an_identified_camera_session(tmp_path: Path) -> None:
     assert audit.intrinsics_relative <= 1e-6
     out = CliRunner().invoke(app, ["audit", str(d), "--json"])
     assert out.exit_code == 0 and json.loads(out.stdout)["tool_position_cm"] <= 1e-6
+
+
+def test_a_prior_on_the_lens_pulls_the_fit_to_it(tmp_path: Path) -> None:
+    """camera_fit.intrinsics=prior: a tight prior keeps the recorded lens, a loose one
+    lets the pixels move it to the fitted values."""
+    d, _ = _simulated(tmp_path, "puma560", "eye-to-hand", 15)
+    tables = _tables(d)
+    recorded = json.loads(tables["session"].column("rig_json")[0].as_py())["camera"]
+
+    def lens(params) -> dict:
+        rows = camera_fit.compute(tables, params).to_pylist()
+        return {r["name"]: r["value"] for r in rows if r["group"] == "intrinsics"}
+
+    tight = lens(camera_fit.Params(intrinsics="prior", prior_focal_px=1e-6,
+                                   prior_center_px=1e-6, prior_distortion=1e-9))  # fmt: skip
+    loose = lens(camera_fit.Params(intrinsics="prior", prior_focal_px=1e6,
+                                   prior_center_px=1e6, prior_distortion=1e6))  # fmt: skip
+    fitted = lens(camera_fit.Params())
+    assert abs(tight["camera.fx"] - recorded["fx"]) < 1e-3
+    assert abs(loose["camera.fx"] - fitted["camera.fx"]) < 1e-3 * abs(fitted["camera.fx"])
+    assert abs(fitted["camera.fx"] - recorded["fx"]) > 1.0  # the nominal lens is 1 % off
