@@ -298,3 +298,31 @@ def test_a_prior_on_the_lens_pulls_the_fit_to_it(tmp_path: Path) -> None:
     assert abs(tight["camera.fx"] - recorded["fx"]) < 1e-3
     assert abs(loose["camera.fx"] - fitted["camera.fx"]) < 1e-3 * abs(fitted["camera.fx"])
     assert abs(fitted["camera.fx"] - recorded["fx"]) > 1.0  # the nominal lens is 1 % off
+
+
+TARGET_FILES = {
+    "checkerboard": 'kind = "checkerboard"\nrows = 7\ncolumns = 9\nspacing_cm = 3.0\n',
+    "circles": 'kind = "circles"\nrows = 6\ncolumns = 8\nspacing_cm = 3.5\n',
+    "aruco": 'kind = "aruco"\nrows = 4\ncolumns = 5\nspacing_cm = 5.0\nmarker_cm = 4.0\n'
+    'dictionary = "DICT_4X4_50"\nfirst_id = 3\n',
+}
+
+
+@pytest.mark.parametrize("kind", list(TARGET_FILES))
+def test_every_target_kind_identifies_exactly(tmp_path: Path, kind: str) -> None:
+    """A whole checkerboard, a circle grid and a marker set (ids 4m + k, from marker 3):
+    20 noiseless images, eye-to-hand, identify to the acceptance."""
+    from pipeline.robots.description import description_from_dict
+
+    board = tmp_path / "board.toml"
+    board.write_text(TARGET_FILES[kind], encoding="utf-8")
+    d, truth = _simulated(tmp_path, "puma560", "eye-to-hand", 20, noiseless=True,
+                          target_file=str(board))  # fmt: skip
+    tables = _tables(d)
+    det, design, lens, setup = camera_fit.detections_for_fit(tables)
+    fit = fit_camera(det, design, lens, setup)
+    desc = description_from_dict(tables[RECORDING].robot["robot"])
+    audit = audit_camera_fit(fit, truth, desc, det.q_signature)
+    assert audit.tool_position_cm <= 1e-6 and audit.tool_orientation_deg <= 1e-6
+    assert audit.fixed_position_cm <= 1e-6 and audit.flange_position_cm <= 1e-6
+    assert audit.intrinsics_relative <= 1e-6
