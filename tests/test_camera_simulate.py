@@ -180,6 +180,12 @@ def test_identify_writes_the_detections_table_and_says_no_signature(tmp_path: Pa
     per_image = report.split("## Reprojection per image")[1]
     assert per_image.count("\n| ") == 12 + 1  # a header and one row per image
     assert "camera.fx" in report and "tool_rot.rz" in report
+    assert (result.report.parent / "camera_residuals.png").stat().st_size > 1000
+    residuals = pl.read_ipc(d / "stages" / "camera_residuals.arrow")
+    rms = float(np.sqrt((residuals["du_px"] ** 2 + residuals["dv_px"] ** 2).mean()))
+    fit = pl.read_ipc(d / "stages" / "camera_fit.arrow")
+    assert residuals.height == len(read_recording(d / "recording.mcap").detection_point)
+    assert rms < 1e-6 and fit.height == 39  # noiseless: the pixels are met exactly
     table = pl.read_ipc(d / "stages" / "detections.arrow")
     rec = read_recording(d / "recording.mcap")
     assert table.height == len(rec.detection_point) and table["image"].n_unique() == 12

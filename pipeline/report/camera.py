@@ -4,15 +4,20 @@ Every number comes from the stage table and its summary: the fit (status, images
 rms reprojection), the parameters the images could not identify (held, with the line
 that says what to measure), the lens with its σ, the hand-eye transforms as fitted (the
 tool's point and rotation in the sensor frame at q̄^s) and OpenCV's closed-form start
-beside them, and the reprojection error of every image.
+beside them, the reprojection error of every image, and the figure of every point's
+residual vector on the image plane (stage ``camera_residuals``, magnified).
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from pipeline.atomic import write_text_atomic
+from pipeline.report.figures import panel_figure, save_png
 from pipeline.report.identification import markdown_table
 from pipeline.stages.camera_fit import camera_summary
 from pipeline.stages.runner import stage_path
@@ -25,6 +30,25 @@ def _rows(table: Any, group: str) -> list[list[str]]:
         for r in table.to_pylist()
         if r["group"] == group
     ]
+
+
+def residual_figure(table: Any, width_px: int, height_px: int, path: Path) -> tuple[Path, float]:
+    """Every detected point's residual as an arrow on the image plane, magnified so that
+    the largest is a twentieth of the image's width; the PNG and the magnification."""
+    u, v = table.column("u_px").to_numpy(), table.column("v_px").to_numpy()
+    du, dv = table.column("du_px").to_numpy(), table.column("dv_px").to_numpy()
+    largest = float(np.max(np.hypot(du, dv))) if len(du) else 0.0
+    gain = width_px / 20.0 / largest if largest > 0 else 1.0
+    fig, (ax,) = panel_figure(1)
+    ax.quiver(u, v, du * gain, dv * gain, angles="xy", scale_units="xy", scale=1.0,
+              width=0.002)  # fmt: skip
+    ax.set_xlim(0, width_px)
+    ax.set_ylim(height_px, 0)  # v down, as in the image
+    ax.set_aspect("equal")
+    ax.set_title(f"reprojection residuals x {gain:.3g}")
+    ax.set_xlabel("u (px)")
+    ax.set_ylabel("v (px)")
+    return save_png(fig, path), gain
 
 
 def write_camera_report(session_dir: str | Path) -> Path:
@@ -57,5 +81,16 @@ def write_camera_report(session_dir: str | Path) -> Path:
     ]
     out = sdir / "report" / "report.md"
     out.parent.mkdir(parents=True, exist_ok=True)
+    residuals = stage_path(sdir, "camera_residuals")
+    if residuals.is_file():
+        session = read_table(stage_path(sdir, "session"))
+        lens = json.loads(session.column("rig_json")[0].as_py())["camera"]
+        figure = out.parent / "camera_residuals.png"
+        png, gain = residual_figure(read_table(residuals), lens["width_px"], lens["height_px"],
+                                    figure)  # fmt: skip
+        parts.append(
+            "## Residuals on the image plane\n\nEvery detected point's residual (predicted − "
+            f"detected), magnified {gain:.3g}×.\n\n![]({png.name})"
+        )
     write_text_atomic(out, "\n\n".join(parts) + "\n")
     return out
