@@ -190,3 +190,18 @@ def test_identify_writes_the_detections_table_and_says_no_signature(tmp_path: Pa
     rec = read_recording(d / "recording.mcap")
     assert table.height == len(rec.detection_point) and table["image"].n_unique() == 12
     assert table.schema["u_px"] == pl.Float64
+
+
+def test_commands_that_need_a_signature_say_what_a_camera_session_has(tmp_path: Path) -> None:
+    """Regression: fk and export of an identified camera session advised `pipeline
+    identify`, which writes no signature for a camera session (a loop)."""
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+    from pipeline.identify import identify
+
+    d = _session(tmp_path, "eye-to-hand", noiseless=True)
+    identify(d, report=False)
+    for args in (["fk", str(d), "--q", "0,0,0,0,0,0"], ["export", str(d), "--format", "urdf"]):
+        out = CliRunner().invoke(app, args)
+        assert out.exit_code != 0 and "camera session writes no signature" in out.output
