@@ -1,6 +1,7 @@
 """`make bench`: every benchmark, printed; never asserted in tests."""
 
 from bench import (
+    camera,
     evaluate,
     fleet,
     identify,
@@ -25,6 +26,10 @@ if __name__ == "__main__":
     identify.main()
     print()
     pose_sets.main()
+    print()
+    camera.timing()  # the accuracy study: python -m bench.camera (minutes)
+    print()
+    camera.hand_eye_alone()
     print()
     evaluate.main()
     print()

@@ -15,7 +15,7 @@ from pipeline.errors import SchemaError
 if TYPE_CHECKING:  # pyarrow where tables are made (a warm identify needs none: issue 18)
     import pyarrow as pa
 
-UNITS = ("", "cm", "cm2", "deg", "s", "degF", "kg")
+UNITS = ("", "cm", "cm2", "deg", "s", "degF", "kg", "px")
 
 
 @cache
@@ -80,6 +80,41 @@ def compiled_validator(relative_path: str, detailed: bool = True) -> Callable[[A
 
     schema = _read_json(schema_dir() / relative_path)
     return fastjsonschema.compile(schema, detailed_exceptions=detailed)  # type: ignore[no-any-return]
+
+
+def expected_in_words(rule: str, definition: dict[str, Any]) -> str:
+    """What a JSON Schema wanted, in words, from the failed ``rule`` of ``definition`` (a
+    fastjsonschema ``JsonSchemaValueException``'s ``rule`` and ``definition``)."""
+    if rule == "enum":
+        return " | ".join(repr(v) for v in definition["enum"])
+    if rule == "oneOf":
+        options = definition["oneOf"]
+        return definition.get("description") or " or ".join(o.get("type", "?") for o in options)
+    if rule == "additionalProperties":
+        keys = [*definition.get("properties", {}), *definition.get("patternProperties", {})]
+        return "one of the keys " + ", ".join(keys)
+    if rule == "required":
+        return "the keys " + ", ".join(definition["required"])
+    if rule == "pattern":
+        return f"a string matching {definition['pattern']}"
+    if rule in definition:
+        return f"{rule} {definition[rule]!r}"
+    return str(definition.get("type", rule))
+
+
+def first_non_finite(value: Any, key: str = "") -> tuple[str, float] | None:
+    """The first ``nan`` or ``inf`` in a parsed document (TOML has them; a schema's
+    ``minimum`` lets ``nan`` through): its dotted key and value, else None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return key, value
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(
+        value, list) else ()  # fmt: skip
+    for k, v in items:
+        sub = f"{key}[{k}]" if isinstance(k, int) else (f"{key}.{k}" if key else str(k))
+        bad = first_non_finite(v, sub)
+        if bad is not None:
+            return bad
+    return None
 
 
 @cache

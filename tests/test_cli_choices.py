@@ -34,6 +34,7 @@ from pipeline.cli.options import (
     Method,
     PumaBranch,
     Sensor,
+    Setup,
     Study,
     choices_of,
 )
@@ -48,14 +49,14 @@ def _work_tuples() -> dict[type[StrEnum], tuple[str, ...]]:
     from pipeline.export import FORMATS as EXPORT_FORMATS
     from pipeline.importers import FORMATS as IMPORT_FORMATS
     from pipeline.montecarlo.studies import STUDY_NAMES
-    from pipeline.rig.options import AIRS, FAULTS, SENSORS
+    from pipeline.rig.options import AIRS, FAULTS, SENSORS, SETUPS
     from pipeline.robots.puma560 import BRANCHES
     from pipeline.signature.alignment import FRAMES
 
     return {
         ExportFormat: EXPORT_FORMATS, ExportFrame: FRAMES, Method: METHODS,
         PumaBranch: tuple(b.label for b in BRANCHES), Sensor: SENSORS, Air: AIRS,
-        Fault: FAULTS, ImportFormat: IMPORT_FORMATS, Study: STUDY_NAMES,
+        Fault: FAULTS, ImportFormat: IMPORT_FORMATS, Study: STUDY_NAMES, Setup: SETUPS,
     }  # fmt: skip
 
 
@@ -70,6 +71,7 @@ CHOICES: dict[tuple[str, str], tuple[type[StrEnum], list[str]]] = {
     ("simulate", "--sensor"): (Sensor, ["simulate", "NEW"]),
     ("plan", "--sensor"): (Sensor, ["plan", "OUT.csv", "--robot", "puma560", "--sweeps"]),
     ("simulate", "--air"): (Air, ["simulate", "NEW"]),
+    ("simulate", "--setup"): (Setup, ["simulate", "NEW", "--sensor", "camera", "--poses", "8"]),
     ("simulate", "--faults"): (Fault, ["simulate", "NEW"]),
     ("import", "--format"): (ImportFormat, ["import", "f.csv", "NEW", "--robot", "r.toml"]),
     ("validate", "--format"): (ImportFormat, ["validate", "S", "--against", "f.csv"]),

@@ -16,12 +16,13 @@ SMALL = {"points": 12, "repeats": 2}
 #: sha256 of recording.mcap as made before the plan was cached (main at ae2a052), seed 5;
 #: renewed when the recording embeds a changed channel schema (issue 26: the sweep
 #: 'poses' of joint_state.json; issue 27: its optional payload_kg; issue 29: plan.tool_targets
-#: of robot_description.json), its messages unchanged (checked against 0537394, bef8e5b and
-#: 23ce14c: every message's topic, log and publish time and bytes equal).
+#: of robot_description.json; issue 39: sensor 'camera' of rig_description.json), its messages
+#: unchanged (checked against 0537394, bef8e5b, 23ce14c and 9454d58: every message's topic,
+#: log and publish time and bytes equal).
 BEFORE = {
-    (): "a366be4f38d7e7299e1efd6de763180f28bcc150739070135cdf8898b061cdc4",
+    (): "5e02dbfcf41f91c89768421162382126168717ee508fd39dfcba556661e5ae6e",
     (("noise_factor", 4.6), ("wac_error_cm", 0.5)): (
-        "b2afbef8349ba7ef5c475bd321cd42ed8d32f683f60b5e7274f232d5322ee7bd"
+        "88004c2e7838a1bd905adb832895a4ad5aad8345c751606de127ec0092fa22c5"
     ),
 }
 

@@ -48,6 +48,14 @@ class Sensor(StrEnum):
 
     sonic = "sonic"
     tracker = "tracker"
+    camera = "camera"
+
+
+class Setup(StrEnum):
+    """``simulate --setup`` (``pipeline.rig.options.SETUPS``)."""
+
+    eye_to_hand = "eye-to-hand"
+    eye_in_hand = "eye-in-hand"
 
 
 class Air(StrEnum):

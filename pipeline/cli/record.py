@@ -17,6 +17,7 @@ from pipeline.cli.options import (
     NewSessionArg,
     RobotIdOption,
     Sensor,
+    Setup,
     choice,
     choice_list,
     choices_of,
@@ -111,8 +112,38 @@ def simulate(
         ),
     ] = 0,
     sensor: Annotated[
-        Sensor, choice("sonic (the sparker digitizer) or tracker (a laser tracker, docs/rig.md).")
+        Sensor,
+        choice(
+            "sonic (the sparker digitizer), tracker (a laser tracker, docs/rig.md) or camera "
+            "(a camera and a target, --setup; docs/camera.md)."
+        ),
     ] = Sensor.sonic,
+    setup: Annotated[
+        Setup,
+        choice(
+            "Camera: eye-to-hand (a fixed camera watches a target on the flange) or "
+            "eye-in-hand (a camera on the flange watches a fixed target)."
+        ),
+    ] = Setup.eye_to_hand,
+    target: Annotated[
+        str,
+        typer.Option(
+            help="Camera: target file (TOML, docs/camera.md); default a ChArUco "
+            "board of 6 x 8 squares of 3.5 cm."
+        ),
+    ] = "",
+    resolution: Annotated[
+        str, typer.Option(help="Camera: image size in px, WIDTHxHEIGHT.")
+    ] = "1280x960",
+    focal_px: Annotated[
+        float, typer.Option(min=10.0, max=100000.0, help="Camera: nominal focal length (px).")
+    ] = 1000.0,
+    distortion: Annotated[
+        str, typer.Option(help="Camera: the true lens's k1, k2, p1, p2, k3 (OpenCV's order).")
+    ] = "-0.12,0.05,0.0005,-0.0003,0",
+    pixel_noise: Annotated[
+        float, typer.Option(min=0.0, max=100.0, help="Camera: pixel noise σ per coordinate (px).")
+    ] = 0.2,
     targets: Annotated[
         int, typer.Option(min=1, help="Tracker: reflectors per sweep in a nest, ids T1..TK.")
     ] = 1,
@@ -231,6 +262,12 @@ def simulate(
         payloads_kg=tuple(joint_values(payloads, "--payloads", "0,10")),
         backlash_mm=backlash_mm,
         robot_id=robot_id or "",
+        setup=setup.value,
+        target_file=target,
+        resolution_px=resolution_px(resolution),
+        focal_px=focal_px,
+        distortion=distortion_terms(distortion),
+        pixel_noise_px=pixel_noise,
     )
     path = simulate_session(folder, opts, force=force)
     truth = folder / "rig-truth.json"
@@ -239,6 +276,25 @@ def simulate(
                     "rig_truth": str(truth), "options": dataclasses.asdict(opts)})  # fmt: skip
         return
     typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {truth}")
+
+
+def resolution_px(text: str) -> tuple[int, int]:
+    """``--resolution WIDTHxHEIGHT`` as (width, height) px."""
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise ArmsigError("--resolution must be WIDTHxHEIGHT in px", got=repr(text),
+                          fix="--resolution 1280x960")  # fmt: skip
+    return int(parts[0]), int(parts[1])
+
+
+def distortion_terms(text: str) -> tuple[float, float, float, float, float]:
+    """``--distortion k1,k2,p1,p2,k3``: five numbers."""
+    values = joint_values(text, "--distortion", "-0.12,0.05,0,0,0")
+    if len(values) != 5:
+        raise ArmsigError("--distortion needs five numbers: k1, k2, p1, p2, k3 (OpenCV's order)",
+                          got=repr(text), fix="--distortion -0.12,0.05,0,0,0")  # fmt: skip
+    k1, k2, p1, p2, k3 = values
+    return k1, k2, p1, p2, k3
 
 
 @commands.command("import")
@@ -378,6 +434,11 @@ def plan_(
                     points, repeats, json_out, force, robot)  # fmt: skip
         return
     given = [k for k, v in sweep_only.items() if v is not None]
+    if sensor == Sensor.camera:  # issue 39: poses for a camera calibration are not planned yet
+        raise ArmsigError("pipeline plan plans a tracker's poses, not a camera's",
+                          expected="--sensor tracker (or no --sensor)",
+                          fix="simulate camera images at random poses (`pipeline simulate "
+                          "NAME --sensor camera --poses 40`)")  # fmt: skip
     if given or sensor == Sensor.sonic:
         what = (given or ["--sensor sonic"])[0]
         fix = "add --sweeps, or drop it (pose plans are the tracker's)"

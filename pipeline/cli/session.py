@@ -168,9 +168,13 @@ def audit(
     as_json: JsonOption = False,
     configurations: Annotated[int, typer.Option(help="Random configurations.")] = 1000,
 ) -> None:
-    """Compare the signature and the design model with a simulated session's truth."""
+    """Compare the signature and the design model with a simulated session's truth (a
+    camera session: its fit's tool pose, hand-eye transforms and lens)."""
     from pipeline.rig.audit import audit as run_audit
 
+    if _is_camera(session):
+        _camera_audit(session, as_json)
+        return
     r = run_audit(session, configurations=configurations)
     if as_json:
         print_json(r.to_dict())
@@ -183,6 +187,30 @@ def audit(
             f"  rms {e.rms_orientation_deg:.3e} deg"
         )
     typer.echo(f"  design / signature RMS position error: {r.improvement:.1f}x")
+
+
+def _is_camera(session: str) -> bool:
+    from pathlib import Path
+
+    from pipeline.stages.runner import stage_path
+
+    return stage_path(Path(session), "camera_fit").is_file()
+
+
+def _camera_audit(session: str, as_json: bool) -> None:
+    from pipeline.rig.camera_audit import CONFIGURATIONS, audit_camera_session
+
+    r = audit_camera_session(session)
+    if as_json:
+        print_json({"session": session, **r.to_dict()})
+        return
+    typer.echo(f"{session}: camera fit against the truth, {CONFIGURATIONS} random configurations")
+    typer.echo(f"  tool pose     max {r.tool_position_cm:.3e} cm  {r.tool_orientation_deg:.3e} deg")
+    typer.echo(f"  fixed body    {r.fixed_position_cm:.3e} cm  {r.fixed_orientation_deg:.3e} deg"
+               " (in the true base)")  # fmt: skip
+    typer.echo(f"  flange body   {r.flange_position_cm:.3e} cm  {r.flange_orientation_deg:.3e} deg"
+               " (on the true flange)")  # fmt: skip
+    typer.echo(f"  intrinsics    max relative error {r.intrinsics_relative:.3e}")
 
 
 @commands.command()

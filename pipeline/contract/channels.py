@@ -18,8 +18,14 @@ POINT_CHANNELS = {
     **{t: s for t, s in CHANNELS.items() if t != "/sonic/ranges"},
     "/points": "points",
 }
+#: topic -> schema file of a camera session recording (``/rig/description`` sensor
+#: ``camera``, issue 39): the detections of the target in each image.
+CAMERA_CHANNELS = {
+    **{t: s for t, s in CHANNELS.items() if t != "/sonic/ranges"},
+    "/camera/detections": "camera_detections",
+}
 #: sensor kind of ``/rig/description`` (absent: ``sonic``) -> channels of its recording
-SENSOR_CHANNELS = {"sonic": CHANNELS, "points": POINT_CHANNELS}
+SENSOR_CHANNELS = {"sonic": CHANNELS, "points": POINT_CHANNELS, "camera": CAMERA_CHANNELS}
 #: topic -> schema file of the evaluation recording ``evaluation.mcap`` (docs/evaluation.md)
 EVAL_CHANNELS = {
     "/eval/description": "eval_description",

@@ -102,7 +102,18 @@ def _run(
         overrides=overrides,
         progress=progress,
     )
-    if next(r for r in runs if r.name == PRODUCT[0]).action == "not written":
+    product = [r for r in runs if r.name == PRODUCT[0]]
+    if not product:  # a stage list without a product (a camera session, issue 39)
+        names = ", ".join(r.name for r in runs)
+        why = (
+            f"{FILE_NAME} not written: this session's stages ({names}) end before a "
+            "signature (stages/camera_fit.arrow holds the camera's fit, report/report.md "
+            "its report; a camera session's signature is not written yet, issue 39)"
+        )
+        camera = any(r.name == "camera_fit" for r in runs)
+        rep = _camera_report(sdir) if camera and report else None
+        return IdentifyResult(runs, None, rep, [why, *_camera_warnings(sdir, runs)])
+    if product[0].action == "not written":
         why = (
             f"{FILE_NAME} not written: stages after --only {only} are stale; "
             f"`pipeline identify {sdir}` brings them and the signature up to date"
@@ -113,6 +124,24 @@ def _run(
     rep = _report_if_stale(sdir, doc["provenance"]["stages"]) if report else None
     line = verdict_line(sdir)
     return IdentifyResult(runs, sig, rep, doc["warnings"], line, verdict_of(doc))
+
+
+def _camera_warnings(sdir: Path, runs: list[Any]) -> list[str]:
+    """The camera fit's warning (parameters it held), when the session has that stage."""
+    if not any(r.name == "camera_fit" for r in runs):
+        return []
+    from pipeline.stages.camera_fit import camera_warning
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.tables import read_table
+
+    line = camera_warning(read_table(stage_path(sdir, "camera_fit")))
+    return [] if line is None else [line]
+
+
+def _camera_report(sdir: Path) -> Path:
+    from pipeline.report.camera import write_camera_report
+
+    return write_camera_report(sdir)
 
 
 def _report_if_stale(sdir: Path, hashes: dict[str, str | None]) -> Path:

@@ -8,14 +8,13 @@ is refused in one line naming the key, what was expected and what arrived.
 
 from __future__ import annotations
 
-import math
 import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from pipeline.errors import ImportFileError, one_line
-from pipeline.schemas import compiled_validator
+from pipeline.schemas import compiled_validator, expected_in_words, first_non_finite
 
 SCHEMA = "import/map.json"
 #: The ``[rosbag2]`` table's own schema (``--format rosbag2``).
@@ -141,42 +140,18 @@ def _refuse(src: str, key: str, what: str, expected: str, got: Any) -> ImportFil
     )
 
 
-def _expected(rule: str, definition: dict[str, Any]) -> str:
-    """What the schema wanted, in words, from the failed rule of ``definition``."""
-    if rule == "enum":
-        return " | ".join(repr(v) for v in definition["enum"])
-    if rule == "oneOf":
-        options = definition["oneOf"]
-        return definition.get("description") or " or ".join(o.get("type", "?") for o in options)
-    if rule == "additionalProperties":
-        keys = [*definition.get("properties", {}), *definition.get("patternProperties", {})]
-        return "one of the keys " + ", ".join(keys)
-    if rule == "required":
-        return "the keys " + ", ".join(definition["required"])
-    if rule == "pattern":
-        return f"a string matching {definition['pattern']}"
-    if rule in definition:
-        return f"{rule} {definition[rule]!r}"
-    return str(definition.get("type", rule))
-
-
-def _finite(src: str, key: str, value: Any) -> None:
+def _finite(src: str, data: Any) -> None:
     """Refuse ``nan`` and ``inf`` (TOML has them, the map's numbers must be finite)."""
-    if isinstance(value, float) and not math.isfinite(value):
-        raise _refuse(src, key, "is not a finite number", "a finite number", value)
-    if isinstance(value, dict):
-        for k, v in value.items():
-            _finite(src, f"{key}.{k}" if key else str(k), v)
-    elif isinstance(value, list):
-        for k, v in enumerate(value):
-            _finite(src, f"{key}[{k}]", v)
+    bad = first_non_finite(data)
+    if bad is not None:
+        raise _refuse(src, bad[0], "is not a finite number", "a finite number", bad[1])
 
 
 def check_map(src: str, data: Any) -> dict[str, Any]:
     """``data`` (a parsed map) checked against the map schema; ``src`` names it in errors."""
     from fastjsonschema import JsonSchemaValueException
 
-    _finite(src, "", data)
+    _finite(src, data)
     for schema, part, prefix in ((SCHEMA, data, ""), (BAG_SCHEMA, None, "rosbag2")):
         if prefix:
             if not isinstance(data, dict) or "rosbag2" not in data:
@@ -188,7 +163,7 @@ def check_map(src: str, data: Any) -> dict[str, Any]:
             name = str(exc.name)
             key = ".".join(k for k in (prefix, name.removeprefix("data").removeprefix(".")) if k)
             what = one_line(exc.message.removeprefix(name).strip(), _SHOWN)
-            expected = _expected(str(exc.rule), exc.definition or {})
+            expected = expected_in_words(str(exc.rule), exc.definition or {})
             raise _refuse(src, key or "map", what, expected, exc.value) from None
     _check_combinations(src, data)
     return data  # type: ignore[no-any-return]

@@ -152,6 +152,14 @@ def plan_sweeps(
 
     if sensor not in SENSORS:
         raise ArmsigError(f"unknown sensor {sensor!r}", expected=", ".join(SENSORS))
+    if sensor == "camera":  # issue 39: which poses calibrate a camera best is not planned yet
+        raise ArmsigError(
+            "pipeline plan --sweeps plans joint sweeps of the sonic digitizer or a tracker",
+            expected="--sensor sonic or tracker",
+            got="--sensor camera",
+            fix="simulate camera images at random poses (`pipeline simulate NAME --sensor "
+            "camera --poses 40`)",
+        )
     _check(plane_sigma_deg, center_sigma_cm, target_rms_cm=target_rms_cm, sigma_cm=sigma_cm)
     if points is not None and not MIN_POINTS <= points <= MAX_POINTS:
         raise ArmsigError("sweep plan: points per sweep out of range",

@@ -102,7 +102,12 @@ class Solution:
 def linearize(problem: Problem, x: Array) -> Linearization:
     """The block's linearization at ``x`` (and the measured orientations' rows after it),
     on the rows ``problem.keep`` leaves in the fit."""
-    lin = problem.block.linearize(problem.model.positions(x[: problem.n_kin]), x[problem.n_kin :])
+    kin, own = x[: problem.n_kin], x[problem.n_kin :]
+    pose = getattr(problem.block, "linearize_pose", None)  # a block that sees the tool's pose
+    if pose is not None:  # (a camera: pipeline.refine.camera_block)
+        lin = pose(problem.model, kin, own)
+    else:
+        lin = problem.block.linearize(problem.model.positions(kin), own)
     if problem.orientation is not None:
         lin = _with_orientation(lin, problem, x)
     return lin if problem.keep is None else kept_rows(lin, problem.keep)
@@ -224,6 +229,10 @@ def normal_equations(problem: Problem, x: Array, lin: Linearization) -> Normal:
             T = lin.d_theta
             A[:n_kin, :n_kin] += T.T @ (w[:, None] * T)
             g[:n_kin] += T.T @ (w * lin.r)
+            # rows of both a position and the kinematics directly (a camera's pixels):
+            # the cross terms Pᵀ DᵀW T (zero when no row has both, as for orientations)
+            C = P.T @ np.asarray(DtW @ T)
+            A[:n_kin, :n_kin] += C + C.T
         if n > n_kin:
             A[:n_kin, n_kin:] = P.T @ dense(DtW @ lin.d_x)
             if lin.d_theta is not None:  # zero while those rows have no block derivative

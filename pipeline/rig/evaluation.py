@@ -41,7 +41,7 @@ from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z
 from pipeline.rig.audit import read_truth, true_chain, true_nongeometric
 from pipeline.rig.plan import PROBE_LENGTH_CM
 from pipeline.rig.recorder import EVAL_CHANNELS, Message, write_recording
-from pipeline.rig.simulate import T0_NS
+from pipeline.rig.session_files import T0_NS
 from pipeline.robots import get_robot
 from pipeline.units import joints_to_boundary, joints_to_internal
 

@@ -13,7 +13,9 @@ from pipeline.rig.true_robot import ErrorSigmas
 from pipeline.robots import get_robot
 
 FAULTS = ("bias", "dropouts", "outliers")
-SENSORS = ("sonic", "tracker")
+SENSORS = ("sonic", "tracker", "camera")
+#: Camera set-ups (:mod:`pipeline.rig.camera`).
+SETUPS = ("eye-to-hand", "eye-in-hand")
 #: ``lab``: temperature linear in height, one slow drift (uniform 70 °F when noiseless);
 #: ``drifting``: a speed of sound exactly linear in height drifting with periods of 8-45
 #: min (:func:`pipeline.rig.atmosphere.drifting_linear_air`), noiseless or not.
@@ -50,6 +52,15 @@ class SimulationOptions:
     payloads_kg: tuple[float, ...] = ()  # payloads on the flange, cycled over the pose set
     backlash_mm: float = 0.0  # the true joints' backlash under gravity (RMS flange move, mm)
     robot_id: str = ""  # the arm's own id (serial), recorded in /robot/description ("": none)
+    # camera (issue 39, pipeline.rig.camera): the set-up, the target file ("" the default
+    # ChArUco board), the image size and nominal focal length (px), the true lens's
+    # distortion (k1, k2, p1, p2, k3) and the pixel noise σ (px per coordinate)
+    setup: str = "eye-to-hand"
+    target_file: str = ""
+    resolution_px: tuple[int, int] = (1280, 960)
+    focal_px: float = 1000.0
+    distortion: tuple[float, float, float, float, float] = (-0.12, 0.05, 5e-4, -3e-4, 0.0)
+    pixel_noise_px: float = 0.2
 
 
 def check_options(opts: SimulationOptions) -> None:
@@ -75,6 +86,7 @@ def check_options(opts: SimulationOptions) -> None:
             got=f"max_sweep_deg={opts.max_sweep_deg}, wac_error_cm={opts.wac_error_cm}",
         )
     _check_tracker(opts)
+    _check_camera(opts)
     if opts.air not in AIRS:
         raise ArmsigError(
             f"unknown air {opts.air!r}", expected=" or ".join(AIRS), fix="--air drifting"
@@ -122,6 +134,12 @@ def options_for_truth(opts: SimulationOptions) -> dict[str, object]:
     ``log_jitter_s`` only when set, so that sessions simulated without them keep their
     bytes."""
     out = {**asdict(opts), "faults": list(opts.faults), "payloads_kg": list(opts.payloads_kg)}
+    camera = ("setup", "target_file", "resolution_px", "focal_px", "distortion", "pixel_noise_px")
+    for name in camera:  # a camera session's own; the others keep their bytes
+        if opts.sensor != "camera":
+            del out[name]
+        elif isinstance(out[name], tuple):
+            out[name] = list(out[name])
     for name, default in (
         ("resettle_counts", 0), ("air", "lab"), ("log_jitter_s", 0.0),
         ("poses", 0), ("sweeps", True), ("plan_file", ""), ("six_d", False),
@@ -153,6 +171,8 @@ def _check_tracker(opts: SimulationOptions) -> None:
             expected="one of them: the poses of a plan file, or N random poses",
             fix="drop --poses (the plan file says how many)",
         )
+    if opts.sensor == "camera":
+        return
     if opts.sensor == "sonic" and (point_only or not opts.sweeps):
         raise ArmsigError(
             "--targets, --nest-on-axis, --check, --poses and --no-sweeps need a point sensor",
@@ -180,4 +200,47 @@ def _check_tracker(opts: SimulationOptions) -> None:
             f"--nest-on-axis {j}: no revolute joint {j} with a nest of several targets",
             expected=f"a revolute joint of {robot.name} (1 to {robot.n_joints}) and --targets >= 2",
             fix="--targets 3 --nest-on-axis 6",
+        )
+
+
+def _check_camera(opts: SimulationOptions) -> None:
+    if opts.sensor != "camera":
+        return
+    if opts.setup not in SETUPS:
+        raise ArmsigError(
+            f"unknown camera set-up {opts.setup!r}", expected=" or ".join(SETUPS),
+            fix="--setup eye-in-hand",
+        )  # fmt: skip
+    if not 4 <= opts.poses <= 100_000:
+        raise ArmsigError(
+            "a camera session is a set of images at random poses",
+            expected="--poses from 4 to 100000 (one image per pose)",
+            got=f"--poses {opts.poses}",
+            fix="--poses 40",
+        )
+    others = {
+        "--targets": opts.targets != 1, "--nest-on-axis": opts.nest_on_axis != 0,
+        "--check": opts.check != 0, "--plan": bool(opts.plan_file), "--six-d": opts.six_d,
+        "--compliance-mm": opts.compliance_mm != 0, "--harmonic-deg": opts.harmonic_deg != 0,
+        "--payloads": bool(opts.payloads_kg), "--backlash-mm": opts.backlash_mm != 0,
+    }  # fmt: skip
+    given = [k for k, v in others.items() if v]
+    if given:
+        raise ArmsigError(
+            f"{given[0]} does not apply to --sensor camera",
+            expected="--setup, --target, --resolution, --focal-px, --distortion, "
+            "--pixel-noise and --poses",
+            fix=f"drop {given[0]}",
+        )
+    w, h = opts.resolution_px
+    numbers = (opts.focal_px, opts.pixel_noise_px, *opts.distortion)
+    if not (64 <= w <= 20_000 and 64 <= h <= 20_000 and np.isfinite(numbers).all()
+            and 10.0 <= opts.focal_px <= 100_000 and 0.0 <= opts.pixel_noise_px <= 100.0
+            and np.abs(opts.distortion).max() <= 10.0):  # fmt: skip
+        raise ArmsigError(
+            "camera options out of range",
+            expected="a resolution of 64 to 20000 px a side, --focal-px 10 to 100000, "
+            "--pixel-noise 0 to 100 px, distortion coefficients within ±10",
+            got=f"{w}x{h} px, focal {opts.focal_px} px, noise {opts.pixel_noise_px} px, "
+            f"distortion {list(opts.distortion)}",
         )

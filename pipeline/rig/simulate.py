@@ -15,8 +15,6 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.atomic import write_text_atomic
-from pipeline.contract.channels import SENSOR_CHANNELS
 from pipeline.kinematics.chain import link_frames
 from pipeline.rig import tracker
 from pipeline.rig.atmosphere import (
@@ -26,7 +24,7 @@ from pipeline.rig.atmosphere import (
     random_atmosphere,
 )
 from pipeline.rig.digitizer import DigitizerModel, digitize
-from pipeline.rig.options import SimulationOptions, check_options, options_for_truth
+from pipeline.rig.options import SimulationOptions, check_options
 from pipeline.rig.plan import (
     MeasurementPlan,
     default_sensor_from_base,
@@ -35,8 +33,16 @@ from pipeline.rig.plan import (
     tool_positions,
 )
 from pipeline.rig.pose_file import read_pose_plan
-from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
+from pipeline.rig.recorder import Message, refuse_existing_recording
 from pipeline.rig.resettle import resettle
+from pipeline.rig.session_files import (
+    T0_NS,
+    joint_state,
+    logged,
+    robot_message,
+    truth_common,
+    write_session,
+)
 from pipeline.rig.true_robot import (
     draw_backlash,
     draw_nongeometric,
@@ -44,9 +50,8 @@ from pipeline.rig.true_robot import (
     where_joints_sit,
 )
 from pipeline.robots import get_robot
-from pipeline.robots.description import RobotDescription, description_to_dict
+from pipeline.robots.description import RobotDescription
 from pipeline.sensor.geometry import W_AB_CM, W_AC_CM, W_BC_CM, DigitizerGeometry, default_geometry
-from pipeline.stages.lock import session_lock
 from pipeline.units import joints_to_internal
 
 CYCLE_S = 0.25  # Section 6.4 / issue: about four digitize cycles per second
@@ -54,30 +59,9 @@ SETTLE_S = 1.0  # servo settling after each move
 JOINT_SPEED = 30.0  # deg/s (or cm/s) while indexing between positions
 SWAP_TARGET_S = 60.0  # moving the target sparker to the next fixture by hand
 FIXTURE_SIGMA_CM = 0.1  # true target / probe placement versus nominal
-T0_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z: recordings carry no wall-clock time
 BIAS_SIGMA_CM = 0.05
 DROPOUT_PROB = 0.02
 OUTLIER_PROB = 0.005
-
-
-def joint_state(
-    robot: Any, sweep: int | str, step: int, q_cmd: np.ndarray, q_enc: np.ndarray, exact: bool,
-    payload_kg: float = float("nan"),
-) -> dict[str, Any]:  # fmt: skip
-    """A /robot/joint_state payload: the controller's readings of joint values ``q_cmd`` and
-    ``q_enc`` (deg / cm; through the inverse of the robot's coupling, if any), printed to
-    1e-6 (commanded always, encoder unless ``exact``), and the payload (kg) when given."""
-    cmd, enc = robot.readings_from_joints(q_cmd), robot.readings_from_joints(q_enc)
-    out: dict[str, Any] = {
-        "sweep": sweep,
-        "step": step,
-        "q_commanded": [round(float(v), 6) for v in cmd],
-        "q_encoder": [float(v) if exact else round(float(v), 6) for v in enc],
-        "units": [j.unit for j in robot.joints],
-    }
-    if np.isfinite(payload_kg):
-        out["payload_kg"] = float(payload_kg)
-    return out
 
 
 def command_payloads(commands: list[Any], payloads_kg: tuple[float, ...]) -> np.ndarray:
@@ -89,23 +73,6 @@ def command_payloads(commands: list[Any], payloads_kg: tuple[float, ...]) -> np.
     kg = np.array(payloads_kg, float)
     return np.array([kg[step % len(kg)] if sweep == "poses" else kg[0]
                      for sweep, step, _ in commands])  # fmt: skip
-
-
-def _robot_message(
-    robot: Any, signature_q: Any, plan: dict[str, Any], robot_id: str = ""
-) -> Message:
-    """The ``/robot/description`` message: design model, q^s as readings, the plan, and
-    the arm's ``robot_id`` when it has one."""
-    readings = robot.readings_from_joints(np.array(signature_q))
-    payload = {
-        "robot": description_to_dict(robot),
-        "signature_q": [float(v) for v in readings],
-        "plan": plan,
-        "mode": "simulated",
-    }
-    if robot_id:
-        payload["robot_id"] = robot_id
-    return Message("/robot/description", T0_NS, payload)
 
 
 def session_plan(
@@ -152,6 +119,10 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
     check_options(opts)
     out = Path(session_dir)
     refuse_existing_recording(out, force, "a simulated one")
+    if opts.sensor == "camera":
+        from pipeline.rig.camera_session import simulate_camera
+
+        return simulate_camera(out, opts, force)
     robot = get_robot(opts.robot)
     rng = np.random.default_rng(opts.seed)
     rng_robot, rng_world, rng_servo, rng_sensor = rng.spawn(4)
@@ -292,7 +263,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
 
     messages = [
         Message("/rig/description", T0_NS, geometry_recorded.to_dict()),
-        _robot_message(robot, plan.signature_q, plan.to_dict(), opts.robot_id),
+        robot_message(robot, plan.signature_q, plan.to_dict(), opts.robot_id),
     ]
     digits = None if opts.noiseless else 2  # quantized ranges print as 0.01 cm
     for k, (sweep_id, step, _) in enumerate(commands):
@@ -320,7 +291,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
                     {"sweep": sweep_id, "step": step, "repeat": r, "ranges_cm": rows},
                 )
             )
-    truth = _truth(opts, robot, true, sensor_from_base, tool_true, target_true)
+    truth = truth_common(opts, robot, true, sensor_from_base, tool_true, target_true)
     truth.update(
         {
             "sensor": {
@@ -338,85 +309,7 @@ def simulate_session(session_dir: str | Path, opts: SimulationOptions, force: bo
             },
         }
     )
-    return _write(out, force, _logged(messages, opts), truth, "sonic")
-
-
-def _truth(
-    opts: SimulationOptions,
-    robot: Any,
-    true: Any,
-    sensor_from_base: np.ndarray,
-    tool_true: np.ndarray,
-    target_true: dict[int, np.ndarray],
-) -> dict[str, Any]:
-    """The part of ``rig-truth.json`` both sensors share (the audit reads the kinematics)."""
-    return {
-        "robot": robot.name,
-        "seed": opts.seed,
-        "options": options_for_truth(opts),
-        "true_kinematics": {
-            "frame": "sensor",
-            "length_unit": "cm",
-            "angle_unit": "deg",
-            "joint_types": [j.type for j in robot.joints],
-            "base": (sensor_from_base @ true.chain.base).tolist(),
-            "links": true.chain.links.tolist(),
-        },
-        **_nongeometric_truth(true),
-        "true_tool_in_last_link_cm": tool_true.tolist(),
-        "true_targets_local_cm": {str(k): v.tolist() for k, v in target_true.items()},
-        "sensor_from_base": sensor_from_base.tolist(),
-        "errors": true.errors,
-    }
-
-
-def _nongeometric_truth(true: Any) -> dict[str, Any]:
-    """``true_nongeometric`` of rig-truth.json (absent for a rigid robot): the terms and
-    their coefficients in internal units (rad/cm, rad); ``true_backlash`` (absent without
-    it): the error the model does not have (:meth:`pipeline.rig.backlash.Backlash.to_truth`)."""
-    ng = true.nongeometric
-    out: dict[str, Any] = {}
-    if ng is not None:
-        out["true_nongeometric"] = {
-            "terms": list(ng.terms.names),
-            "units": list(ng.terms.units),
-            "coefficients": ng.coefficients.tolist(),
-        }
-    if true.backlash is not None:
-        out["true_backlash"] = true.backlash.to_truth()
-    return out
-
-
-def _logged(messages: list[Message], opts: SimulationOptions) -> list[Message]:
-    """The messages as a logger writes them: each measurement logged ``U(0,
-    log_jitter_s)`` after it was measured (its own stream of the seed), so that with a
-    jitter of more than a cycle's 0.25 s cycles are logged out of measurement order. The
-    measurement time (``publish_time``) stays; descriptions are logged when written."""
-    if opts.log_jitter_s == 0.0:
-        return messages
-    rng = np.random.default_rng([opts.seed, 33])  # issue 33: apart from the rig's streams
-    delay = rng.uniform(0.0, opts.log_jitter_s, len(messages))
-    return [
-        m if m.topic.endswith("/description") else replace(m, log_time_ns=m.time_ns + int(d * 1e9))
-        for m, d in zip(messages, delay, strict=True)
-    ]
-
-
-def _write(
-    out: Path, force: bool, messages: list[Message], truth: dict[str, Any], sensor: str
-) -> Path:
-    """Write the recording (messages in log-time order) and ``rig-truth.json``."""
-    # stable: descriptions stay first
-    messages.sort(key=lambda m: m.time_ns if m.log_time_ns is None else m.log_time_ns)
-    recording = out / "recording.mcap"
-    out.mkdir(parents=True, exist_ok=True)
-    # Under the session lock, like every pipeline run on the folder: no run reads a
-    # recording half replaced, and a recording that appeared meanwhile is still refused.
-    with session_lock(out):
-        refuse_existing_recording(out, force, "a simulated one")
-        write_recording(recording, messages, SENSOR_CHANNELS[sensor])
-        write_text_atomic(out / "rig-truth.json", json.dumps(truth, indent=1) + "\n")
-    return recording
+    return write_session(out, force, logged(messages, opts), truth, "sonic")
 
 
 def _record_points(
@@ -460,7 +353,7 @@ def _record_points(
     n_poses = sum(c[0] == "poses" for c in commands)
     messages = [
         Message("/rig/description", T0_NS, tracker.rig_description()),
-        _robot_message(
+        robot_message(
             robot,
             plan.signature_q,
             tracker.plan_dict(plan, opts.targets, opts.check, n_poses, opts.sweeps),
@@ -495,7 +388,7 @@ def _record_points(
         message = tracker.point_message(sweep_id, step, tid, p_meas[m], sigma[m], opts.noiseless)
         message.update(oriented.get(m, {}))
         messages.append(Message("/points", t_ns, message))
-    truth = _truth(opts, robot, true, sensor_from_base, tool_true, target_true)
+    truth = truth_common(opts, robot, true, sensor_from_base, tool_true, target_true)
     if opts.six_d:
         truth["true_tool_rotation_in_last_link"] = R_probe.tolist()
     truth.update(
@@ -510,4 +403,4 @@ def _record_points(
             },
         }
     )
-    return _write(out, force, _logged(messages, opts), truth, "points")
+    return write_session(out, force, logged(messages, opts), truth, "points")

@@ -66,10 +66,14 @@ def read_signature_document(path: str | Path) -> dict[str, Any]:
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
+        camera = (p.parent / "stages" / "camera_fit.arrow").is_file()  # issue 39
         raise ArmsigError(
             f"cannot read signature {p}",
             got=str(exc),
-            fix="run `pipeline identify SESSION` to write it",
+            fix="a camera session writes no signature yet: its fit is stages/camera_fit.arrow "
+            "and report/report.md (`pipeline audit` compares a simulated one with its truth)"
+            if camera
+            else "run `pipeline identify SESSION` to write it",
         ) from exc
     doc = parse_json(text, str(p))
     check_document(doc, str(p))

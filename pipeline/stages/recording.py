@@ -14,7 +14,7 @@ a result.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -67,7 +67,7 @@ class Recording:
     sha256: str
     rig: dict[str, Any]
     robot: dict[str, Any]
-    sensor: str  # "sonic" | "points"
+    sensor: str  # "sonic" | "points" | "camera"
     joint_sweep: np.ndarray  # (K,) int
     joint_step: np.ndarray  # (K,) int
     joint_t_s: np.ndarray  # (K,)
@@ -88,6 +88,12 @@ class Recording:
     point_cov_cm2: np.ndarray  # (P, 3, 3) covariance, NaN = not recorded
     point_wxyz: np.ndarray  # (P, 4) unit quaternion of a 6-D target, NaN = not recorded
     point_orientation_sigma_deg: np.ndarray  # (P,) its σ per rotation-vector component, NaN = none
+    # camera (issue 39): one row per detected target point, sorted by (sweep, step, point)
+    detection_sweep: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    detection_step: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    detection_point: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    detection_uv_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    detection_sigma_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def read_recording(path: str | Path, sha256: str | None = None) -> Recording:
@@ -151,6 +157,18 @@ def _read_cached(p: Path, sha: str) -> Recording:
         "q_encoder": q_enc,
         "joint_payload_kg": np.array([m.get("payload_kg", np.nan) for _, m in js], float),
     }
+    if sensor == "camera":
+        from pipeline.stages import recording_camera
+
+        _, target = recording_camera.check_camera_rig(p, rig)
+        det = recording_camera.read_detections(p, msgs["/camera/detections"], target, n_points)
+        ds, dk = det["detection_sweep"], det["detection_step"]
+        pair_keys(
+            p, j_sweep, j_step, ds, dk, lambda k: key_text(ds[k], dk[k]),
+            "/camera/detections", "image",
+        )  # fmt: skip
+        return Recording(p, sha, rig, robot, sensor, **joints, **_no_cycles(),
+                         **recording_points.no_points(), **det)  # fmt: skip
     if sensor == "points":
         measured = recording_points.read_points(p, msgs["/points"], robot["plan"], n_points, t0)
         ps, pk, pt = measured["point_sweep"], measured["point_step"], measured["point_target"]
@@ -276,7 +294,7 @@ def _planned(
                 fix="repair the recorded plan",
             )
         points[s["joint"]] = s["n_points"]
-    if "poses" in plan and sensor != "points":
+    if "poses" in plan and sensor not in ("points", "camera"):
         raise RecordingError(
             f"{p}: /robot/description plan.poses in a recording of sensor {sensor!r}",
             expected="a pose set in a point-sensor session (/rig/description sensor 'points')",

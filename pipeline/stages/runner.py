@@ -84,7 +84,9 @@ POINT_STAGE_MODULES = (
     "verdict",
 )
 #: recorded sensor kind (``/rig/description`` sensor) -> its identification stage modules
-SENSOR_STAGE_MODULES = {"sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES}
+SENSOR_STAGE_MODULES = {"sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES,
+                        "camera": ("session", "joints", "detections", "camera_fit",
+                                   "camera_residuals")}  # fmt: skip
 #: The last identification stage: a stage list holding it (and ``session``) has a product.
 LAST_STAGE = "verdict"
 #: Stage modules of ``pipeline evaluate`` (run after the identification, same runner).

@@ -1,0 +1,51 @@
+"""Stage ``camera_residuals`` of a camera session: the reprojection residual of every
+detected point under the fitted chain and lens (``schemas/arrow/camera_residuals.json``;
+the report's figure of residual vectors on the image plane)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from pipeline.schemas import arrow_schema
+from pipeline.stages.base import NoParams, Stage
+from pipeline.stages.camera_fit import detections_for_fit, fitted_model, table_images
+from pipeline.stages.session import session_robot
+from pipeline.sweeps import POSES_SWEEP
+
+
+def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
+    from pipeline.refine.camera_block import camera_points
+    from pipeline.refine.camera_fit import observing
+    from pipeline.sensor.camera import project
+
+    det, _, _, setup = detections_for_fit(inputs)
+    robot = session_robot(inputs["session"])
+    model, x, intrinsics, q_sig = fitted_model(inputs["camera_fit"], robot)
+    at = observing(model, det.q, q_sig)
+    t, R = at.positions(x)[det.image], at.tool_rotations(x)[det.image]
+    uv = project(camera_points(setup, t, R, det.local)[0], intrinsics)
+    d = inputs["detections"]
+    use = d.column("sweep").to_numpy() == POSES_SWEEP  # the fit's images (detections_for_fit)
+    columns = {
+        "image": table_images(d)[det.image],
+        "point_id": d.column("point_id").to_numpy()[use],
+        "u_px": det.uv[:, 0], "v_px": det.uv[:, 1],
+        "du_px": uv[:, 0] - det.uv[:, 0], "dv_px": uv[:, 1] - det.uv[:, 1],
+    }  # fmt: skip
+    schema = arrow_schema("camera_residuals")
+    return pa.table({f.name: pa.array(np.asarray(columns[f.name]), f.type) for f in schema},
+                    schema=schema)  # fmt: skip
+
+
+STAGE = Stage(
+    "camera_residuals",
+    1,
+    ("session", "joints", "detections", "camera_fit"),
+    NoParams(),
+    compute,
+    "reprojection residual of every detected point under the fitted chain and lens (camera)",
+)
