@@ -78,6 +78,7 @@ class ImportFormat(StrEnum):
     sscanss2 = "sscanss2"
     table = "table"
     rct = "rct"
+    images = "images"
 
 
 class Study(StrEnum):

@@ -298,19 +298,30 @@ def distortion_terms(text: str) -> tuple[float, float, float, float, float]:
 def import_(
     file: Annotated[str, typer.Argument(help="The foreign file of measured points.")],
     name: NewSessionArg,
-    format: Annotated[ImportFormat, choice("sscanss2, table or rct (docs/import.md).")],
-    robot: Annotated[str, typer.Option(help="Robot description .toml of the measured machine.")],
+    format: Annotated[ImportFormat, choice("sscanss2, table, rct or images (docs/import.md).")],
+    robot: Annotated[
+        str | None,
+        typer.Option(help="Robot description .toml of the measured machine (not for images)."),
+    ] = None,
     map: Annotated[
         str | None, typer.Option(help="Map file (TOML): columns, units, sweeps (docs/import.md).")
     ] = None,
     force: ForceRecording = False,
     as_json: JsonOption = False,
 ) -> None:
-    """Convert a file of measured points into a point session (recording.mcap)."""
+    """Convert a file of measured points into a point session (recording.mcap), or a set
+    of camera images with flange poses (industrial_calibration's cal_data.yaml) into a
+    camera session."""
     from pipeline.importers import import_file
     from pipeline.sweeps import CHECK_SWEEP, POSES_SWEEP
 
     folder = new_session_folder(name)
+    if format.value == "images":
+        _import_images(file, folder, map, force, as_json)
+        return
+    if robot is None:
+        raise ArmsigError(f"--format {format.value} needs --robot",
+                          fix="--robot ROBOT.toml, the measured machine's description")  # fmt: skip
     out = import_file(file, format.value, robot, folder, map, force)
     n_check = int((out.rows.sweep == CHECK_SWEEP).sum())
     n_poses = int((out.rows.sweep == POSES_SWEEP).sum())
@@ -341,6 +352,30 @@ def import_(
         )
     if out.tool.warning:
         warn(out.tool.warning)
+
+
+def _import_images(file: str, folder: Any, map: str | None, force: bool, as_json: bool) -> None:
+    """``import --format images``: detect, record, one line per dropped image."""
+    from pipeline.importers.images import import_image_set
+
+    if map is not None:
+        raise ArmsigError("--format images reads cal_data.yaml as it is: no --map",
+                          fix="drop --map (docs/import.md, Image sets)")  # fmt: skip
+    s, recording = import_image_set(file, folder, force)
+    points = sum(len(e.found.point_ids) for e in s.images)
+    if as_json:
+        print_json({
+            "session": str(folder), "recording": str(recording), "format": "images",
+            "setup": s.setup, "target": s.target.to_dict(), "images": len(s.images),
+            "kept": s.kept, "points": points, "dropped": s.drops(),
+        })  # fmt: skip
+    else:
+        typer.echo(
+            f"wrote {recording}: {len(s.images)} images ({s.setup}), {s.kept} kept, "
+            f"{points} points; flange poses without joint readings: the arm is not calibrated"
+        )
+    for line in s.drops():
+        warn(line)
 
 
 @commands.command("plan")

@@ -24,6 +24,14 @@ CAMERA_CHANNELS = {
     **{t: s for t, s in CHANNELS.items() if t != "/sonic/ranges"},
     "/camera/detections": "camera_detections",
 }
+#: topic -> schema file of an imported image set without joint readings (issue 40): the
+#: images by content hash, their detections, the flange poses the robot reported.
+IMAGE_SET_CHANNELS = {
+    "/rig/description": "rig_description",
+    "/camera/images": "camera_images",
+    "/camera/detections": "camera_detections",
+    "/robot/flange_pose": "flange_pose",
+}
 #: sensor kind of ``/rig/description`` (absent: ``sonic``) -> channels of its recording
 SENSOR_CHANNELS = {"sonic": CHANNELS, "points": POINT_CHANNELS, "camera": CAMERA_CHANNELS}
 #: topic -> schema file of the evaluation recording ``evaluation.mcap`` (docs/evaluation.md)

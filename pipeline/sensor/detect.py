@@ -47,6 +47,9 @@ SUBPIX_HALF_WINDOW = 5
 SUBPIX_CRITERIA = (3, 100, 1e-4)  # COUNT + EPS, 100 iterations, 1e-4 px
 #: The larger origin dot of a modified circle grid is at least this much larger (diameter,
 #: relative to its grid neighbours) than the other corners' dots, else no corner is marked.
+#: Measured on industrial_calibration's 15 real images: the origin dot 1.87-2.06 × its
+#: neighbours, the next corner 0.98-1.09 ×, a ratio of 1.81-2.07; a rendered dot 1.4 × its
+#: neighbours' diameter passes. 1.15 stays above the other corners' spread (±10 %).
 ORIGIN_DOT_MARGIN = 1.15
 
 
@@ -91,7 +94,10 @@ class ImageDetection:
         return not self.dropped
 
 
-def _none(reason: str, why: str, markers: int = -1, width: float = float("nan")) -> ImageDetection:
+def no_points(
+    reason: str, why: str, markers: int = -1, width: float = float("nan")
+) -> ImageDetection:
+    """A dropped image's detection: no points, the reason and why in words."""
     empty = np.zeros(0)
     return ImageDetection(np.zeros(0, np.int64), np.zeros((0, 2)), empty, markers, width,
                           reason, why)  # fmt: skip
@@ -118,10 +124,10 @@ def detect_target(
         return found
     n = len(found.point_ids)
     if n < settings.min_points:
-        return _none("too_few_points", f"{n} points found, fewer than {settings.min_points}",
+        return no_points("too_few_points", f"{n} points found, fewer than {settings.min_points}",
                      found.markers, found.edge_width_px)  # fmt: skip
     if found.edge_width_px > settings.max_edge_width_px:
-        return _none("blur", f"edges {found.edge_width_px:.1f} px wide, over "
+        return no_points("blur", f"edges {found.edge_width_px:.1f} px wide, over "
                      f"{settings.max_edge_width_px:g} px", found.markers,
                      found.edge_width_px)  # fmt: skip
     order = np.argsort(found.point_ids, kind="stable")
@@ -159,7 +165,7 @@ def _charuco(image: npt.NDArray[np.uint8], t: Target) -> ImageDetection:
     corners, ids, _, marker_ids = detector.detectBoard(image)
     markers = 0 if marker_ids is None else len(marker_ids)
     if ids is None or not len(ids):
-        return _none("not_found", f"{markers} markers of the board found, no corner", markers)
+        return no_points("not_found", f"{markers} markers of the board found, no corner", markers)
     pid = np.asarray(ids, np.int64).reshape(-1)
     uv = np.asarray(corners, float).reshape(-1, 2)
     width = float("nan")
@@ -199,7 +205,7 @@ def _checkerboard(image: npt.NDArray[np.uint8], t: Target) -> ImageDetection:
     if not ok:
         ok, corners = cv2.findChessboardCorners(image, inner)
         if not ok:
-            return _none("not_found", f"no {inner[0]} × {inner[1]} inner-corner chessboard")
+            return no_points("not_found", f"no {inner[0]} × {inner[1]} inner-corner chessboard")
     corners = cv2.cornerSubPix(image, corners.astype(np.float32), (SUBPIX_HALF_WINDOW,) * 2,
                                (-1, -1), SUBPIX_CRITERIA)  # fmt: skip
     grid = np.asarray(corners, float).reshape(inner[1], inner[0], 2)
@@ -213,7 +219,7 @@ def _checkerboard(image: npt.NDArray[np.uint8], t: Target) -> ImageDetection:
         why = (
             f"{len(chosen)} ways to number the corners (rows + columns even: the same turned 180°)"
         )
-        return _none("ambiguous", why, -1, width)
+        return no_points("ambiguous", why, -1, width)
     uv = chosen[0].reshape(-1, 2)
     return ImageDetection(np.arange(len(uv), dtype=np.int64), uv, np.full(len(uv), np.nan), -1,
                           width)  # fmt: skip
@@ -259,7 +265,7 @@ def _circles(image: npt.NDArray[np.uint8], t: Target) -> ImageDetection:
         ok, centres = find(image, shape, flags=flags, blobDetector=blobs)
         shape = (t.columns, t.rows)
     if not ok:
-        return _none("not_found", f"no {t.columns} × {t.rows} circle grid")
+        return no_points("not_found", f"no {t.columns} × {t.rows} circle grid")
     uv = np.asarray(centres, float).reshape(-1, 2)
     keys = blobs.detect(image)  # type: ignore[attr-defined]
     pts = np.array([k.pt for k in keys], float).reshape(-1, 2)
@@ -268,7 +274,7 @@ def _circles(image: npt.NDArray[np.uint8], t: Target) -> ImageDetection:
     size = sizes[nearest]
     if not t.origin_dot:
         if shape != (t.rows, t.columns):
-            return _none("ambiguous", "the grid is turned 90° and has no origin mark")
+            return no_points("ambiguous", "the grid is turned 90° and has no origin mark")
         return ImageDetection(np.arange(len(uv), dtype=np.int64), uv, size)
     return _origin_dot_order(uv.reshape(*shape, 2), size.reshape(shape), t)
 
@@ -285,14 +291,14 @@ def _origin_dot_order(grid: Array, size: Array, t: Target) -> ImageDetection:
     best = max(corners, key=corners.__getitem__)
     rest = max(v for k, v in corners.items() if k != best)
     if corners[best] < ORIGIN_DOT_MARGIN * rest:
-        return _none("ambiguous", f"no corner dot stands out (largest {corners[best]:.2f}, next "
-                     f"{rest:.2f} × its neighbours)")  # fmt: skip
+        why = f"no corner dot stands out ({corners[best]:.2f}, next {rest:.2f} × its neighbours)"
+        return no_points("ambiguous", why)
     flat_uv, flat_size = grid.reshape(-1, 2), size.reshape(-1)
     origin = best[0] * c + best[1]
     for idx in _grid_orders(r, c, (t.rows, t.columns)):
         if idx[0, 0] == origin and _handed(flat_uv[idx]):
             return _ordered(flat_uv, flat_size, idx)
-    return _none("ambiguous", "the origin dot is at a corner the target file does not "
+    return no_points("ambiguous", "the origin dot is at a corner the target file does not "
                  "describe (the board seen mirrored?)")  # fmt: skip
 
 
@@ -309,11 +315,11 @@ def _markers(image: npt.NDArray[np.uint8], t: Target) -> ImageDetection:
     detector = cv2.aruco.ArucoDetector(_dictionary(t.dictionary), params)
     corners, ids, _ = detector.detectMarkers(image)
     if ids is None or not len(ids):
-        return _none("not_found", f"no {t.dictionary} marker", 0)
+        return no_points("not_found", f"no {t.dictionary} marker", 0)
     ids = np.asarray(ids, np.int64).reshape(-1)
     on_board = (ids >= t.first_id) & (ids < t.first_id + t.rows * t.columns)
     if not on_board.any():
-        return _none("not_found", f"{len(ids)} markers, none of the board's ids "
+        return no_points("not_found", f"{len(ids)} markers, none of the board's ids "
                      f"{t.first_id}..{t.first_id + t.rows * t.columns - 1}", 0)  # fmt: skip
     uv = np.asarray(corners, float).reshape(-1, 4, 2)[on_board].reshape(-1, 2)
     pid = (4 * ids[on_board][:, None] + np.arange(4)[None]).reshape(-1)
