@@ -180,3 +180,96 @@ def test_bad_inputs_are_one_line(tmp_path: Path, damage: object, words: str) -> 
         import_image_set(cal, tmp_path / "s")
     assert words in str(err.value) and "\n" not in str(err.value)
     assert not (tmp_path / "s" / "recording.mcap").exists()
+
+
+PUMA = ROOT / "pipeline" / "robots" / "data" / "puma560.toml"
+MAP = """images = "set/images"
+image_column = "image"
+target = "board.toml"
+setup = "eye-to-hand"
+[camera]
+fx = 600.0
+fy = 600.0
+cx = 320.0
+cy = 240.0
+"""
+JOINTS = "".join(f'[[joints]]\ncolumn = "q{j}"\nunit = "rad"\n' for j in range(1, 7))
+
+
+def _mapped(tmp_path: Path, table: str, extra: str) -> tuple[Path, Path]:
+    _image_set(tmp_path / "set", 4)
+    (tmp_path / "board.toml").write_text(
+        'kind = "charuco"\nrows = 5\ncolumns = 7\nspacing_cm = 3.0\nmarker_cm = 2.2\n'
+        'dictionary = "DICT_5X5_100"\n'
+    )
+    (tmp_path / "map.toml").write_text(MAP + extra)
+    (tmp_path / "table.csv").write_text(table)
+    return tmp_path / "table.csv", tmp_path / "map.toml"
+
+
+def _joint_table(rows: int = 4, first: str = "image") -> str:
+    lines = [f"{first},q1,q2,q3,q4,q5,q6"]
+    lines += [f"{k}.png," + ",".join(f"{0.1 * (k + j):.2f}" for j in range(6)) for k in range(rows)]
+    return "\n".join(lines) + "\n"
+
+
+def test_table_with_joint_readings_is_a_camera_session(tmp_path: Path) -> None:
+    """A table of images and joint readings (rad) with a map: the camera session of
+    issue 39's contract (pose set, joint states in deg, detections) that identify reads,
+    with the images by hash beside it."""
+    table, mp = _mapped(tmp_path, _joint_table(), JOINTS)
+    s, recording = import_image_set(table, tmp_path / "s", map_path=mp, robot_path=PUMA)
+    assert s.robot is not None and s.kept == 4
+    rec = read_recording(recording)
+    assert rec.sensor == "camera" and len(np.unique(rec.detection_step)) == 4
+    assert len(rec.detection_point) == 4 * 24
+    assert np.allclose(rec.q_encoder[1], np.degrees([0.1, 0.2, 0.3, 0.4, 0.5, 0.6]))
+    images = read_mcap(recording, {"/camera/images": "camera_images"}, "x").messages
+    assert [m["sha256"] for _, m in images["/camera/images"]] == [
+        file_sha256(tmp_path / "set" / "images" / f"{k}.png") for k in range(4)
+    ]
+    assert "arm" not in rec.rig
+
+
+def test_table_with_flange_poses(tmp_path: Path) -> None:
+    """[flange] columns (m, quaternion): an image set whose arm is not calibrated."""
+    table = "image,x,y,z,qx,qy,qz,qw\n" + "".join(
+        f"{k}.png,{0.1 * k},0.5,0.4,0,0,0,1\n" for k in range(4)
+    )
+    flange = '[flange]\nx = "x"\ny = "y"\nz = "z"\nqx = "qx"\nqy = "qy"\nqz = "qz"\nqw = "qw"\n'
+    path, mp = _mapped(tmp_path, table, flange)
+    s, recording = import_image_set(path, tmp_path / "s", map_path=mp)
+    assert s.robot is None and s.kept == 4
+    poses = _messages(recording)["/robot/flange_pose"]
+    assert [p["position_cm"][0] for p in poses] == pytest.approx([0.0, 10.0, 20.0, 30.0])
+
+
+@pytest.mark.parametrize(
+    "table, extra, robot, words",
+    [
+        (_joint_table(first="file"), JOINTS, PUMA, "table.csv: line 1: missing column 'image'"),
+        (_joint_table().replace("q6", "q9"), JOINTS, PUMA, "missing column 'q6' (joint 6)"),
+        (_joint_table(), JOINTS, None, "map.toml: [[joints]] needs --robot"),
+        (_joint_table(), JOINTS.replace('"rad"', '"rd"'), PUMA, "map.toml: joints[0].unit"),
+        (_joint_table(), JOINTS + '[flange]\nx = "x"\n', PUMA, "map.toml: flange: must contain"),
+        (_joint_table().replace("0.30", "nan"), JOINTS, PUMA, "line 2: joint 4 is missing"),
+        (_joint_table().replace("0.50", "9.0"), JOINTS, PUMA, "identify would refuse"),
+    ],
+    ids=[
+        "no image column",
+        "no joint column",
+        "no robot",
+        "bad unit",
+        "flange incomplete",
+        "empty cell",
+        "beyond the limits",
+    ],  # fmt: skip
+)
+def test_bad_maps_and_tables_are_one_line(
+    tmp_path: Path, table: str, extra: str, robot: Path | None, words: str
+) -> None:
+    path, mp = _mapped(tmp_path, table, extra)
+    with pytest.raises(ImportFileError) as err:
+        import_image_set(path, tmp_path / "s", map_path=mp, robot_path=robot)
+    assert words in str(err.value) and "\n" not in str(err.value)
+    assert not (tmp_path / "s" / "recording.mcap").exists()

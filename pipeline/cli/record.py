@@ -309,15 +309,15 @@ def import_(
     force: ForceRecording = False,
     as_json: JsonOption = False,
 ) -> None:
-    """Convert a file of measured points into a point session (recording.mcap), or a set
-    of camera images with flange poses (industrial_calibration's cal_data.yaml) into a
-    camera session."""
+    """Convert a file of measured points into a point session (recording.mcap), or camera
+    images into a camera session: industrial_calibration's cal_data.yaml as it is, or a
+    table of images with joint readings or flange poses and --map (docs/import.md)."""
     from pipeline.importers import import_file
     from pipeline.sweeps import CHECK_SWEEP, POSES_SWEEP
 
     folder = new_session_folder(name)
     if format.value == "images":
-        _import_images(file, folder, map, force, as_json)
+        _import_images(file, folder, map, robot, force, as_json)
         return
     if robot is None:
         raise ArmsigError(f"--format {format.value} needs --robot",
@@ -354,14 +354,13 @@ def import_(
         warn(out.tool.warning)
 
 
-def _import_images(file: str, folder: Any, map: str | None, force: bool, as_json: bool) -> None:
+def _import_images(
+    file: str, folder: Any, map: str | None, robot: str | None, force: bool, as_json: bool
+) -> None:
     """``import --format images``: detect, record, one line per dropped image."""
     from pipeline.importers.images import import_image_set
 
-    if map is not None:
-        raise ArmsigError("--format images reads cal_data.yaml as it is: no --map",
-                          fix="drop --map (docs/import.md, Image sets)")  # fmt: skip
-    s, recording = import_image_set(file, folder, force)
+    s, recording = import_image_set(file, folder, force, map, robot)
     points = sum(len(e.found.point_ids) for e in s.images)
     if as_json:
         print_json({
@@ -372,8 +371,10 @@ def _import_images(file: str, folder: Any, map: str | None, force: bool, as_json
     else:
         typer.echo(
             f"wrote {recording}: {len(s.images)} images ({s.setup}), {s.kept} kept, "
-            f"{points} points; flange poses without joint readings: the arm is not calibrated"
-        )
+            f"{points} points; "
+            + ("flange poses without joint readings: the arm is not calibrated"
+               if s.robot is None else f"joint readings of {s.robot.name}")
+        )  # fmt: skip
     for line in s.drops():
         warn(line)
 

@@ -32,6 +32,11 @@ IMAGE_SET_CHANNELS = {
     "/camera/detections": "camera_detections",
     "/robot/flange_pose": "flange_pose",
 }
+#: An imported image set with joint readings (issue 40): a camera recording, and its
+#: images by content hash (a channel the reader allows and does not need).
+CAMERA_IMAGE_CHANNELS = {**CAMERA_CHANNELS, "/camera/images": "camera_images"}
+#: Channels a recording of a sensor kind may hold besides its own.
+OPTIONAL_CHANNELS = {"camera": ("/camera/images",)}
 #: sensor kind of ``/rig/description`` (absent: ``sonic``) -> channels of its recording
 SENSOR_CHANNELS = {"sonic": CHANNELS, "points": POINT_CHANNELS, "camera": CAMERA_CHANNELS}
 #: topic -> schema file of the evaluation recording ``evaluation.mcap`` (docs/evaluation.md)

@@ -20,14 +20,15 @@ from __future__ import annotations
 
 import contextlib
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pipeline.contract.channels import IMAGE_SET_CHANNELS
+from pipeline.atomic import TEMP_SUFFIX
+from pipeline.contract.channels import CAMERA_IMAGE_CHANNELS, IMAGE_SET_CHANNELS
 from pipeline.contract.digest import file_sha256
 from pipeline.errors import ArmsigError, ImportFileError, one_line
 from pipeline.importers.rows import LENGTH_CM
@@ -36,6 +37,7 @@ from pipeline.importers.write import SOURCE_METADATA, source_metadata
 from pipeline.importers.yamlfile import load_yaml
 from pipeline.quiet import debugging
 from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
+from pipeline.robots.description import RobotDescription
 from pipeline.schemas import compiled_validator, expected_in_words, first_non_finite
 from pipeline.sensor.camera import Intrinsics
 from pipeline.sensor.detect import DetectorSettings, ImageDetection, detect_target
@@ -63,14 +65,16 @@ SIGMA_PX = 0.2
 @dataclass(frozen=True)
 class ImageEntry:
     """One image of the set: its path, its content hash ("" when missing), the flange
-    pose in the base (4, 4, cm), what the detector found."""
+    pose in the base (4, 4, cm) or the joint readings (n, deg / cm), what the detector
+    found."""
 
     file: str
     path: Path
     sha256: str
-    flange_in_base: np.ndarray
+    flange_in_base: np.ndarray | None
     found: ImageDetection
     size_px: tuple[int, int] | None
+    readings: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -82,6 +86,7 @@ class ImageSet:
     lens: Intrinsics
     target: Target
     images: tuple[ImageEntry, ...]
+    robot: RobotDescription | None = None  # the arm, when its joint readings are given
 
     @property
     def kept(self) -> int:
@@ -93,13 +98,15 @@ class ImageSet:
                 if not e.found.kept]  # fmt: skip
 
 
-def _checked(src: str, data: Any, schema: str) -> Any:
+def checked_document(src: str, data: Any, schema: str, fix: str = _FIX) -> Any:
+    """``data`` (a parsed file ``src``) checked against ``schemas/<schema>``: the first
+    non-finite number or schema violation refused in one line naming its key."""
     from fastjsonschema import JsonSchemaValueException
 
     bad = first_non_finite(data)
     if bad is not None:
         raise ImportFileError(f"{src}: {bad[0]}: is not a finite number", got=repr(bad[1]),
-                              fix=_FIX)  # fmt: skip
+                              fix=fix)  # fmt: skip
     try:
         compiled_validator(schema)(data)
     except JsonSchemaValueException as exc:
@@ -109,7 +116,7 @@ def _checked(src: str, data: Any, schema: str) -> Any:
             f"{src}: {key}: {one_line(exc.message.removeprefix(name).strip(), 80)}",
             expected=expected_in_words(str(exc.rule), exc.definition or {}),
             got=one_line(repr(exc.value), 80),
-            fix=_FIX,
+            fix=fix,
         ) from None
     return data
 
@@ -157,7 +164,7 @@ def _pose(path: Path, name: str, src: str) -> np.ndarray:
 
     if not path.is_file():
         raise ImportFileError(f"{name}: no such pose file (named by {src})", fix=_FIX)
-    p = _checked(name, load_yaml(read_text(path), name), "import/flange_pose.json")
+    p = checked_document(name, load_yaml(read_text(path), name), "import/flange_pose.json")
     q = np.array([p["qx"], p["qy"], p["qz"], p["qw"]], float)
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > QUAT_NORM_TOL:
@@ -215,20 +222,47 @@ def read_image_set(path: str | Path, settings: DetectorSettings | None = None) -
     src = src_path.name
     if not src_path.is_file():
         raise ImportFileError(f"{src_path}: no such file", fix="check the path")
-    data = _checked(src, load_yaml(read_text(src_path), src), "import/ic_cal_data.json")
+    data = checked_document(src, load_yaml(read_text(src_path), src), "import/ic_cal_data.json")
     target = _target(src, data["target_finder"])
-    k = data["intrinsics"]
     root = src_path.parent
+    poses = [_pose(root / e["pose"], e["pose"], src) for e in data["data"]]
+    files = [e["image"] for e in data["data"]]
+    entries = _detected(src, root, files, target, settings, poses, None)
+    setup = "eye-to-hand" if data["static_camera"] else "eye-in-hand"
+    return ImageSet(src_path, setup, _lens(entries, data["intrinsics"]), target, entries)
+
+
+def read_mapped_image_set(
+    table: str | Path, map_path: str | Path, robot: RobotDescription | None,
+    settings: DetectorSettings | None = None,
+) -> ImageSet:  # fmt: skip
+    """Read a table of images with a map (:mod:`pipeline.importers.image_map`) and detect
+    every image it lists; ``robot``: the arm whose joint readings the table holds."""
+    from pipeline.importers.image_map import load_image_map, read_image_table
+
+    imap = load_image_map(Path(map_path))
+    rows = read_image_table(Path(table), imap, robot)
+    n = len(rows.files)
+    poses = list(rows.flange_in_base) if rows.flange_in_base is not None else [None] * n
+    readings = list(rows.readings) if rows.readings is not None else None
+    entries = _detected(Path(table).name, imap.images, list(rows.files), imap.target, settings,
+                        poses, readings)  # fmt: skip
+    arm = robot if rows.readings is not None else None
+    return ImageSet(Path(table), imap.setup, _lens(entries, imap.camera), imap.target, entries, arm)
+
+
+def _detected(
+    src: str, root: Path, files: list[str], target: Target, settings: DetectorSettings | None,
+    poses: Sequence[np.ndarray | None], readings: list[np.ndarray] | None,
+) -> tuple[ImageEntry, ...]:  # fmt: skip
+    """Hash and detect each image (``files`` relative to ``root``); refuse two sizes, an
+    image twice, fewer than :data:`MIN_IMAGES` kept."""
     entries = []
-    sizes = set()
-    settings = settings or DetectorSettings()
-    for e in data["data"]:
-        pose = _pose(root / e["pose"], e["pose"], src)
-        image_path = root / e["image"]
-        sha, found, size = _detect(image_path, target, settings)
-        if size is not None:
-            sizes.add(size)
-        entries.append(ImageEntry(e["image"], image_path, sha, pose, found, size))
+    for k, name in enumerate(files):
+        sha, found, size = _detect(root / name, target, settings or DetectorSettings())
+        q = None if readings is None else readings[k]
+        entries.append(ImageEntry(name, root / name, sha, poses[k], found, size, q))
+    sizes = {e.size_px for e in entries if e.size_px is not None}
     if len(sizes) > 1:
         raise ImportFileError(
             f"{src}: images of {len(sizes)} sizes",
@@ -242,15 +276,19 @@ def read_image_set(path: str | Path, settings: DetectorSettings | None = None) -
         raise ImportFileError(
             f"{src}: {kept} of {len(entries)} images kept",
             expected=f"at least {MIN_IMAGES} images with the target found",
-            got="; ".join(f"{x.file}: {x.found.dropped}" for x in entries if not x.found.kept)[
-                :200
-            ],
-            fix="check the target_finder against the board in the images",
+            got=one_line(
+                "; ".join(f"{x.file}: {x.found.dropped}" for x in entries if not x.found.kept), 200
+            ),  # fmt: skip
+            fix="check the target against the board in the images",
         )
-    w, h = sizes.pop()
-    lens = Intrinsics(w, h, float(k["fx"]), float(k["fy"]), float(k["cx"]), float(k["cy"]))
-    setup = "eye-to-hand" if data["static_camera"] else "eye-in-hand"
-    return ImageSet(src_path, setup, lens, target, tuple(entries))
+    return tuple(entries)
+
+
+def _lens(entries: tuple[ImageEntry, ...], k: dict[str, Any]) -> Intrinsics:
+    """The stated lens, the image size read from the images."""
+    w, h = next(e.size_px for e in entries if e.size_px is not None)
+    extra = {n: float(k[n]) for n in ("k1", "k2", "p1", "p2", "k3") if n in k}
+    return Intrinsics(w, h, float(k["fx"]), float(k["fy"]), float(k["cx"]), float(k["cy"]), **extra)
 
 
 def _refuse_duplicates(src: str, entries: list[ImageEntry]) -> None:
@@ -269,56 +307,131 @@ def _refuse_duplicates(src: str, entries: list[ImageEntry]) -> None:
 
 
 def image_set_messages(s: ImageSet) -> list[Message]:
-    """The recording's messages (module docstring), one step per image in file order."""
+    """The recording's messages (module docstring). Kept images are steps 0, 1, ... of
+    sweep ``poses`` in file order; with joint readings a dropped image has no joint state
+    and its ``/camera/images`` step follows the kept ones."""
     from scipy.spatial.transform import Rotation
 
-    rig = {
+    rig: dict[str, Any] = {
         "sensor": "camera",
         "instrument": f"camera images ({s.source.name}, imported)",
         "setup": s.setup,
         "camera": s.lens.to_dict(),
         "target": s.target.to_dict(),
-        "images_dir": str(s.source.parent.resolve()),
-        "arm": ARM_NOT_CALIBRATED,
+        "images_dir": str(s.images[0].path.parent.resolve()),
     }
+    if s.robot is None:
+        rig["arm"] = ARM_NOT_CALIBRATED
     messages = [Message("/rig/description", T0_NS, rig)]
-    for step, e in enumerate(s.images):
+    kept = [e for e in s.images if e.found.kept]
+    order = kept + [e for e in s.images if not e.found.kept] if s.robot else list(s.images)
+    if s.robot is not None:
+        messages.append(_robot_message(s.robot, kept))
+    for step, e in enumerate(order):
         t_ns = T0_NS + (step + 1) * STEP_NS
         f = e.found
-        image: dict[str, Any] = {"sweep": "poses", "step": step, "file": e.file,
-                                 "sha256": e.sha256, "dropped": f.dropped, "why": f.why,
-                                 "markers": f.markers,
-                                 "edge_width_px": None if np.isnan(f.edge_width_px)
-                                 else round(f.edge_width_px, 3)}  # fmt: skip
-        if e.size_px is not None:
-            image["width_px"], image["height_px"] = e.size_px
-        messages.append(Message("/camera/images", t_ns, image))
-        xyzw = Rotation.from_matrix(e.flange_in_base[:3, :3]).as_quat()
-        messages.append(Message("/robot/flange_pose", t_ns, {
-            "sweep": "poses", "step": step,
-            "position_cm": [float(v) for v in e.flange_in_base[:3, 3]],
-            "orientation_wxyz": [float(xyzw[3]), *(float(v) for v in xyzw[:3])],
-        }))  # fmt: skip
-        if f.kept:
-            messages.append(Message("/camera/detections", t_ns, {
-                "sweep": "poses", "step": step, "point_ids": [int(i) for i in f.point_ids],
-                "u_px": [float(u) for u in f.uv_px[:, 0]],
-                "v_px": [float(v) for v in f.uv_px[:, 1]], "sigma_px": SIGMA_PX,
+        messages.append(Message("/camera/images", t_ns, _image_message(step, e)))
+        if e.flange_in_base is not None:
+            xyzw = Rotation.from_matrix(e.flange_in_base[:3, :3]).as_quat()
+            messages.append(Message("/robot/flange_pose", t_ns, {
+                "sweep": "poses", "step": step,
+                "position_cm": [float(v) for v in e.flange_in_base[:3, 3]],
+                "orientation_wxyz": [float(xyzw[3]), *(float(v) for v in xyzw[:3])],
             }))  # fmt: skip
+        if not f.kept:
+            continue
+        if e.readings is not None:
+            q = [float(v) for v in e.readings]
+            units = [j.unit for j in s.robot.joints] if s.robot else []
+            messages.append(Message("/robot/joint_state", t_ns, {
+                "sweep": "poses", "step": step, "q_commanded": q, "q_encoder": q, "units": units,
+            }))  # fmt: skip
+        messages.append(Message("/camera/detections", t_ns + STEP_NS // 10, {
+            "sweep": "poses", "step": step, "point_ids": [int(i) for i in f.point_ids],
+            "u_px": [float(u) for u in f.uv_px[:, 0]],
+            "v_px": [float(v) for v in f.uv_px[:, 1]], "sigma_px": SIGMA_PX,
+        }))  # fmt: skip
     return messages
 
 
+def _image_message(step: int, e: ImageEntry) -> dict[str, Any]:
+    f = e.found
+    out: dict[str, Any] = {
+        "sweep": "poses", "step": step, "file": e.file, "sha256": e.sha256,
+        "dropped": f.dropped, "why": f.why, "markers": f.markers,
+        "edge_width_px": None if np.isnan(f.edge_width_px) else round(f.edge_width_px, 3),
+    }  # fmt: skip
+    if e.size_px is not None:
+        out["width_px"], out["height_px"] = e.size_px
+    return out
+
+
+def _robot_message(robot: RobotDescription, kept: list[ImageEntry]) -> Message:
+    """``/robot/description`` of a session with joint readings: a pose set of the kept
+    images, q^s the first one's readings, the tool point unknown (0: the camera fit
+    finds the hand-eye transform)."""
+    from pipeline.robots.description import description_to_dict
+
+    first = kept[0].readings
+    assert first is not None
+    plan = {"n_avg": 1, "order": ["poses"], "sweeps": [], "tool_local_cm": [0.0, 0.0, 0.0],
+            "poses": {"n_points": len(kept)}}  # fmt: skip
+    return Message("/robot/description", T0_NS, {
+        "robot": description_to_dict(robot), "signature_q": [float(v) for v in first],
+        "plan": plan, "mode": "imported",
+    })  # fmt: skip
+
+
 def import_image_set(
-    path: str | Path, session_dir: str | Path, force: bool = False
-) -> tuple[ImageSet, Path]:
-    """Read, detect and write ``session_dir/recording.mcap`` (module docstring)."""
-    s = read_image_set(path)
+    path: str | Path, session_dir: str | Path, force: bool = False,
+    map_path: str | Path | None = None, robot_path: str | Path | None = None,
+) -> tuple[ImageSet, Path]:  # fmt: skip
+    """Read, detect and write ``session_dir/recording.mcap`` (module docstring): ``path``
+    is industrial_calibration's ``cal_data.yaml``, or with ``map_path`` a table of images
+    (and ``robot_path`` the arm whose joint readings it holds)."""
+    from pipeline.robots.description import load_description
+
+    if map_path is None:
+        if robot_path is not None:
+            raise ImportFileError(f"{Path(path).name}: cal_data.yaml holds flange poses, no "
+                                  "joint readings: no --robot", fix="drop --robot")  # fmt: skip
+        s = read_image_set(path)
+    else:
+        robot = None if robot_path is None else load_description(robot_path)
+        s = read_mapped_image_set(path, map_path, robot)
     sdir = Path(session_dir)
     refuse_existing_recording(sdir, force, "the imported one")
     sdir.mkdir(parents=True, exist_ok=True)
     recording = sdir / "recording.mcap"
+    channels = IMAGE_SET_CHANNELS if s.robot is None else CAMERA_IMAGE_CHANNELS
+    meta = {
+        SOURCE_METADATA: source_metadata(
+            s.source, FORMAT, None if map_path is None else Path(map_path)
+        )
+    }
     with session_lock(sdir):
         refuse_existing_recording(sdir, force, "the imported one")
-        meta = {SOURCE_METADATA: source_metadata(s.source, FORMAT, None)}
-        write_recording(recording, image_set_messages(s), IMAGE_SET_CHANNELS, meta)  # atomic
+        staged = sdir / f".{recording.name}.import{TEMP_SUFFIX}"  # debris if killed
+        write_recording(staged, image_set_messages(s), channels, meta)
+        if s.robot is not None:
+            _read_back(staged, s.source.name)
+        os.replace(staged, recording)
     return s, recording
+
+
+def _read_back(staged: Path, src: str) -> None:
+    """Read the staged recording with identify's reader; refuse (and remove) what it
+    would refuse (a joint reading beyond the limits, a wrong unit)."""
+    from pipeline.errors import RecordingError
+    from pipeline.stages.recording import read_recording
+
+    try:
+        read_recording(staged)
+    except RecordingError as exc:
+        staged.unlink(missing_ok=True)
+        what = exc.what.removeprefix(f"{staged.resolve()}: ").removeprefix(f"{staged}: ")
+        raise ImportFileError(
+            f"{src}: identify would refuse this recording: {what}",
+            got=exc.got,
+            fix="check the joint columns and their units",
+        ) from None

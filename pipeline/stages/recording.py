@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.contract.channels import IMAGE_SET_CHANNELS, SENSOR_CHANNELS
+from pipeline.contract.channels import IMAGE_SET_CHANNELS, OPTIONAL_CHANNELS, SENSOR_CHANNELS
 from pipeline.contract.digest import file_sha256
 from pipeline.errors import ArmsigError, RecordingError
 from pipeline.stages.recording_keys import (
@@ -135,7 +135,8 @@ def _read_cached(p: Path, sha: str) -> Recording:
             expected="channels " + ", ".join(topics),
             fix="record every channel of schemas/mcap/ (see schemas/README.md)",
         )
-    foreign = [t for t in TOPICS if t not in topics and msgs[t]]
+    allowed = (*topics, *OPTIONAL_CHANNELS.get(sensor, ()))  # image references (issue 40)
+    foreign = [t for t in TOPICS if t not in allowed and msgs[t]]
     if foreign:
         raise RecordingError(
             f"{p}: channel {foreign[0]} in a recording of sensor {sensor!r}",
