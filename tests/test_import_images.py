@@ -273,3 +273,19 @@ def test_bad_maps_and_tables_are_one_line(
         import_image_set(path, tmp_path / "s", map_path=mp, robot_path=robot)
     assert words in str(err.value) and "\n" not in str(err.value)
     assert not (tmp_path / "s" / "recording.mcap").exists()
+
+
+def test_dropped_image_in_a_joint_table(tmp_path: Path) -> None:
+    """A missing image of a table with joint readings is dropped: no joint state, its
+    /camera/images step after the kept ones; the recording is identify's to read."""
+    table, mp = _mapped(tmp_path, _joint_table(), JOINTS)
+    (tmp_path / "set" / "images" / "1.png").unlink()
+    s, recording = import_image_set(table, tmp_path / "s", map_path=mp, robot_path=PUMA)
+    assert s.kept == 3 and s.drops() == ["1.png: missing: no such file"]
+    rec = read_recording(recording)
+    assert list(rec.joint_step) == [0, 1, 2]
+    assert np.allclose(rec.q_encoder[1], np.degrees([0.2, 0.3, 0.4, 0.5, 0.6, 0.7]))  # image 2
+    images = read_mcap(recording, {"/camera/images": "camera_images"}, "x").messages
+    assert [(m["step"], m["file"]) for _, m in images["/camera/images"]] == [
+        (0, "0.png"), (1, "2.png"), (2, "3.png"), (3, "1.png")
+    ]  # fmt: skip

@@ -24,9 +24,11 @@ from pipeline.importers.rows import LENGTH_CM, readings_in_boundary_units
 from pipeline.importers.sscanss2 import csv_rows, editor_lines, read_text
 from pipeline.importers.table import _cell_reader, _index
 from pipeline.robots.description import RobotDescription
+from pipeline.schemas import compiled_validator, expected_in_words, first_non_finite
 from pipeline.sensor.target import Target, target_from_toml
 
 SCHEMA = "import/images_map.json"
+IMAGES_FIX = "correct the file (docs/import.md, Image sets)"
 _FIX = "correct the map (docs/import.md, Image sets; schemas/import/images_map.json)"
 _POSE = ("x", "y", "z", "qx", "qy", "qz", "qw")
 QUAT_NORM_TOL = 1e-3  # as robot_cal_tools' files (importers/rct.py): a text file's rounding
@@ -58,10 +60,31 @@ class ImageRows:
     flange_in_base: np.ndarray | None
 
 
+def checked_document(src: str, data: Any, schema: str, fix: str = IMAGES_FIX) -> Any:
+    """``data`` (a parsed file ``src``) checked against ``schemas/<schema>``: the first
+    non-finite number or schema violation refused in one line naming its key."""
+    from fastjsonschema import JsonSchemaValueException
+
+    bad = first_non_finite(data)
+    if bad is not None:
+        raise ImportFileError(f"{src}: {bad[0]}: is not a finite number", got=repr(bad[1]),
+                              fix=fix)  # fmt: skip
+    try:
+        compiled_validator(schema)(data)
+    except JsonSchemaValueException as exc:
+        name = str(exc.name)
+        key = name.removeprefix("data").removeprefix(".") or "file"
+        raise ImportFileError(
+            f"{src}: {key}: {one_line(exc.message.removeprefix(name).strip(), 80)}",
+            expected=expected_in_words(str(exc.rule), exc.definition or {}),
+            got=one_line(repr(exc.value), 80),
+            fix=fix,
+        ) from None
+    return data
+
+
 def load_image_map(path: Path) -> ImageMap:
     """Read and check an image-set map (module docstring)."""
-    from pipeline.importers.images import checked_document
-
     src = path.name
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))

@@ -14,7 +14,9 @@ image was dropped when it was. The detectors, by target kind:
   target's frame); a board that looks the same turned 180° (rows + columns even) has no
   such corner and its images are dropped (``ambiguous``);
 - ``circles``: ``cv2.findCirclesGrid`` (symmetric grid, dark circles found by a
-  ``SimpleBlobDetector``). In OpenCV's order, or, with ``origin_dot``, numbered from the
+  ``SimpleBlobDetector``). In OpenCV's order (a symmetric grid looks the same turned
+  180°, so that order may flip between images: measured, a 5 × 4 grid turned 160° came
+  back numbered from the other end), or, with ``origin_dot``, numbered from the
   larger dot that marks the origin (industrial_calibration's "modified circle grid"):
   id 0 at the large dot, Z = X × Y into the board;
 - ``aruco`` / ``apriltag``: ``cv2.aruco.ArucoDetector`` (sub-pixel corner refinement);
