@@ -161,6 +161,12 @@ def test_bad_images_are_dropped_one_line_each(
             ),
             "images/0.png is the same image as images/0.png",
         ),
+        (
+            lambda d: (d / "cal_data.yaml").write_text(
+                (d / "cal_data.yaml").read_text().replace("poses/4.yaml", "poses/3.yaml")
+            ),
+            "poses/3.yaml is the pose of images/3.png and of images/4.png",
+        ),
         (lambda d: shutil.rmtree(d / "images"), "0 of 5 images kept"),
     ],  # fmt: skip
     ids=[
@@ -170,6 +176,7 @@ def test_bad_images_are_dropped_one_line_each(
         "entry without pose",
         "finder without rows",
         "duplicate image",
+        "duplicate pose",
         "no image left",
     ],  # fmt: skip
 )
@@ -289,3 +296,25 @@ def test_dropped_image_in_a_joint_table(tmp_path: Path) -> None:
     assert [(m["step"], m["file"]) for _, m in images["/camera/images"]] == [
         (0, "0.png"), (1, "2.png"), (2, "3.png"), (3, "1.png")
     ]  # fmt: skip
+
+
+def test_cli_import_images(tmp_path: Path) -> None:
+    """`pipeline import cal_data.yaml NAME --format images`: one line written, one warning
+    line per dropped image, exit 0; a refusal is one line and exit EXIT_REFUSED."""
+    from typer.testing import CliRunner
+
+    from pipeline.cli import EXIT_REFUSED, app
+
+    cal = _image_set(tmp_path / "set", 4)
+    (tmp_path / "set" / "images" / "3.png").write_bytes(b"not a png")
+    runner = CliRunner()
+    r = runner.invoke(app, ["import", str(cal), str(tmp_path / "s"), "--format", "images"])
+    assert r.exit_code == 0, r.output
+    assert r.stdout.startswith("wrote ") and "4 images (eye-to-hand), 3 kept, 72 points" in r.stdout
+    assert r.stderr.splitlines() == [
+        "warning: images/3.png: unreadable: OpenCV cannot decode it (not an image, or corrupted)"
+    ]
+    args = ["import", str(cal), str(tmp_path / "t"), "--format", "images", "--robot", str(PUMA)]
+    r = runner.invoke(app, args)
+    assert r.exit_code == EXIT_REFUSED and len(r.stderr.splitlines()) == 1
+    assert "no --robot" in r.stderr

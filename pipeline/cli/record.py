@@ -296,7 +296,12 @@ def distortion_terms(text: str) -> tuple[float, float, float, float, float]:
 
 @commands.command("import")
 def import_(
-    file: Annotated[str, typer.Argument(help="The foreign file of measured points.")],
+    file: Annotated[
+        str,
+        typer.Argument(
+            help="The foreign file of measured points (images: cal_data.yaml or a table)."
+        ),
+    ],
     name: NewSessionArg,
     format: Annotated[ImportFormat, choice("sscanss2, table, rct or images (docs/import.md).")],
     robot: Annotated[

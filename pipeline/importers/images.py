@@ -206,6 +206,13 @@ def read_image_set(path: str | Path, settings: DetectorSettings | None = None) -
     data = checked_document(src, load_yaml(read_text(src_path), src), "import/ic_cal_data.json")
     target = _target(src, data["target_finder"])
     root = src_path.parent
+    named: dict[str, str] = {}
+    for e in data["data"]:  # one pose file for two images: a copied entry, not two poses
+        if e["pose"] in named:
+            raise ImportFileError(f"{src}: {e['pose']} is the pose of {named[e['pose']]} and "
+                                  f"of {e['image']}", expected="one pose file per image",
+                                  fix="correct the entry's pose")  # fmt: skip
+        named[e["pose"]] = e["image"]
     poses = [_pose(root / e["pose"], e["pose"], src) for e in data["data"]]
     files = [e["image"] for e in data["data"]]
     entries = _detected(src, root, files, target, settings, poses, None)
