@@ -108,7 +108,9 @@ def _target(src: str, finder: dict[str, Any]) -> Target:
 
     from pipeline.sensor.target import DICTIONARY_SIZES, target_from_dict
 
-    cm = LENGTH_CM["m"]
+    def _cm(m: float) -> float:  # m -> cm, without 1.8256000000000001 for 0.018256 m
+        return round(float(m) * LENGTH_CM["m"], 9)
+
     rows, cols = int(finder["rows"]), int(finder["cols"])
     need: tuple[str, ...] = ("chessboard_dim", "aruco_marker_dim", "dictionary")
     if finder["type"] == "ModifiedCircleGridTargetFinder":
@@ -122,7 +124,7 @@ def _target(src: str, finder: dict[str, Any]) -> Target:
         )
     if finder["type"] == "ModifiedCircleGridTargetFinder":
         data = {"kind": "circles", "rows": rows, "columns": cols,
-                "spacing_cm": finder["spacing"] * cm, "origin_dot": True}  # fmt: skip
+                "spacing_cm": _cm(finder["spacing"]), "origin_dot": True}  # fmt: skip
     else:
         names = {int(getattr(cv2.aruco, n)): n for n in DICTIONARY_SIZES}
         if finder["dictionary"] not in names:
@@ -130,8 +132,8 @@ def _target(src: str, finder: dict[str, Any]) -> Target:
                                   "is not an OpenCV predefined dictionary",
                                   expected=f"one of {sorted(names)}", fix=_FIX)  # fmt: skip
         data = {"kind": "charuco", "rows": rows, "columns": cols,
-                "spacing_cm": finder["chessboard_dim"] * cm,
-                "marker_cm": finder["aruco_marker_dim"] * cm,
+                "spacing_cm": _cm(finder["chessboard_dim"]),
+                "marker_cm": _cm(finder["aruco_marker_dim"]),
                 "dictionary": names[finder["dictionary"]]}  # fmt: skip
     try:
         return target_from_dict(data, f"{src}: target_finder")
