@@ -80,6 +80,7 @@ class ImportFormat(StrEnum):
     table = "table"
     rct = "rct"
     rosbag2 = "rosbag2"
+    images = "images"
 
 
 class Study(StrEnum):

@@ -299,10 +299,20 @@ def distortion_terms(text: str) -> tuple[float, float, float, float, float]:
 
 @commands.command("import")
 def import_(
-    file: Annotated[str, typer.Argument(help="The foreign file of measured points.")],
+    file: Annotated[
+        str,
+        typer.Argument(
+            help="The foreign file of measured points (images: cal_data.yaml or a table)."
+        ),
+    ],
     name: NewSessionArg,
-    format: Annotated[ImportFormat, choice("sscanss2, table, rct or rosbag2 (docs/import.md).")],
-    robot: Annotated[str, typer.Option(help="Robot description .toml of the measured machine.")],
+    format: Annotated[
+        ImportFormat, choice("sscanss2, table, rct, rosbag2 or images (docs/import.md).")
+    ],
+    robot: Annotated[
+        str | None,
+        typer.Option(help="Robot description .toml of the measured machine (not for images)."),
+    ] = None,
     map: Annotated[
         str | None, typer.Option(help="Map file (TOML): columns, units, sweeps (docs/import.md).")
     ] = None,
@@ -310,11 +320,19 @@ def import_(
     force: ForceRecording = False,
     as_json: JsonOption = False,
 ) -> None:
-    """Convert a file of measured points into a point session (recording.mcap)."""
+    """Convert a file of measured points into a point session (recording.mcap), or camera
+    images into a camera session: industrial_calibration's cal_data.yaml as it is, or a
+    table of images with joint readings or flange poses and --map (docs/import.md)."""
     from pipeline.importers import import_file
     from pipeline.sweeps import CHECK_SWEEP, POSES_SWEEP
 
     folder = new_session_folder(name)
+    if format.value == "images":
+        _import_images(file, folder, map, robot, force, as_json)
+        return
+    if robot is None:
+        raise ArmsigError(f"--format {format.value} needs --robot",
+                          fix="--robot ROBOT.toml, the measured machine's description")  # fmt: skip
     out = import_file(file, format.value, robot, folder, map, force, robot_id)
     n_check = int((out.rows.sweep == CHECK_SWEEP).sum())
     n_poses = int((out.rows.sweep == POSES_SWEEP).sum())
@@ -348,6 +366,31 @@ def import_(
         typer.echo(f"note: {note}", err=True)
     if out.tool.warning:
         warn(out.tool.warning)
+
+
+def _import_images(
+    file: str, folder: Any, map: str | None, robot: str | None, force: bool, as_json: bool
+) -> None:
+    """``import --format images``: detect, record, one line per dropped image."""
+    from pipeline.importers.images import import_image_set
+
+    s, recording = import_image_set(file, folder, force, map, robot)
+    points = sum(len(e.found.point_ids) for e in s.images)
+    if as_json:
+        print_json({
+            "session": str(folder), "recording": str(recording), "format": "images",
+            "setup": s.setup, "target": s.target.to_dict(), "images": len(s.images),
+            "kept": s.kept, "points": points, "dropped": s.drops(),
+        })  # fmt: skip
+    else:
+        typer.echo(
+            f"wrote {recording}: {len(s.images)} images ({s.setup}), {s.kept} kept, "
+            f"{points} points; "
+            + ("flange poses without joint readings: the arm is not calibrated"
+               if s.robot is None else f"joint readings of {s.robot.name}")
+        )  # fmt: skip
+    for line in s.drops():
+        warn(line)
 
 
 @commands.command("plan")

@@ -24,6 +24,19 @@ CAMERA_CHANNELS = {
     **{t: s for t, s in CHANNELS.items() if t != "/sonic/ranges"},
     "/camera/detections": "camera_detections",
 }
+#: topic -> schema file of an imported image set without joint readings (issue 40): the
+#: images by content hash, their detections, the flange poses the robot reported.
+IMAGE_SET_CHANNELS = {
+    "/rig/description": "rig_description",
+    "/camera/images": "camera_images",
+    "/camera/detections": "camera_detections",
+    "/robot/flange_pose": "flange_pose",
+}
+#: An imported image set with joint readings (issue 40): a camera recording, and its
+#: images by content hash (a channel the reader allows and does not need).
+CAMERA_IMAGE_CHANNELS = {**CAMERA_CHANNELS, "/camera/images": "camera_images"}
+#: Channels a recording of a sensor kind may hold besides its own.
+OPTIONAL_CHANNELS = {"camera": ("/camera/images",)}
 #: sensor kind of ``/rig/description`` (absent: ``sonic``) -> channels of its recording
 SENSOR_CHANNELS = {"sonic": CHANNELS, "points": POINT_CHANNELS, "camera": CAMERA_CHANNELS}
 #: topic -> schema file of the evaluation recording ``evaluation.mcap`` (docs/evaluation.md)

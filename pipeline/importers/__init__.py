@@ -27,7 +27,7 @@ from pipeline.importers.sweeps import (
 from pipeline.importers.write import source_metadata, write_imported
 from pipeline.robots.description import RobotDescription, load_description
 
-FORMATS = ("sscanss2", "table", "rct", "rosbag2")
+FORMATS = ("sscanss2", "table", "rct", "rosbag2", "images")  # images: a camera session
 #: The most rows one import takes. Measured on 2 cores (docs/import.md, "Size"): 100,000
 #: rows import in 22 s (0.67 GB) and identify in 37 s (0.87 GB); time and memory grow at
 #: least in proportion (a million rows: minutes and ~7 GB each), for no better signature.
@@ -68,6 +68,12 @@ def parse_foreign(
         return _rosbag2(path, robot, imap)
     if not path.is_file():
         raise ImportFileError(f"{path}: no such file", fix="check the path")
+    if fmt == "images":
+        raise ImportFileError(
+            f"{path.name}: --format images holds camera images, not measured points",
+            expected="sscanss2 | table | rct",
+            fix="`pipeline import FILE NAME --format images` makes a camera session of it",
+        )
     if fmt == "sscanss2":
         from pipeline.importers.sscanss2 import read_sscanss2
 

@@ -11,7 +11,9 @@ ids where OpenCV has a board of that kind:
   ``((c + 1) s, (r + 1) s)`` (``cv2.aruco.CharucoBoard((columns, rows), ...)``'s
   ``getChessboardCorners()`` and ChArUco corner ids);
 - ``circles``: a symmetric grid of circle centres, id ``r · columns + c`` at ``(c s, r s)``
-  (``cv2.findCirclesGrid``'s order for a ``(columns, rows)`` pattern);
+  (``cv2.findCirclesGrid``'s order for a ``(columns, rows)`` pattern); with
+  ``origin_dot = true`` (industrial_calibration's "modified circle grid") id 0 is the larger
+  dot and Z = X × Y points into the board (:mod:`pipeline.sensor.detect`);
 - ``aruco`` and ``apriltag``: ``rows × columns`` markers of side ``marker_cm`` whose first
   corners are ``spacing_cm`` apart, marker ``first_id + r · columns + c``; its four corners
   (OpenCV's order: top-left, top-right, bottom-right, bottom-left) have ids
@@ -62,6 +64,7 @@ class Target:
     marker_cm: float = 0.0
     dictionary: str = ""
     first_id: int = 0
+    origin_dot: bool = False  # circles: a larger dot marks the origin (issue 40)
 
     @property
     def whole_board(self) -> bool:
@@ -96,7 +99,8 @@ class Target:
     def to_dict(self) -> dict[str, Any]:
         """The target as its file states it (keys with their default value left out)."""
         out = asdict(self)
-        for key, default in (("marker_cm", 0.0), ("dictionary", ""), ("first_id", 0)):
+        defaults = (("marker_cm", 0.0), ("dictionary", ""), ("first_id", 0), ("origin_dot", False))
+        for key, default in defaults:
             if out[key] == default:
                 del out[key]
         return out
@@ -133,6 +137,9 @@ def target_from_dict(data: Any, src: str = "target") -> Target:
 
 
 def _check_markers(src: str, t: Target) -> None:
+    if t.origin_dot and t.kind != "circles":
+        raise _refuse(src, "origin_dot", "only a circle grid has an origin dot",
+                      "no origin_dot", t.origin_dot)  # fmt: skip
     if t.kind not in _MARKERS:
         for key in ("marker_cm", "dictionary", "first_id"):
             if key in t.to_dict():

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.contract.channels import SENSOR_CHANNELS
+from pipeline.contract.channels import IMAGE_SET_CHANNELS, OPTIONAL_CHANNELS, SENSOR_CHANNELS
 from pipeline.contract.digest import file_sha256
 from pipeline.errors import ArmsigError, RecordingError
 from pipeline.stages.recording_keys import (
@@ -37,8 +37,9 @@ from pipeline.sweeps import CHECK_SWEEP, POSES_SWEEP, TOOL_SWEEP, sweep_id, swee
 __all__ = ["CHECK_SWEEP", "POSES_SWEEP", "TOOL_SWEEP", "Recording", "read_recording", "sweep_name"]
 
 #: every channel a session recording may hold (sonic and point sensors)
-TOPICS = tuple(dict.fromkeys(t for ch in SENSOR_CHANNELS.values() for t in ch))
-_KNOWN = {t: s for ch in SENSOR_CHANNELS.values() for t, s in ch.items()}
+_ALL = (*SENSOR_CHANNELS.values(), IMAGE_SET_CHANNELS)  # image sets: issue 40
+TOPICS = tuple(dict.fromkeys(t for ch in _ALL for t in ch))
+_KNOWN = {t: s for ch in _ALL for t, s in ch.items()}
 #: Recorded joint values may pass the robot's limits by this much (deg or cm): far
 #: above a servo's settling error (a few encoder counts) and an encoder offset
 #: (tenths of a degree), far below what garbage or a wrong unit gives.
@@ -119,6 +120,13 @@ def _read_cached(p: Path, sha: str) -> Recording:
     msgs = read_mcap(p, _KNOWN, _FIX).messages
     rigs = msgs["/rig/description"]
     sensor = str(rigs[0][1].get("sensor", "sonic")) if len(rigs) == 1 else "sonic"
+    if msgs["/robot/flange_pose"]:  # an image set without joint readings (issue 40)
+        raise RecordingError(
+            f"{p}: flange poses and no joint readings: the arm cannot be calibrated from them",
+            expected="/robot/joint_state readings at each image to calibrate the arm",
+            fix="such a session calibrates the camera's intrinsics and hand-eye transforms "
+            "only (/rig/description arm), with the camera fit of issue 39",
+        )
     topics = tuple(SENSOR_CHANNELS[sensor])
     missing = [t for t in topics if not msgs[t]]
     if missing:
@@ -127,7 +135,8 @@ def _read_cached(p: Path, sha: str) -> Recording:
             expected="channels " + ", ".join(topics),
             fix="record every channel of schemas/mcap/ (see schemas/README.md)",
         )
-    foreign = [t for t in TOPICS if t not in topics and msgs[t]]
+    allowed = (*topics, *OPTIONAL_CHANNELS.get(sensor, ()))  # image references (issue 40)
+    foreign = [t for t in TOPICS if t not in allowed and msgs[t]]
     if foreign:
         raise RecordingError(
             f"{p}: channel {foreign[0]} in a recording of sensor {sensor!r}",
