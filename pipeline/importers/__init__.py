@@ -71,7 +71,7 @@ def parse_foreign(
     if fmt == "images":
         raise ImportFileError(
             f"{path.name}: --format images holds camera images, not measured points",
-            expected="sscanss2 | table | rct",
+            expected="sscanss2 | table | rct | rosbag2",
             fix="`pipeline import FILE NAME --format images` makes a camera session of it",
         )
     if fmt == "sscanss2":
