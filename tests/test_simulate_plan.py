@@ -16,13 +16,13 @@ SMALL = {"points": 12, "repeats": 2}
 #: sha256 of recording.mcap as made before the plan was cached (main at ae2a052), seed 5;
 #: renewed when the recording embeds a changed channel schema (issue 26: the sweep
 #: 'poses' of joint_state.json; issue 27: its optional payload_kg; issue 29: plan.tool_targets
-#: of robot_description.json; issue 39: sensor 'camera' of rig_description.json), its messages
-#: unchanged (checked against 0537394, bef8e5b, 23ce14c and 9454d58: every message's topic,
-#: log and publish time and bytes equal).
+#: of robot_description.json; issue 39: sensor 'camera' of rig_description.json; issue 43:
+#: robot_id of robot_description.json), its messages unchanged (checked against 0537394,
+#: bef8e5b, 23ce14c and 9454d58: every message's topic, log and publish time and bytes equal).
 BEFORE = {
-    (): "5e02dbfcf41f91c89768421162382126168717ee508fd39dfcba556661e5ae6e",
+    (): "6518c7e45f624cf99b1d67e2a2a604e2a3361eb957a6324b5dbfc2d0b8b6eceb",
     (("noise_factor", 4.6), ("wac_error_cm", 0.5)): (
-        "88004c2e7838a1bd905adb832895a4ad5aad8345c751606de127ec0092fa22c5"
+        "354641ab99bf14d42f986a2a112880b52f7754132f515de7579bf89c787bce7a"
     ),
 }
 
