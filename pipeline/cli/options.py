@@ -70,6 +70,7 @@ class ImportFormat(StrEnum):
     sscanss2 = "sscanss2"
     table = "table"
     rct = "rct"
+    mat = "mat"
 
 
 class Study(StrEnum):
@@ -160,6 +161,15 @@ SessionArg = Annotated[
 #: ``--json``: machine output on stdout (warnings and errors stay on stderr).
 JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON on stdout for machines.")]
 #: The ``NAME`` of ``simulate`` and ``import``: a new session's name or folder.
+#: ``--strict`` of import and validate: refuse a row with a missing value, do not drop it.
+StrictOption = Annotated[
+    bool,
+    typer.Option(
+        "--strict",
+        help="Refuse a row with a missing or non-finite measured value (default: drop it, "
+        "count it per column and say so in one line).",
+    ),
+]
 NewSessionArg = Annotated[
     str, typer.Argument(help="Session name (sessions/NAME) or a folder path.")
 ]

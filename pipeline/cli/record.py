@@ -16,6 +16,7 @@ from pipeline.cli.options import (
     JsonOption,
     NewSessionArg,
     Sensor,
+    StrictOption,
     choice,
     choice_list,
     choices_of,
@@ -240,22 +241,30 @@ def simulate(
 
 @commands.command("import")
 def import_(
-    file: Annotated[str, typer.Argument(help="The foreign file of measured points.")],
+    file: Annotated[
+        list[str],
+        typer.Argument(
+            help="The foreign file(s) of measured points: paths or quoted globs, in "
+            "order (one data set; joined by row when the map names a file per "
+            "column group)."
+        ),
+    ],
     name: NewSessionArg,
-    format: Annotated[ImportFormat, choice("sscanss2, table or rct (docs/import.md).")],
+    format: Annotated[ImportFormat, choice("sscanss2, table, rct or mat (docs/import.md).")],
     robot: Annotated[str, typer.Option(help="Robot description .toml of the measured machine.")],
     map: Annotated[
         str | None, typer.Option(help="Map file (TOML): columns, units, sweeps (docs/import.md).")
     ] = None,
     force: ForceRecording = False,
+    strict: StrictOption = False,
     as_json: JsonOption = False,
 ) -> None:
-    """Convert a file of measured points into a point session (recording.mcap)."""
+    """Convert file(s) of measured points into a point session (recording.mcap)."""
     from pipeline.importers import import_file
     from pipeline.sweeps import CHECK_SWEEP, POSES_SWEEP
 
     folder = new_session_folder(name)
-    out = import_file(file, format.value, robot, folder, map, force)
+    out = import_file(list(file), format.value, robot, folder, map, force, strict)
     n_check = int((out.rows.sweep == CHECK_SWEEP).sum())
     n_poses = int((out.rows.sweep == POSES_SWEEP).sum())
     if as_json:
@@ -269,6 +278,8 @@ def import_(
                 "poses": n_poses,
                 "check": n_check,
                 "targets": sorted(out.rows.targets),
+                "rows_dropped": out.rows.dropped,
+                "notes": list(out.rows.notes),
                 "tool": {
                     "note": out.tool.note,
                     "rows": out.tool.rows.tolist(),
@@ -283,6 +294,8 @@ def import_(
             f"wrote {out.recording}: {len(out.rows.where)} configurations "
             f"({poses}{n_check} for validation), tool from {out.tool.note}"
         )
+    for note in out.rows.notes:  # rows dropped for a missing value, σ floored: said
+        warn(note)
     if out.tool.warning:
         warn(out.tool.warning)
 

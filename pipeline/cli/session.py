@@ -12,6 +12,7 @@ from pipeline.cli.options import (
     ImportFormat,
     JsonOption,
     SessionArg,
+    StrictOption,
     choice,
     comma_list,
     stage_params,
@@ -188,9 +189,16 @@ def audit(
 @commands.command()
 def validate(
     session: SessionArg,
-    against: Annotated[str, typer.Option(help="A second file of measured points.")],
-    format: Annotated[ImportFormat, choice("sscanss2, table or rct (docs/import.md).")],
+    against: Annotated[
+        list[str],
+        typer.Option(
+            help="A second file of measured points; repeat it (or give a quoted "
+            "glob) for several files of one validation set, in order."
+        ),
+    ],
+    format: Annotated[ImportFormat, choice("sscanss2, table, rct or mat (docs/import.md).")],
     map: Annotated[str | None, typer.Option(help="Map file (TOML) of the second file.")] = None,
+    strict: StrictOption = False,
     as_json: JsonOption = False,
 ) -> None:
     """The signature's position error on a second file (read in memory, nothing written).
@@ -201,14 +209,16 @@ def validate(
     """
     from pipeline.evaluate.validate import validate_against
 
-    r = validate_against(session, against, format.value, map)
+    r = validate_against(session, list(against), format.value, map, strict)
     if as_json:
         print_json(r)
         return
     typer.echo(
         f"{r['file']}: {r['n']} points of target {r['target']} vs the signature of {session}"
     )
-    if r["rows_skipped"]:  # said, not skipped silently (issue 32)
+    for note in r["notes"]:  # rows dropped for a missing value (issue 42), σ floored
+        warn(note)
+    if r["rows_skipped"] and not r["notes"]:  # said, not skipped silently (issue 32)
         warn(f"{r['rows_skipped']} row(s) of {r['file']} skipped: a reading or coordinate "
              "is not a finite number (NaN or inf)")  # fmt: skip
     typer.echo(

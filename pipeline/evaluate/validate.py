@@ -18,7 +18,7 @@ import numpy as np
 
 from pipeline.errors import ArmsigError, os_errors_refused
 from pipeline.evaluation.validation import error_distances, model_points, position_errors
-from pipeline.importers import OS_FIX, parse_foreign
+from pipeline.importers import OS_FIX, expand_paths, parse_foreign
 from pipeline.importers.mapping import ImportMap, load_map
 from pipeline.signature.file import FILE_NAME, Signature
 from pipeline.signature.session import load_session_signature
@@ -68,23 +68,31 @@ def design_errors(sig: Signature, q: np.ndarray, measured: np.ndarray) -> np.nda
 
 
 def validate_against(
-    session_dir: str | Path, path: str | Path, fmt: str, map_path: str | Path | None = None
+    session_dir: str | Path,
+    path: str | Path | list[str | Path],
+    fmt: str,
+    map_path: str | Path | None = None,
+    strict: bool = False,
 ) -> dict[str, Any]:
-    """The signature of ``session_dir`` against every row of a second foreign file
-    (parsed in memory, never written into the session): its target of the session's
-    tool point's id vs the model, and the registered design model beside it."""
+    """The signature of ``session_dir`` against every row of a second data set (one or
+    several foreign files, paths or globs, in order; parsed in memory, never written into
+    the session): its target of the session's tool point's id vs the model, and the
+    registered design model beside it."""
     sdir = Path(session_dir)
-    with os_errors_refused(path, OS_FIX):
+    specs = path if isinstance(path, list) else [path]
+    with os_errors_refused(specs[0], OS_FIX):
+        files = expand_paths(specs)
         sig = load_session_signature(sdir / FILE_NAME)
         imap = ImportMap() if map_path is None else load_map(Path(map_path))
+        imap = replace(imap, strict=strict)
         if fmt != "sscanss2":
             imap = _as_poses(imap)
-        rows, _ = parse_foreign(Path(path), fmt, sig.robot, imap)
-        target = _target(Path(path).name, list(rows.targets), _session_tool_target(sdir))
+        rows, _ = parse_foreign(files, fmt, sig.robot, imap)
+        target = _target(rows.name, list(rows.targets), _session_tool_target(sdir))
     measured = rows.targets[target]
     ok = np.isfinite(rows.q).all(axis=1) & np.isfinite(measured).all(axis=1)
     if not ok.any():
-        raise ArmsigError(f"{Path(path).name}: no row with finite readings and coordinates")
+        raise ArmsigError(f"{rows.name}: no row with finite readings and coordinates")
     q = sig.robot.joints_from_readings(rows.q[ok])
     model = model_points(sig.chain, q, sig.prismatic, sig.nongeometric)
     raw, reg = error_distances(model, measured[ok])
@@ -92,10 +100,12 @@ def validate_against(
     predicted = _predicted_rms_cm(sdir, joints_to_internal(q, sig.prismatic))
     return {
         "session": str(sdir),
-        "file": Path(path).name,
+        "file": files[0].name if len(files) == 1 else rows.name,
+        "files": [f.name for f in files],
         "format": fmt,
         "target": target,
-        "rows_skipped": int((~ok).sum()),
+        "rows_skipped": int((~ok).sum()) + rows.dropped,
+        "notes": list(rows.notes),
         **position_errors(raw, reg).to_dict(),
         "design_registered_mean_cm": design.mean_cm,
         "design_registered_rms_cm": design.rms_cm,

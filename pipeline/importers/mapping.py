@@ -35,6 +35,8 @@ class TargetColumns:
     z: str | int
     sigma: str | int | None = None
     sigma_xyz: tuple[str | int, str | int, str | int] | None = None
+    file: str | None = None  # several files joined by row: the one holding these columns
+    fixed: bool = False  # fixed in the world (on the base), not on the arm
 
 
 @dataclass(frozen=True)
@@ -44,6 +46,7 @@ class JointColumn:
     column: str | int
     unit: str
     unwrap: bool = False
+    file: str | None = None  # several files joined by row: the one holding this column
 
 
 @dataclass(frozen=True)
@@ -67,10 +70,15 @@ class OrientationColumns:
 
 @dataclass(frozen=True)
 class CheckSplit:
-    """A seeded random ``fraction`` of a pose set's rows imported as sweep ``check``."""
+    """A pose set's rows imported as sweep ``check``: a seeded random ``fraction``, the
+    rows whose ``column`` is true, the rows of ``files`` (names or globs), or the data
+    rows of ``ranges`` (1-based, both ends included, over the files in order)."""
 
-    fraction: float
-    seed: int
+    fraction: float | None = None
+    seed: int | None = None
+    column: str | int | None = None
+    files: tuple[str, ...] = ()
+    ranges: tuple[tuple[int, int], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -100,6 +108,15 @@ class ImportMap:
     payload_column: str | int | None = None  # or a column of it (kg)
     orientation: OrientationColumns | None = None
     check: CheckSplit | None = None
+    points_per_pose: int | None = None  # stacked: this many rows per pose
+    pose_column: str | int | None = None  # stacked: rows sharing its value are one pose
+    sigma_floor: float | None = None  # length_unit; None: the tracker's resolution
+    strict: bool = False  # --strict, not a map key: refuse a missing value, do not drop
+
+    @property
+    def joined(self) -> bool:
+        """Several files joined by row (a ``file`` key in [[targets]] or [[joints]])."""
+        return any(t.file for t in self.targets) or any(j.file for j in self.joints)
 
     @property
     def name(self) -> str:
@@ -119,7 +136,8 @@ class ImportMap:
     def only_sigma(self, fmt: str) -> None:
         """Refuse a map that says more than a σ (``sigma``, ``length_unit``) for ``fmt``,
         a format whose file states everything else (sscanss2)."""
-        plain = replace(self, path=None, sigma=None, length_unit=ImportMap.length_unit)
+        plain = replace(self, path=None, sigma=None, length_unit=ImportMap.length_unit,
+                        strict=False)  # fmt: skip
         if plain != ImportMap():
             raise ImportFileError(
                 f"{self.name}: --format {fmt} reads only sigma and length_unit from a map",
@@ -212,6 +230,19 @@ def _check_combinations(src: str, data: dict[str, Any]) -> None:
         if (axes or "sigma" in t) and "sigma" in data:
             raise _refuse(src, "sigma", f"is stated and targets[{k}] has σ columns too",
                           "one stated σ for the file, or σ columns", data["sigma"])  # fmt: skip
+    check = data.get("check")
+    if check is not None:
+        ways = [k for k in ("fraction", "column", "files", "rows") if k in check]
+        if len(ways) != 1 or ("fraction" in check) != ("seed" in check):
+            raise _refuse(src, "check", "names the held-out rows in none or several ways",
+                          "fraction and seed, column, files or rows", sorted(check))  # fmt: skip
+        for k, (a, b) in enumerate(check.get("rows", [])):
+            if a > b:
+                raise _refuse(src, f"check.rows[{k}]", "ends before it starts",
+                              "[first, last] with first <= last", [a, b])  # fmt: skip
+    if "points_per_pose" in data and "pose_column" in data:
+        raise _refuse(src, "pose_column", "is given and points_per_pose too",
+                      "one way of stacking rows", data["pose_column"])  # fmt: skip
     if "payload_kg" in data and "payload_column" in data:
         raise _refuse(
             src, "payload_kg", "is stated and payload_column is given too",
@@ -251,11 +282,13 @@ def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
             t["z"],
             t.get("sigma"),
             (t["sigma_x"], t["sigma_y"], t["sigma_z"]) if "sigma_x" in t else None,
+            t.get("file"),
+            bool(t.get("fixed", False)),
         )
         for k, t in enumerate(data.get("targets", []))
     )
     joints = tuple(
-        JointColumn(j["column"], j.get("unit", "deg"), j.get("unwrap", False))
+        JointColumn(j["column"], j.get("unit", "deg"), j.get("unwrap", False), j.get("file"))
         for j in data.get("joints", [])
     )
     sw = data.get("sweeps", {})
@@ -295,5 +328,18 @@ def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
             orient["convention"],
             orient.get("sigma_deg"),
         ),
-        check=None if check is None else CheckSplit(float(check["fraction"]), int(check["seed"])),
+        check=None if check is None else _check_split(check),
+        points_per_pose=data.get("points_per_pose"),
+        pose_column=data.get("pose_column"),
+        sigma_floor=data.get("sigma_floor"),
+    )
+
+
+def _check_split(check: dict[str, Any]) -> CheckSplit:
+    return CheckSplit(
+        None if "fraction" not in check else float(check["fraction"]),
+        None if "seed" not in check else int(check["seed"]),
+        check.get("column"),
+        tuple(check.get("files", ())),
+        tuple((int(a), int(b)) for a, b in check.get("rows", ())),
     )

@@ -8,7 +8,6 @@ decimal comma (``decimal = ","``)."""
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Callable
 from dataclasses import replace
@@ -17,74 +16,63 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import ImportFileError
-from pipeline.importers.mapping import ImportMap, TargetColumns
+from pipeline.importers.grid import Block, CellValue, Grid
+from pipeline.importers.layout import Columns, columns, delimited_loader
+from pipeline.importers.mapping import ImportMap
+from pipeline.importers.missing import sigma_floored, without_missing
 from pipeline.importers.rows import (
     ANGLE_DEG,
     LENGTH_CM,
     MeasuredRows,
+    concat_rows,
     readings_in_boundary_units,
     unit_factor,
 )
-from pipeline.importers.sscanss2 import csv_rows, editor_lines, read_text
-from pipeline.importers.sweeps import infer_sweeps, pose_set, select_sweeps, tolerances
+from pipeline.importers.sweeps import (
+    held_out_marked,
+    infer_sweeps,
+    pose_set,
+    select_sweeps,
+    tolerances,
+)
 from pipeline.robots.description import RobotDescription
-from pipeline.stages.recording import CHECK_SWEEP
+from pipeline.stages.recording import CHECK_SWEEP, POSES_SWEEP
 
 FORMAT = "table"
 INFER = "infer"
 _MISSING = ("", "nan", "na", "null")
 
-#: A cell parser: (fields, 0-based column, file line, what the column is) -> number.
-Cell = Callable[[list[str], int, int, str], float]
+#: A cell parser: (cells, 0-based joined column, pose row, what the column is) -> number.
+Cell = Callable[[list[CellValue], int, int, str], float]
+#: A file's blocks of columns: (path, the variables the map names) -> blocks by variable.
+Loader = Callable[[Path, set[str | None]], dict[str | None, Block]]
+#: A ``.mat`` column ("Q:2") -> its variable and its column there.
+Variable = Callable[[str | int], tuple[str | None, str | int]]
 
 
-def _index(col: str | int, header: list[str] | None, src: str, line: int, what: str) -> int:
-    """0-based index of a map column (header name or 1-based number)."""
-    if isinstance(col, int):
-        if header is not None and col > len(header):
-            raise ImportFileError(
-                f"{src}: line {line}: no column {col} for {what}",
-                expected=f"a column number 1 to {len(header)}",
-                fix="correct the map",
-            )
-        return col - 1
-    if header is None or col not in header:
-        raise ImportFileError(
-            f"{src}: line {line}: missing column {col!r} ({what})",
-            expected="a column of the header" if header else "a header (map: header = true)",
-            got=", ".join(header) if header else "no header",
-            fix="correct the column name in the map, or add the column to the file",
-        )
-    at = [k + 1 for k, h in enumerate(header) if h == col]
-    if len(at) > 1:
-        raise ImportFileError(
-            f"{src}: line {line}: column {col!r} ({what}) appears {len(at)} times in the header "
-            f"(columns {', '.join(map(str, at[:-1]))} and {at[-1]})",
-            expected="a column name the header holds once",
-            fix=f"name the column by its number in the map (e.g. {at[-1]}), or rename it",
-        )
-    return at[0] - 1
+def _cell_reader(grid: Grid, decimal: str) -> Cell:
+    """Parse a cell as a number (NaN when empty or "nan"; a ``.mat`` number as it is); with
+    a decimal comma, "0,5" is one half and a cell holding a '.' (a thousands separator?) is
+    refused. Errors name the cell's own file and line."""
 
-
-def _cell_reader(src: str, decimal: str) -> Cell:
-    """Parse a cell as a number (NaN when empty or "nan"); with a decimal comma, "0,5" is
-    one half and a cell holding a '.' (a thousands separator?) is refused."""
-
-    def cell(cells: list[str], k: int, line: int, what: str) -> float:
+    def cell(cells: list[CellValue], k: int, r: int, what: str) -> float:
         if k >= len(cells):
             raise ImportFileError(
-                f"{src}: line {line}: {len(cells)} columns, no column {k + 1} ({what})",
-                expected=f"at least {k + 1} columns",
+                f"{grid.place(k, r)}: {len(cells)} columns, no column {grid.local(k)} ({what})",
+                expected=f"at least {grid.local(k)} columns",
                 fix="complete the row (a missing column?) or list it in the map's skip_lines",
             )
-        text = cells[k].strip()
+        value = cells[k]
+        if isinstance(value, float):
+            return value
+        text = value.strip()
         if text.lower() in _MISSING:
             return float("nan")
         if decimal == ",":
             if "." in text:
                 raise ImportFileError(
-                    f"{src}: line {line}: column {k + 1} ({what}) holds a '.' in a file with "
-                    "decimal commas",
+                    f"{grid.place(k, r)}: column {grid.local(k)} ({what}) holds a '.' in a file "
+                    "with decimal commas",
                     expected='numbers like 0,5 (map: decimal = ",")',
                     got=repr(text),
                     fix='remove the thousands separators, or set decimal = "." in the map',
@@ -94,7 +82,7 @@ def _cell_reader(src: str, decimal: str) -> Cell:
             return float(text)
         except ValueError:
             raise ImportFileError(
-                f"{src}: line {line}: column {k + 1} ({what}) is not a number",
+                f"{grid.place(k, r)}: column {grid.local(k)} ({what}) is not a number",
                 got=repr(text),
                 fix="write a decimal number, or list the row in the map's skip_lines",
             ) from None
@@ -102,20 +90,19 @@ def _cell_reader(src: str, decimal: str) -> Cell:
     return cell
 
 
-def _delimiter(imap: ImportMap, lines: list[str]) -> str:
-    """The map's delimiter, else guessed among , ; tab space (not ',' with decimal commas)."""
-    if imap.delimiter is not None:
-        return imap.delimiter
-    candidates = ";\t " if imap.decimal == "," else ",;\t "
-    try:
-        return csv.Sniffer().sniff("\n".join(lines[:20]), delimiters=candidates).delimiter
-    except csv.Error:
-        return candidates[0]
-
-
-def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> MeasuredRows:
-    """Parse the table with its map into rows (deg / cm) with their sweeps assigned."""
-    src, mname = path.name, imap.name
+def read_table(
+    paths: Path | list[Path],
+    imap: ImportMap,
+    robot: RobotDescription,
+    loader: Loader | None = None,
+    variable: Variable | None = None,
+) -> MeasuredRows:
+    """Parse the file(s) with their map into rows (deg / cm) with their sweeps assigned:
+    each file alike, one after the other, or the files joined by row (a map's ``file``
+    keys). ``loader`` and ``variable``: a ``.mat`` file's blocks
+    (:mod:`pipeline.importers.matfile`); default a delimited file's."""
+    mname = imap.name
+    paths = [paths] if isinstance(paths, Path) else paths
     if len(imap.joints) != robot.n_joints:
         raise ImportFileError(
             f"{mname}: {len(imap.joints)} [[joints]] for {robot.n_joints} joints of {robot.name}",
@@ -127,77 +114,77 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
             f"{mname}: no [[targets]]", expected="x, y, z columns of at least one target",
             fix="add a [[targets]] table (docs/import.md)",
         )  # fmt: skip
-    lines = editor_lines(read_text(path))[imap.skip_rows :]
-    reader = csv_rows(lines, src, imap.skip_rows, delimiter=_delimiter(imap, lines),
-                      skipinitialspace=True)  # fmt: skip
-    header: list[str] | None = None
-    hl = imap.skip_rows + 1  # the header's line
-    if imap.header:
-        header = [h.strip() for h in next(reader, (hl, []))[1]]
+    load = loader or delimited_loader(imap)
+    scol = imap.sweep_column if imap.sweep_column not in (None, INFER) else None
+    groups = [paths] if imap.joined else [[p] for p in paths]
+    rows = concat_rows([_parsed(columns(g, imap, load, variable, scol), g[0], imap, robot)
+                        for g in groups])  # fmt: skip
+    rows = held_out_marked(rows, imap, paths)
+    rows = sigma_floored(without_missing(rows, imap, imap.strict), imap)
+    return assigned(rows, imap, robot, scol is not None)
+
+
+def _parsed(cols: Columns, path: Path, imap: ImportMap, robot: RobotDescription) -> MeasuredRows:
+    """One grid's rows in armsig's units (sweeps from a sweep column, else 0)."""
+    grid, mname = cols.grid, imap.name
     length = unit_factor(imap.length_unit, LENGTH_CM, "length", f"{mname}: length_unit")
-    # the tool target first: its id is plan.tool_target, its orientation the recorded one
-    targets = sorted(imap.targets, key=lambda t: t.id != (imap.tool_target or imap.targets[0].id))
-    cols = {t.id: [_index(c, header, src, hl, f"target {t.id} {a}")
-                   for c, a in zip((t.x, t.y, t.z), "xyz", strict=True)]
-            for t in targets}  # fmt: skip
-    scols = {t.id: [_index(c, header, src, hl, f"target {t.id} σ {a}")
-                    for c, a in zip(_sigma_columns(t), "xyz", strict=True)]
-             for t in targets if t.sigma is not None or t.sigma_xyz is not None}  # fmt: skip
-    jcols = [_index(j.column, header, src, hl, f"joint {k + 1}")
-             for k, j in enumerate(imap.joints)]  # fmt: skip
-    ocols = []
-    if imap.orientation is not None:
-        names = ("rx", "ry", "rz")
-        ocols = [_index(c, header, src, hl, f"orientation {a}")
-                 for c, a in zip(imap.orientation.columns, names, strict=True)]  # fmt: skip
-    pcol = None
-    if imap.payload_column is not None:
-        pcol = _index(imap.payload_column, header, src, hl, "payload")
-    scol = None
-    if imap.sweep_column not in (None, INFER):
-        scol = _index(imap.sweep_column, header, src, hl, "sweep")  # type: ignore[arg-type]
-    cell = _cell_reader(src, imap.decimal)
-    where, q, sweep, angles, payload = [], [], [], [], []  # type: ignore[var-annotated]
-    pts = {t: [] for t in cols}  # type: ignore[var-annotated]
-    sig = {t: [] for t in scols}  # type: ignore[var-annotated]
-    for line, fields in reader:
-        if not any(f.strip() for f in fields) or line in imap.skip_lines:
-            continue
-        where.append(f"line {line}")
-        q.append([cell(fields, k, line, f"joint {j + 1}") for j, k in enumerate(jcols)])
-        for t, c in cols.items():
-            pts[t].append([cell(fields, k, line, f"target {t}") * length for k in c])
-        for t, c in scols.items():
-            sig[t].append([cell(fields, k, line, f"target {t} σ") * length for k in c])
-        angles.append([cell(fields, k, line, "orientation") for k in ocols])
-        if pcol is not None:
-            payload.append(_payload_cell(cell(fields, pcol, line, "payload"), src, line))
-        if scol is not None:
-            sweep.append(_sweep_cell(fields, scol, src, line, robot.n_joints))
-    if not where:
-        raise ImportFileError(f"{src}: no rows", fix="check skip_rows and header in the map")
+    cell = _cell_reader(grid, imap.decimal)
+    q, sweep, angles, payload, held = [], [], [], [], []  # type: ignore[var-annotated]
+    pts = {t: [] for t in cols.targets}  # type: ignore[var-annotated]
+    sig = {t: [] for t in cols.sigmas}  # type: ignore[var-annotated]
+    for r, fields in enumerate(grid.rows):
+        q.append([cell(fields, k, r, f"joint {j + 1}") for j, k in enumerate(cols.joints)])
+        for t, c in cols.targets.items():
+            pts[t].append([cell(fields, k, r, f"target {t}") * length for k in c])
+        for t, c in cols.sigmas.items():
+            sig[t].append([cell(fields, k, r, f"target {t} σ") * length for k in c])
+        angles.append([cell(fields, k, r, "orientation") for k in cols.orientation])
+        if cols.payload is not None:
+            kg = cell(fields, cols.payload, r, "payload")
+            payload.append(_payload_cell(kg, grid.place(cols.payload, r)))
+        if cols.sweep is not None:
+            sweep.append(_sweep_cell(fields, cols.sweep, grid, r, robot.n_joints))
+        if cols.check is not None:
+            held.append(_held_cell(fields, cols.check, grid, r))
+    block = grid.blocks[0]
+    if not grid.rows:
+        raise ImportFileError(f"{block.name}: no rows", fix="check skip_rows and header in the map")
+    n = len(grid.rows)
     units = [j.unit for j in imap.joints]
     qq = readings_in_boundary_units(np.array(q), units, robot, f"{mname}: [[joints]] unit")
-    rows = MeasuredRows(
-        path, tuple(where), np.array(sweep or [0] * len(where), np.int64), qq,
+    sw = np.array(sweep, np.int64) if sweep else np.zeros(n, np.int64)
+    if held:
+        sw = np.where(held, CHECK_SWEEP, POSES_SWEEP)
+    return MeasuredRows(
+        path, tuple(f"{block.word} {v}" for v in grid.lines[:, 0]), sw, qq,
         {t: np.array(v, float) for t, v in pts.items()},
         orientation_wxyz=_quaternions(np.array(angles, float), imap),
-        sigma=_sigmas(rows_sigma=sig, ids=list(cols), n=len(where)),
+        sigma=_sigmas(rows_sigma=sig, ids=list(cols.targets), n=n),
         orientation_sigma_deg=None if imap.orientation is None else imap.orientation.sigma_deg,
-        payload_kg=np.array(payload, float) if pcol is not None else (
-            None if imap.payload_kg is None else np.full(len(where), float(imap.payload_kg))
+        payload_kg=np.array(payload, float) if cols.payload is not None else (
+            None if imap.payload_kg is None else np.full(n, float(imap.payload_kg))
         ),
+        files=(block.file,) * n,
+        lines=grid.lines[:, 0].copy(),
     ).with_sigma(imap.sigma_cm)  # fmt: skip
+
+
+def assigned(
+    rows: MeasuredRows, imap: ImportMap, robot: RobotDescription, sweep_column: bool
+) -> MeasuredRows:
+    """The rows' sweeps: the pose set (with its held-out rows), a selection, the sweep
+    column's (already read), or inferred from the joints (file order)."""
     if imap.poses:
         return pose_set(rows, imap)
     tol = tolerances(imap, robot).held
     if imap.select:
         return select_sweeps(rows, imap, robot, tol)
-    if scol is None:
+    if not sweep_column:
+        qq = rows.q
         if not np.isfinite(qq).all():
-            bad = np.flatnonzero(~np.isfinite(qq).all(axis=1))[0]
+            bad = int(np.flatnonzero(~np.isfinite(qq).all(axis=1))[0])
             raise ImportFileError(
-                f"{src}: {where[bad]}: a joint reading is missing or not a number (NaN)",
+                f"{rows.at(bad)}: a joint reading is missing or not a number (NaN)",
                 expected="finite joint readings in every row",
                 fix="delete the row, or list it in the map's skip_lines",
             )
@@ -205,24 +192,16 @@ def read_table(path: Path, imap: ImportMap, robot: RobotDescription) -> Measured
     return _unwrapped(rows, imap, robot)
 
 
-def _payload_cell(kg: float, src: str, line: int) -> float:
+def _payload_cell(kg: float, place: str) -> float:
     """A payload cell (kg), refused in one line unless finite, >= 0 and <= 10,000 kg."""
     if not (math.isfinite(kg) and 0.0 <= kg <= 10_000.0):
         raise ImportFileError(
-            f"{src}: line {line}: payload {kg:g} kg",
+            f"{place}: payload {kg:g} kg",
             expected="a payload from 0 to 10000 kg (payload_column)",
             got=f"{kg:g}",
             fix="correct the cell, or skip the line (skip_lines)",
         )
     return kg
-
-
-def _sigma_columns(t: TargetColumns) -> tuple[str | int, str | int, str | int]:
-    """The σ columns of x, y, z: one per axis, or the one σ column three times."""
-    if t.sigma_xyz is not None:
-        return t.sigma_xyz
-    assert t.sigma is not None  # the caller asks only for targets with σ columns
-    return (t.sigma, t.sigma, t.sigma)
 
 
 def _sigmas(
@@ -262,14 +241,30 @@ def _unwrapped(rows: MeasuredRows, imap: ImportMap, robot: RobotDescription) -> 
     return replace(rows, q=q)
 
 
-def _sweep_cell(fields: list[str], k: int, src: str, line: int, n: int) -> int:
-    text = fields[k].strip() if k < len(fields) else ""
+def _sweep_cell(fields: list[CellValue], k: int, grid: Grid, r: int, n: int) -> int:
+    text = str(fields[k]).strip() if k < len(fields) else ""
     if text == "check":
         return CHECK_SWEEP
     if text.isdigit() and 1 <= int(text) <= n:
         return int(text)
     raise ImportFileError(
-        f"{src}: line {line}: sweep column holds {text!r}",
+        f"{grid.place(k, r)}: sweep column holds {text!r}",
         expected=f"a joint number 1 to {n}, or 'check' for a validation configuration",
         fix='correct the sweep column, or use column = "infer" in the map',
+    )
+
+
+_TRUE = ("true", "1", "yes", "1.0")
+_FALSE = ("false", "0", "no", "0.0", "")
+
+
+def _held_cell(fields: list[CellValue], k: int, grid: Grid, r: int) -> bool:
+    """A ``check.column`` cell: true (held out) or false."""
+    text = str(fields[k]).strip().lower() if k < len(fields) else ""
+    if text in _TRUE or text in _FALSE:
+        return text in _TRUE
+    raise ImportFileError(
+        f"{grid.place(k, r)}: check column holds {text!r}",
+        expected="true or false (1 or 0): the row held out or not",
+        fix="correct the cell, or name the held-out rows by check.rows",
     )

@@ -74,6 +74,8 @@ class Recording:
     q_commanded: np.ndarray  # (K, n) deg / cm
     q_encoder: np.ndarray  # (K, n) deg / cm
     joint_payload_kg: np.ndarray  # (K,) kg on the flange, NaN = not recorded
+    joint_source_file: np.ndarray  # (K,) str: the imported row's file, "" = not recorded
+    joint_source_line: np.ndarray  # (K,) int: its line there, 0 = not recorded
     cycle_sweep: np.ndarray  # (M,) int
     cycle_step: np.ndarray  # (M,) int
     cycle_repeat: np.ndarray  # (M,) int
@@ -150,6 +152,8 @@ def _read_cached(p: Path, sha: str) -> Recording:
         "q_commanded": q_cmd,
         "q_encoder": q_enc,
         "joint_payload_kg": np.array([m.get("payload_kg", np.nan) for _, m in js], float),
+        "joint_source_file": np.array([m.get("source_file", "") for _, m in js], str),
+        "joint_source_line": np.array([m.get("source_line", 0) for _, m in js], np.int64),
     }
     if sensor == "points":
         measured = recording_points.read_points(p, msgs["/points"], robot["plan"], n_points, t0)

@@ -1,0 +1,263 @@
+"""Issue 42: a data set as labs write it imports as it is. One simulated pose set written
+as seven files, per-quantity files joined by row, stacked rows, a pose column, MATLAB v5
+and v7.3 imports to the recording of the one-file session (every value, bit for bit;
+only each row's source file and line differ), and identifies to the same signature. Each
+mismatch is one line naming the file."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from import_data import UR10
+from layout_data import (
+    mat_file,
+    one_file,
+    per_quantity,
+    pose_column,
+    pose_set,
+    seven_files,
+    stacked,
+)
+from typer.testing import CliRunner
+
+from pipeline.cli import EXIT_REFUSED, app
+from pipeline.contract.channels import POINT_CHANNELS
+from pipeline.contract.mcap_read import read_mcap
+from pipeline.importers import import_file
+
+LAYOUTS = {
+    "seven files": seven_files,
+    "per-quantity files": per_quantity,
+    "stacked rows": stacked,
+    "pose column": pose_column,
+    "mat v5": lambda ps, d: mat_file(ps, d, "v5"),
+    "mat v7.3": lambda ps, d: mat_file(ps, d, "v73"),
+}
+SOURCE = ("source_file", "source_line")
+
+
+def imported(folder: Path, layout, ps=None) -> Path:  # type: ignore[no-untyped-def]
+    folder.mkdir(parents=True, exist_ok=True)
+    paths, text = layout(ps or pose_set(), folder)
+    mp = folder / "map.toml"
+    mp.write_text(text)
+    fmt = "mat" if paths[0].suffix == ".mat" else "table"
+    import_file([str(p) for p in paths], fmt, UR10, folder / "s", mp)
+    return folder / "s"
+
+
+def messages(session: Path, keep_source: bool = False) -> dict[str, list[dict]]:
+    content = read_mcap(session / "recording.mcap", POINT_CHANNELS, "test")
+    out = {t: [m for _, m in msgs] for t, msgs in content.messages.items()}
+    out["/rig/description"] = []  # names the files
+    if not keep_source:
+        for m in out["/robot/joint_state"]:
+            for k in SOURCE:
+                m.pop(k, None)
+    return out
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return imported(tmp_path_factory.mktemp("one"), one_file)
+
+
+@pytest.mark.parametrize("name", list(LAYOUTS))
+def test_layout_imports_to_the_one_file_recording(tmp_path: Path, reference: Path, name: str):
+    session = imported(tmp_path, LAYOUTS[name])
+    assert messages(session) == messages(reference)
+
+
+def test_rows_keep_their_source_file_and_line(tmp_path: Path) -> None:
+    session = imported(tmp_path, seven_files)
+    js = messages(session, keep_source=True)["/robot/joint_state"]
+    first = [m for m in js if m["step"] == 0][0]
+    assert (first["source_file"], first["source_line"]) == ("region_1.csv", 2)
+    last = max(js, key=lambda m: m["step"])
+    assert last["source_file"] == "region_7.csv" and last["source_line"] == 7  # 6 rows + header
+    mat = imported(tmp_path / "mat", LAYOUTS["mat v7.3"])
+    js = messages(mat, keep_source=True)["/robot/joint_state"]
+    assert {m["source_file"] for m in js} == {"poses_v73.mat"}
+    assert sorted(m["source_line"] for m in js) == list(range(1, 43))
+
+
+def test_globs_in_order_and_same_signature(tmp_path: Path, reference: Path) -> None:
+    """Seven files given as a glob identify to the one-file session's signature, bit for
+    bit (the document but its provenance: the recordings differ in source names only)."""
+    from pipeline.identify import identify
+    from pipeline.stages.tables import read_table
+
+    paths, text = seven_files(pose_set(), tmp_path)
+    (tmp_path / "map.toml").write_text(text)
+    import_file(
+        str(tmp_path / "region_*.csv"), "table", UR10, tmp_path / "s", tmp_path / "map.toml"
+    )
+    docs = []
+    for s in (reference, tmp_path / "s"):
+        identify(s, report=False)
+        doc = json.loads((s / "signature.json").read_text())
+        docs.append({k: v for k, v in doc.items() if k not in ("provenance", "sha256")})
+    assert docs[0] == docs[1]
+    v = read_table(tmp_path / "s" / "stages" / "validation.arrow").to_pylist()
+    assert {r["source_file"] for r in v} == {f"region_{k}.csv" for k in range(1, 8)}
+    j = read_table(tmp_path / "s" / "stages" / "joints.arrow").to_pylist()
+    assert all(r["source_line"] >= 2 for r in j)
+
+
+def _refused(tmp: Path, paths: list[Path], text: str, fmt: str = "table") -> str:
+    """The command's one line (exit 2, nothing written)."""
+    mp = tmp / "map.toml"
+    mp.write_text(text)
+    args = [*map(str, paths), str(tmp / "s"), "--format", fmt, "--robot", str(UR10), "--map",
+            str(mp)]  # fmt: skip
+    r = CliRunner().invoke(app, ["import", *args])
+    assert r.exit_code == EXIT_REFUSED, (r.exit_code, r.output)
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "try:" in lines[0], r.stderr
+    assert not (tmp / "s" / "recording.mcap").exists()
+    return lines[0]
+
+
+def test_row_counts_differ_one_line_naming_the_file(tmp_path: Path) -> None:
+    paths, text = per_quantity(pose_set(), tmp_path)
+    r2 = tmp_path / "r2.csv"
+    r2.write_text("\n".join(r2.read_text().splitlines()[:-1]) + "\n")
+    line = _refused(tmp_path, paths, text)
+    assert line.startswith("error: r2.csv: 41 rows, but joints.csv has 42"), line
+
+
+def test_stacked_rows_not_a_multiple_one_line(tmp_path: Path) -> None:
+    paths, text = stacked(pose_set(), tmp_path)
+    pts = tmp_path / "points.csv"
+    pts.write_text(pts.read_text() + "1.0,2.0,3.0\n")
+    line = _refused(tmp_path, paths, text)
+    assert line.startswith("error: points.csv: 85 rows, not a multiple of points_per_pose = 2"), (
+        line
+    )
+
+
+def test_mat_variable_absent_one_line_naming_the_file(tmp_path: Path) -> None:
+    paths, text = mat_file(pose_set(), tmp_path, "v5")
+    line = _refused(tmp_path, paths, text.replace('"P_r2:', '"P_r3:'), "mat")
+    assert line.startswith("error: poses_v5.mat: no variable 'P_r3'"), line
+    paths, text = mat_file(pose_set(), tmp_path, "v73")
+    line = _refused(tmp_path, paths, text.replace('"Q:', '"Joints:'), "mat")
+    assert line.startswith("error: poses_v73.mat: no variable 'Joints'"), line
+
+
+def test_a_given_file_the_map_does_not_read_is_refused(tmp_path: Path) -> None:
+    paths, text = per_quantity(pose_set(), tmp_path)
+    extra = tmp_path / "notes.csv"
+    extra.write_text("a\n1\n")
+    line = _refused(tmp_path, [*paths, extra], text)
+    assert line.startswith("error: notes.csv: the map reads no column of this file"), line
+
+
+def test_validate_against_several_files_uses_them_all(tmp_path: Path, reference: Path) -> None:
+    """`validate --against A --against B` (issue 44: it used B alone, exit 0)."""
+    from pipeline.identify import identify
+
+    identify(reference, report=False)
+    paths, text = seven_files(pose_set(n=21, seed=9), tmp_path)
+    mp = tmp_path / "map.toml"
+    mp.write_text(text)
+    args = ["validate", str(reference), "--format", "table", "--map", str(mp), "--json"]
+    one = CliRunner().invoke(app, [*args, "--against", str(paths[0])])
+    two = CliRunner().invoke(app, [*args, "--against", str(paths[0]), "--against", str(paths[1])])
+    every = CliRunner().invoke(app, [*args, "--against", str(tmp_path / "region_*.csv")])
+    assert one.exit_code == two.exit_code == every.exit_code == 0, two.output
+    n = [json.loads(r.stdout)["n"] for r in (one, two, every)]
+    assert n == [3, 6, 21]
+    assert json.loads(two.stdout)["files"] == ["region_1.csv", "region_2.csv"]
+    bad = CliRunner().invoke(app, [*args, "--against", str(tmp_path / "nothing_*.csv")])
+    assert bad.exit_code == EXIT_REFUSED and "no file matches" in bad.output
+
+
+def test_import_cli_takes_several_files(tmp_path: Path, reference: Path) -> None:
+    paths, text = per_quantity(pose_set(), tmp_path)
+    mp = tmp_path / "map.toml"
+    mp.write_text(text)
+    out = CliRunner().invoke(app, ["import", *map(str, paths), str(tmp_path / "s"), "--format",
+                                   "table", "--robot", str(UR10), "--map", str(mp)])  # fmt: skip
+    assert out.exit_code == 0, out.output
+    assert messages(tmp_path / "s") == messages(reference)
+    assert "42 configurations (42 poses" in out.output
+
+
+def _with_nan(ps, rows: list[int], cols: list[int]):  # type: ignore[no-untyped-def]
+    """The pose set with one value of each of ``rows`` NaN (column ``cols[k]`` of the
+    joints then the tool reflector's x, y, z)."""
+    from layout_data import PoseSet
+
+    q, tm = ps.q_rad.copy(), ps.points_mm["tmac"].copy()
+    for r, c in zip(rows, cols, strict=True):
+        if c < 6:
+            q[r, c] = np.nan
+        else:
+            tm[r, c - 6] = np.nan
+    return PoseSet(q, {**ps.points_mm, "tmac": tm})
+
+
+def test_rows_with_nan_dropped_counted_and_said(tmp_path: Path) -> None:
+    """10 % of the rows with a NaN import as the one-file session of the other rows; the
+    drop is one warning line counting per column; --strict refuses in one line."""
+    from layout_data import PoseSet
+
+    ps = pose_set(n=50)
+    bad = [3, 11, 19, 27, 45]
+    nan = _with_nan(ps, bad, [2, 6, 6, 8, 2])
+    keep = np.setdiff1d(np.arange(50), bad)
+    kept = PoseSet(ps.q_rad[keep], {t: p[keep] for t, p in ps.points_mm.items()})
+    ref = imported(tmp_path / "ref", one_file, kept)
+    paths, text = one_file(nan, tmp_path)
+    mp = tmp_path / "map.toml"
+    mp.write_text(text)
+    args = [str(paths[0]), str(tmp_path / "s"), "--format", "table", "--robot", str(UR10),
+            "--map", str(mp)]  # fmt: skip
+    r = CliRunner().invoke(app, ["import", *args])
+    assert r.exit_code == 0, r.output
+    warnings = [ln for ln in r.stderr.splitlines() if ln.startswith("warning:")]
+    assert warnings == [
+        "warning: poses.csv: 5 of 50 rows dropped, a measured value missing or not finite (by "
+        "column: j3 2, tmac_x 2, tmac_z 1): poses.csv: line 5, poses.csv: line 13, poses.csv: "
+        "line 21, poses.csv: line 29, poses.csv: line 47"
+    ], r.stderr
+    assert messages(tmp_path / "s") == messages(ref)
+    lines = [m["source_line"] for m in messages(tmp_path / "s", True)["/robot/joint_state"]]
+    assert sorted(lines) == [k + 2 for k in keep]
+    strict = CliRunner().invoke(app, ["import", *args, "--force", "--strict"])
+    assert strict.exit_code == EXIT_REFUSED
+    assert strict.stderr.startswith(
+        "error: poses.csv: line 5: a measured value is missing or not a finite number (5 such "
+        "rows; by column: j3 2, tmac_x 2, tmac_z 1)"
+    ), strict.stderr
+
+
+def test_sigma_columns_below_the_floor_raised_to_it(tmp_path: Path) -> None:
+    """A tracker's σ rounded to 0.000 mm is raised to the floor (default 0.001 mm, or the
+    map's sigma_floor) and said, not refused."""
+    ps = pose_set(n=12)
+    paths, text = one_file(ps, tmp_path)
+    src = paths[0]
+    lines = src.read_text().splitlines()
+    sig = ["0.0" if k == 3 else "0.02" for k in range(12)]
+    src.write_text(
+        "\n".join([lines[0] + ",s", *(f"{ln},{s}" for ln, s in zip(lines[1:], sig, strict=True))])
+        + "\n"
+    )
+    text = text.replace("sigma = 0.01\n", "")
+    for t in ("tmac", "r2"):
+        text = text.replace(f'z = "{t}_z"\n', f'z = "{t}_z"\nsigma = "s"\n')
+    for extra, want in (("", 0.0001), ("sigma_floor = 0.005\n", 0.0005)):
+        mp = tmp_path / "map.toml"
+        mp.write_text(extra + text)
+        out = import_file(str(src), "table", UR10, tmp_path / "s", mp, force=True)
+        assert out.rows.notes == (
+            f"poses.csv: the σ of 2 point(s) below the floor {want * 10:g} mm, raised to it "
+            "(map: sigma_floor)",
+        )
+        pts = [m for m in messages(tmp_path / "s")["/points"] if m["target"] == "tmac"]
+        assert sorted({m["sigma_cm"] for m in pts}) == [want, 0.002]
