@@ -261,3 +261,53 @@ def test_sigma_columns_below_the_floor_raised_to_it(tmp_path: Path) -> None:
         )
         pts = [m for m in messages(tmp_path / "s")["/points"] if m["target"] == "tmac"]
         assert sorted({m["sigma_cm"] for m in pts}) == [want, 0.002]
+
+
+def _held(session: Path) -> list[tuple[str, int]]:
+    js = messages(session, keep_source=True)["/robot/joint_state"]
+    return sorted((m["source_file"], m["source_line"]) for m in js if m["sweep"] == "check")
+
+
+@pytest.mark.parametrize(
+    ("check", "want"),
+    [
+        ('files = ["region_7.csv"]', [("region_7.csv", k) for k in range(2, 8)]),
+        ("rows = [[1, 2], [42, 42]]", [("region_1.csv", 2), ("region_1.csv", 3),
+                                       ("region_7.csv", 7)]),
+    ],
+)  # fmt: skip
+def test_held_out_rows_by_name(tmp_path: Path, check: str, want: list) -> None:  # type: ignore[type-arg]
+    paths, text = seven_files(pose_set(), tmp_path)
+    (tmp_path / "map.toml").write_text(text + f"\n[check]\n{check}\n")
+    import_file([str(p) for p in paths], "table", UR10, tmp_path / "s", tmp_path / "map.toml")
+    assert _held(tmp_path / "s") == want
+
+
+def test_held_out_rows_by_column_and_listed_in_the_report(tmp_path: Path) -> None:
+    from pipeline.identify import identify
+    from pipeline.report.validation import validation_rows, validation_section
+
+    paths, text = one_file(pose_set(), tmp_path)
+    src = paths[0]
+    lines = src.read_text().splitlines()
+    held = ["true" if k in (4, 5, 6, 30) else "false" for k in range(42)]
+    body = [f"{ln},{h}" for ln, h in zip(lines[1:], held, strict=True)]
+    src.write_text("\n".join([lines[0] + ",held", *body]) + "\n")
+    (tmp_path / "map.toml").write_text(text + '\n[check]\ncolumn = "held"\n')
+    import_file(str(src), "table", UR10, tmp_path / "s", tmp_path / "map.toml")
+    assert _held(tmp_path / "s") == [("poses.csv", k) for k in (6, 7, 8, 32)]
+    identify(tmp_path / "s", report=False)
+    section = validation_section(validation_rows(tmp_path / "s" / "stages" / "validation.arrow"))
+    assert "Held out (4 rows, by source file and line): poses.csv lines 6-8, 32." in section
+    (tmp_path / "map.toml").write_text(text + '\n[check]\ncolumn = "j1"\n')
+    args = [str(src), str(tmp_path / "t"), "--format", "table", "--robot", str(UR10)]
+    r = CliRunner().invoke(app, ["import", *args, "--map", str(tmp_path / "map.toml")])
+    assert r.exit_code == EXIT_REFUSED and "check column holds" in r.stderr, r.stderr
+
+
+def test_held_out_rows_beyond_the_data_refused(tmp_path: Path) -> None:
+    paths, text = seven_files(pose_set(), tmp_path)
+    line = _refused(tmp_path, paths, text + "\n[check]\nrows = [[40, 43]]\n")
+    assert line.startswith("error: map.toml: check.rows [40, 43] goes beyond the 42 data rows")
+    line = _refused(tmp_path, paths, text + '\n[check]\nfiles = ["region_9.csv"]\n')
+    assert line.startswith("error: map.toml: check.files names 'region_9.csv', none of the given")

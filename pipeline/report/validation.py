@@ -66,7 +66,35 @@ def validation_section(rows: list[dict[str, Any]] | None) -> str:
         "design chain with its base and tool point fitted to the fit points, the error the "
         "arm makes uncalibrated in a registered cell (the before of the before/after)."
     )
-    return head + "\n".join(body) + note
+    return head + "\n".join(body) + note + held_out_text(rows)
+
+
+def held_out_text(rows: list[dict[str, Any]]) -> str:
+    """Which rows were held out (role ``check``), by their source file and lines (issue
+    42): "region_3.csv lines 2-7, 9"; empty when none, or none records its source."""
+    lines: dict[str, list[int]] = {}
+    for r in rows:
+        if r["role"] == "check" and r.get("source_file"):
+            lines.setdefault(r["source_file"], []).append(int(r.get("source_line") or 0))
+    if not lines:
+        return ""
+    parts = [f"{f} {_ranges(sorted(v))}" for f, v in lines.items()]
+    n = sum(len(v) for v in lines.values())
+    return f"\n\nHeld out ({n} rows, by source file and line): " + "; ".join(parts) + "."
+
+
+def _ranges(values: list[int]) -> str:
+    """Sorted line numbers as runs: [2, 3, 4, 9] -> "lines 2-4, 9" (0: no line)."""
+    if values and values[0] == 0:
+        return f"({len(values)} entries)"
+    runs: list[list[int]] = []
+    for v in values:
+        if runs and v == runs[-1][1] + 1:
+            runs[-1][1] = v
+        else:
+            runs.append([v, v])
+    text = ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in runs)
+    return ("line " if len(values) == 1 else "lines ") + text
 
 
 def validation_rows(stage_file: Path) -> list[dict[str, Any]] | None:
