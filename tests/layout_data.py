@@ -136,3 +136,41 @@ def write_v73(path: Path, arrays: dict[str, np.ndarray]) -> None:
     header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: armsig test HDF5 schema 1.00 ."
     with path.open("r+b") as f:
         f.write(header.ljust(116) + b"\x00" * 8 + b"\x00\x02IM")
+
+
+#: Three reflectors fixed on the base (mm, the tracker's frame at the first pose).
+BASE_MM = {"b1": np.array([800.0, 0.0, 0.0]), "b2": np.array([0.0, 800.0, 0.0]),
+           "b3": np.array([-600.0, -600.0, 50.0])}  # fmt: skip
+
+
+def drifting(ps: PoseSet, drift_mm: float, seed: int = 5, noise_mm: float = 0.01) -> PoseSet:
+    """The pose set measured by a tracker that drifts (a random walk of its placement,
+    ``drift_mm`` RMS at the last pose at 1 m), with the three base reflectors read at
+    every pose (tracker noise ``noise_mm``)."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(seed)
+    n = len(ps.q_rad)
+    step = drift_mm / np.sqrt(n) / np.sqrt(3)
+    shift = np.cumsum(rng.normal(0.0, step, (n, 3)), axis=0)
+    turn = np.cumsum(rng.normal(0.0, step / 1000.0, (n, 3)), axis=0)  # rad: drift_mm at 1 m
+    pts = {t: p.copy() for t, p in ps.points_mm.items()}
+    pts |= {t: np.tile(b, (n, 1)) + rng.normal(0.0, noise_mm, (n, 3)) for t, b in BASE_MM.items()}
+    for r in range(n):
+        R = Rotation.from_rotvec(turn[r]).as_matrix()
+        for t in pts:
+            pts[t][r] = R @ pts[t][r] + shift[r]
+    return PoseSet(ps.q_rad, pts)
+
+
+def fixed_map(text: str) -> str:
+    """A one-file map with the base reflectors as fixed targets."""
+    extra = "".join(f'[[targets]]\nid = "{t}"\nfixed = true\n'
+                    + "".join(f'{a} = "{t}_{a}"\n' for a in "xyz") for t in BASE_MM)  # fmt: skip
+    return text.replace("[[joints]]", extra + "\n[[joints]]", 1)
+
+
+def one_file_all(ps: PoseSet, folder: Path, name: str = "poses.csv") -> Path:
+    """Every target of the pose set (arm and base) in one row of one file."""
+    head = JOINTS + [f"{t}_{a}" for t in ps.points_mm for a in "xyz"]
+    return _csv(folder / name, head, [ps.q_rad, *ps.points_mm.values()])

@@ -40,8 +40,9 @@ def sigma_columns(t: TargetColumns) -> tuple[str | int, str | int, str | int] | 
 
 
 def ordered_targets(imap: ImportMap) -> list[TargetColumns]:
-    """The map's targets, the tool target first (its id is plan.tool_target)."""
-    tool = imap.tool_target or imap.targets[0].id
+    """The map's targets, the tool target first (its id is plan.tool_target; default the
+    first target not fixed in the world)."""
+    tool = imap.tool_target or next((t.id for t in imap.targets if not t.fixed), "")
     return sorted(imap.targets, key=lambda t: t.id != tool)
 
 

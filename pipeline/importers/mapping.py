@@ -111,6 +111,7 @@ class ImportMap:
     points_per_pose: int | None = None  # stacked: this many rows per pose
     pose_column: str | int | None = None  # stacked: rows sharing its value are one pose
     sigma_floor: float | None = None  # length_unit; None: the tracker's resolution
+    fixed_block: int = 1  # fixed targets: poses per registration
     strict: bool = False  # --strict, not a map key: refuse a missing value, do not drop
 
     @property
@@ -248,6 +249,16 @@ def _check_combinations(src: str, data: dict[str, Any]) -> None:
             src, "payload_kg", "is stated and payload_column is given too",
             "one payload for the file, or a column of it", data["payload_kg"],
         )  # fmt: skip
+    fixed = [str(t.get("id", f"t{k + 1}")) for k, t in enumerate(targets) if t.get("fixed")]
+    if fixed and not poses:
+        raise _refuse(src, "targets", "has fixed targets outside a pose set",
+                      'sweep = "poses" with fixed = true', fixed)  # fmt: skip
+    if fixed and len(fixed) == len(targets):
+        raise _refuse(src, "targets", "are all fixed in the world: no point of the arm",
+                      "at least one [[targets]] on the arm (fixed = false)", fixed)  # fmt: skip
+    if data.get("tool_target") in fixed:
+        raise _refuse(src, "tool_target", "is a fixed target, not a point of the arm",
+                      "a [[targets]] id without fixed = true", data["tool_target"])  # fmt: skip
     ids = [str(t.get("id", f"t{k + 1}")) for k, t in enumerate(targets)]
     if len(set(ids)) != len(ids):
         raise _refuse(src, "targets", "names a target id twice", "distinct ids", ids)
@@ -332,6 +343,7 @@ def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
         points_per_pose=data.get("points_per_pose"),
         pose_column=data.get("pose_column"),
         sigma_floor=data.get("sigma_floor"),
+        fixed_block=int(data.get("fixed_block", 1)),
     )
 
 

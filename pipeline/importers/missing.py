@@ -28,6 +28,8 @@ def _columns(rows: MeasuredRows, imap: ImportMap) -> list[tuple[str, np.ndarray]
     """Each measured column's name (as the map gives it) and its values (R,)."""
     out = [(str(j.column), rows.q[:, k]) for k, j in enumerate(imap.joints)]
     for t in ordered_targets(imap):
+        if t.fixed:
+            continue  # a fixed target's lost reading: the pose is registered by its block
         out += [(str(c), rows.targets[t.id][:, a]) for a, c in enumerate((t.x, t.y, t.z))]
         s = sigma_columns(t)
         if s is not None and rows.sigma is not None:

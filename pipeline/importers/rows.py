@@ -57,6 +57,10 @@ class MeasuredRows:
         Lines for the user: rows dropped for a missing value, σ raised to the floor.
     dropped : int
         How many rows were dropped for a missing value.
+    drift_cm, residual_cm : ndarray, shape (R,), optional
+        With fixed targets (:mod:`pipeline.importers.fixed`): each pose's RMS distance of
+        their readings from their reference before the correction, and after it (NaN:
+        not registered at this pose).
     """
 
     source: Path
@@ -72,6 +76,8 @@ class MeasuredRows:
     lines: np.ndarray | None = None
     notes: tuple[str, ...] = ()  # one line each for the user (rows dropped, σ floored)
     dropped: int = 0  # rows dropped for a missing value
+    drift_cm: np.ndarray | None = None  # (R,) fixed targets' RMS drift before correction
+    residual_cm: np.ndarray | None = None  # (R,) their RMS residual after it (NaN: none)
 
     def file_of(self, k: int) -> str:
         """Row ``k``'s source file name."""
@@ -106,6 +112,8 @@ class MeasuredRows:
             payload_kg=None if self.payload_kg is None else self.payload_kg[idx],
             files=tuple(self.files[k] for k in idx) if self.files else (),
             lines=None if self.lines is None else self.lines[idx],
+            drift_cm=None if self.drift_cm is None else self.drift_cm[idx],
+            residual_cm=None if self.residual_cm is None else self.residual_cm[idx],
         )
 
     def with_sigma(self, sigma_cm: float | None) -> MeasuredRows:
@@ -145,6 +153,8 @@ def concat_rows(parts: list[MeasuredRows]) -> MeasuredRows:
         lines=stacked(lambda p: p.lines),
         notes=tuple(n for p in parts for n in p.notes),
         dropped=sum(p.dropped for p in parts),
+        drift_cm=stacked(lambda p: p.drift_cm),
+        residual_cm=stacked(lambda p: p.residual_cm),
     )
 
 

@@ -155,6 +155,11 @@ def session_messages(
         }  # fmt: skip
         if rows.payload_kg is not None:
             state["payload_kg"] = float(rows.payload_kg[k])
+        if rows.drift_cm is not None:  # fixed targets: the tracker's drift at this pose
+            for key, v in (("tracker_drift_cm", rows.drift_cm[k]),
+                           ("tracker_residual_cm", rows.residual_cm[k])):  # type: ignore[index]  # fmt: skip
+                if np.isfinite(v):
+                    state[key] = float(v)
         state["source_file"] = rows.file_of(k)
         if rows.lines is not None and rows.lines[k] > 0:
             state["source_line"] = int(rows.lines[k])

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import ImportFileError
+from pipeline.importers.fixed import registered
 from pipeline.importers.grid import Block, CellValue, Grid
 from pipeline.importers.layout import Columns, columns, delimited_loader
 from pipeline.importers.mapping import ImportMap
@@ -121,6 +122,7 @@ def read_table(
                         for g in groups])  # fmt: skip
     rows = held_out_marked(rows, imap, paths)
     rows = sigma_floored(without_missing(rows, imap, imap.strict), imap)
+    rows = registered(rows, imap)  # fixed targets: each pose in one tracker frame
     return assigned(rows, imap, robot, scol is not None)
 
 

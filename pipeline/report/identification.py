@@ -69,7 +69,8 @@ def _load(sdir: Path) -> tuple[dict[str, list[Row]], dict[str, dict[str, Any]], 
             fix=f"run `pipeline identify {sdir}` first",
         )
     paths = {n: stage_path(sdir, n) for n in names}
-    tables = {n: read_table(paths[n]) for n in (*USED, "compensate", "validation") if n in paths}
+    tables = {n: read_table(paths[n])
+              for n in (*USED, "compensate", "validation", "joints") if n in paths}  # fmt: skip
     robot = session_robot(tables["session"])
     rows = {n: t.to_pylist() for n, t in tables.items()}
     return rows, {n: read_provenance(p) for n, p in paths.items()}, robot
@@ -431,7 +432,7 @@ def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -
         _quality_section(t["positions"], t["compensate"])
         if "compensate" in t
         else _point_quality_section(t["positions"]),
-        *([validation_section(t["validation"])] if "validation" in t else []),
+        *([validation_section(t["validation"], t.get("joints"))] if "validation" in t else []),
         _convergence_section(sdir),
         *([_audit_section(audit)] if audit is not None else []),
         _provenance_section(prov),

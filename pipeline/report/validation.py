@@ -39,7 +39,9 @@ def role_errors(rows: list[dict[str, Any]] | None) -> dict[str, dict[str, Any]]:
     return out
 
 
-def validation_section(rows: list[dict[str, Any]] | None) -> str:
+def validation_section(
+    rows: list[dict[str, Any]] | None, joints: list[dict[str, Any]] | None = None
+) -> str:
     """Mean, RMS and max position error per role, as measured and base-registered (cm),
     and the registered design model's RMS beside them; a session without the stage (sonic)
     or without points gets one line saying so."""
@@ -66,7 +68,30 @@ def validation_section(rows: list[dict[str, Any]] | None) -> str:
         "design chain with its base and tool point fitted to the fit points, the error the "
         "arm makes uncalibrated in a registered cell (the before of the before/after)."
     )
-    return head + "\n".join(body) + note + held_out_text(rows)
+    return head + "\n".join(body) + note + held_out_text(rows) + drift_text(joints)
+
+
+def drift_text(joints: list[dict[str, Any]] | None) -> str:
+    """The tracker's drift by fixed targets (issue 42: ``joints`` table,
+    ``tracker_drift_cm`` per configuration): median and maximum before the correction,
+    and the residual after it; empty without fixed targets."""
+    per = {
+        (r["sweep"], r["step"]): r for r in joints or [] if r.get("tracker_drift_cm") is not None
+    }
+    if not per:
+        return ""
+    drift = np.array([r["tracker_drift_cm"] for r in per.values()])
+    res = np.array([r["tracker_residual_cm"] for r in per.values()
+                    if r.get("tracker_residual_cm") is not None])  # fmt: skip
+    after = "" if not len(res) else (
+        f"; after registering each pose by them, median {np.median(res):.3g} cm, max "
+        f"{res.max():.3g} cm")  # fmt: skip
+    return (
+        f"\n\nTracker drift by the fixed targets ({len(per)} configurations, RMS distance "
+        f"of their readings from their reference, `joints` table `tracker_drift_cm`): median "
+        f"{np.median(drift):.3g} cm, max {drift.max():.3g} cm before the correction{after}. "
+        "The points above are the registered ones."
+    )
 
 
 def held_out_text(rows: list[dict[str, Any]]) -> str:

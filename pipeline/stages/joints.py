@@ -38,8 +38,16 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
             "t_s": np.repeat(rec.joint_t_s, n),
             "payload_kg": pa.array(np.repeat(payload, n), mask=np.repeat(np.isnan(payload), n)),
             **source_columns(rec.joint_source_file, rec.joint_source_line, n),
+            **{
+                name: pa.array(np.repeat(v, n), mask=np.repeat(np.isnan(v), n))
+                for name, v in zip(DRIFT, rec.joint_drift_cm.T, strict=True)
+            },
         }
     )
+
+
+#: The fixed targets' drift per configuration (importers/fixed.py), before and after.
+DRIFT = ("tracker_drift_cm", "tracker_residual_cm")
 
 
 def source_columns(files: np.ndarray, lines: np.ndarray, n: int = 1) -> dict[str, pa.Array]:
@@ -69,7 +77,8 @@ def sources_at(joints: pa.Table, sweep: np.ndarray, step: np.ndarray) -> dict[st
 STAGE = Stage(
     "joints",
     5,  # 3: t_s from the measurement times (MCAP publish_time), not the log times (issue 33);
-    # 4: payload_kg (issue 27); 5: source_file and source_line of an imported row (issue 42)
+    # 4: payload_kg (issue 27); 5: source_file and source_line of an imported row and the
+    # tracker's drift by fixed targets (issue 42)
     (RECORDING,),
     NoParams(),
     compute,

@@ -76,6 +76,7 @@ class Recording:
     joint_payload_kg: np.ndarray  # (K,) kg on the flange, NaN = not recorded
     joint_source_file: np.ndarray  # (K,) str: the imported row's file, "" = not recorded
     joint_source_line: np.ndarray  # (K,) int: its line there, 0 = not recorded
+    joint_drift_cm: np.ndarray  # (K, 2) fixed targets' drift before / after, NaN = none
     cycle_sweep: np.ndarray  # (M,) int
     cycle_step: np.ndarray  # (M,) int
     cycle_repeat: np.ndarray  # (M,) int
@@ -154,6 +155,13 @@ def _read_cached(p: Path, sha: str) -> Recording:
         "joint_payload_kg": np.array([m.get("payload_kg", np.nan) for _, m in js], float),
         "joint_source_file": np.array([m.get("source_file", "") for _, m in js], str),
         "joint_source_line": np.array([m.get("source_line", 0) for _, m in js], np.int64),
+        "joint_drift_cm": np.array(
+            [
+                [m.get("tracker_drift_cm", np.nan), m.get("tracker_residual_cm", np.nan)]
+                for _, m in js
+            ],
+            float,
+        ).reshape(-1, 2),  # fmt: skip
     }
     if sensor == "points":
         measured = recording_points.read_points(p, msgs["/points"], robot["plan"], n_points, t0)
