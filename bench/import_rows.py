@@ -4,7 +4,8 @@ another checkout of armsig in the same run (issue 42: no slower than before).
 ``python -m bench.import_rows [OTHER_ROOT]``: writes a UR10 pose set of 100,000 rows (mm,
 rad, ``;``-separated like the IPA files) to a temp folder, then times ``pipeline import``
 in a fresh process per run, alternating this tree and ``OTHER_ROOT`` (a ``git archive`` of
-the base commit), three runs each; prints the medians and their ratio.
+the base commit), five runs each; prints the medians of the wall time and of the CPU time
+(user + system of the child: what a loaded machine changes least) and their ratios.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 ROBOT = ROOT / "examples" / "ur10_ipa" / "ur10.toml"
 ROWS = 100_000
-RUNS = 3
+RUNS = 5
 MAP = """delimiter = ";"
 length_unit = "mm"
 sweep = "poses"
@@ -51,29 +52,40 @@ def write_file(folder: Path) -> tuple[Path, Path]:
     return data, mp
 
 
-def run(root: Path, data: Path, mp: Path, session: Path) -> float:
-    """Seconds of one ``pipeline import`` (a fresh process, ``root`` on the path)."""
+def run(root: Path, data: Path, mp: Path, session: Path) -> tuple[float, float]:
+    """Wall and CPU seconds of one ``pipeline import`` (a fresh process, ``root`` on the
+    path)."""
     cmd = [sys.executable, "-m", "pipeline", "import", str(data), str(session), "--format",
            "table", "--robot", str(ROBOT), "--map", str(mp), "--force"]  # fmt: skip
     env = {**os.environ, "PYTHONPATH": str(root)}
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _child_cpu()
     subprocess.run(cmd, env=env, check=True, capture_output=True, cwd=root)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, _child_cpu() - c0
+
+
+def _child_cpu() -> float:
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
 
 
 def main(other: Path) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         data, mp = write_file(folder)
-        times: dict[str, list[float]] = {"this": [], "other": []}
+        times: dict[str, list[tuple[float, float]]] = {"this": [], "other": []}
         for _ in range(RUNS):
             times["other"].append(run(other, data, mp, folder / "s_other"))
             times["this"].append(run(ROOT, data, mp, folder / "s_this"))
-    med = {k: float(np.median(v)) for k, v in times.items()}
     print(f"import of {ROWS:,} rows, median of {RUNS} runs each (alternating):")
-    print(f"  this tree  {med['this']:.2f} s  {[round(t, 2) for t in times['this']]}")
-    print(f"  {other}  {med['other']:.2f} s  {[round(t, 2) for t in times['other']]}")
-    print(f"  ratio this / other: {med['this'] / med['other']:.3f}")
+    for k, kind in enumerate(("wall", "CPU")):
+        med = {w: float(np.median([t[k] for t in v])) for w, v in times.items()}
+        runs = {w: [round(t[k], 1) for t in v] for w, v in times.items()}
+        print(
+            f"  {kind}: this tree {med['this']:.2f} s {runs['this']}; {other} "
+            f"{med['other']:.2f} s {runs['other']}; ratio {med['this'] / med['other']:.3f}"
+        )
 
 
 if __name__ == "__main__":

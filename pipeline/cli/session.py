@@ -199,6 +199,14 @@ def validate(
     format: Annotated[ImportFormat, choice("sscanss2, table, rct or mat (docs/import.md).")],
     map: Annotated[str | None, typer.Option(help="Map file (TOML) of the second file.")] = None,
     strict: StrictOption = False,
+    tool_point: Annotated[
+        str | None,
+        typer.Option(
+            "--tool-point",
+            help="'registered': the file measured another point on the tool; locate it (and "
+            "the base) by the fit of the file's own points, and say so.",
+        ),
+    ] = None,
     as_json: JsonOption = False,
 ) -> None:
     """The signature's position error on a second file (read in memory, nothing written).
@@ -209,7 +217,7 @@ def validate(
     """
     from pipeline.evaluate.validate import validate_against
 
-    r = validate_against(session, list(against), format.value, map, strict)
+    r = validate_against(session, list(against), format.value, map, strict, tool_point)
     if as_json:
         print_json(r)
         return
@@ -221,11 +229,26 @@ def validate(
     if r["rows_skipped"] and not r["notes"]:  # said, not skipped silently (issue 32)
         warn(f"{r['rows_skipped']} row(s) of {r['file']} skipped: a reading or coordinate "
              "is not a finite number (NaN or inf)")  # fmt: skip
-    typer.echo(
-        f"  as measured:      mean {r['mean_cm']:.4g}  RMS {r['rms_cm']:.4g}  "
-        f"max {r['max_cm']:.4g} cm"
-    )
-    if r["registered_rms_cm"] is None:
+    if r["tool_point"] == "registered":  # issue 42: a point the session never measured
+        x, y, z = r["tool_point_local_cm"]
+        typer.echo(
+            f"  tool point registered: located by the fit of this file at ({x:.4g}, {y:.4g}, "
+            f"{z:.4g}) cm in the last link's frame, {r['tool_point_offset_cm']:.4g} cm from "
+            "the session's tool point, with the base (9 parameters fitted to the points "
+            "judged, as the design model below)"
+        )
+        typer.echo(
+            f"  base and tool point registered:  mean {r['mean_cm']:.4g}  RMS {r['rms_cm']:.4g}"
+            f"  max {r['max_cm']:.4g} cm"
+        )
+    else:
+        typer.echo(
+            f"  as measured:      mean {r['mean_cm']:.4g}  RMS {r['rms_cm']:.4g}  "
+            f"max {r['max_cm']:.4g} cm"
+        )
+    if r["tool_point"] == "registered":
+        pass  # the signature's registered line above
+    elif r["registered_rms_cm"] is None:
         typer.echo("  base registered:  not possible (fewer than 3 points, or collinear)")
     else:
         typer.echo(

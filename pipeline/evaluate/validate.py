@@ -24,6 +24,9 @@ from pipeline.signature.file import FILE_NAME, Signature
 from pipeline.signature.session import load_session_signature
 from pipeline.units import joints_to_internal
 
+#: ``--tool-point registered``: the validation file's point located by its own fit.
+REGISTERED = "registered"
+
 
 def _as_poses(imap: ImportMap) -> ImportMap:
     """The map read as a plain list of poses: every row checked, no sweeps inferred."""
@@ -73,11 +76,24 @@ def validate_against(
     fmt: str,
     map_path: str | Path | None = None,
     strict: bool = False,
+    tool_point: str | None = None,
 ) -> dict[str, Any]:
     """The signature of ``session_dir`` against every row of a second data set (one or
     several foreign files, paths or globs, in order; parsed in memory, never written into
     the session): its target of the session's tool point's id vs the model, and the
-    registered design model beside it."""
+    registered design model beside it.
+
+    ``tool_point = "registered"``: the file measured another point on the tool, one the
+    session never measured (its map's ``tool_target``, else its first target). Its place
+    on the last link is fitted with the base to the file's own points (the signature's
+    chain, :func:`pipeline.refine.baseline.register_design`: 9 parameters, as the design
+    model beside it), and the errors are those of that fit, said in ``tool_point``."""
+    if tool_point not in (None, REGISTERED):
+        raise ArmsigError(
+            f"--tool-point {tool_point!r}",
+            expected=f"{REGISTERED!r}: the point located by the fit of the validation file",
+            fix="--tool-point registered, or leave it out to compare the session's tool point",
+        )
     sdir = Path(session_dir)
     specs = path if isinstance(path, list) else [path]
     with os_errors_refused(specs[0], OS_FIX):
@@ -88,14 +104,22 @@ def validate_against(
         if fmt != "sscanss2":
             imap = _as_poses(imap)
         rows, _ = parse_foreign(files, fmt, sig.robot, imap)
-        target = _target(rows.name, list(rows.targets), _session_tool_target(sdir))
+        if tool_point == REGISTERED:
+            target = imap.tool_target or next(iter(rows.targets))
+        else:
+            target = _target(rows.name, list(rows.targets), _session_tool_target(sdir))
     measured = rows.targets[target]
     ok = np.isfinite(rows.q).all(axis=1) & np.isfinite(measured).all(axis=1)
     if not ok.any():
         raise ArmsigError(f"{rows.name}: no row with finite readings and coordinates")
     q = sig.robot.joints_from_readings(rows.q[ok])
-    model = model_points(sig.chain, q, sig.prismatic, sig.nongeometric)
-    raw, reg = error_distances(model, measured[ok])
+    located = None
+    if tool_point == REGISTERED:
+        raw, located = _registered_tool(sig, q, measured[ok])
+        reg: np.ndarray | None = raw
+    else:
+        model = model_points(sig.chain, q, sig.prismatic, sig.nongeometric)
+        raw, reg = error_distances(model, measured[ok])
     design = position_errors(design_errors(sig, q, measured[ok]), None)
     predicted = _predicted_rms_cm(sdir, joints_to_internal(q, sig.prismatic))
     return {
@@ -112,7 +136,25 @@ def validate_against(
         "design_registered_max_cm": design.max_cm,
         "predicted_rms_cm": predicted,
         "gain_registered": None if reg is None else _gain(design, reg),
+        "tool_point": "session" if located is None else REGISTERED,
+        "tool_point_local_cm": None if located is None else [float(v) for v in located],
+        "tool_point_offset_cm": None
+        if located is None
+        else float(np.linalg.norm(located - sig.chain.tool[:3, 3])),
     }
+
+
+def _registered_tool(sig: Signature, q: np.ndarray, measured: np.ndarray) -> tuple[Any, Any]:
+    """The signature's chain with its base and a tool point fitted to ``measured`` (m, 3)
+    at joint values ``q`` (deg / cm): each point's distance (m,) cm and the point (3,) in
+    the last link's frame (cm)."""
+    from pipeline.refine.baseline import register_design
+
+    qi = joints_to_internal(q, sig.prismatic)
+    if sig.nongeometric is not None:
+        qi = sig.nongeometric.effective(qi)
+    fit = register_design(sig.chain, qi, measured, sig.design_flange_to_tool[:3, 3])
+    return fit.errors_cm, fit.tool
 
 
 def _gain(design: Any, registered: np.ndarray) -> float | None:

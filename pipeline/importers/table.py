@@ -130,40 +130,52 @@ def _parsed(cols: Columns, path: Path, imap: ImportMap, robot: RobotDescription)
     """One grid's rows in armsig's units (sweeps from a sweep column, else 0)."""
     grid, mname = cols.grid, imap.name
     length = unit_factor(imap.length_unit, LENGTH_CM, "length", f"{mname}: length_unit")
-    cell = _cell_reader(grid, imap.decimal)
-    q, sweep, angles, payload, held = [], [], [], [], []  # type: ignore[var-annotated]
-    pts = {t: [] for t in cols.targets}  # type: ignore[var-annotated]
-    sig = {t: [] for t in cols.sigmas}  # type: ignore[var-annotated]
-    for r, fields in enumerate(grid.rows):
-        q.append([cell(fields, k, r, f"joint {j + 1}") for j, k in enumerate(cols.joints)])
-        for t, c in cols.targets.items():
-            pts[t].append([cell(fields, k, r, f"target {t}") * length for k in c])
-        for t, c in cols.sigmas.items():
-            sig[t].append([cell(fields, k, r, f"target {t} σ") * length for k in c])
-        angles.append([cell(fields, k, r, "orientation") for k in cols.orientation])
-        if cols.payload is not None:
-            kg = cell(fields, cols.payload, r, "payload")
-            payload.append(_payload_cell(kg, grid.place(cols.payload, r)))
-        if cols.sweep is not None:
-            sweep.append(_sweep_cell(fields, cols.sweep, grid, r, robot.n_joints))
-        if cols.check is not None:
-            held.append(_held_cell(fields, cols.check, grid, r))
+    what = [*((k, f"joint {j + 1}") for j, k in enumerate(cols.joints)),
+            *((k, f"target {t}") for t, c in cols.targets.items() for k in c),
+            *((k, f"target {t} σ") for t, c in cols.sigmas.items() for k in c),
+            *((k, "orientation") for k in cols.orientation),
+            *([] if cols.payload is None else [(cols.payload, "payload")])]  # fmt: skip
+    first: dict[int, str] = {}
+    for k, w in what:
+        first.setdefault(k, w)  # a column read twice is named by its first use
+    num = _numbers(grid, list(first.items()), imap.decimal)
+
+    def stack(ks: list[int]) -> np.ndarray:
+        return np.column_stack([num[k] for k in ks]) if ks else np.zeros((len(grid.rows), 0))
+
+    q = stack(cols.joints)
+    pts = {t: stack(c) * length for t, c in cols.targets.items()}
+    sig = {t: stack(c) * length for t, c in cols.sigmas.items()}
+    angles = stack(cols.orientation)
+    payload = None
+    if cols.payload is not None:
+        payload = num[cols.payload]
+        bad = np.flatnonzero(~(np.isfinite(payload) & (payload >= 0.0) & (payload <= 10_000.0)))
+        if len(bad):
+            _payload_cell(float(payload[bad[0]]), grid.place(cols.payload, int(bad[0])))
+    sweep = (
+        []
+        if cols.sweep is None
+        else [_sweep_cell(f, cols.sweep, grid, r, robot.n_joints) for r, f in enumerate(grid.rows)]
+    )
+    held = [] if cols.check is None else [
+        _held_cell(f, cols.check, grid, r) for r, f in enumerate(grid.rows)]  # fmt: skip
     block = grid.blocks[0]
     if not grid.rows:
         raise ImportFileError(f"{block.name}: no rows", fix="check skip_rows and header in the map")
     n = len(grid.rows)
     units = [j.unit for j in imap.joints]
-    qq = readings_in_boundary_units(np.array(q), units, robot, f"{mname}: [[joints]] unit")
+    qq = readings_in_boundary_units(q, units, robot, f"{mname}: [[joints]] unit")
     sw = np.array(sweep, np.int64) if sweep else np.zeros(n, np.int64)
     if held:
         sw = np.where(held, CHECK_SWEEP, POSES_SWEEP)
     return MeasuredRows(
         path, tuple(f"{block.word} {v}" for v in grid.lines[:, 0]), sw, qq,
-        {t: np.array(v, float) for t, v in pts.items()},
-        orientation_wxyz=_quaternions(np.array(angles, float), imap),
+        pts,
+        orientation_wxyz=_quaternions(angles, imap),
         sigma=_sigmas(rows_sigma=sig, ids=list(cols.targets), n=n),
         orientation_sigma_deg=None if imap.orientation is None else imap.orientation.sigma_deg,
-        payload_kg=np.array(payload, float) if cols.payload is not None else (
+        payload_kg=payload if payload is not None else (
             None if imap.payload_kg is None else np.full(n, float(imap.payload_kg))
         ),
         files=(block.file,) * n,
@@ -206,14 +218,44 @@ def _payload_cell(kg: float, place: str) -> float:
     return kg
 
 
+def _numbers(grid: Grid, ks: list[tuple[int, str]], decimal: str) -> dict[int, np.ndarray]:
+    """The numbers of the joined columns ``ks`` (position, what it is; NaN where empty or
+    "nan"). A column whose
+    text numpy reads as it is (or, with decimal commas, once its commas are points and it
+    holds no '.') is converted at once, the same doubles as Python's ``float``; otherwise
+    every cell is read in row order (:func:`_cell_reader`), so that the first bad cell
+    of the file is the one refused."""
+    out: dict[int, np.ndarray] = {}
+    for k, _ in ks:
+        try:
+            cells = [c[k] for c in grid.rows]
+            if decimal == ",":
+                if any("." in c for c in cells if isinstance(c, str)):
+                    raise ValueError  # refused, naming the cell, by the cell reader
+                cells = [c.replace(",", ".") if isinstance(c, str) else c for c in cells]
+            out[k] = np.array(cells, dtype=float)
+        except (ValueError, IndexError, TypeError):
+            return _numbers_by_cell(grid, ks, decimal)
+    return out
+
+
+def _numbers_by_cell(grid: Grid, ks: list[tuple[int, str]], decimal: str) -> dict[int, np.ndarray]:
+    """:func:`_numbers` read cell by cell in row order: a bad cell is refused naming its
+    file, line and column."""
+    cell = _cell_reader(grid, decimal)
+    values = [[cell(f, k, r, w) for k, w in ks] for r, f in enumerate(grid.rows)]
+    arr = np.array(values, float).reshape(len(grid.rows), len(ks))
+    return {k: arr[:, j] for j, (k, _) in enumerate(ks)}
+
+
 def _sigmas(
-    rows_sigma: dict[str, list[list[float]]], ids: list[str], n: int
+    rows_sigma: dict[str, np.ndarray], ids: list[str], n: int
 ) -> dict[str, np.ndarray] | None:
     """Each target's σ of x, y, z (n, 3) cm from its columns, or none (the map's stated σ:
     :meth:`MeasuredRows.with_sigma`)."""
     if not rows_sigma:
         return None
-    return {t: np.array(rows_sigma[t], float) if t in rows_sigma else np.full((n, 3), np.nan)
+    return {t: rows_sigma[t] if t in rows_sigma else np.full((n, 3), np.nan)
             for t in ids}  # fmt: skip
 
 

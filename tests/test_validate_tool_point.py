@@ -1,0 +1,64 @@
+"""`validate --against ... --tool-point registered` (issue 42): a validation file that
+measured another point on the tool, 1.2 mm from the session's, is judged with that point
+located by the file's own fit (said so), not against the session's tool point."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from import_data import UR10
+from layout_data import JOINTS, one_file, pose_set
+from typer.testing import CliRunner
+
+from pipeline.cli import EXIT_REFUSED, app
+from pipeline.identify import identify
+from pipeline.importers import import_file
+from pipeline.kinematics.chain import forward_kinematics
+from pipeline.robots.description import load_description
+from pipeline.units import joints_to_internal
+
+#: The second point (mm, last D-H frame): 1.2 mm from the session's tool point tmac.
+SECOND_MM = np.array([50.0, 1.2, 100.0])
+
+
+def _second_point_file(path: Path, n: int = 30) -> Path:
+    robot = load_description(UR10)
+    rng = np.random.default_rng(21)
+    q = np.deg2rad(rng.uniform(-170.0, 170.0, (n, 6)))
+    T = forward_kinematics(robot.design_chain(), joints_to_internal(np.rad2deg(q), robot.prismatic))
+    p = T[:, :3, :3] @ SECOND_MM + T[:, :3, 3] * 10.0 + rng.normal(0.0, 0.01, (n, 3))
+    rows = "\n".join(",".join(repr(float(v)) for v in r) for r in np.hstack([q, p]))
+    path.write_text(",".join([*JOINTS, "x", "y", "z"]) + "\n" + rows + "\n")
+    return path
+
+
+def test_a_second_tool_point_registered(tmp_path: Path) -> None:
+    paths, text = one_file(pose_set(), tmp_path)
+    (tmp_path / "map.toml").write_text(text)
+    import_file(str(paths[0]), "table", UR10, tmp_path / "s", tmp_path / "map.toml")
+    identify(tmp_path / "s", report=False)
+    other = _second_point_file(tmp_path / "second.csv")
+    mp = tmp_path / "second.toml"
+    cols = 'x = "x"\ny = "y"\nz = "z"\n'
+    joints = text[text.index("[[joints]]") :]
+    args = ["validate", str(tmp_path / "s"), "--against", str(other), "--format", "table",
+            "--map", str(mp)]  # fmt: skip
+    # named as the session's point, it is judged against it: the 1.2 mm between them
+    mp.write_text(f'length_unit = "mm"\n[[targets]]\nid = "tmac"\n{cols}\n{joints}')
+    wrong = json.loads(CliRunner().invoke(app, [*args, "--json"]).stdout)
+    assert 0.10 < wrong["rms_cm"] < 0.14, wrong
+    # named as itself: refused (not the session's tool point) unless --tool-point
+    mp.write_text(f'length_unit = "mm"\n[[targets]]\nid = "p2"\n{cols}\n{joints}')
+    refused = CliRunner().invoke(app, args)
+    assert refused.exit_code == EXIT_REFUSED and "no target 'tmac'" in refused.stderr
+    r = CliRunner().invoke(app, [*args, "--tool-point", "registered", "--json"])
+    out = json.loads(r.stdout)
+    assert out["tool_point"] == "registered" and out["target"] == "p2"
+    assert out["rms_cm"] < 0.003, out  # the tracker noise (0.01 mm per axis), not 1.2 mm
+    assert abs(out["tool_point_offset_cm"] - 0.12) < 0.005, out  # 1.2 mm from tmac
+    text_out = CliRunner().invoke(app, [*args, "--tool-point", "registered"]).stdout
+    assert "tool point registered: located by the fit of this file" in text_out
+    bad = CliRunner().invoke(app, [*args, "--tool-point", "p2"])
+    assert bad.exit_code == EXIT_REFUSED and "--tool-point 'p2'" in bad.stderr
