@@ -107,6 +107,35 @@ def test_globs_in_order_and_same_signature(tmp_path: Path, reference: Path) -> N
     assert all(r["source_line"] >= 2 for r in j)
 
 
+def _signature(session: Path) -> dict:  # type: ignore[type-arg]
+    """The identified signature document but its provenance (recording and table hashes:
+    the recordings differ in their rows' source names only) and self-digest."""
+    from pipeline.identify import identify
+
+    identify(session, report=False)
+    doc = json.loads((session / "signature.json").read_text())
+    return {k: v for k, v in doc.items() if k not in ("provenance", "sha256")}
+
+
+def test_every_layout_identifies_to_the_one_file_signature(tmp_path: Path, reference: Path) -> None:
+    """Issue 42's acceptance: each layout's session (and the file with 10 % of its rows
+    NaN, against the one file of the other rows) identifies to the same signature, bit for
+    bit."""
+    from layout_data import PoseSet
+
+    want = _signature(reference)
+    for name, layout in LAYOUTS.items():
+        assert _signature(imported(tmp_path / name.replace(" ", "_"), layout)) == want, name
+    ps = pose_set(n=50)
+    bad = [3, 11, 19, 27, 45]
+    keep = np.setdiff1d(np.arange(50), bad)
+    kept = PoseSet(ps.q_rad[keep], {t: p[keep] for t, p in ps.points_mm.items()})
+    nan = _with_nan(ps, bad, [2, 6, 6, 8, 2])
+    assert _signature(imported(tmp_path / "nan", one_file, nan)) == _signature(
+        imported(tmp_path / "kept", one_file, kept)
+    )
+
+
 def _refused(tmp: Path, paths: list[Path], text: str, fmt: str = "table") -> str:
     """The command's one line (exit 2, nothing written)."""
     mp = tmp / "map.toml"
