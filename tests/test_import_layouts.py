@@ -435,3 +435,31 @@ def test_poses_without_three_fixed_readings_counted(tmp_path: Path) -> None:
         "poses.csv: fixed targets b1, b2, b3 registered 17 poses by their own readings (each "
         "pose), 2 by an earlier one, 1 uncorrected"
     ), out.rows.notes
+
+
+@pytest.mark.parametrize("fmt", ["sscanss2", "table"])
+def test_joint_sweeps_in_two_files(tmp_path: Path, fmt: str) -> None:
+    """A sweep file split after joint 1's sweep (SScanSS-2 text, a table whose sweeps are
+    inferred) imports to the one file's recording values."""
+    from import_data import TWO_LINK, TWO_LINK_MAP, TWO_LINK_VALUES, sscanss2_text, two_link_table
+
+    one = tmp_path / "one.txt"
+    if fmt == "sscanss2":
+        one.write_text(sscanss2_text(TWO_LINK, TWO_LINK_VALUES))
+        head, cut = [], len(TWO_LINK_VALUES[0])
+    else:
+        two_link_table(one)
+        head, cut = one.read_text().splitlines()[:2], len(TWO_LINK_VALUES[0])
+    lines = one.read_text().splitlines()[len(head) :]
+    a, b = tmp_path / "a.txt", tmp_path / "b.txt"
+    a.write_text("\n".join([*head, *lines[:cut]]) + "\n")
+    b.write_text("\n".join([*head, *lines[cut:]]) + "\n")
+    mp = None
+    if fmt == "table":
+        mp = tmp_path / "map.toml"
+        mp.write_text(TWO_LINK_MAP)
+    import_file(str(one), fmt, TWO_LINK, tmp_path / "s1", mp)
+    import_file([str(a), str(b)], fmt, TWO_LINK, tmp_path / "s2", mp)
+    assert messages(tmp_path / "s2") == messages(tmp_path / "s1")
+    files = {m["source_file"] for m in messages(tmp_path / "s2", True)["/robot/joint_state"]}
+    assert files == {"a.txt", "b.txt"}
