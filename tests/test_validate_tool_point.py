@@ -59,6 +59,9 @@ def test_a_second_tool_point_registered(tmp_path: Path) -> None:
     assert out["rms_cm"] < 0.003, out  # the tracker noise (0.01 mm per axis), not 1.2 mm
     assert abs(out["tool_point_offset_cm"] - 0.12) < 0.005, out  # 1.2 mm from tmac
     text_out = CliRunner().invoke(app, [*args, "--tool-point", "registered"]).stdout
-    assert "tool point registered: located by the fit of this file" in text_out
+    line = next(ln for ln in text_out.splitlines() if "tool point registered" in ln)
+    assert line.startswith("  tool point registered: located by the fit of this file at (")
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "import.md").read_text()
+    assert line in doc, line  # docs/import.md quotes this run
     bad = CliRunner().invoke(app, [*args, "--tool-point", "p2"])
     assert bad.exit_code == EXIT_REFUSED and "--tool-point 'p2'" in bad.stderr
