@@ -78,6 +78,8 @@ def test_fixed_rows_fold_into_base_and_tool() -> None:
          "joints[3] is fixed between moving joints"),
         (lambda d: {**d, "joints": [_modified(d)["joints"][0], *d["joints"][1:]]},
          "some joints give mdh (modified D-H) and some dh"),
+        (lambda d: {**_modified(d), "base": {"xyz_cm": ["a", 0, 0]}},
+         "d.toml: base: xyz_cm and rpy_deg must be lists of three numbers"),
     ],
 )  # fmt: skip
 def test_bad_conventions_one_line(edit, fragment: str) -> None:  # type: ignore[no-untyped-def]

@@ -26,13 +26,21 @@ MDH_KEYS = ("alpha_deg", "a_cm", "theta_deg", "d_cm")
 FIXED = "fixed"
 
 
-def _pose_matrix(pose: Any) -> np.ndarray:
+def _pose_matrix(pose: Any, where: str) -> np.ndarray:
+    """A ``[base]`` or ``[tool]`` table's matrix; a malformed one refused in one line."""
     from pipeline.kinematics.transforms import transform_from_xyz_rpy
 
-    pose = pose if isinstance(pose, dict) else {}
-    return transform_from_xyz_rpy(
-        pose.get("xyz_cm", [0.0] * 3), np.deg2rad(pose.get("rpy_deg", [0.0] * 3))
-    )
+    pose = {} if pose is None else pose
+    try:
+        xyz = np.array(pose.get("xyz_cm", [0.0] * 3), float).reshape(3)
+        rpy = np.array(pose.get("rpy_deg", [0.0] * 3), float).reshape(3)
+    except (AttributeError, TypeError, ValueError):
+        raise RobotDescriptionError(
+            f"{where}: xyz_cm and rpy_deg must be lists of three numbers", got=repr(pose)[:80]
+        ) from None
+    if not np.isfinite([*xyz, *rpy]).all():
+        raise RobotDescriptionError(f"{where}: a number is not finite", got=repr(pose)[:80])
+    return transform_from_xyz_rpy(xyz, np.deg2rad(rpy))
 
 
 def _pose_dict(T: np.ndarray) -> dict[str, list[float]]:
@@ -77,7 +85,7 @@ def standard_form(data: Any, source: str) -> Any:
                 fix="write every row in the same convention",
             )
         joints, base = _from_modified(joints, source)
-        out["base"] = _pose_dict(_pose_matrix(data.get("base")) @ base)
+        out["base"] = _pose_dict(_pose_matrix(data.get("base"), f"{source}: base") @ base)
     moving = [k for k, j in enumerate(joints) if j.get("type") != FIXED]
     if not moving:
         raise RobotDescriptionError(f"{source}: every joint is fixed", expected="a moving joint")
@@ -90,7 +98,8 @@ def standard_form(data: Any, source: str) -> Any:
             expected="fixed rows before the first moving joint (base) or after the last (tool)",
             fix="multiply it into the neighbouring rows by hand, or describe the arm without it",
         )
-    B, T = _pose_matrix(out.get("base")), _pose_matrix(out.get("tool"))
+    B = _pose_matrix(out.get("base"), f"{source}: base")
+    T = _pose_matrix(out.get("tool"), f"{source}: tool")
     for k in range(moving[0]):
         B = B @ _link(joints[k].get("dh", {}), f"{source}: joints[{k}].dh")
     for k in reversed(range(moving[-1] + 1, len(joints))):
