@@ -463,3 +463,10 @@ def test_joint_sweeps_in_two_files(tmp_path: Path, fmt: str) -> None:
     assert messages(tmp_path / "s2") == messages(tmp_path / "s1")
     files = {m["source_file"] for m in messages(tmp_path / "s2", True)["/robot/joint_state"]}
     assert files == {"a.txt", "b.txt"}
+
+
+def test_skip_lines_with_several_files_refused(tmp_path: Path) -> None:
+    """Line numbers name no one file of several: refused, not applied to every file."""
+    paths, text = seven_files(pose_set(), tmp_path)
+    line = _refused(tmp_path, paths, "skip_lines = [3]\n" + text)
+    assert line.startswith("error: map.toml: skip_lines with 7 files: its line numbers name"), line

@@ -190,8 +190,10 @@ def import_file(
         local = None
         if imap.tool_offset is not None:
             local = np.array(imap.tool_offset) * LENGTH_CM[imap.length_unit]
-        names = files[0].name if len(files) == 1 else f"{len(files)} files {rows.name}"
-        note = f"{fmt} file {names} (imported)"
+        names = f"file {files[0].name}"
+        if len(files) > 1:
+            names = f"files {files[0].name} to {files[-1].name} ({len(files)})"
+        note = f"{fmt} {names} (imported)"
         messages = session_messages(rows, robot, tool, note, local)
         recording = write_imported(
             Path(session_dir), messages, source_metadata(files, fmt, mp), force

@@ -115,6 +115,14 @@ def read_table(
             f"{mname}: no [[targets]]", expected="x, y, z columns of at least one target",
             fix="add a [[targets]] table (docs/import.md)",
         )  # fmt: skip
+    if imap.skip_lines and (len(paths) > 1 or loader is not None):
+        raise ImportFileError(
+            f"{mname}: skip_lines with {'a .mat file' if loader else f'{len(paths)} files'}: "
+            "its line numbers name no one file",
+            expected="skip_lines with one delimited file",
+            fix="leave the rows' cells empty (dropped and counted), or hold them out by "
+            "check.rows; or import one file",
+        )
     load = loader or delimited_loader(imap)
     scol = imap.sweep_column if imap.sweep_column not in (None, INFER) else None
     groups = [paths] if imap.joined else [[p] for p in paths]
