@@ -105,6 +105,10 @@ def test_globs_in_order_and_same_signature(tmp_path: Path, reference: Path) -> N
     assert {r["source_file"] for r in v} == {f"region_{k}.csv" for k in range(1, 8)}
     j = read_table(tmp_path / "s" / "stages" / "joints.arrow").to_pylist()
     assert all(r["source_line"] >= 2 for r in j)
+    for name in ("positions", "holdout"):  # every table with rows names them
+        rows = read_table(tmp_path / "s" / "stages" / f"{name}.arrow").to_pylist()
+        assert rows and {r["source_file"] for r in rows} == {f"region_{k}.csv" for k in range(1, 8)}
+        assert all(r["source_line"] >= 2 for r in rows), name
 
 
 def _signature(session: Path) -> dict:  # type: ignore[type-arg]

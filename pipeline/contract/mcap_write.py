@@ -12,7 +12,6 @@ from typing import IO, Any
 
 from mcap.writer import CompressionType, IndexType, Writer
 
-
 #: One encoder for every message: ``json.dumps`` with these arguments builds a new
 #: ``JSONEncoder`` per call (the same bytes; 100,000-row imports write 200,000 messages).
 _ENCODER = json.JSONEncoder(separators=(",", ":"), allow_nan=False)

@@ -60,10 +60,10 @@ def source_columns(files: np.ndarray, lines: np.ndarray, n: int = 1) -> dict[str
     }
 
 
-def sources_at(joints: pa.Table, sweep: np.ndarray, step: np.ndarray) -> dict[str, pa.Array]:
+def sources_at(joints: pa.Table | None, sweep: np.ndarray, step: np.ndarray) -> dict[str, pa.Array]:
     """``source_file`` and ``source_line`` of the configurations (sweep, step), joined by
-    that key from the ``joints`` table (null where not recorded, or a table from before)."""
-    if "source_file" not in joints.column_names:
+    that key from the ``joints`` table (null where not recorded, or no table)."""
+    if joints is None or "source_file" not in joints.column_names:
         return source_columns(np.full(len(sweep), ""), np.zeros(len(sweep), np.int64))
     cols = joints.select(["sweep", "step", "source_file", "source_line"]).to_pydict()
     at = {(s, k): (f or "", ln or 0)
