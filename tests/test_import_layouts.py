@@ -50,11 +50,16 @@ def imported(folder: Path, layout, ps=None) -> Path:  # type: ignore[no-untyped-
 
 
 def messages(session: Path, keep_source: bool = False) -> dict[str, list[dict]]:
+    """The recording's messages; ``keep_source``: each joint state's source_file as the
+    contract gives it (its own, else armsig.source's one file), else none."""
     content = read_mcap(session / "recording.mcap", POINT_CHANNELS, "test")
     out = {t: [m for _, m in msgs] for t, msgs in content.messages.items()}
     out["/rig/description"] = []  # names the files
-    if not keep_source:
-        for m in out["/robot/joint_state"]:
+    one_file = content.metadata["armsig.source"]["file"]
+    for m in out["/robot/joint_state"]:
+        if keep_source:
+            m.setdefault("source_file", one_file)
+        else:
             for k in SOURCE:
                 m.pop(k, None)
     return out
@@ -78,8 +83,12 @@ def test_rows_keep_their_source_file_and_line(tmp_path: Path) -> None:
     assert (first["source_file"], first["source_line"]) == ("region_1.csv", 2)
     last = max(js, key=lambda m: m["step"])
     assert last["source_file"] == "region_7.csv" and last["source_line"] == 7  # 6 rows + header
+    raw = read_mcap(session / "recording.mcap", POINT_CHANNELS, "test").messages
+    assert all("source_file" in m for _, m in raw["/robot/joint_state"])  # several files
     mat = imported(tmp_path / "mat", LAYOUTS["mat v7.3"])
-    js = messages(mat, keep_source=True)["/robot/joint_state"]
+    content = read_mcap(mat / "recording.mcap", POINT_CHANNELS, "test")
+    assert all("source_file" not in m for _, m in content.messages["/robot/joint_state"])
+    js = messages(mat, keep_source=True)["/robot/joint_state"]  # one file: armsig.source's
     assert {m["source_file"] for m in js} == {"poses_v73.mat"}
     assert sorted(m["source_line"] for m in js) == list(range(1, 43))
 

@@ -147,6 +147,7 @@ def session_messages(
         ),
     ]
     tool_q = rows.q[tool.rows] if tool.readings is None else tool.readings
+    several = len(set(rows.files)) > 1
     for c, (sweep, step, k) in enumerate(configs):
         t_ns = T0_NS + (c + 1) * STEP_NS
         q = [float(v) for v in (tool_q[step] if sweep == "tool" else rows.q[k])]
@@ -160,7 +161,8 @@ def session_messages(
                            ("tracker_residual_cm", rows.residual_cm[k])):  # type: ignore[index]  # fmt: skip
                 if np.isfinite(v):
                     state[key] = float(v)
-        state["source_file"] = rows.file_of(k)
+        if several:  # one file: armsig.source names it, not every message (issue 42)
+            state["source_file"] = rows.file_of(k)
         if rows.lines is not None and rows.lines[k] > 0:
             state["source_line"] = int(rows.lines[k])
         messages.append(Message("/robot/joint_state", t_ns, state))

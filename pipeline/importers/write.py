@@ -7,15 +7,12 @@ import os
 from pathlib import Path
 
 from pipeline.atomic import TEMP_SUFFIX
-from pipeline.contract.channels import POINT_CHANNELS
+from pipeline.contract.channels import POINT_CHANNELS, SOURCE_METADATA
 from pipeline.contract.digest import file_sha256
 from pipeline.errors import ImportFileError, RecordingError
 from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
 from pipeline.stages.lock import session_lock
 from pipeline.stages.recording import read_recording
-
-#: MCAP metadata record naming the foreign file a recording was converted from.
-SOURCE_METADATA = "armsig.source"
 
 
 def source_metadata(sources: list[Path], fmt: str, map_file: Path | None) -> dict[str, str]:

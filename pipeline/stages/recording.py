@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.contract.channels import SENSOR_CHANNELS
+from pipeline.contract.channels import SENSOR_CHANNELS, SOURCE_METADATA
 from pipeline.contract.digest import file_sha256
 from pipeline.errors import ArmsigError, RecordingError
 from pipeline.stages.recording_keys import (
@@ -113,7 +113,9 @@ def _read_cached(p: Path, sha: str) -> Recording:
     from pipeline.contract.mcap_read import read_mcap  # parsing: only when not cached
     from pipeline.stages import recording_points
 
-    msgs = read_mcap(p, _KNOWN, _FIX).messages
+    content = read_mcap(p, _KNOWN, _FIX)
+    msgs = content.messages
+    one_file = content.metadata.get(SOURCE_METADATA, {}).get("file", "")  # an import's
     rigs = msgs["/rig/description"]
     sensor = str(rigs[0][1].get("sensor", "sonic")) if len(rigs) == 1 else "sonic"
     topics = tuple(SENSOR_CHANNELS[sensor])
@@ -153,7 +155,7 @@ def _read_cached(p: Path, sha: str) -> Recording:
         "q_commanded": q_cmd,
         "q_encoder": q_enc,
         "joint_payload_kg": np.array([m.get("payload_kg", np.nan) for _, m in js], float),
-        "joint_source_file": np.array([m.get("source_file", "") for _, m in js], str),
+        "joint_source_file": np.array([m.get("source_file", one_file) for _, m in js], str),
         "joint_source_line": np.array([m.get("source_line", 0) for _, m in js], np.int64),
         "joint_drift_cm": np.array(
             [
