@@ -63,5 +63,19 @@ def test_a_second_tool_point_registered(tmp_path: Path) -> None:
     assert line.startswith("  tool point registered: located by the fit of this file at (")
     doc = (Path(__file__).resolve().parent.parent / "docs" / "import.md").read_text()
     assert line in doc, line  # docs/import.md quotes this run
+    bad = CliRunner().invoke(app, [*args, "--tool-point", "p9"])
+    assert bad.exit_code == EXIT_REFUSED and "--tool-point 'p9' is no target" in bad.stderr
     bad = CliRunner().invoke(app, [*args, "--tool-point", "p2"])
-    assert bad.exit_code == EXIT_REFUSED and "--tool-point 'p2'" in bad.stderr
+    assert bad.exit_code == EXIT_REFUSED and "needs tool_point_q in the map" in bad.stderr
+    # located from its measurement at a known configuration (the file's first row)
+    q0 = [float(v) for v in other.read_text().splitlines()[1].split(",")[:6]]
+    q0_deg = [round(float(np.rad2deg(v)), 6) for v in q0]
+    mp.write_text(f"tool_point_q = {q0_deg}\nlength_unit = \"mm\"\n[[targets]]\nid = \"p2\"\n"
+                  f"{cols}\n{joints}")  # fmt: skip
+    known = json.loads(CliRunner().invoke(app, [*args, "--tool-point", "p2", "--json"]).stdout)
+    assert known["tool_point"] == "p2" and known["tool_point_rows"] == 1 and known["n"] == 29
+    assert known["rms_cm"] < 0.004, known  # as measured: noise, not 1.2 mm
+    assert abs(known["tool_point_offset_cm"] - 0.12) < 0.01, known
+    mp.write_text(mp.read_text().replace("tool_point_q = [", "tool_point_q = [1.0, "))
+    bad = CliRunner().invoke(app, [*args, "--tool-point", "p2"])
+    assert bad.exit_code == EXIT_REFUSED and "tool_point_q has 7 values" in bad.stderr

@@ -204,7 +204,8 @@ def validate(
         typer.Option(
             "--tool-point",
             help="'registered': the file measured another point on the tool; locate it (and "
-            "the base) by the fit of the file's own points, and say so.",
+            "the base) by the fit of the file's own points, and say so. A target ID: locate "
+            "it from its rows at the map's tool_point_q (readings), judge the other rows.",
         ),
     ] = None,
     as_json: JsonOption = False,
@@ -242,6 +243,14 @@ def validate(
             f"  max {r['max_cm']:.4g} cm"
         )
     else:
+        if r["tool_point"] != "session":  # located at the map's tool_point_q (issue 42)
+            x, y, z = r["tool_point_local_cm"]
+            typer.echo(
+                f"  tool point {r['tool_point']}: located from its {r['tool_point_rows']} "
+                f"row(s) at the map's tool_point_q, at ({x:.4g}, {y:.4g}, {z:.4g}) cm in the last "
+                f"link's frame, {r['tool_point_offset_cm']:.4g} cm from the session's tool "
+                "point; the other rows judged"
+            )
         typer.echo(
             f"  as measured:      mean {r['mean_cm']:.4g}  RMS {r['rms_cm']:.4g}  "
             f"max {r['max_cm']:.4g} cm"

@@ -112,6 +112,7 @@ class ImportMap:
     pose_column: str | int | None = None  # stacked: rows sharing its value are one pose
     sigma_floor: float | None = None  # length_unit; None: the tracker's resolution
     fixed_block: int = 1  # fixed targets: poses per registration
+    tool_point_q: tuple[float, ...] | None = None  # validate --tool-point ID: where located
     strict: bool = False  # --strict, not a map key: refuse a missing value, do not drop
 
     @property
@@ -344,6 +345,9 @@ def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
         pose_column=data.get("pose_column"),
         sigma_floor=data.get("sigma_floor"),
         fixed_block=int(data.get("fixed_block", 1)),
+        tool_point_q=None
+        if "tool_point_q" not in data
+        else tuple(float(v) for v in data["tool_point_q"]),
     )
 
 
