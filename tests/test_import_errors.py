@@ -86,9 +86,16 @@ CASES = {
         _sscanss2(lambda ls: _cell(ls, 4, 2, "nan")),
         ["f.txt: line 5: a value is missing or not a number (NaN)", "try:"],
     ),
-    "NaN row (table)": (
-        _table(lambda ls: [*ls[:4], ls[4].replace(ls[4].split(",")[3], "", 1), *ls[5:]]),
-        ["f.csv: line 5: a value is missing", "skip"],
+    "NaN row (table), --strict": (  # without --strict: dropped and said (issue 42)
+        lambda tmp: [
+            *_table(lambda ls: [*ls[:4], ls[4].replace(ls[4].split(",")[3], "", 1), *ls[5:]])(tmp),
+            "--strict",
+        ],  # fmt: skip
+        [
+            "f.csv: line 5: a measured value is missing or not a finite number (1 such rows; "
+            "by column: y1 1)",
+            "--strict",
+        ],
     ),
     "duplicated row": (
         _sscanss2(lambda ls: [*ls[:4], ls[3], *ls[4:]]),

@@ -189,7 +189,7 @@ def test_a_bag_of_a_pose_set_imports_as_its_table(tmp_path: Path) -> None:
             "--robot", str(UR10), "--map", str(mp)]  # fmt: skip
     r = CliRunner().invoke(app, argv)
     assert r.exit_code == 0, r.output
-    assert "note: 40 stops where the arm stood still" in r.stderr, r.stderr
+    assert "warning: 40 stops where the arm stood still" in r.stderr, r.stderr
     for s in ("table", "fromBag"):
         identify(tmp_path / s, report=False)
     np.testing.assert_allclose(_chain(tmp_path / "fromBag"), _chain(tmp_path / "table"), atol=1e-9)

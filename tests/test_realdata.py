@@ -267,6 +267,36 @@ def test_ur10_verdict_on_a_real_arm(ur10_c70: Path) -> None:
     identify(ur10_c70, report=False)  # the defaults again, for the module's other tests
 
 
+#: SHA-256 of Series C's recording (series_c.toml) as imported before issue 42, every
+#: message's JSON (sorted keys, with its topic and time) but the rows' source fields.
+SERIES_C_MESSAGES = "19f0b43ec769f87ee7739ef9f72bcba7763cc7a703484267ae353eaa55650934"
+
+
+@needs_ur10
+def test_ur10_series_c_import_unchanged(tmp_path: Path) -> None:
+    """Issue 42: the three-column-group layout imports to the same messages, bit for bit
+    (the joint states gain only source_line); every row names line and file."""
+    import hashlib
+    import json
+
+    from pipeline.contract.channels import POINT_CHANNELS
+    from pipeline.contract.mcap_read import read_mcap
+
+    src = UR10_DATA / "Series_C" / "measurements_random_poses.csv"
+    import_file(
+        src, "table", UR10_EXAMPLE / "ur10.toml", tmp_path / "c", UR10_EXAMPLE / "series_c.toml"
+    )
+    content = read_mcap(tmp_path / "c" / "recording.mcap", POINT_CHANNELS, "test")
+    h = hashlib.sha256()
+    for topic in sorted(content.messages):
+        for t, m in content.messages[topic]:
+            m = {k: v for k, v in m.items() if k not in ("source_file", "source_line")}
+            h.update(json.dumps([topic, t, m], sort_keys=True).encode())
+    assert h.hexdigest() == SERIES_C_MESSAGES
+    lines = [m["source_line"] for _, m in content.messages["/robot/joint_state"]]
+    assert sorted(lines) == list(range(2, 2775))  # a header, then 2,773 poses
+
+
 @needs_ur10
 def test_ur10_series_c_held_out(ur10_c70: Path) -> None:
     held = read_table(ur10_c70 / "stages" / "holdout.arrow").to_pylist()

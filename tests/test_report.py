@@ -48,7 +48,7 @@ def test_report_written_in_session(session: Path, report: tuple[Path, str]) -> N
 def test_sections_in_order(report: tuple[Path, str]) -> None:
     _, text = report
     headings = [
-        "pseudo Denavit-Hartenberg",
+        "Denavit-Hartenberg parameters (as `pipeline export --format dh`)",
         "S-Model link parameters",
         "Feature accuracies",
         "### Warnings",
@@ -82,11 +82,17 @@ def test_every_joint_and_dh_value(session: Path, report: tuple[Path, str]) -> No
     robot = session_robot(read_table(stage_path(session, "session")))
     for i, joint in enumerate(robot.joints, start=1):
         assert f"| {i} | {joint.name} |" in text
-    for row in read_table(stage_path(session, "dh")).to_pylist():
-        assert f"{row['a_cm']:.4f}" in text
-        assert f"{row['alpha_deg']:.3f}" in text
-        assert f"{row['q_offset_deg']:.3f}" in text
-        assert f"{row['d_cm']:.4f}" in text
+    # the D-H table export writes (issue 42: Hayati's β on parallel axes), from stage chain
+    from pipeline.kinematics.dh_table import dh_table_from_chain
+    from pipeline.stages.frames import chain_from_frames
+
+    t = dh_table_from_chain(chain_from_frames(read_table(stage_path(session, "chain")),
+                                              robot.prismatic))  # fmt: skip
+    for i in range(robot.n_joints):
+        assert f"{t.a[i]:.4f}" in text
+        assert f"{np.degrees(t.alpha[i]):.3f}" in text
+        assert f"{np.degrees(t.theta[i]):.3f}" in text
+        assert f"{t.d[i]:.4f}" in text
 
 
 def test_tables_come_from_stage_files(session: Path, report: tuple[Path, str]) -> None:

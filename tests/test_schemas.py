@@ -41,6 +41,10 @@ def _joint_states(**overrides):
         "q_cm": [None],
         "t_s": [0.5],
         "payload_kg": pa.array([None], pa.float64()),
+        "source_file": pa.array([None], pa.string()),
+        "source_line": pa.array([None], pa.int32()),
+        "tracker_drift_cm": pa.array([None], pa.float64()),
+        "tracker_residual_cm": pa.array([None], pa.float64()),
     }
     cols.update(overrides)
     return pa.table(cols)

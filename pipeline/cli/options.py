@@ -81,6 +81,7 @@ class ImportFormat(StrEnum):
     rct = "rct"
     rosbag2 = "rosbag2"
     images = "images"
+    mat = "mat"
 
 
 class Study(StrEnum):
@@ -171,6 +172,15 @@ SessionArg = Annotated[
 #: ``--json``: machine output on stdout (warnings and errors stay on stderr).
 JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON on stdout for machines.")]
 #: The ``NAME`` of ``simulate`` and ``import``: a new session's name or folder.
+#: ``--strict`` of import and validate: refuse a row with a missing value, do not drop it.
+StrictOption = Annotated[
+    bool,
+    typer.Option(
+        "--strict",
+        help="Refuse a row with a missing or non-finite measured value (default: drop it, "
+        "count it per column and say so in one line).",
+    ),
+]
 NewSessionArg = Annotated[
     str, typer.Argument(help="Session name (sessions/NAME) or a folder path.")
 ]

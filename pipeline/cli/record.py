@@ -18,6 +18,7 @@ from pipeline.cli.options import (
     RobotIdOption,
     Sensor,
     Setup,
+    StrictOption,
     choice,
     choice_list,
     choices_of,
@@ -300,14 +301,16 @@ def distortion_terms(text: str) -> tuple[float, float, float, float, float]:
 @commands.command("import")
 def import_(
     file: Annotated[
-        str,
+        list[str],
         typer.Argument(
-            help="The foreign file of measured points (images: cal_data.yaml or a table)."
+            help="The foreign file(s) of measured points: paths or quoted globs, in "
+            "order (one data set; joined by row when the map names a file per "
+            "column group); a ROS 2 bag folder; images: cal_data.yaml or a table."
         ),
     ],
     name: NewSessionArg,
     format: Annotated[
-        ImportFormat, choice("sscanss2, table, rct, rosbag2 or images (docs/import.md).")
+        ImportFormat, choice("sscanss2, table, rct, mat, rosbag2 or images (docs/import.md).")
     ],
     robot: Annotated[
         str | None,
@@ -318,9 +321,10 @@ def import_(
     ] = None,
     robot_id: RobotIdOption = None,
     force: ForceRecording = False,
+    strict: StrictOption = False,
     as_json: JsonOption = False,
 ) -> None:
-    """Convert a file of measured points into a point session (recording.mcap), or camera
+    """Convert file(s) of measured points into a point session (recording.mcap), or camera
     images into a camera session: industrial_calibration's cal_data.yaml as it is, or a
     table of images with joint readings or flange poses and --map (docs/import.md)."""
     from pipeline.importers import import_file
@@ -328,12 +332,15 @@ def import_(
 
     folder = new_session_folder(name)
     if format.value == "images":
-        _import_images(file, folder, map, robot, force, as_json)
+        if len(file) != 1:
+            raise ArmsigError("--format images takes one file", got=f"{len(file)} files",
+                              fix="give the cal_data.yaml or the table of images")  # fmt: skip
+        _import_images(file[0], folder, map, robot, force, as_json)
         return
     if robot is None:
         raise ArmsigError(f"--format {format.value} needs --robot",
                           fix="--robot ROBOT.toml, the measured machine's description")  # fmt: skip
-    out = import_file(file, format.value, robot, folder, map, force, robot_id)
+    out = import_file(list(file), format.value, robot, folder, map, force, strict, robot_id)
     n_check = int((out.rows.sweep == CHECK_SWEEP).sum())
     n_poses = int((out.rows.sweep == POSES_SWEEP).sum())
     if as_json:
@@ -347,6 +354,7 @@ def import_(
                 "poses": n_poses,
                 "check": n_check,
                 "targets": sorted(out.rows.targets),
+                "rows_dropped": out.rows.dropped,
                 "notes": list(out.rows.notes),
                 "tool": {
                     "note": out.tool.note,
@@ -362,8 +370,8 @@ def import_(
             f"wrote {out.recording}: {len(out.rows.where)} configurations "
             f"({poses}{n_check} for validation), tool from {out.tool.note}"
         )
-    for note in out.rows.notes:
-        typer.echo(f"note: {note}", err=True)
+    for note in out.rows.notes:  # rows dropped, σ floored, a bag's moving samples: said
+        warn(note)
     if out.tool.warning:
         warn(out.tool.warning)
 

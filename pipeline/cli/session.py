@@ -12,6 +12,7 @@ from pipeline.cli.options import (
     ImportFormat,
     JsonOption,
     SessionArg,
+    StrictOption,
     choice,
     comma_list,
     stage_params,
@@ -216,9 +217,27 @@ def _camera_audit(session: str, as_json: bool) -> None:
 @commands.command()
 def validate(
     session: SessionArg,
-    against: Annotated[str, typer.Option(help="A second file of measured points.")],
-    format: Annotated[ImportFormat, choice("sscanss2, table, rct or rosbag2 (docs/import.md).")],
+    against: Annotated[
+        list[str],
+        typer.Option(
+            help="A second file of measured points; repeat it (or give a quoted "
+            "glob) for several files of one validation set, in order."
+        ),
+    ],
+    format: Annotated[
+        ImportFormat, choice("sscanss2, table, rct, mat or rosbag2 (docs/import.md).")
+    ],
     map: Annotated[str | None, typer.Option(help="Map file (TOML) of the second file.")] = None,
+    strict: StrictOption = False,
+    tool_point: Annotated[
+        str | None,
+        typer.Option(
+            "--tool-point",
+            help="'registered': the file measured another point on the tool; locate it (and "
+            "the base) by the fit of the file's own points, and say so. A target ID: locate "
+            "it from its rows at the map's tool_point_q (readings), judge the other rows.",
+        ),
+    ] = None,
     as_json: JsonOption = False,
 ) -> None:
     """The signature's position error on a second file (read in memory, nothing written).
@@ -229,21 +248,46 @@ def validate(
     """
     from pipeline.evaluate.validate import validate_against
 
-    r = validate_against(session, against, format.value, map)
+    r = validate_against(session, list(against), format.value, map, strict, tool_point)
     if as_json:
         print_json(r)
         return
     typer.echo(
         f"{r['file']}: {r['n']} points of target {r['target']} vs the signature of {session}"
     )
-    if r["rows_skipped"]:  # said, not skipped silently (issue 32)
+    for note in r["notes"]:  # rows dropped for a missing value (issue 42), σ floored
+        warn(note)
+    if r["rows_skipped"] and not r["notes"]:  # said, not skipped silently (issue 32)
         warn(f"{r['rows_skipped']} row(s) of {r['file']} skipped: a reading or coordinate "
              "is not a finite number (NaN or inf)")  # fmt: skip
-    typer.echo(
-        f"  as measured:      mean {r['mean_cm']:.4g}  RMS {r['rms_cm']:.4g}  "
-        f"max {r['max_cm']:.4g} cm"
-    )
-    if r["registered_rms_cm"] is None:
+    if r["tool_point"] == "registered":  # issue 42: a point the session never measured
+        x, y, z = r["tool_point_local_cm"]
+        typer.echo(
+            f"  tool point registered: located by the fit of this file at ({x:.4g}, {y:.4g}, "
+            f"{z:.4g}) cm in the last link's frame, {r['tool_point_offset_cm']:.4g} cm from "
+            "the session's tool point, with the base (9 parameters fitted to the points "
+            "judged, as the design model below)"
+        )
+        typer.echo(
+            f"  base and tool point registered:  mean {r['mean_cm']:.4g}  RMS {r['rms_cm']:.4g}"
+            f"  max {r['max_cm']:.4g} cm"
+        )
+    else:
+        if r["tool_point"] != "session":  # located at the map's tool_point_q (issue 42)
+            x, y, z = r["tool_point_local_cm"]
+            typer.echo(
+                f"  tool point {r['tool_point']}: located from its {r['tool_point_rows']} "
+                f"row(s) at the map's tool_point_q, at ({x:.4g}, {y:.4g}, {z:.4g}) cm in the last "
+                f"link's frame, {r['tool_point_offset_cm']:.4g} cm from the session's tool "
+                "point; the other rows judged"
+            )
+        typer.echo(
+            f"  as measured:      mean {r['mean_cm']:.4g}  RMS {r['rms_cm']:.4g}  "
+            f"max {r['max_cm']:.4g} cm"
+        )
+    if r["tool_point"] == "registered":
+        pass  # the signature's registered line above
+    elif r["registered_rms_cm"] is None:
         typer.echo("  base registered:  not possible (fewer than 3 points, or collinear)")
     else:
         typer.echo(

@@ -68,6 +68,10 @@ def check_robot_id(robot_id: str) -> str:
 
 
 #: Words of older recordings, read as today's: (topic, field) -> {old: new}.
+#: MCAP metadata record naming the foreign file(s) an imported recording was converted
+#: from (``pipeline import``); its ``file`` is every row's ``source_file`` when the joint
+#: states carry none (a recording of one file).
+SOURCE_METADATA = "armsig.source"
 LEGACY_VALUES = {("/robot/description", "mode"): {"real": "hardware"}}
 
 

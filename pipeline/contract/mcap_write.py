@@ -12,10 +12,14 @@ from typing import IO, Any
 
 from mcap.writer import CompressionType, IndexType, Writer
 
+#: One encoder for every message: ``json.dumps`` with these arguments builds a new
+#: ``JSONEncoder`` per call (the same bytes; 100,000-row imports write 200,000 messages).
+_ENCODER = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
+
 
 def json_bytes(payload: Any) -> bytes:
     """A message's data: compact JSON; NaN and Infinity, which are not JSON, raise."""
-    return json.dumps(payload, separators=(",", ":"), allow_nan=False).encode()
+    return _ENCODER.encode(payload).encode()
 
 
 def checked_writer(fh: IO[bytes], profile: str, library: str) -> Writer:

@@ -71,10 +71,23 @@ def model_points(
     """The chain's tool point (m, 3) cm at joint values ``q`` (m, n) deg / cm, the joints
     where the ``nongeometric`` terms put them when the signature has them, under each
     row's ``payload_kg`` (m,) where recorded (NaN or None: the signature's own payload)."""
-    qi = joints_to_internal(q, prismatic)
-    if nongeometric is not None:
-        kg = None
-        if payload_kg is not None:
-            kg = np.where(np.isfinite(payload_kg), payload_kg, nongeometric.payload_kg)
-        qi = nongeometric.effective(qi, kg)
+    qi = joints_sitting(q, prismatic, nongeometric, payload_kg)
     return forward_kinematics(chain, qi)[:, :3, 3]
+
+
+def joints_sitting(
+    q: np.ndarray,
+    prismatic: np.ndarray,
+    nongeometric: NonGeometric | None = None,
+    payload_kg: np.ndarray | None = None,
+) -> np.ndarray:
+    """The joint values (m, n) rad / cm where the ``nongeometric`` terms put readings ``q``
+    (m, n) deg / cm, under each row's ``payload_kg`` (m,) where recorded (NaN or None: the
+    signature's own payload); the readings themselves without terms."""
+    qi = joints_to_internal(q, prismatic)
+    if nongeometric is None:
+        return qi
+    kg = None
+    if payload_kg is not None:
+        kg = np.where(np.isfinite(payload_kg), payload_kg, nongeometric.payload_kg)
+    return nongeometric.effective(qi, kg)

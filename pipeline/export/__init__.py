@@ -21,14 +21,6 @@ import numpy as np
 
 from pipeline.atomic import check_new_file, check_writable, write_text_atomic
 from pipeline.errors import ArmsigError
-from pipeline.export.dh_table import (
-    DHTable,
-    ModifiedDHTable,
-    chain_from_dh_table,
-    chain_from_modified,
-    dh_table_from_chain,
-    modified_from_dh,
-)
 from pipeline.export.documents import chain_document, chain_from_document, dh_document, mdh_document
 from pipeline.export.rigid import RigidLoss, rigid_signature
 from pipeline.export.sidecar import check_sidecar, sidecar_document, sidecar_path
@@ -41,6 +33,14 @@ from pipeline.export.urdf import (
     written_origins,
 )
 from pipeline.kinematics.chain import SerialChain, forward_kinematics, in_frame
+from pipeline.kinematics.dh_table import (
+    DHTable,
+    ModifiedDHTable,
+    chain_from_dh_table,
+    chain_from_modified,
+    dh_table_from_chain,
+    modified_from_dh,
+)
 from pipeline.kinematics.transforms import invert_transform, pose_error
 from pipeline.signature.alignment import FRAMES
 from pipeline.signature.file import FILE_NAME, Signature, signature_from_document

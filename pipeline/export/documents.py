@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.export.dh_table import HAYATI_DEG, DHTable, ModifiedDHTable
 from pipeline.kinematics.chain import SerialChain
+from pipeline.kinematics.dh_table import HAYATI_DEG, DHTable, ModifiedDHTable
 from pipeline.robots.description import RobotDescription
 from pipeline.signature.file import matrix_rows
 from pipeline.units import joints_to_boundary, joints_to_internal

@@ -21,8 +21,8 @@ import numpy as np
 
 from pipeline.errors import ArmsigError, ImportFileError, one_line
 from pipeline.importers.rows import LENGTH_CM, readings_in_boundary_units
-from pipeline.importers.sscanss2 import csv_rows, editor_lines, read_text
-from pipeline.importers.table import _cell_reader, _index
+from pipeline.importers.sscanss2 import read_text
+from pipeline.importers.table import cell_reader
 from pipeline.robots.description import RobotDescription
 from pipeline.schemas import compiled_validator, expected_in_words, first_non_finite
 from pipeline.sensor.target import Target, target_from_toml
@@ -114,20 +114,20 @@ def load_image_map(path: Path) -> ImageMap:
 
 def read_image_table(path: Path, imap: ImageMap, robot: RobotDescription | None) -> ImageRows:
     """The table's rows: image files and joint readings (``robot`` given) or flange poses."""
+    from pipeline.importers.grid import delimited_block, joined
+
     src = path.name
     if not path.is_file():
         raise ImportFileError(f"{path}: no such file", fix="check the path")
-    records = list(csv_rows(editor_lines(read_text(path)), src, delimiter=imap.delimiter))
-    if len(records) < 2:
+    block = delimited_block(path, 0, (), True, imap.delimiter, ".")
+    if not block.rows:
         raise ImportFileError(f"{src}: no rows", expected="a header and one row per image",
                               fix="check the file")  # fmt: skip
-    header_line, header = records[0]
-    header = [h.strip() for h in header]
-    rows = [(n, f) for n, f in records[1:] if any(c.strip() for c in f)]
-    cell = _cell_reader(src, ".")
-    k_image = _index(imap.image_column, header, src, header_line, "image_column")
-    files = tuple(f[k_image].strip() if k_image < len(f) else "" for _, f in rows)
-    lines = tuple(n for n, _ in rows)
+    grid = joined([block])
+    cell = cell_reader(grid, ".")
+    k_image = grid.index(0, imap.image_column, "image_column")
+    files = tuple(str(f[k_image]).strip() if k_image < len(f) else "" for f in grid.rows)
+    lines = tuple(int(n) for n in grid.lines[:, 0])
     for name, line in zip(files, lines, strict=True):
         if not name:
             raise ImportFileError(
@@ -135,7 +135,7 @@ def read_image_table(path: Path, imap: ImageMap, robot: RobotDescription | None)
                 fix="name the image or delete the row",
             )
     if imap.flange is not None:
-        return ImageRows(files, lines, None, _flange(src, header, header_line, rows, imap, cell))
+        return ImageRows(files, lines, None, _flange(grid, imap, cell))
     if robot is None:
         raise ImportFileError(f"{imap.path.name}: [[joints]] needs --robot",
                               fix="--robot ROBOT.toml, the description of the arm")  # fmt: skip
@@ -143,38 +143,37 @@ def read_image_table(path: Path, imap: ImageMap, robot: RobotDescription | None)
         raise ImportFileError(f"{imap.path.name}: {len(imap.joints)} [[joints]] for robot "
                               f"{robot.name}", expected=f"{robot.n_joints}, one per joint",
                               fix=_FIX)  # fmt: skip
-    cols = [_index(c, header, src, header_line, f"joint {j + 1}")
-            for j, (c, _) in enumerate(imap.joints)]  # fmt: skip
-    values = np.array([[_number(cell, f, k, n, f"joint {j + 1}") for j, k in enumerate(cols)]
-                       for n, f in rows])  # fmt: skip
+    cols = [grid.index(0, c, f"joint {j + 1}") for j, (c, _) in enumerate(imap.joints)]
+    values = np.array([[_number(grid, cell, r, k, f"joint {j + 1}") for j, k in enumerate(cols)]
+                       for r in range(len(grid.rows))])  # fmt: skip
     units = [u for _, u in imap.joints]
     readings = readings_in_boundary_units(values, units, robot, f"{imap.path.name}: joints")
     return ImageRows(files, lines, readings, None)
 
 
-def _number(cell: Any, fields: list[str], k: int, line: int, what: str) -> float:
-    value = float(cell(fields, k, line, what))
+def _number(grid: Any, cell: Any, r: int, k: int, what: str) -> float:
+    """Row ``r``'s number in column ``k``; a missing one is refused naming its place."""
+    value = float(cell(grid.rows[r], k, r, what))
     if not np.isfinite(value):
-        raise ImportFileError(f"line {line}: {what} is missing",
+        raise ImportFileError(f"{grid.place(k, r)}: {what} is missing",
                               fix="fill the cell or delete the row")  # fmt: skip
     return value
 
 
-def _flange(
-    src: str, header: list[str], header_line: int, rows: list[tuple[int, list[str]]],
-    imap: ImageMap, cell: Any,
-) -> np.ndarray:  # fmt: skip
+def _flange(grid: Any, imap: ImageMap, cell: Any) -> np.ndarray:
     """The flange poses (N, 4, 4, cm) of the table's pose columns."""
     from scipy.spatial.transform import Rotation
 
     assert imap.flange is not None
-    cols = [_index(imap.flange[k], header, src, header_line, k) for k in _POSE]
-    pose = np.array([[_number(cell, f, c, n, k) for c, k in zip(cols, _POSE, strict=True)]
-                     for n, f in rows])  # fmt: skip
+    src = grid.blocks[0].name
+    cols = [grid.index(0, imap.flange[k], k) for k in _POSE]
+    pose = np.array([[_number(grid, cell, r, c, k) for c, k in zip(cols, _POSE, strict=True)]
+                     for r in range(len(grid.rows))])  # fmt: skip
     norm = np.linalg.norm(pose[:, 3:], axis=1)
     bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOL)
     if len(bad):
-        raise ImportFileError(f"{src}: line {rows[bad[0]][0]}: the quaternion is not a rotation",
+        line = grid.lines[bad[0], 0]
+        raise ImportFileError(f"{src}: line {line}: the quaternion is not a rotation",
                               expected=f"norm 1 ± {QUAT_NORM_TOL:g}", got=f"{norm[bad[0]]:g}",
                               fix="correct or delete the row")  # fmt: skip
     T = np.tile(np.eye(4), (len(pose), 1, 1))

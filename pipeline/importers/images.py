@@ -396,7 +396,7 @@ def import_image_set(
     channels = IMAGE_SET_CHANNELS if s.robot is None else CAMERA_IMAGE_CHANNELS
     meta = {
         SOURCE_METADATA: source_metadata(
-            s.source, FORMAT, None if map_path is None else Path(map_path)
+            [s.source], FORMAT, None if map_path is None else Path(map_path)
         )
     }
     with session_lock(sdir):

@@ -36,6 +36,8 @@ class TargetColumns:
     z: str | int
     sigma: str | int | None = None
     sigma_xyz: tuple[str | int, str | int, str | int] | None = None
+    file: str | None = None  # several files joined by row: the one holding these columns
+    fixed: bool = False  # fixed in the world (on the base), not on the arm
 
 
 @dataclass(frozen=True)
@@ -45,6 +47,7 @@ class JointColumn:
     column: str | int
     unit: str
     unwrap: bool = False
+    file: str | None = None  # several files joined by row: the one holding this column
 
 
 @dataclass(frozen=True)
@@ -68,10 +71,15 @@ class OrientationColumns:
 
 @dataclass(frozen=True)
 class CheckSplit:
-    """A seeded random ``fraction`` of a pose set's rows imported as sweep ``check``."""
+    """A pose set's rows imported as sweep ``check``: a seeded random ``fraction``, the
+    rows whose ``column`` is true, the rows of ``files`` (names or globs), or the data
+    rows of ``ranges`` (1-based, both ends included, over the files in order)."""
 
-    fraction: float
-    seed: int
+    fraction: float | None = None
+    seed: int | None = None
+    column: str | int | None = None
+    files: tuple[str, ...] = ()
+    ranges: tuple[tuple[int, int], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -101,7 +109,18 @@ class ImportMap:
     payload_column: str | int | None = None  # or a column of it (kg)
     orientation: OrientationColumns | None = None
     check: CheckSplit | None = None
+    points_per_pose: int | None = None  # stacked: this many rows per pose
+    pose_column: str | int | None = None  # stacked: rows sharing its value are one pose
+    sigma_floor: float | None = None  # length_unit; None: the tracker's resolution
+    fixed_block: int = 1  # fixed targets: poses per registration
+    tool_point_q: tuple[float, ...] | None = None  # validate --tool-point ID: where located
+    strict: bool = False  # --strict, not a map key: refuse a missing value, do not drop
     rosbag2: dict[str, Any] | None = None  # the [rosbag2] table, checked (importers.rosbag2)
+
+    @property
+    def joined(self) -> bool:
+        """Several files joined by row (a ``file`` key in [[targets]] or [[joints]])."""
+        return any(t.file for t in self.targets) or any(j.file for j in self.joints)
 
     @property
     def name(self) -> str:
@@ -121,7 +140,8 @@ class ImportMap:
     def only_sigma(self, fmt: str) -> None:
         """Refuse a map that says more than a σ (``sigma``, ``length_unit``) for ``fmt``,
         a format whose file states everything else (sscanss2)."""
-        plain = replace(self, path=None, sigma=None, length_unit=ImportMap.length_unit)
+        plain = replace(self, path=None, sigma=None, length_unit=ImportMap.length_unit,
+                        strict=False)  # fmt: skip
         if plain != ImportMap():
             raise ImportFileError(
                 f"{self.name}: --format {fmt} reads only sigma and length_unit from a map",
@@ -195,11 +215,34 @@ def _check_combinations(src: str, data: dict[str, Any]) -> None:
         if (axes or "sigma" in t) and "sigma" in data:
             raise _refuse(src, "sigma", f"is stated and targets[{k}] has σ columns too",
                           "one stated σ for the file, or σ columns", data["sigma"])  # fmt: skip
+    check = data.get("check")
+    if check is not None:
+        ways = [k for k in ("fraction", "column", "files", "rows") if k in check]
+        if len(ways) != 1 or ("fraction" in check) != ("seed" in check):
+            raise _refuse(src, "check", "names the held-out rows in none or several ways",
+                          "fraction and seed, column, files or rows", sorted(check))  # fmt: skip
+        for k, (a, b) in enumerate(check.get("rows", [])):
+            if a > b:
+                raise _refuse(src, f"check.rows[{k}]", "ends before it starts",
+                              "[first, last] with first <= last", [a, b])  # fmt: skip
+    if "points_per_pose" in data and "pose_column" in data:
+        raise _refuse(src, "pose_column", "is given and points_per_pose too",
+                      "one way of stacking rows", data["pose_column"])  # fmt: skip
     if "payload_kg" in data and "payload_column" in data:
         raise _refuse(
             src, "payload_kg", "is stated and payload_column is given too",
             "one payload for the file, or a column of it", data["payload_kg"],
         )  # fmt: skip
+    fixed = [str(t.get("id", f"t{k + 1}")) for k, t in enumerate(targets) if t.get("fixed")]
+    if fixed and not poses:
+        raise _refuse(src, "targets", "has fixed targets outside a pose set",
+                      'sweep = "poses" with fixed = true', fixed)  # fmt: skip
+    if fixed and len(fixed) == len(targets):
+        raise _refuse(src, "targets", "are all fixed in the world: no point of the arm",
+                      "at least one [[targets]] on the arm (fixed = false)", fixed)  # fmt: skip
+    if data.get("tool_target") in fixed:
+        raise _refuse(src, "tool_target", "is a fixed target, not a point of the arm",
+                      "a [[targets]] id without fixed = true", data["tool_target"])  # fmt: skip
     ids = [str(t.get("id", f"t{k + 1}")) for k, t in enumerate(targets)]
     if len(set(ids)) != len(ids):
         raise _refuse(src, "targets", "names a target id twice", "distinct ids", ids)
@@ -235,11 +278,13 @@ def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
             t["z"],
             t.get("sigma"),
             (t["sigma_x"], t["sigma_y"], t["sigma_z"]) if "sigma_x" in t else None,
+            t.get("file"),
+            bool(t.get("fixed", False)),
         )
         for k, t in enumerate(data.get("targets", []))
     )
     joints = tuple(
-        JointColumn(j["column"], j.get("unit", "deg"), j.get("unwrap", False))
+        JointColumn(j["column"], j.get("unit", "deg"), j.get("unwrap", False), j.get("file"))
         for j in data.get("joints", [])
     )
     sw = data.get("sweeps", {})
@@ -279,6 +324,23 @@ def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
             orient["convention"],
             orient.get("sigma_deg"),
         ),
-        check=None if check is None else CheckSplit(float(check["fraction"]), int(check["seed"])),
+        check=None if check is None else _check_split(check),
+        points_per_pose=data.get("points_per_pose"),
+        pose_column=data.get("pose_column"),
+        sigma_floor=data.get("sigma_floor"),
+        fixed_block=int(data.get("fixed_block", 1)),
+        tool_point_q=None
+        if "tool_point_q" not in data
+        else tuple(float(v) for v in data["tool_point_q"]),
         rosbag2=data.get("rosbag2"),
+    )
+
+
+def _check_split(check: dict[str, Any]) -> CheckSplit:
+    return CheckSplit(
+        None if "fraction" not in check else float(check["fraction"]),
+        None if "seed" not in check else int(check["seed"]),
+        check.get("column"),
+        tuple(check.get("files", ())),
+        tuple((int(a), int(b)) for a, b in check.get("rows", ())),
     )

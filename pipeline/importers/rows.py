@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -47,8 +48,20 @@ class MeasuredRows:
         Target id -> standard deviation of x, y, z (cm), when the file states it.
     payload_kg : ndarray, shape (R,), optional
         The payload on the flange (kg) at each row, when the map states it.
+    files : tuple of str, shape (R,)
+        Each row's source file name (empty: every row is ``source``'s).
+    lines : ndarray of int, shape (R,), optional
+        Each row's line in its file (1-based, as an editor numbers it; 0: no line, a
+        YAML entry), recorded as ``source_line``.
     notes : tuple of str
-        What the reader dropped or assumed, said to the user (e.g. a bag's moving samples).
+        Lines for the user: rows dropped for a missing value, σ raised to the floor,
+        a bag's samples taken while the arm moved.
+    dropped : int
+        How many rows were dropped for a missing value.
+    drift_cm, residual_cm : ndarray, shape (R,), optional
+        With fixed targets (:mod:`pipeline.importers.fixed`): each pose's RMS distance of
+        their readings from their reference before the correction, and after it (NaN:
+        not registered at this pose).
     """
 
     source: Path
@@ -60,7 +73,31 @@ class MeasuredRows:
     sigma: dict[str, np.ndarray] | None = None
     orientation_sigma_deg: float | None = None
     payload_kg: np.ndarray | None = None
-    notes: tuple[str, ...] = ()
+    files: tuple[str, ...] = ()
+    lines: np.ndarray | None = None
+    notes: tuple[str, ...] = ()  # one line each for the user (rows dropped, σ floored)
+    dropped: int = 0  # rows dropped for a missing value
+    drift_cm: np.ndarray | None = None  # (R,) fixed targets' RMS drift before correction
+    residual_cm: np.ndarray | None = None  # (R,) their RMS residual after it (NaN: none)
+
+    def file_of(self, k: int) -> str:
+        """Row ``k``'s source file name."""
+        return self.files[k] if self.files else self.source.name
+
+    def at(self, k: int) -> str:
+        """Row ``k``'s place for a message: ``"b.csv: line 12"``."""
+        return f"{self.file_of(k)}: {self.where[k]}"
+
+    def short(self, k: int, beside: int) -> str:
+        """Row ``k``'s place after row ``beside``'s: its line alone in the same file."""
+        return self.where[k] if self.file_of(k) == self.file_of(beside) else self.at(k)
+
+    @property
+    def name(self) -> str:
+        """The source for a message: the file, or the first and the count of several."""
+        names = dict.fromkeys(self.files or (self.source.name,))
+        first = next(iter(names))
+        return first if len(names) == 1 else f"{first} (+{len(names) - 1} files)"
 
     def take(self, keep: np.ndarray) -> MeasuredRows:
         """The rows ``keep`` (indices or mask), in that order."""
@@ -74,6 +111,10 @@ class MeasuredRows:
             orientation_wxyz=None if self.orientation_wxyz is None else self.orientation_wxyz[idx],
             sigma=None if self.sigma is None else {t: s[idx] for t, s in self.sigma.items()},
             payload_kg=None if self.payload_kg is None else self.payload_kg[idx],
+            files=tuple(self.files[k] for k in idx) if self.files else (),
+            lines=None if self.lines is None else self.lines[idx],
+            drift_cm=None if self.drift_cm is None else self.drift_cm[idx],
+            residual_cm=None if self.residual_cm is None else self.residual_cm[idx],
         )
 
     def with_sigma(self, sigma_cm: float | None) -> MeasuredRows:
@@ -83,6 +124,39 @@ class MeasuredRows:
             return self
         n = len(self.where)
         return replace(self, sigma={t: np.full((n, 3), sigma_cm) for t in self.targets})
+
+
+def concat_rows(parts: list[MeasuredRows]) -> MeasuredRows:
+    """The rows of ``parts`` one after the other (several files, or a selection's sweeps),
+    each keeping its source file and line; an optional array kept only when every part
+    has it (a map reads every file alike)."""
+    first = parts[0]
+    if len(parts) == 1:
+        return first
+
+    def stacked(get: Any) -> Any:
+        vals = [get(p) for p in parts]
+        return None if any(v is None for v in vals) else np.concatenate(vals)
+
+    sigma = None
+    if first.sigma is not None and all(p.sigma is not None for p in parts):
+        sigma = {t: np.concatenate([p.sigma[t] for p in parts]) for t in first.sigma}  # type: ignore[index]
+    return replace(
+        first,
+        where=tuple(w for p in parts for w in p.where),
+        sweep=np.concatenate([p.sweep for p in parts]),
+        q=np.concatenate([p.q for p in parts]),
+        targets={t: np.concatenate([p.targets[t] for p in parts]) for t in first.targets},
+        orientation_wxyz=stacked(lambda p: p.orientation_wxyz),
+        sigma=sigma,
+        payload_kg=stacked(lambda p: p.payload_kg),
+        files=tuple(p.file_of(k) for p in parts for k in range(len(p.where))),
+        lines=stacked(lambda p: p.lines),
+        notes=tuple(n for p in parts for n in p.notes),
+        dropped=sum(p.dropped for p in parts),
+        drift_cm=stacked(lambda p: p.drift_cm),
+        residual_cm=stacked(lambda p: p.residual_cm),
+    )
 
 
 @dataclass(frozen=True)
@@ -129,21 +203,21 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: Tolerances) -
     joint without a sweep (unless the rows are a pose set) or whose sweep does not move
     it; a sweep in which another joint moves too.
     """
-    src = rows.source.name
+    src = rows.name
     extra = [] if rows.orientation_wxyz is None else [rows.orientation_wxyz]
     sigma = [] if rows.sigma is None else list(rows.sigma.values())
     values = np.column_stack([rows.q, *rows.targets.values(), *extra, *sigma])
     bad = np.flatnonzero(~np.isfinite(values).all(axis=1))
     if len(bad):
         raise ImportFileError(
-            f"{src}: {rows.where[bad[0]]}: a value is missing or not a number (NaN)",
+            f"{rows.at(bad[0])}: a value is missing or not a number (NaN)",
             expected="finite joint readings, coordinates, angles and σ in every row",
             fix="delete the row, or mark it as skipped in the map",
         )
     small = np.flatnonzero((np.column_stack(sigma) <= 0).any(axis=1)) if sigma else np.zeros(0)
     if len(small):
         raise ImportFileError(
-            f"{src}: {rows.where[small[0]]}: a point's σ is zero or negative",
+            f"{rows.at(small[0])}: a point's σ is zero or negative",
             expected="a positive standard deviation of every coordinate",
             fix="correct the σ column, or state one σ for the file (map: sigma = ...)",
         )
@@ -157,7 +231,7 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: Tolerances) -
         k, j = out[0]
         unit = robot.joints[j].unit
         raise ImportFileError(
-            f"{src}: {rows.where[k]}: joint {j + 1} ({names[j]}) reads {values[k, j]:g} "
+            f"{rows.at(k)}: joint {j + 1} ({names[j]}) reads {values[k, j]:g} "
             f"{unit}{coupled}, outside its limits",
             expected=f"{lim[j, 0]:g} to {lim[j, 1]:g} {unit} (± {LIMIT_MARGIN:g})",
             fix="check the joint's unit and unwrap setting in the map, or the robot's limits",
@@ -186,7 +260,7 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: Tolerances) -
         if len(same):
             a, b = sel[order[same[0]]], sel[order[same[0] + 1]]
             raise ImportFileError(
-                f"{src}: {rows.where[a]} and {rows.where[b]} measure joint {j + 1} "
+                f"{rows.at(a)} and {rows.short(b, a)} measure joint {j + 1} "
                 f"({names[j]}) at the same {what} {q[order[same[0]], j]:g}",
                 expected=f"each configuration of a sweep once (duplicated rows: within "
                 f"{tol.duplicate[j]:g}, the map's sweeps.duplicate)",
@@ -197,7 +271,7 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: Tolerances) -
         if held.any():
             k, m = np.argwhere(held)[0]
             raise ImportFileError(
-                f"{src}: {rows.where[sel[k]]}: joint {m + 1} ({names[m]}) moves in the sweep "
+                f"{rows.at(sel[k])}: joint {m + 1} ({names[m]}) moves in the sweep "
                 f"of joint {j + 1} ({what} {q[k, m]:g}, median {np.median(q[:, m]):g}"
                 f"{coupled})",
                 expected=f"one joint moving per sweep, the others within {tol.held[m]:g} "
@@ -211,7 +285,7 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: Tolerances) -
     if len(unknown):
         k = unknown[0]
         raise ImportFileError(
-            f"{src}: {rows.where[k]}: sweep {rows.sweep[k]} names no joint of {robot.name}",
+            f"{rows.at(k)}: sweep {rows.sweep[k]} names no joint of {robot.name}",
             expected=f"joint 1 to {robot.n_joints}",
             fix="check the joint numbering and the robot description",
         )

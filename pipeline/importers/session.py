@@ -59,7 +59,7 @@ def tool_rows(
     """
     poses = np.flatnonzero(rows.sweep == POSES_SWEEP)
     if len(poses):
-        note = f"the pose set (fitted), q^s the readings of {rows.where[poses[0]]}"
+        note = f"the pose set (fitted), q^s the readings of {rows.short(poses[0], 0)}"
         return ToolChoice(np.zeros(0, np.int64), rows.q[poses[0]].copy(), note)
     d = robot.joints_from_readings(rows.q) - robot.joints_from_readings(home)
     turns = whole_turns(d, robot.prismatic)
@@ -73,10 +73,10 @@ def tool_rows(
     last = np.flatnonzero(rows.sweep == n)
     k = last[np.argmin(np.abs((d - turns)[last, -1]))]
     note = (
-        f"no row has every joint at home; the tool is the point of {rows.where[k]} "
+        f"no row has every joint at home; the tool is the point of {rows.short(k, 0)} "
         f"(joint {n} at {rows.q[k, -1]:g} instead of {home[-1]:g}), and q^s its readings"
     )
-    return ToolChoice(np.array([k]), rows.q[k].copy(), note, f"{rows.source.name}: {note}")
+    return ToolChoice(np.array([k]), rows.q[k].copy(), note, f"{rows.name}: {note}")
 
 
 def session_messages(
@@ -149,6 +149,7 @@ def session_messages(
         ),
     ]
     tool_q = rows.q[tool.rows] if tool.readings is None else tool.readings
+    several = len(set(rows.files)) > 1
     for c, (sweep, step, k) in enumerate(configs):
         t_ns = T0_NS + (c + 1) * STEP_NS
         q = [float(v) for v in (tool_q[step] if sweep == "tool" else rows.q[k])]
@@ -157,6 +158,15 @@ def session_messages(
         }  # fmt: skip
         if rows.payload_kg is not None:
             state["payload_kg"] = float(rows.payload_kg[k])
+        if rows.drift_cm is not None:  # fixed targets: the tracker's drift at this pose
+            for key, v in (("tracker_drift_cm", rows.drift_cm[k]),
+                           ("tracker_residual_cm", rows.residual_cm[k])):  # type: ignore[index]  # fmt: skip
+                if np.isfinite(v):
+                    state[key] = float(v)
+        if several:  # one file: armsig.source names it, not every message (issue 42)
+            state["source_file"] = rows.file_of(k)
+        if rows.lines is not None and rows.lines[k] > 0:
+            state["source_line"] = int(rows.lines[k])
         messages.append(Message("/robot/joint_state", t_ns, state))
         for t, target in enumerate(ids):
             x, y, z = (float(v) for v in rows.targets[target][k])

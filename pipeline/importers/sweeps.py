@@ -9,12 +9,13 @@ controller's elbow reading follows the shoulder while the elbow itself holds."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
 from pipeline.errors import ImportFileError
 from pipeline.importers.mapping import ImportMap
-from pipeline.importers.rows import MeasuredRows, Tolerances
+from pipeline.importers.rows import MeasuredRows, Tolerances, concat_rows
 from pipeline.robots.description import RobotDescription
 from pipeline.stages.recording import CHECK_SWEEP, POSES_SWEEP
 
@@ -52,16 +53,62 @@ def whole_turns(d: np.ndarray, prismatic: np.ndarray | bool) -> np.ndarray:
     return np.where(prismatic, 0.0, 360.0 * np.round(np.asarray(d, float) / 360.0))
 
 
+def held_out_marked(rows: MeasuredRows, imap: ImportMap, paths: list[Path]) -> MeasuredRows:
+    """A pose set's rows held out by name: the rows of ``check.files`` or of the data-row
+    ranges ``check.rows`` (1-based over the files in order, before any row is dropped)
+    become sweep ``check``, the others ``poses`` (``check.column``: read with the rows)."""
+    from fnmatch import fnmatchcase
+
+    c = imap.check
+    if c is None or not imap.poses or not (c.files or c.ranges):
+        return rows
+    n = len(rows.where)
+    if c.files:
+        names = [p.name for p in paths]
+        for pat in c.files:
+            if not any(fnmatchcase(f, pat) for f in names):
+                raise ImportFileError(
+                    f"{imap.name}: check.files names {pat!r}, none of the given files",
+                    expected="a name (or glob) of " + ", ".join(names),
+                    fix="give the file on the command line, or correct check.files",
+                )
+        held = np.array([any(fnmatchcase(rows.file_of(k), p) for p in c.files) for k in range(n)])
+    else:
+        beyond = [r for r in c.ranges if r[1] > n]
+        if beyond:
+            raise ImportFileError(
+                f"{imap.name}: check.rows {list(beyond[0])} goes beyond the {n:,} data rows",
+                expected=f"row numbers 1 to {n:,} (over the files in order)",
+                fix="correct check.rows",
+            )
+        idx = np.arange(1, n + 1)
+        held = np.zeros(n, bool)
+        for a, b in c.ranges:
+            held |= (idx >= a) & (idx <= b)
+    return replace(rows, sweep=np.where(held, CHECK_SWEEP, POSES_SWEEP).astype(np.int64))
+
+
 def pose_set(rows: MeasuredRows, imap: ImportMap) -> MeasuredRows:
     """Every row a configuration of the pose set; with ``[check]``, a seeded random
-    fraction of them (rounded) validation configurations instead, in file order."""
+    fraction of them (rounded) validation configurations instead, in file order, or the
+    rows held out by name (marked by :func:`held_out_marked` or the check column)."""
     sweep = np.full(len(rows.where), POSES_SWEEP, np.int64)
-    if imap.check is not None:
+    if imap.check is not None and imap.check.fraction is None:
+        sweep = np.where(rows.sweep == CHECK_SWEEP, CHECK_SWEEP, POSES_SWEEP).astype(np.int64)
+        m, n = int((sweep == CHECK_SWEEP).sum()), len(sweep)
+        if not 0 < m < n:
+            raise ImportFileError(
+                f"{rows.name}: [check] holds out {m} of {n} rows",
+                expected="at least one pose and one validation configuration",
+                fix="correct [check] in the map",
+            )
+    elif imap.check is not None:
+        assert imap.check.seed is not None and imap.check.fraction is not None  # with a seed
         n = len(sweep)
         m = round(imap.check.fraction * n)
         if not 0 < m < n:
             raise ImportFileError(
-                f"{rows.source.name}: check.fraction {imap.check.fraction:g} of {n} rows "
+                f"{rows.name}: check.fraction {imap.check.fraction:g} of {n} rows "
                 f"leaves {n - m} poses and {m} validation configurations",
                 expected="at least one of each",
                 fix="change check.fraction in the map, or drop [check]",
@@ -77,7 +124,6 @@ def infer_sweeps(rows: MeasuredRows, robot: RobotDescription, tol: np.ndarray) -
     A row after which two joints change at once starts a new run; a run of one row
     that moves into another run with two joints changing belongs to no sweep and is refused.
     """
-    src = rows.source.name
     moved = np.abs(np.diff(robot.joints_from_readings(rows.q), axis=0)) > tol  # (R-1, n)
     sweep = np.zeros(len(rows.where), np.int64)
     start = 0
@@ -94,10 +140,10 @@ def infer_sweeps(rows: MeasuredRows, robot: RobotDescription, tol: np.ndarray) -
             else:
                 break
         if joint is None:
-            nxt = f" and {rows.where[end]}" if end < len(sweep) else ""
+            nxt = f" and {rows.short(end, start)}" if end < len(sweep) else ""
             coupled = "" if robot.coupling is None else ", joint values through the coupling"
             raise ImportFileError(
-                f"{src}: {rows.where[start]}{nxt}: no single joint moves here "
+                f"{rows.at(start)}{nxt}: no single joint moves here "
                 f"({'two or more joints change' if nxt else 'the last row stands alone'}"
                 f"{coupled})",
                 expected="runs of rows in which one joint moves and the others hold",
@@ -107,7 +153,7 @@ def infer_sweeps(rows: MeasuredRows, robot: RobotDescription, tol: np.ndarray) -
             )
         if (sweep == joint + 1).any():
             raise ImportFileError(
-                f"{src}: {rows.where[start]}: joint {joint + 1} is swept a second time",
+                f"{rows.at(start)}: joint {joint + 1} is swept a second time",
                 expected="one run of rows per joint",
                 fix="give a sweep column in the map, or skip one run (skip_lines)",
             )
@@ -138,34 +184,9 @@ def select_sweeps(
             ok &= np.abs(q[:, j - 1] - value) <= tol[j - 1]
         used |= ok
         part = rows.take(ok)
-        parts.append((part, np.full(int(ok.sum()), sel.joint)))
-    parts.append((rows.take(~used), np.full(int((~used).sum()), CHECK_SWEEP)))
-    return _concat(parts)
-
-
-def _concat(parts: list[tuple[MeasuredRows, np.ndarray]]) -> MeasuredRows:
-    first = parts[0][0]
-    orient = (
-        None
-        if first.orientation_wxyz is None
-        else np.vstack(
-            [p.orientation_wxyz for p, _ in parts]  # type: ignore[misc]
-        )
-    )
-    sigma = (
-        None
-        if first.sigma is None
-        else {t: np.vstack([p.sigma[t] for p, _ in parts]) for t in first.sigma}  # type: ignore[index]
-    )
-    return MeasuredRows(
-        source=first.source,
-        where=tuple(w for p, _ in parts for w in p.where),
-        sweep=np.concatenate([s for _, s in parts]),
-        q=np.vstack([p.q for p, _ in parts]),
-        targets={t: np.vstack([p.targets[t] for p, _ in parts]) for t in first.targets},
-        orientation_wxyz=orient,
-        sigma=sigma,
-    )
+        parts.append((part, np.full(int(ok.sum()), sel.joint, np.int64)))
+    parts.append((rows.take(~used), np.full(int((~used).sum()), CHECK_SWEEP, np.int64)))
+    return concat_rows([replace(p, sweep=s) for p, s in parts])
 
 
 def home_readings(rows: MeasuredRows, imap: ImportMap, robot: RobotDescription) -> np.ndarray:

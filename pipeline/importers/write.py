@@ -2,29 +2,31 @@
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
 from pipeline.atomic import TEMP_SUFFIX
-from pipeline.contract.channels import POINT_CHANNELS
+from pipeline.contract.channels import POINT_CHANNELS, SOURCE_METADATA
 from pipeline.contract.digest import file_sha256
 from pipeline.errors import ImportFileError, RecordingError
 from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
 from pipeline.stages.lock import session_lock
 from pipeline.stages.recording import read_recording
 
-#: MCAP metadata record naming the foreign file a recording was converted from.
-SOURCE_METADATA = "armsig.source"
 
-
-def source_metadata(source: Path, fmt: str, map_file: Path | None) -> dict[str, str]:
-    """``armsig.source``: the file's name and SHA-256, the format, the map file's SHA-256."""
-    return {
-        "file": source.name,
-        "sha256": file_sha256(source),
+def source_metadata(sources: list[Path], fmt: str, map_file: Path | None) -> dict[str, str]:
+    """``armsig.source``: the first file's name and SHA-256, the format, the map file's
+    SHA-256; with several files, ``files``: each one's name and SHA-256 in order (JSON)."""
+    out = {
+        "file": sources[0].name,
+        "sha256": file_sha256(sources[0]),
         "format": fmt,
         "map_sha256": "" if map_file is None else file_sha256(map_file),
     }
+    if len(sources) > 1:
+        out["files"] = json.dumps([{"file": p.name, "sha256": file_sha256(p)} for p in sources])
+    return out
 
 
 def write_imported(

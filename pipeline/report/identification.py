@@ -69,7 +69,8 @@ def _load(sdir: Path) -> tuple[dict[str, list[Row]], dict[str, dict[str, Any]], 
             fix=f"run `pipeline identify {sdir}` first",
         )
     paths = {n: stage_path(sdir, n) for n in names}
-    tables = {n: read_table(paths[n]) for n in (*USED, "compensate", "validation") if n in paths}
+    tables = {n: read_table(paths[n])
+              for n in (*USED, "compensate", "validation", "joints") if n in paths}  # fmt: skip
     robot = session_robot(tables["session"])
     rows = {n: t.to_pylist() for n, t in tables.items()}
     return rows, {n: read_provenance(p) for n, p in paths.items()}, robot
@@ -176,29 +177,36 @@ def _expected_section(rows: list[Row], robot: Any) -> str:
     )
 
 
-def _dh_section(rows: list[Row], robot: Any) -> str:
+def _dh_section(sdir: Path, robot: Any) -> str:
+    """The identified D-H table in the form ``pipeline export --format dh`` writes (issue
+    42): Hayati's β on nearly parallel axes instead of a common normal far from the arm
+    (the pseudo D-H of stage ``dh`` printed d = ±4,075 cm there), from the refined chain
+    (stage ``chain``; a session without it: ``frames``)."""
+    from pipeline.kinematics.dh_table import dh_table_from_chain
+    from pipeline.stages.frames import chain_from_frames
+
+    path = next(p for n in ("chain", "frames") if (p := stage_path(sdir, n)).is_file())
+    t = dh_table_from_chain(chain_from_frames(read_table(path), robot.prismatic))
     body = []
-    for r in rows:
-        j = robot.joints[r["joint"] - 1]
-        pris = r["type"] == "prismatic"
-        theta, d_design = (r["theta_deg"], j.dh.d_cm) if pris else (r["q_offset_deg"], None)
-        d = r["q_offset_cm"] if pris else r["d_cm"]
+    for i, j in enumerate(robot.joints):
         body.append(
-            [r["joint"], j.name, f"d{r['joint']}" if pris else f"θ{r['joint']}",
-             deg(theta), deg(j.dh.theta_deg), cm(d),
-             cm(d_design if pris else r["design_d_cm"]), cm(r["a_cm"]), cm(r["design_a_cm"]),
-             deg(r["alpha_deg"]), deg(r["design_alpha_deg"])]
+            [i + 1, j.name, f"d{i + 1}" if j.prismatic else f"θ{i + 1}",
+             deg(np.degrees(t.theta[i])), deg(j.dh.theta_deg), cm(t.d[i]), cm(j.dh.d_cm),
+             cm(t.a[i]), cm(j.dh.a_cm), deg(np.degrees(t.alpha[i])), deg(j.dh.alpha_deg),
+             deg(np.degrees(t.beta[i])) if t.hayati[i] else DASH]
         )  # fmt: skip
     head = ["Joint", "Name", "Variable", "θ (deg)", "design θ", "d (cm)", "design d"]
-    head += ["a (cm)", "design a", "α (deg)", "design α"]
+    head += ["a (cm)", "design a", "α (deg)", "design α", "β (deg)"]
     return (
-        "## Identified pseudo Denavit-Hartenberg parameters (cf. Table 6-3)\n\n"
+        "## Identified Denavit-Hartenberg parameters (as `pipeline export --format dh`)\n\n"
         + markdown_table(head, body)
-        + "\n\nFor the variable of each joint (θ revolute, d prismatic) the table gives its "
-        "encoder offset: θ = q + offset (d = q + offset). Nearly parallel consecutive axes put "
-        "their common normal far from the arm, so huge d values of opposite sign on such axes "
-        "are expected (ERRATA, convergence-angle problem), as are sign flips of a and α with "
-        "±180° in the offsets (the sense of x_i is a convention). These numbers are for people: "
+        + "\n\nThe table `pipeline export --format dh` writes: A_i = Rot(z, θ) Trans(0, 0, d) "
+        "Trans(a, 0, 0) Rot(x, α) Rot(y, β). Nearly parallel consecutive axes get Hayati's β "
+        "(a rotation about y) instead of a common normal far from the arm, so d stays the "
+        "size of the arm there (docs/export.md). For the variable of each joint (θ revolute, "
+        "d prismatic) the table gives its value at encoder reading 0: θ = q + θ (d = q + d). "
+        "The first row is measured from the sensor frame (the base as identified), so it "
+        "differs from the design's by the base's placement. These numbers are for people: "
         "control uses the S-Model matrices B_i, not the D-H parameters."
     )
 
@@ -425,13 +433,13 @@ def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -
         _summary(name, t, robot, mode),
         *([] if pose_tables is None else [pose_set_section(pose_tables, out, markdown_table)]),
         *_nongeometric_part(sdir, robot),
-        _dh_section(t["dh"], robot),
+        _dh_section(sdir, robot),
         _smodel_section(t["smodel"], t["frames"], robot),
         *sweeps,
         _quality_section(t["positions"], t["compensate"])
         if "compensate" in t
         else _point_quality_section(t["positions"]),
-        *([validation_section(t["validation"])] if "validation" in t else []),
+        *([validation_section(t["validation"], t.get("joints"))] if "validation" in t else []),
         _convergence_section(sdir),
         *([_audit_section(audit)] if audit is not None else []),
         _provenance_section(prov),

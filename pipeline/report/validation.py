@@ -39,7 +39,9 @@ def role_errors(rows: list[dict[str, Any]] | None) -> dict[str, dict[str, Any]]:
     return out
 
 
-def validation_section(rows: list[dict[str, Any]] | None) -> str:
+def validation_section(
+    rows: list[dict[str, Any]] | None, joints: list[dict[str, Any]] | None = None
+) -> str:
     """Mean, RMS and max position error per role, as measured and base-registered (cm),
     and the registered design model's RMS beside them; a session without the stage (sonic)
     or without points gets one line saying so."""
@@ -66,7 +68,58 @@ def validation_section(rows: list[dict[str, Any]] | None) -> str:
         "design chain with its base and tool point fitted to the fit points, the error the "
         "arm makes uncalibrated in a registered cell (the before of the before/after)."
     )
-    return head + "\n".join(body) + note
+    return head + "\n".join(body) + note + held_out_text(rows) + drift_text(joints)
+
+
+def drift_text(joints: list[dict[str, Any]] | None) -> str:
+    """The tracker's drift by fixed targets (issue 42: ``joints`` table,
+    ``tracker_drift_cm`` per configuration): median and maximum before the correction,
+    and the residual after it; empty without fixed targets."""
+    per = {
+        (r["sweep"], r["step"]): r for r in joints or [] if r.get("tracker_drift_cm") is not None
+    }
+    if not per:
+        return ""
+    drift = np.array([r["tracker_drift_cm"] for r in per.values()])
+    res = np.array([r["tracker_residual_cm"] for r in per.values()
+                    if r.get("tracker_residual_cm") is not None])  # fmt: skip
+    after = "" if not len(res) else (
+        f"; after registering each pose by them, median {np.median(res):.3g} cm, max "
+        f"{res.max():.3g} cm")  # fmt: skip
+    return (
+        f"\n\nTracker drift by the fixed targets ({len(per)} configurations, RMS distance "
+        f"of their readings from their reference, `joints` table `tracker_drift_cm`): median "
+        f"{np.median(drift):.3g} cm, max {drift.max():.3g} cm before the correction{after}. "
+        "The points above are the registered ones."
+    )
+
+
+def held_out_text(rows: list[dict[str, Any]]) -> str:
+    """Which rows were held out (role ``check``), by their source file and lines (issue
+    42): "region_3.csv lines 2-7, 9"; empty when none, or none records its source."""
+    lines: dict[str, list[int]] = {}
+    for r in rows:
+        if r["role"] == "check" and r.get("source_file"):
+            lines.setdefault(r["source_file"], []).append(int(r.get("source_line") or 0))
+    if not lines:
+        return ""
+    parts = [f"{f} {_ranges(sorted(v))}" for f, v in lines.items()]
+    n = sum(len(v) for v in lines.values())
+    return f"\n\nHeld out ({n} rows, by source file and line): " + "; ".join(parts) + "."
+
+
+def _ranges(values: list[int]) -> str:
+    """Sorted line numbers as runs: [2, 3, 4, 9] -> "lines 2-4, 9" (0: no line)."""
+    if values and values[0] == 0:
+        return f"({len(values)} entries)"
+    runs: list[list[int]] = []
+    for v in values:
+        if runs and v == runs[-1][1] + 1:
+            runs[-1][1] = v
+        else:
+            runs.append([v, v])
+    text = ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in runs)
+    return ("line " if len(values) == 1 else "lines ") + text
 
 
 def validation_rows(stage_file: Path) -> list[dict[str, Any]] | None:

@@ -391,6 +391,9 @@ def description_from_dict(data: Any, source: str = "<dict>") -> RobotDescription
     """
     if not isinstance(data, dict):
         raise RobotDescriptionError(f"{source} is not a table", got=repr(data)[:80])
+    from pipeline.robots.conventions import standard_form
+
+    data = standard_form(data, source)  # modified D-H rows, fixed rows (issue 42)
     _known(data, ("name", "notes", "base", "tool", "joints", "coupling"), source)
     name = _name(data, "name", source)
     notes = data.get("notes", "")

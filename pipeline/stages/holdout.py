@@ -65,7 +65,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
     refine = inputs["refine"]
     if refine.num_rows == 0:
-        return _table([], [], [], None)
+        return _table([], [], [], None, joints=inputs["joints"])
     summ = refine_summary(refine)
     sp = session_problem(inputs, **problem_params(summ))
     sp = dataclasses.replace(
@@ -79,7 +79,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     if sp.problem.model.terms:  # the same held-out positions without the terms (issue 27)
         rigid = _rigid_held_out(inputs, params, summ)
     design = None if summ.get("level") == "ranges" else _design_held_out(inputs, sp, held)
-    return _table(*keys, held, rigid, design)
+    return _table(*keys, held, rigid, design, inputs["joints"])
 
 
 def _design_held_out(inputs: Mapping[str, Any], sp: Any, held: Any) -> np.ndarray:
@@ -258,8 +258,10 @@ def _check_rows(inputs: Mapping[str, Any], pos: pa.Table) -> tuple[pa.Table, np.
 
 def _table(
     sweep: list[Any], step: list[Any], target: list[Any], held: Any, rigid: Any = None,
-    design: np.ndarray | None = None,
+    design: np.ndarray | None = None, joints: pa.Table | None = None,
 ) -> pa.Table:  # fmt: skip
+    from pipeline.stages.joints import sources_at
+
     empty = np.zeros(0)
     design = np.full(len(sweep), np.nan) if design is None else design
     if rigid is not None and not np.array_equal(rigid.index, held.index):
@@ -278,6 +280,7 @@ def _table(
             ),
             "rigid_error_cm": pa.array(rigid_error, pa.float64(), mask=np.isnan(rigid_error)),
             "design_error_cm": pa.array(design, pa.float64(), mask=np.isnan(design)),
+            **sources_at(joints, np.array(sweep, np.int64), np.array(step, np.int64)),
         }
     )
 
@@ -285,12 +288,13 @@ def _table(
 #: The sonic session's stage: the raw ranges too (level ``ranges`` rebuilds its problem).
 STAGE = Stage(
     "holdout",
-    5,  # 2: the folds' normal equations by the solver's structured products;
+    6,  # 2: the folds' normal equations by the solver's structured products;
     # 3: the problem rebuilt with every refine.* parameter (speed_knot_s crashed it), and
     # single-cycle sonic positions' covariances from the range noise law (issue 33);
     # 4: rigid_error_cm, the same positions held out of the rigid fit (issue 27);
     # 5: design_error_cm, the registered design model at the same positions, and the
-    # expected error with the fit's unmodelled error (issue 41)
+    # expected error with the fit's unmodelled error (issue 41); 6: source_file and
+    # source_line of an imported row (issue 42)
     ("session", "refine", "positions", "joints", "frames", "chain", "uncertainty", "ranges"),
     Params(),
     compute,

@@ -37,14 +37,48 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
             "q_cm": pa.array(enc, mask=~is_p),
             "t_s": np.repeat(rec.joint_t_s, n),
             "payload_kg": pa.array(np.repeat(payload, n), mask=np.repeat(np.isnan(payload), n)),
+            **source_columns(rec.joint_source_file, rec.joint_source_line, n),
+            **{
+                name: pa.array(np.repeat(v, n), mask=np.repeat(np.isnan(v), n))
+                for name, v in zip(DRIFT, rec.joint_drift_cm.T, strict=True)
+            },
         }
     )
 
 
+#: The fixed targets' drift per configuration (importers/fixed.py), before and after.
+DRIFT = ("tracker_drift_cm", "tracker_residual_cm")
+
+
+def source_columns(files: np.ndarray, lines: np.ndarray, n: int = 1) -> dict[str, pa.Array]:
+    """``source_file`` and ``source_line`` of each configuration, repeated ``n`` times (one
+    row per joint): where an imported row came from, null when not recorded."""
+    f, ln = np.repeat(files, n), np.repeat(lines, n)
+    return {
+        "source_file": pa.array(f.tolist(), pa.string(), mask=f == ""),
+        "source_line": pa.array(ln.astype(np.int32), mask=ln <= 0),
+    }
+
+
+def sources_at(joints: pa.Table | None, sweep: np.ndarray, step: np.ndarray) -> dict[str, pa.Array]:
+    """``source_file`` and ``source_line`` of the configurations (sweep, step), joined by
+    that key from the ``joints`` table (null where not recorded, or no table)."""
+    if joints is None or "source_file" not in joints.column_names:
+        return source_columns(np.full(len(sweep), ""), np.zeros(len(sweep), np.int64))
+    cols = joints.select(["sweep", "step", "source_file", "source_line"]).to_pydict()
+    at = {(s, k): (f or "", ln or 0)
+          for s, k, f, ln in zip(cols["sweep"], cols["step"], cols["source_file"],
+                                 cols["source_line"], strict=True)}  # fmt: skip
+    found = [at.get((int(s), int(k)), ("", 0)) for s, k in zip(sweep, step, strict=True)]
+    return source_columns(np.array([f for f, _ in found], str).reshape(-1),
+                          np.array([ln for _, ln in found], np.int64))  # fmt: skip
+
+
 STAGE = Stage(
     "joints",
-    4,  # 3: t_s from the measurement times (MCAP publish_time), not the log times (issue 33);
-    # 4: payload_kg (issue 27)
+    5,  # 3: t_s from the measurement times (MCAP publish_time), not the log times (issue 33);
+    # 4: payload_kg (issue 27); 5: source_file and source_line of an imported row and the
+    # tracker's drift by fixed targets (issue 42)
     (RECORDING,),
     NoParams(),
     compute,

@@ -16,6 +16,7 @@ import pyarrow as pa
 
 from pipeline.errors import StageError
 from pipeline.stages.base import RECORDING, NoParams, Stage
+from pipeline.stages.joints import source_columns
 from pipeline.stages.positions import positions_table
 
 
@@ -40,12 +41,26 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         rec.point_cov_cm2,
         rec.point_wxyz,
         rec.point_orientation_sigma_deg,
+        _sources(rec),
     )
+
+
+def _sources(rec: Any) -> dict[str, Any]:
+    """Each point's ``source_file`` and ``source_line``: its configuration's, joined by
+    (sweep, step) from the joint states."""
+    at = {
+        (int(s), int(k)): i
+        for i, (s, k) in enumerate(zip(rec.joint_sweep, rec.joint_step, strict=True))
+    }
+    keys = zip(rec.point_sweep, rec.point_step, strict=True)
+    idx = np.array([at[(int(s), int(k))] for s, k in keys], np.int64).reshape(-1)
+    return source_columns(rec.joint_source_file[idx], rec.joint_source_line[idx])
 
 
 STAGE = Stage(
     "positions",
-    2,  # 2: the recorded orientation's σ (orientation_sigma_deg)
+    3,  # 2: the recorded orientation's σ (orientation_sigma_deg); 3: source_file and
+    # source_line of an imported row (issue 42)
     (RECORDING,),
     NoParams(),
     compute,

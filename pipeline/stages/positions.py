@@ -69,13 +69,15 @@ def positions_table(
     cov_cm2: np.ndarray | None = None,
     wxyz: np.ndarray | None = None,
     orientation_sigma_deg: np.ndarray | None = None,
+    source: Mapping[str, pa.Array] | None = None,
 ) -> pa.Table:
     """The ``positions`` table, sorted by (sweep, step, target).
 
     ``xyz`` (m, 3) with NaN or rows of None for no position; ``counts``: ``n_samples``,
     ``n_dropped``, ``n_rejected``, ``n_used`` (m,); ``sigma_cm`` (m,), ``cov_cm2``
     (m, 3, 3), ``wxyz`` (m, 4), ``orientation_sigma_deg`` (m,) with NaN where not recorded
-    (None: none recorded).
+    (None: none recorded); ``source``: ``source_file`` and ``source_line`` (m,) of an
+    imported row (None: null, a simulated session).
     """
     m = len(sweep)
 
@@ -100,6 +102,8 @@ def positions_table(
     for name in ("n_samples", "n_dropped", "n_rejected", "n_used"):
         cols[name] = pa.array(counts[name], pa.int32())
     cols["scatter_cm"] = pa.array(scatter_cm, pa.float64())
+    cols["source_file"] = pa.nulls(m, pa.string()) if source is None else source["source_file"]
+    cols["source_line"] = pa.nulls(m, pa.int32()) if source is None else source["source_line"]
     table = pa.table({n: cols[n] for n in arrow_schema("positions").names})
     order = np.lexsort((np.asarray(target, str), np.asarray(step), np.asarray(sweep)))
     return table.take(pa.array(order))
@@ -123,7 +127,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
 
 STAGE = Stage(
     "positions",
-    1,
+    2,  # 2: source_file and source_line, null here (issue 42)
     ("triangulate",),
     NoParams(),
     compute,

@@ -21,7 +21,12 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.contract.channels import IMAGE_SET_CHANNELS, OPTIONAL_CHANNELS, SENSOR_CHANNELS
+from pipeline.contract.channels import (
+    IMAGE_SET_CHANNELS,
+    OPTIONAL_CHANNELS,
+    SENSOR_CHANNELS,
+    SOURCE_METADATA,
+)
 from pipeline.contract.digest import file_sha256
 from pipeline.errors import ArmsigError, RecordingError
 from pipeline.stages.recording_keys import (
@@ -75,6 +80,9 @@ class Recording:
     q_commanded: np.ndarray  # (K, n) deg / cm
     q_encoder: np.ndarray  # (K, n) deg / cm
     joint_payload_kg: np.ndarray  # (K,) kg on the flange, NaN = not recorded
+    joint_source_file: np.ndarray  # (K,) str: the imported row's file, "" = not recorded
+    joint_source_line: np.ndarray  # (K,) int: its line there, 0 = not recorded
+    joint_drift_cm: np.ndarray  # (K, 2) fixed targets' drift before / after, NaN = none
     cycle_sweep: np.ndarray  # (M,) int
     cycle_step: np.ndarray  # (M,) int
     cycle_repeat: np.ndarray  # (M,) int
@@ -117,7 +125,9 @@ def _read_cached(p: Path, sha: str) -> Recording:
     from pipeline.contract.mcap_read import read_mcap  # parsing: only when not cached
     from pipeline.stages import recording_points
 
-    msgs = read_mcap(p, _KNOWN, _FIX).messages
+    content = read_mcap(p, _KNOWN, _FIX)
+    msgs = content.messages
+    one_file = content.metadata.get(SOURCE_METADATA, {}).get("file", "")  # an import's
     rigs = msgs["/rig/description"]
     sensor = str(rigs[0][1].get("sensor", "sonic")) if len(rigs) == 1 else "sonic"
     if msgs["/robot/flange_pose"]:  # an image set without joint readings (issue 40)
@@ -165,6 +175,15 @@ def _read_cached(p: Path, sha: str) -> Recording:
         "q_commanded": q_cmd,
         "q_encoder": q_enc,
         "joint_payload_kg": np.array([m.get("payload_kg", np.nan) for _, m in js], float),
+        "joint_source_file": np.array([m.get("source_file", one_file) for _, m in js], str),
+        "joint_source_line": np.array([m.get("source_line", 0) for _, m in js], np.int64),
+        "joint_drift_cm": np.array(
+            [
+                [m.get("tracker_drift_cm", np.nan), m.get("tracker_residual_cm", np.nan)]
+                for _, m in js
+            ],
+            float,
+        ).reshape(-1, 2),  # fmt: skip
     }
     if sensor == "camera":
         from pipeline.stages import recording_camera

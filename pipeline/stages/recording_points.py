@@ -71,6 +71,10 @@ def read_points(
     wxyz = np.full((n, 4), np.nan)
     sigma_o = np.full(n, np.nan)
     for k, (_, m) in enumerate(msgs):
+        if "cov_cm2" not in m and "orientation_wxyz" not in m and "orientation_sigma_deg" not in m:
+            if "sigma_cm" in m:
+                sigma[k] = m["sigma_cm"]
+            continue  # nothing else to check: the key's text only for a message below
         key = key_text(sweep[k], step[k], target=target[k])
         if "sigma_cm" in m and "cov_cm2" in m:
             raise RecordingError(

@@ -29,6 +29,7 @@ import pyarrow as pa
 from pipeline.evaluation.validation import error_distances, model_points
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.frames import chain_from_frames, readings_at
+from pipeline.stages.joints import sources_at
 from pipeline.stages.positions import positions, sweep_rows
 from pipeline.stages.recording import CHECK_SWEEP
 from pipeline.stages.refine import nongeometric_model
@@ -99,6 +100,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
             "error_cm": pa.array(raw, pa.float64()),
             "registered_error_cm": pa.array(reg, pa.float64(), mask=np.isnan(reg)),
             "design_error_cm": pa.array(design, pa.float64(), mask=np.isnan(design)),
+            **sources_at(inputs["joints"], np.array(cols["sweep"]), np.array(cols["step"])),
         }
     )
 
@@ -128,9 +130,10 @@ def _design_errors(
 
 STAGE = Stage(
     "validation",
-    5,  # 2: from the signature chain (stage chain); 3: with its non-geometric terms;
+    6,  # 2: from the signature chain (stage chain); 3: with its non-geometric terms;
     # 4: design_error_cm, the registered design model beside it (issue 29);
-    # 5: each row under its recorded payload (issue 44: the check rows' payload ignored)
+    # 5: each row under its recorded payload (issue 44: the check rows' payload ignored);
+    # 6: source_file and source_line of an imported row (issue 42)
     ("positions", "joints", "chain", "session", "refine"),
     NoParams(),
     compute,

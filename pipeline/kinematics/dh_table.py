@@ -75,7 +75,8 @@ class DHTable:
     @property
     def hayati(self) -> Array:
         """Rows placed by Hayati's rule (nearly parallel axes), bool (n,)."""
-        return np.abs(np.sin(self.alpha)) < np.sin(np.radians(HAYATI_DEG))
+        out: Array = np.abs(np.sin(self.alpha)) < np.sin(np.radians(HAYATI_DEG))
+        return out
 
 
 def _hayati_row(B: Array, z0: float) -> tuple[float, float, float, float]:
