@@ -79,9 +79,9 @@ class ImportFormat(StrEnum):
     sscanss2 = "sscanss2"
     table = "table"
     rct = "rct"
+    mat = "mat"
     rosbag2 = "rosbag2"
     images = "images"
-    mat = "mat"
 
 
 class Study(StrEnum):
