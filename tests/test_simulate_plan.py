@@ -17,12 +17,13 @@ SMALL = {"points": 12, "repeats": 2}
 #: renewed when the recording embeds a changed channel schema (issue 26: the sweep
 #: 'poses' of joint_state.json; issue 27: its optional payload_kg; issue 29: plan.tool_targets
 #: of robot_description.json; issue 39: sensor 'camera' of rig_description.json; issue 43:
-#: robot_id of robot_description.json), its messages unchanged (checked against 0537394,
+#: robot_id of robot_description.json; issue 42: source_file, source_line and the tracker
+#: drift of joint_state.json), its messages unchanged (checked against 0537394,
 #: bef8e5b, 23ce14c and 9454d58: every message's topic, log and publish time and bytes equal).
 BEFORE = {
-    (): "6518c7e45f624cf99b1d67e2a2a604e2a3361eb957a6324b5dbfc2d0b8b6eceb",
+    (): "785b5ff71b01d1555a0f730de37661751740523981dcd7d08544050efb37b02e",
     (("noise_factor", 4.6), ("wac_error_cm", 0.5)): (
-        "354641ab99bf14d42f986a2a112880b52f7754132f515de7579bf89c787bce7a"
+        "ad0dd420a772ebe3b9679fb40d8431db2c6b42de58dda255c5684f80ee473059"
     ),
 }
 
