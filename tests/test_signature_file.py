@@ -13,6 +13,7 @@ from typing import Any
 import jsonschema
 import numpy as np
 import pytest
+from committed import committed_sessions
 from typer.testing import CliRunner
 
 from pipeline.cli import app
@@ -235,7 +236,7 @@ def test_only_leaves_the_signature_unwritten_while_stages_are_stale(
         session_controller(d)
 
 
-COMMITTED = sorted((Path(__file__).resolve().parent.parent / "sessions").glob("*/recording.mcap"))
+COMMITTED = [d / "recording.mcap" for d in committed_sessions()]
 
 
 @pytest.mark.parametrize("recording", COMMITTED, ids=[p.parent.name for p in COMMITTED])
