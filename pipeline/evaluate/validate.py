@@ -20,6 +20,7 @@ from pipeline.errors import ArmsigError, os_errors_refused
 from pipeline.evaluation.validation import error_distances, model_points, position_errors
 from pipeline.importers import OS_FIX, parse_foreign
 from pipeline.importers.mapping import ImportMap, load_map
+from pipeline.importers.rows import refuse_absurd_coordinates
 from pipeline.signature.file import FILE_NAME, Signature
 from pipeline.signature.session import load_session_signature
 from pipeline.units import joints_to_internal
@@ -80,6 +81,7 @@ def validate_against(
         if fmt != "sscanss2":
             imap = _as_poses(imap)
         rows, _ = parse_foreign(Path(path), fmt, sig.robot, imap)
+        refuse_absurd_coordinates(rows)
         target = _target(Path(path).name, list(rows.targets), _session_tool_target(sdir))
     measured = rows.targets[target]
     ok = np.isfinite(rows.q).all(axis=1) & np.isfinite(measured).all(axis=1)
