@@ -374,3 +374,22 @@ def test_check_urdf_accepts_every_export(sessions, tmp_path) -> None:
     for p in paths:
         run = subprocess.run([str(_check_urdf()), p], capture_output=True, text=True)
         assert run.returncode == 0 and "Successfully Parsed XML" in run.stdout, run.stdout
+
+
+def test_onto_a_device_a_pipe_a_folder_or_a_huge_file_is_one_line(
+    sessions, tmp_path, monkeypatch
+) -> None:
+    """Issue 44: ``export --onto /dev/zero`` read until a MemoryError (exit 70)."""
+    import os
+
+    import pipeline.export.vendor as vendor
+
+    d = str(sessions["ur10"])
+    fifo = tmp_path / "pipe.urdf"
+    os.mkfifo(fifo)  # opening it would block until a writer came
+    for path in ("/dev/zero", str(fifo), str(tmp_path)):
+        assert_one_error(invoke(d, "--onto", path), f"the vendor URDF {path} is not a regular")
+    monkeypatch.setattr(vendor, "MAX_URDF_BYTES", 2**20)
+    big = tmp_path / "big.urdf"
+    big.write_bytes(b"<robot name='x'>" + b" " * 2**20 + b"</robot>")
+    assert_one_error(invoke(d, "--onto", str(big)), "big.urdf is over 1 MiB")
