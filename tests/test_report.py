@@ -134,3 +134,31 @@ def test_missing_stage_names_session_and_fix(session: Path, tmp_path: Path) -> N
     with pytest.raises(StageError, match="features.*pipeline identify"):
         write_report(partial)
     assert not (partial / "report").exists()
+
+
+def test_a_report_write_error_is_one_line_and_loses_nothing(
+    identified_session: Path, tmp_path: Path
+) -> None:
+    """Issue 44: a file size limit (``ulimit -f``) or a full disk while the report was
+    written exited 70. The signature and the stages are written before it; the error is one
+    line naming the report folder and how to finish, and leaves no temp file."""
+    import resource
+    import subprocess
+    import sys
+
+    d = shutil.copytree(identified_session, tmp_path / "s")
+    before = {p: p.read_bytes() for p in d.rglob("*") if p.is_file()}
+    limit = 16 * 1024  # under any figure (> 20 kB), over the stages already written
+
+    def small_files() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    r = subprocess.run([sys.executable, "-m", "pipeline", "identify", str(d)], text=True,
+                       capture_output=True, preexec_fn=small_files, timeout=600, check=False)  # fmt: skip
+    (line,) = [x for x in r.stderr.splitlines() if not x.startswith("identify ")]  # progress
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+    assert line.startswith(f"error: {d / 'report'}: File too large; try: the signature is")
+    assert line.endswith(f"then `pipeline identify {d}` writes the report")
+    kept = {p: p.read_bytes() for p in d.rglob("*") if p.is_file() and p.parent.name != "report"}
+    assert kept == before
+    assert not [p.name for p in (d / "report").iterdir() if p.name.endswith(".tmp")]

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
+from pipeline.errors import os_errors_refused
 from pipeline.identify import record
 from pipeline.progress import Progress
 from pipeline.signature.verdict import SignatureVerdict, verdict_of
@@ -116,8 +117,10 @@ def _run(
 
 
 def _report_if_stale(sdir: Path, hashes: dict[str, str | None]) -> Path:
-    """Write the report unless the existing one was made from the same stage outputs."""
+    """Write the report unless the existing one was made from the same stage outputs; an
+    OSError while writing it (no space, a file size limit) in one line."""
     from pipeline.atomic import write_unless_same_inputs
+    from pipeline.signature.file import FILE_NAME
 
     def write() -> Path:
         from pipeline.report.identification import write_report  # matplotlib: when needed
@@ -125,4 +128,9 @@ def _report_if_stale(sdir: Path, hashes: dict[str, str | None]) -> Path:
         return write_report(sdir)
 
     report = sdir / "report"
-    return write_unless_same_inputs(report / "report.md", report / ".inputs.json", hashes, write)
+    fix = (f"the signature is written ({sdir / FILE_NAME}); free space or raise the file "
+           f"size limit, then `pipeline identify {sdir}` writes the report")  # fmt: skip
+    with os_errors_refused(report, fix, always_path=True):  # a full disk, `ulimit -f` (issue 44)
+        return write_unless_same_inputs(
+            report / "report.md", report / ".inputs.json", hashes, write
+        )
