@@ -11,6 +11,10 @@ import math
 from collections.abc import Iterator
 from pathlib import Path
 
+#: The exit status of a command interrupted by Ctrl-C: 128 + SIGINT, as typer's and the
+#: shells' (:mod:`pipeline.console` before the command line has loaded, ``pipeline.cli``).
+EXIT_INTERRUPTED = 130
+
 
 def one_line(text: str, limit: int | None = None) -> str:
     """``text`` with every run of whitespace (newlines too) as one space, cut to ``limit``

@@ -107,3 +107,17 @@ def test_local_workers_log_and_warn_nothing_unless_debugging(tmp_path: Path) -> 
     assert debug.returncode == 0 and debug.stdout == quiet.stdout
     assert "a warning of another package" in debug.stderr
     assert any(m in debug.stderr for m in DASK_LINE)
+
+
+def test_fleet_without_its_command_says_which_it_takes() -> None:
+    """Issue 44: ``pipeline fleet`` printed its help, then "error: ; try: ..."."""
+    from typer.testing import CliRunner
+
+    from pipeline.cli import EXIT_USAGE, app
+
+    r = CliRunner().invoke(app, ["fleet"])
+    assert r.exit_code == EXIT_USAGE, r.output
+    assert r.stderr == (
+        "error: Missing command; expected one of identify, evaluate, validate, report; "
+        "try: pipeline fleet --help\n"
+    )
