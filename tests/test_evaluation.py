@@ -151,7 +151,7 @@ def test_cli_json(session) -> None:
 
 
 def test_status_lists_the_evaluate_stages(session, tmp_path) -> None:
-    from pipeline.stages.runner import EVALUATE_STAGE_MODULES, STAGE_MODULES
+    from pipeline.stages.catalog import EVALUATE_STAGE_MODULES, STAGE_MODULES
     from pipeline.stages.runner import status as stage_status
 
     sdir, _ = session

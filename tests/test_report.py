@@ -14,7 +14,8 @@ from pipeline.report.identification import write_report
 from pipeline.rig.audit import audit
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.signature.session import write_signature
-from pipeline.stages.runner import STAGE_MODULES, run, stage_path
+from pipeline.stages.catalog import STAGE_MODULES
+from pipeline.stages.runner import run, stage_path
 from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_provenance, read_table
 

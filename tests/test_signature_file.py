@@ -22,7 +22,8 @@ from pipeline.errors import ArmsigError
 from pipeline.identify import identify
 from pipeline.schemas import schema_dir
 from pipeline.signature.file import load_signature, signature_text
-from pipeline.stages.runner import EVALUATE_STAGE_MODULES, STAGE_MODULES, run, status
+from pipeline.stages.catalog import EVALUATE_STAGE_MODULES, STAGE_MODULES
+from pipeline.stages.runner import run, status
 
 Doc = dict[str, Any]
 

@@ -92,7 +92,8 @@ def _run(
 ) -> IdentifyResult:
     """The runner's full check and work (call under the session lock)."""
     from pipeline.signature.file import FILE_NAME, read_signature_document
-    from pipeline.stages.runner import PRODUCT, run
+    from pipeline.stages.catalog import PRODUCT
+    from pipeline.stages.runner import run
     from pipeline.stages.verdict import verdict_line
 
     runs = run(
