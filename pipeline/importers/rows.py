@@ -17,16 +17,12 @@ import numpy as np
 from pipeline.errors import ImportFileError
 from pipeline.robots.description import RobotDescription
 from pipeline.stages.recording import CHECK_SWEEP, LIMIT_MARGIN, POSES_SWEEP
-from pipeline.stages.recording_points import MIN_SIGMA_CM
+from pipeline.stages.recording_points import MAX_COORD_CM, MIN_SIGMA_CM
 
 #: Length units of imported points and prismatic readings -> cm.
 LENGTH_CM = {"mm": 0.1, "cm": 1.0, "m": 100.0}
 #: Angle units of revolute readings -> deg.
 ANGLE_DEG = {"deg": 1.0, "rad": float(np.rad2deg(1.0))}
-#: The farthest a measured point may lie from the sensor's origin (cm): 1 km, ten times a
-#: laser tracker's range; a coordinate of 1e308 made the registration's SVD spin for
-#: minutes (issue 44). Beyond it a value is a unit or a cell gone wrong, not a measurement.
-MAX_COORD_CM = 1e5
 
 
 @dataclass(frozen=True)
@@ -123,8 +119,11 @@ def readings_in_boundary_units(
 
 
 def refuse_absurd_coordinates(rows: MeasuredRows) -> None:
-    """Refuse a finite coordinate farther than :data:`MAX_COORD_CM` from the sensor, in
-    one line naming the row, before any linear algebra sees it."""
+    """Refuse a finite coordinate farther from the sensor than the recording contract
+    takes (:data:`~pipeline.stages.recording_points.MAX_COORD_CM`, ±1,000 m), in one line
+    naming the row, before any linear algebra sees it: ``validate --against`` reads a
+    file without a recording (a coordinate of 1e308 made its registration's SVD spin or
+    fail, issue 44); ``import`` refuses such a recording as identify would."""
     for t, p in rows.targets.items():
         far = np.flatnonzero((np.abs(p) > MAX_COORD_CM).any(axis=1) & np.isfinite(p).all(axis=1))
         if len(far):
@@ -132,7 +131,7 @@ def refuse_absurd_coordinates(rows: MeasuredRows) -> None:
             raise ImportFileError(
                 f"{rows.source.name}: {rows.where[k]}: target {t} lies "
                 f"{np.abs(p[k]).max():g} cm from the sensor",
-                expected=f"coordinates within {MAX_COORD_CM:g} cm (1 km)",
+                expected=f"coordinates within {MAX_COORD_CM:g} cm (the recording contract's)",
                 fix="check the cell and the map's length_unit",
             )
 
@@ -142,11 +141,10 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: Tolerances) -
     from its sweep's median, how close two stops of a sweep may be (joint values: the
     readings through the robot's coupling).
 
-    Refused: a non-finite value; a point beyond :data:`MAX_COORD_CM`; a σ that is not
-    positive or under 1 nm; a joint value outside its limits; a row measured twice (same
-    sweep, the swept joint within ``tol.duplicate``); a joint without a sweep (unless the
-    rows are a pose set) or whose sweep does not move it; a sweep in which another joint
-    moves too.
+    Refused: a non-finite value; a σ that is not positive or under 1 nm; a joint value
+    outside its limits; a row measured twice (same sweep, the swept joint within
+    ``tol.duplicate``); a joint without a sweep (unless the rows are a pose set) or whose
+    sweep does not move it; a sweep in which another joint moves too.
     """
     src = rows.source.name
     extra = [] if rows.orientation_wxyz is None else [rows.orientation_wxyz]
@@ -159,7 +157,6 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: Tolerances) -
             expected="finite joint readings, coordinates, angles and σ in every row",
             fix="delete the row, or mark it as skipped in the map",
         )
-    refuse_absurd_coordinates(rows)
     small = np.flatnonzero((np.column_stack(sigma) <= 0).any(axis=1)) if sigma else np.zeros(0)
     if len(small):
         raise ImportFileError(

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import RecordingError
+from pipeline.schemas import mcap_json_schema
 from pipeline.stages.recording_keys import KEY_FIX, key_text, message_keys, refuse_duplicates
 from pipeline.sweeps import POSES_SWEEP, TOOL_SWEEP, sweep_name
 
@@ -35,8 +36,10 @@ UNIT_TOL = 1e-6
 #: statement; a σ far below it (1e-200 cm) squares to zero in float64 and broke the fit's
 #: whitening (a LinAlgError, issue 44).
 MIN_SIGMA_CM = 1e-7
-#: The largest (cm): schemas/mcap/points.json's maximum of sigma_cm.
-MAX_SIGMA_CM = 1000.0
+#: The largest (cm), and the farthest coordinate from the sensor's origin (cm, the
+#: contract's ±1,000 m): schemas/mcap/points.json's maxima of sigma_cm and x_cm.
+MAX_SIGMA_CM = float(mcap_json_schema("points")["properties"]["sigma_cm"]["maximum"])
+MAX_COORD_CM = float(mcap_json_schema("points")["properties"]["x_cm"]["maximum"])
 
 
 def no_points() -> dict[str, np.ndarray]:
