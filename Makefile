@@ -6,7 +6,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SESSION ?= robot3
 
-.PHONY: install test lint bench bench-plan fuzz fuzz-import identify sessions clean
+.PHONY: install test lint bench bench-plan fuzz fuzz-import fuzz-inputs identify sessions clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -53,6 +53,11 @@ fuzz: $(STAMP)
 # concurrent runs (tests/fuzz_import.py; 213 s on 2 cores).
 fuzz-import: $(STAMP)
 	$(BIN)/python tests/fuzz_import.py --cases 1000 --concurrent 20
+
+# Issue 44: 1,000 seeded odd values on plan, map (convention, sigma), validate --against,
+# session NAMEs and export --onto (tests/fuzz_inputs.py; 132 s on 2 cores).
+fuzz-inputs: $(STAMP)
+	$(BIN)/python tests/fuzz_inputs.py --cases 1000
 
 # The seven committed sessions: seeds 1-7, every other option at its default.
 sessions: $(STAMP)

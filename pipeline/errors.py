@@ -7,8 +7,13 @@ Every message says what was expected, what arrived, and what to try. Only
 from __future__ import annotations
 
 import contextlib
+import math
 from collections.abc import Iterator
 from pathlib import Path
+
+#: The exit status of a command interrupted by Ctrl-C: 128 + SIGINT, as typer's and the
+#: shells' (:mod:`pipeline.console` before the command line has loaded, ``pipeline.cli``).
+EXIT_INTERRUPTED = 130
 
 
 def one_line(text: str, limit: int | None = None) -> str:
@@ -87,3 +92,18 @@ def os_errors_refused(path: str | Path, fix: str, *, always_path: bool = False) 
         where = exc.filename if exc.filename is not None and not always_path else path
         cause = exc.strerror or one_line(str(exc), 200) or type(exc).__name__
         raise ArmsigError(f"{where}: {cause}", fix=fix) from exc
+
+
+def positive_in_range(
+    name: str, value: float | None, low: float = 0.0, high: float = math.inf, *,
+    unit: str = "", fix: str = "",
+) -> None:  # fmt: skip
+    """Refuse ``value`` (None: not given, passes) unless it is a finite number above 0 and
+    within [``low``, ``high``], in one line naming ``name`` (an option or a parameter)."""
+    if value is None or (math.isfinite(value) and value > 0 and low <= value <= high):
+        return
+    u = f" {unit}" if unit else ""
+    bounds = f"above 0{u}" if low <= 0 else f"at least {low:g}{u}"
+    if math.isfinite(high):
+        bounds += f" and at most {high:g}{u}"
+    raise ArmsigError(f"{name} must be a finite number {bounds}", got=f"{value:g}", fix=fix)

@@ -735,14 +735,15 @@ def _workdir() -> Iterator[Path]:
             subprocess.run(["chattr", "-R", "-i", tmp], capture_output=True)
 
 
-def summary(outcomes: list[Outcome]) -> str:
-    """Counts per result and per kind, and every failure with its detail."""
+def summary(outcomes: list[Outcome], failures: tuple[str, ...] = FAILURES) -> str:
+    """Counts per result and per kind, and every failure (one of ``failures``) with its
+    detail."""
     counts = Counter(o.result for o in outcomes)
     kinds = Counter(o.kind for o in outcomes)
     lines = [f"{len(outcomes)} cases: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())),
              "  by kind: " + ", ".join(f"{k} {v}" for k, v in sorted(kinds.items()))]  # fmt: skip
     lines += [f"  {o.result:10s} {o.kind}:{o.label}: {o.detail}" for o in outcomes
-              if o.result in FAILURES]  # fmt: skip
+              if o.result in failures]  # fmt: skip
     return "\n".join(lines)
 
 

@@ -23,7 +23,8 @@ from pipeline.identify import identify
 from pipeline.robots import get_robot
 from pipeline.robots.fk import design_pose
 from pipeline.signature.session import load_session_signature
-from pipeline.stages.runner import EVALUATE_STAGE_MODULES, stage_path
+from pipeline.stages.catalog import EVALUATE_STAGE_MODULES
+from pipeline.stages.runner import stage_path
 
 ROOT = Path(__file__).resolve().parent.parent
 runner = CliRunner()

@@ -54,3 +54,41 @@ def test_main_runs_the_app(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "3")
     main()
     assert called == ["pipeline"] and os.environ["OPENBLAS_NUM_THREADS"] == "3"
+
+
+#: Ctrl-C while ``pipeline.cli`` loads: a finder that interrupts its own process when the
+#: import starts (the first ~0.5 s of every command, issue 44).
+INTERRUPTED_LOADING = """
+import os, signal, sys
+class Interrupt:
+    def find_spec(self, name, path=None, target=None):
+        if name == "pipeline.cli":
+            os.kill(os.getpid(), signal.SIGINT)
+        return None
+sys.meta_path.insert(0, Interrupt())
+from pipeline.console import main
+sys.argv = ["pipeline", "status", "nowhere"]
+main()
+"""
+#: Ctrl-C inside a command, outside typer's own handling (as the main group starts).
+INTERRUPTED_RUNNING = """
+import sys
+import pipeline.cli
+from typer.core import TyperGroup
+def interrupted(self, *args, **kw):
+    raise KeyboardInterrupt
+TyperGroup.main = interrupted
+sys.argv = ["pipeline", "status", "nowhere"]
+from pipeline.console import main
+main()
+"""
+
+
+@pytest.mark.parametrize("code", [INTERRUPTED_LOADING, INTERRUPTED_RUNNING])
+def test_ctrl_c_exits_130_without_a_traceback(code: str) -> None:
+    """Before: a KeyboardInterrupt traceback of an import, exit 1."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env=env, timeout=120, check=False)  # fmt: skip
+    assert r.returncode == 130 and "Traceback" not in r.stderr, (r.returncode, r.stderr)
+    assert r.stderr.strip() == ""

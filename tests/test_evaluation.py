@@ -7,6 +7,7 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 import pytest
+from committed import committed_sessions
 
 from pipeline.contract.evaluation import read_evaluation
 from pipeline.errors import ArmsigError, StageError
@@ -150,7 +151,7 @@ def test_cli_json(session) -> None:
 
 
 def test_status_lists_the_evaluate_stages(session, tmp_path) -> None:
-    from pipeline.stages.runner import EVALUATE_STAGE_MODULES, STAGE_MODULES
+    from pipeline.stages.catalog import EVALUATE_STAGE_MODULES, STAGE_MODULES
     from pipeline.stages.runner import status as stage_status
 
     sdir, _ = session
@@ -191,7 +192,7 @@ def test_fresh_process_with_cached_stages(session, tmp_path) -> None:
     assert set(json.loads(res.stdout)["tasks"]) == {"lines1d", "grid2d", "grid3d", "grid12"}
 
 
-COMMITTED = sorted(p.parent for p in (ROBOT1.parent).glob("*/evaluation.mcap"))
+COMMITTED = committed_sessions("evaluation.mcap")
 
 
 @pytest.mark.parametrize("committed", COMMITTED, ids=lambda p: p.name)

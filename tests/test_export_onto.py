@@ -486,3 +486,22 @@ def test_a_vendor_tree_with_a_cycle_is_refused_and_a_mobile_base_is_read(
         )
         assert f'type="{kind}"' in (tmp_path / f"{kind}.cal.urdf").read_text()
     assert check_onto(sig, want, default) <= 1e-12
+
+
+def test_onto_a_device_a_pipe_a_folder_or_a_huge_file_is_one_line(
+    sessions, tmp_path, monkeypatch
+) -> None:
+    """Issue 44: ``export --onto /dev/zero`` read until a MemoryError (exit 70)."""
+    import os
+
+    import pipeline.export.vendor as vendor
+
+    d = str(sessions["ur10"])
+    fifo = tmp_path / "pipe.urdf"
+    os.mkfifo(fifo)  # opening it would block until a writer came
+    for path in ("/dev/zero", str(fifo), str(tmp_path)):
+        assert_one_error(invoke(d, "--onto", path), f"the vendor URDF {path} is not a regular")
+    monkeypatch.setattr(vendor, "MAX_URDF_BYTES", 2**20)
+    big = tmp_path / "big.urdf"
+    big.write_bytes(b"<robot name='x'>" + b" " * 2**20 + b"</robot>")
+    assert_one_error(invoke(d, "--onto", str(big)), "big.urdf is over 1 MiB")

@@ -19,6 +19,7 @@ import pytest
 from typer.testing import CliRunner
 
 from pipeline.cli import app
+from pipeline.fleet.engine import WORKER_START_TIMEOUT_S
 from pipeline.fleet.run import TABLE_NAME, find_sessions, run_fleet
 from pipeline.identify import identify
 from pipeline.rig.simulate import SimulationOptions, simulate_session
@@ -189,7 +190,7 @@ def test_killing_a_worker_mid_run_still_completes_every_session(
         killed: list[str] = []
 
         def kill_a_busy_worker() -> None:
-            deadline = time.monotonic() + 60
+            deadline = time.monotonic() + WORKER_START_TIMEOUT_S
             while time.monotonic() < deadline:
                 busy = [w for w, tasks in client.processing().items() if tasks]
                 if busy:
@@ -282,7 +283,7 @@ def test_fleet_local_workers_start_with_the_pipeline_imported_and_no_profiler() 
 
     with dask_client(None, workers=1, preload=FLEET_PRELOAD) as client:
         assert list(client.run(_worker_state).values()) == [(True, False)]
-        client.restart()
+        client.restart(timeout=WORKER_START_TIMEOUT_S)
         assert list(client.run(_worker_state).values()) == [(True, False)]
 
 
@@ -305,7 +306,7 @@ def test_fleet_local_workers_share_the_cores_for_blas() -> None:
     assert shared_cores_environ(2)["OPENBLAS_NUM_THREADS"] == share
     with dask_client(None, workers=2, share_cores=True) as client:
         assert set(client.run(_blas_threads).values()) == {share}
-        client.restart()
+        client.restart(timeout=WORKER_START_TIMEOUT_S)
         assert set(client.run(_blas_threads).values()) == {share}
     with dask_client(None, workers=1) as client:
         assert set(client.run(_blas_threads).values()) == {_blas_threads()}

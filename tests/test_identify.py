@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import json
 import shutil
 from pathlib import Path
@@ -21,8 +22,8 @@ from pipeline.rig.recorder import Message, write_recording
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.schemas import arrow_schema
 from pipeline.signature.file import load_signature
-from pipeline.stages import runner
-from pipeline.stages.runner import run, stage_path, stages, status
+from pipeline.stages.catalog import stages
+from pipeline.stages.runner import run, stage_path, status
 from pipeline.stages.tables import read_provenance
 
 SMALL = {"points": 12, "repeats": 2}
@@ -110,9 +111,7 @@ def test_cache_reruns_exactly_what_changed(
     assert _ran(run(d, overrides=over)) == after
     assert _ran(run(d, overrides=over)) == set()
     # A version bump reruns that stage; identical output keeps its dependants cached.
-    bumped = dataclasses.replace(
-        runner.importlib.import_module("pipeline.stages.dh").STAGE, version=99
-    )
+    bumped = dataclasses.replace(importlib.import_module("pipeline.stages.dh").STAGE, version=99)
     monkeypatch.setattr("pipeline.stages.dh.STAGE", bumped)
     assert {s.name: s.state for s in status(d, over)}["dh"] == "stale"
     assert _ran(run(d, overrides=over)) == {"dh"}

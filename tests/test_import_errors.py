@@ -132,3 +132,26 @@ def test_bad_input_one_line_nothing_written(tmp_path: Path, case: str) -> None:
         assert f in lines[0], (f, lines[0])
     assert not (session / "recording.mcap").exists()
     assert not session.exists() or not any(session.iterdir())
+
+
+@pytest.mark.parametrize("command", ["import", "simulate"])
+def test_the_temp_files_of_a_killed_run_are_removed_by_the_next(
+    tmp_path: Path, command: str
+) -> None:
+    """Issue 44: ``kill -9`` during ``import --force`` left a temp file beside the recording
+    (1 of 16 kills); the next import or simulate of the session, under its lock, removes
+    what killed writers left (the names a kill leaves: the staged import and an atomic
+    write's temp file beside it), and writes its recording."""
+    s = tmp_path / "s"
+    src = tmp_path / "two.txt"
+    src.write_text(sscanss2_text(TWO_LINK, TWO_LINK_VALUES))
+    imp = ["import", str(src), "--format", "sscanss2", "--robot", str(TWO_LINK), str(s)]
+    assert CliRunner().invoke(app, imp).exit_code == 0
+    debris = [s / ".recording.mcap.import.tmp", s / "..recording.mcap.import.tmp.k9x2.tmp",
+              s / ".recording.mcap.q81z.tmp"]  # fmt: skip
+    for p in debris:
+        p.write_bytes(b"\x89MCAP0\r\n half written")
+    argv = imp if command == "import" else ["simulate", str(s), "--points", "5", "--repeats", "1"]
+    r = CliRunner().invoke(app, [*argv, "--force"])
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in s.iterdir() if p.name.endswith(".tmp")) == []

@@ -5,6 +5,8 @@ cells refused in one line naming the key."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -120,6 +122,24 @@ def test_noiseless_pose_set_identifies_and_validates(tmp_path: Path) -> None:
     other, _ = pose_set_table(tmp_path / "other.csv", n=25, seed=2)
     out = validate_against(session, other, "table", tmp_path / "map.toml")
     assert out["target"] == "tmac" and out["n"] == 25 and out["max_cm"] <= 1e-6
+    # Issue 44: a repeated Euler axis (exit 70), a coordinate of 1e308 (an SVD spinning for
+    # minutes): one line each, before any linear algebra (a fresh process, killed at 60 s).
+    xxy = tmp_path / "xxy.toml"
+    xxy.write_text(pose_set_map().replace('convention = "XYZ"', 'convention = "XXY"'))
+    lines = other.read_text().splitlines()
+    cells = lines[3].split(";")
+    cells[8] = "1e308"  # tmac_z, mm
+    far = tmp_path / "far.csv"
+    far.write_text("\n".join([*lines[:3], ";".join(cells), *lines[4:]]) + "\n")
+    for src, mp, words in (
+        (other, xxy, "xxy.toml: orientation.convention: must be one of"),
+        (far, tmp_path / "map.toml", "far.csv: line 4: target tmac lies 1e+307 cm from"),
+    ):
+        argv = ["validate", str(session), "--against", str(src), "--format", "table"]
+        r = subprocess.run([sys.executable, "-m", "pipeline", *argv, "--map", str(mp)],
+                           capture_output=True, text=True, timeout=60, check=False)  # fmt: skip
+        assert r.returncode == EXIT_REFUSED and r.stderr.count("\n") == 1, r.stderr
+        assert words in r.stderr, r.stderr
 
 
 #: The map's last top-level keys: a table inserted after them takes none of them.
@@ -143,6 +163,8 @@ BAD_MAPS = {
                              ["map.toml: sigma: is stated and targets[0] has σ columns too"]),
     "σ stated zero": (('sweep = "poses"', 'sweep = "poses"\nsigma = 0'),
                       ["map.toml: sigma: must be bigger than 0"]),
+    "repeated Euler axis": (('convention = "XYZ"', 'convention = "XXY"'),
+                            ["map.toml: orientation.convention: must be one of", "got 'XXY'"]),
     "σ not finite": (('sweep = "poses"', 'sweep = "poses"\nsigma = nan'),
                      ["map.toml: sigma: is not a finite number"]),
     "unknown tool target": (('tool_target = "tmac"', 'tool_target = "t9"'),
@@ -155,7 +177,7 @@ BAD_MAPS = {
     "check without poses": ((_TOP, 'tool_target = "tmac"\n[check]\nfraction = 0.3\nseed = 1'),
                             ['map.toml: check: applies to a pose set only']),
     "bad Euler sequence": (('convention = "XYZ"', 'convention = "XYx"'),
-                           ["map.toml: orientation.convention: must match pattern"]),
+                           ["map.toml: orientation.convention: must be one of", "got 'XYx'"]),
     "unwrap in a pose set": (('unit = "rad"', 'unit = "rad"\nunwrap = true'),
                              ["map.toml: joints[0].unwrap: has no sweep to unwrap"]),
     "column number zero": (('x = "tmac_x"', "x = 0"),
@@ -178,6 +200,18 @@ BAD_CELLS = {
             *ls[2:],
         ],  # fmt: skip
         ["poses.csv: line 2: a point's σ is zero or negative"],
+    ),
+    "σ far below any instrument": (  # issue 44: identify died in a LinAlgError
+        lambda ls: [
+            ls[0],
+            ";".join([*ls[1].split(";")[:15], "1e-200", *ls[1].split(";")[16:]]),
+            *ls[2:],
+        ],  # fmt: skip
+        ["poses.csv: line 2: a point's σ is under 1 nm", "got 1e-201 cm"],
+    ),
+    "missing angle": (
+        lambda ls: [*ls[:3], ";".join([*ls[3].split(";")[:-1], ""]), *ls[4:]],
+        ["poses.csv: line 4: a value is missing or not a number (NaN)"],
     ),
     "too few rows for the split": (
         lambda ls: ls[:2],
@@ -275,3 +309,11 @@ def test_a_byte_order_mark_is_read_and_a_row_wider_than_the_header_refused(tmp_p
     lines[3] = lines[3][2:]
     wide.write_text("\n".join(lines) + "\n")
     import_file(wide, "table", UR10, tmp_path / "w", tmp_path / "plain" / "map.toml")
+
+
+def test_a_stated_sigma_far_below_any_instrument_is_refused(tmp_path: Path) -> None:
+    """Issue 44: a map's ``sigma = 1e-200`` (the schema's > 0) was imported, then
+    ``identify`` died in a LinAlgError (exit 70)."""
+    text = pose_set_map(sigma="stated").replace("sigma = 0.02", "sigma = 1e-200")
+    line = _refused(tmp_path, text)
+    assert "poses.csv: line 2: a point's σ is under 1 nm" in line and "got 1e-201 cm" in line

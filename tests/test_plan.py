@@ -122,3 +122,46 @@ def test_plan_from_a_session_picks_its_most_informative_poses(tmp_path) -> None:
     )
     assert r.exit_code == 1 and "identified from another recording.mcap" in r.output, r.output
     assert not (tmp_path / "stale.csv").exists()
+
+
+@pytest.mark.parametrize(
+    ("option", "value"),
+    [("--sigma-mm", v) for v in ("0", "nan", "1e-12", "-1", "inf", "1e9")]
+    + [("--target-rms-mm", v) for v in ("nan", "inf", "0", "-0.1")]
+    + [("--center-sigma-mm", v) for v in ("nan", "0")]
+    + [("--plane-sigma-deg", "inf")],
+)
+def test_plan_numbers_out_of_range_are_one_line(tmp_path, option: str, value: str) -> None:
+    """Issue 44: nan died in a LinAlgError (exit 70); 0 took the sensor's law and 1e-12,
+    -1, inf and a target of nan or inf wrote a plan without a word."""
+    from typer.testing import CliRunner
+
+    from pipeline.cli import EXIT_REFUSED, app
+
+    sweeps = ["--sweeps"] if option in ("--center-sigma-mm", "--plane-sigma-deg") else []
+    out = tmp_path / "plan.csv"
+    argv = ["plan", str(out), "--robot", "puma560", *sweeps, option, value]
+    r = CliRunner().invoke(app, argv)
+    assert r.exit_code == EXIT_REFUSED and r.stderr.count("\n") == 1, r.output
+    assert r.stderr.startswith(f"error: {option} must be a finite number") and "try:" in r.stderr
+    assert f"got {float(value):g}" in r.stderr and not out.exists()
+    if not sweeps:  # the function too
+        sigma = option == "--sigma-mm"
+        with pytest.raises(ArmsigError, match="must be a finite number"):
+            plan_poses(get_robot("puma560"), 5, None if sigma else float(value) / 10,
+                       float(value) / 10 if sigma else None, candidates=10)  # fmt: skip
+
+
+def test_a_centre_sigma_no_sweep_can_reach_is_planned_at_the_cap_with_a_warning(tmp_path) -> None:
+    """Issue 44: ``--center-sigma-mm 1e-300`` overflowed (exit 70); now every sweep takes the
+    1,000 points a sweep is capped at, and a warning says the σ is not met."""
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+
+    out = tmp_path / "plan.csv"
+    argv = ["plan", str(out), "--robot", "puma560", "--sweeps", "--center-sigma-mm", "1e-300"]
+    r = CliRunner().invoke(app, argv)
+    assert r.exit_code == 0, r.output
+    assert "warning: the wanted plane / center σ is not met by sweep 6 flange" in r.stderr
+    assert "at 1000 points per sweep" in r.stderr and out.is_file()

@@ -169,7 +169,10 @@ def test_the_sweep_plan_file_holds_every_position_in_measuring_order(tmp_path, p
     for bad, match in (
         (["--points", "20"], "--points is for sweep plans"),
         (["--sweeps", "--poses", "20"], "--sweeps plans joint sweeps, not poses"),
-        (["--sweeps", "--plane-sigma-deg", "-1"], "plane_sigma_deg must be a positive number"),
+        (
+            ["--sweeps", "--plane-sigma-deg", "-1"],
+            "--plane-sigma-deg must be a finite number above 0 deg",
+        ),
     ):
         r = CliRunner().invoke(app, ["plan", str(tmp_path / "x.csv"), "--robot", "puma560", *bad])
         assert r.exit_code != 0 and match in r.output, r.output

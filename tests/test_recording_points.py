@@ -58,6 +58,8 @@ CASES = {
     "asymmetric_cov": ("not symmetric", "(sweep 3, step 2, target T2)"),
     "indefinite_cov": ("not positive definite", "(sweep 3, step 2, target T2)"),
     "non_unit_quaternion": ("not a unit quaternion", "(sweep 3, step 2, target T2)"),
+    "tiny_sigma": ("sigma_cm is 1e-200 cm, under 1e-07 cm", "(sweep 3, step 2, target T2)"),
+    "tiny_cov": ("cov_cm2's smallest σ is 1e-150 cm", "(sweep 3, step 2, target T2)"),
     "sonic_channel": ("channel /sonic/ranges in a recording of sensor 'points'", ""),
     "untold_tool_target": ("does not say which is the tool", "sweep tool"),
     "orientation_sigma_alone": ("orientation_sigma_deg without", "(sweep 3, step 2, target T2)"),
@@ -97,6 +99,10 @@ def test_broken_point_recordings_are_refused_naming_the_key(
         _edit(raw, pt, sigma_cm=None, cov_cm2=[[1e-6, 2e-7, 0], [0, 1e-6, 0], [0, 0, 1e-6]])
     elif case == "indefinite_cov":
         _edit(raw, pt, sigma_cm=None, cov_cm2=[[1e-6, 2e-6, 0], [2e-6, 1e-6, 0], [0, 0, 1e-6]])
+    elif case == "tiny_sigma":  # issue 44: identify died in a LinAlgError
+        _edit(raw, pt, sigma_cm=1e-200)
+    elif case == "tiny_cov":
+        _edit(raw, pt, sigma_cm=None, cov_cm2=np.diag([1e-300, 1e-6, 1e-6]).tolist())
     elif case == "non_unit_quaternion":
         _edit(raw, pt, orientation_wxyz=[0.9, 0.1, 0.0, 0.0])
     elif case == "orientation_sigma_alone":

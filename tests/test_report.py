@@ -14,7 +14,8 @@ from pipeline.report.identification import write_report
 from pipeline.rig.audit import audit
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.signature.session import write_signature
-from pipeline.stages.runner import STAGE_MODULES, run, stage_path
+from pipeline.stages.catalog import STAGE_MODULES
+from pipeline.stages.runner import run, stage_path
 from pipeline.stages.session import session_robot
 from pipeline.stages.tables import read_provenance, read_table
 
@@ -140,3 +141,79 @@ def test_missing_stage_names_session_and_fix(session: Path, tmp_path: Path) -> N
     with pytest.raises(StageError, match="features.*pipeline identify"):
         write_report(partial)
     assert not (partial / "report").exists()
+
+
+def test_a_report_write_error_is_one_line_and_loses_nothing(
+    identified_session: Path, tmp_path: Path
+) -> None:
+    """Issue 44: a file size limit (``ulimit -f``) or a full disk while the report was
+    written exited 70. The signature and the stages are written before it; the error is one
+    line naming the report folder and how to finish, and leaves no temp file."""
+    import resource
+    import subprocess
+    import sys
+
+    d = shutil.copytree(identified_session, tmp_path / "s")
+    before = {p: p.read_bytes() for p in d.rglob("*") if p.is_file()}
+    limit = 16 * 1024  # under any figure (> 20 kB), over the stages already written
+
+    def small_files() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    argv = [sys.executable, "-m", "pipeline", "identify", str(d)]
+    r = subprocess.run(argv, text=True, capture_output=True, preexec_fn=small_files,
+                       timeout=600, check=False)  # fmt: skip
+    (line,) = [x for x in r.stderr.splitlines() if not x.startswith("identify ")]  # progress
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+    assert line.startswith(f"error: {d / 'report'}: File too large; try: the signature is")
+    assert line.endswith(f"then `pipeline identify {d}` writes the report")
+    kept = {p: p.read_bytes() for p in d.rglob("*") if p.is_file() and p.parent.name != "report"}
+    assert kept == before
+    assert not [p.name for p in (d / "report").iterdir() if p.name.endswith(".tmp")]
+
+
+REPRO = Path(__file__).resolve().parents[2] / "shared" / "repro" / "report_convergence_crash"
+REPRO = REPRO / "recording.mcap"
+
+
+@pytest.mark.skipif(not REPRO.is_file(), reason=f"{REPRO} is absent (a shared reproduction)")
+def test_a_restart_into_the_limits_keeps_the_convergence_table(tmp_path: Path) -> None:
+    """Issue 44: a 300-pose Puma-like pose set of another implementation of the recording
+    contract (../shared/repro/report_convergence_crash): ``identify`` wrote the signature,
+    then the report stacked 7 iterations (a restart into the joint limits included) against
+    a history of 4 and exited 70. The table now holds the 4 iterations recorded."""
+    from pipeline.control.convergence import realistic_tables
+    from pipeline.identify import identify
+
+    d = tmp_path / "s"
+    d.mkdir()
+    shutil.copy(REPRO, d / "recording.mcap")
+    result = identify(d)
+    assert result.report is not None and result.signature is not None
+    (table,) = realistic_tables(d)
+    assert table.rows.shape == (4, 5)
+    assert table.rows[-1, 4] <= 1e-6  # the recorded solve converged
+    assert "Newton-Raphson (cf. Table 5-1), realistic signature" in result.report.read_text()
+
+
+def test_the_table_holds_the_iterations_the_history_recorded(
+    robot3_identified: Path, monkeypatch
+) -> None:
+    """The same, without the shared file: a solve whose restarts add iterations that its
+    history (the first solve's) does not hold."""
+    from dataclasses import replace
+
+    from pipeline.control import convergence
+    from pipeline.control.controller import Controller
+
+    solve = Controller.solve
+
+    def restarted(self, *args, **kw):  # type: ignore[no-untyped-def]
+        res = solve(self, *args, **kw)
+        return replace(res, iterations=res.iterations + 3)  # as control.limits' restarts
+
+    d = robot3_identified
+    plain = convergence.realistic_tables(d)
+    monkeypatch.setattr(Controller, "solve", restarted)
+    for a, b in zip(plain, convergence.realistic_tables(d), strict=True):
+        np.testing.assert_array_equal(a.rows, b.rows)

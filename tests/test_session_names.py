@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from pipeline.cli import app
+from pipeline.cli import EXIT_REFUSED, app
 
 ROBOT3 = Path(__file__).resolve().parent.parent / "sessions" / "robot3"
 runner = CliRunner()
@@ -53,3 +53,36 @@ def test_an_unknown_name_says_where_it_looked(here: Path) -> None:
     r = runner.invoke(app, ["identify", "robot9"])
     assert r.exit_code == 1
     assert "no folder robot9 here, nor sessions/robot9" in r.output and r.output.count("\n") == 1
+
+
+LONG = "n" * 300  # a name over the file system's 255 bytes
+SESSION_COMMANDS = {
+    "identify": [], "status": [], "show": [], "audit": [], "evaluate": [],
+    "validate": ["--against", "x.csv", "--format", "table"], "fk": ["--q", "0 0 0 0 0 0"],
+    "ik": ["--pose", "40", "20", "60", "180", "0", "90"], "ik-convergence": [],
+    "compensate": ["--targets", "t.arrow", "--out", "o.arrow"], "viz": [],
+    "export": ["--format", "dh"],
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("command", SESSION_COMMANDS)
+@pytest.mark.parametrize("name", [LONG, f"sessions/{LONG}", f"/tmp/{LONG}/s", "é" * 128])
+def test_a_session_name_over_255_bytes_is_one_line(
+    command: str, name: str, tmp_path: Path, monkeypatch
+) -> None:
+    """Issue 44: every session command died with "File name too long" (exit 70)."""
+    monkeypatch.chdir(tmp_path)
+    r = CliRunner().invoke(app, [command, name, *SESSION_COMMANDS[command]])
+    assert r.exit_code == EXIT_REFUSED, (r.exit_code, r.output)
+    assert r.stderr.count("\n") == 1 and "at most 255 bytes" in r.stderr, r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv", [["simulate", LONG], ["plan", "p.csv", "--from", LONG]])
+def test_a_new_or_planned_session_name_over_255_bytes_is_one_line(
+    argv: list[str], tmp_path: Path, monkeypatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    r = CliRunner().invoke(app, argv)
+    assert r.exit_code == EXIT_REFUSED and r.stderr.count("\n") == 1, r.output
+    assert "255 bytes" in r.stderr and list(tmp_path.iterdir()) == []

@@ -13,6 +13,7 @@ from typing import Any
 import jsonschema
 import numpy as np
 import pytest
+from committed import committed_sessions
 from typer.testing import CliRunner
 
 from pipeline.cli import app
@@ -21,7 +22,8 @@ from pipeline.errors import ArmsigError
 from pipeline.identify import identify
 from pipeline.schemas import schema_dir
 from pipeline.signature.file import load_signature, signature_text
-from pipeline.stages.runner import EVALUATE_STAGE_MODULES, STAGE_MODULES, run, status
+from pipeline.stages.catalog import EVALUATE_STAGE_MODULES, STAGE_MODULES
+from pipeline.stages.runner import run, status
 
 Doc = dict[str, Any]
 
@@ -235,7 +237,7 @@ def test_only_leaves_the_signature_unwritten_while_stages_are_stale(
         session_controller(d)
 
 
-COMMITTED = sorted((Path(__file__).resolve().parent.parent / "sessions").glob("*/recording.mcap"))
+COMMITTED = [d / "recording.mcap" for d in committed_sessions()]
 
 
 @pytest.mark.parametrize("recording", COMMITTED, ids=[p.parent.name for p in COMMITTED])

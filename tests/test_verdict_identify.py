@@ -16,7 +16,8 @@ from typer.testing import CliRunner
 from pipeline.cli import EXIT_VERDICT_FAIL, app
 from pipeline.fleet.row import session_row
 from pipeline.report.identification import write_report
-from pipeline.stages.runner import identification_names, stage_path
+from pipeline.stages.catalog import identification_names
+from pipeline.stages.runner import stage_path
 from pipeline.stages.tables import read_table
 
 runner = CliRunner()

@@ -11,18 +11,19 @@ modules doing its work when it runs, not when the command line starts (issue 18)
 
 Only this module turns exceptions into exit codes, in one place (:class:`_Pipeline`):
 
-==  =====================================================================
-0   done
-1   refused input or data (an :class:`~pipeline.errors.ArmsigError`)
-2   usage error (unknown command or option, missing or malformed argument)
-3   ``ik``: a target was not reached, or has no solution inside the joint limits on
-    its branch (status ``out_of_limits``; the joints are still printed / written)
-4   the signature's verdict is FAIL (docs/verdict.md): ``identify`` after writing the
-    signature and the report and printing the verdict; ``export`` and ``ik`` refuse it
-    unless ``--accept-verdict`` (a :class:`~pipeline.errors.VerdictFailError`)
-70  internal error: a bug in armsig (the traceback with ``ARMSIG_DEBUG=1``, which also
-    shows other packages' warnings and Dask's logs: :mod:`pipeline.quiet`)
-==  =====================================================================
+===  =====================================================================
+0    done
+1    refused input or data (an :class:`~pipeline.errors.ArmsigError`)
+2    usage error (unknown command or option, missing or malformed argument)
+3    ``ik``: a target was not reached, or has no solution inside the joint limits on
+     its branch (status ``out_of_limits``; the joints are still printed / written)
+4    the signature's verdict is FAIL (docs/verdict.md): ``identify`` after writing the
+     signature and the report and printing the verdict; ``export`` and ``ik`` refuse it
+     unless ``--accept-verdict`` (a :class:`~pipeline.errors.VerdictFailError`)
+70   internal error: a bug in armsig (the traceback with ``ARMSIG_DEBUG=1``, which also
+     shows other packages' warnings and Dask's logs: :mod:`pipeline.quiet`)
+130  interrupted (Ctrl-C), with no traceback, also while the command line loads
+===  =====================================================================
 
 Every error is one line on stderr starting ``error:``.
 """
@@ -41,7 +42,7 @@ from typer.core import TyperGroup
 
 from pipeline.cli import control, evaluate, fleet, montecarlo, outputs, record, session
 from pipeline.cli.output import NotReached
-from pipeline.errors import ArmsigError, VerdictFailError, one_line
+from pipeline.errors import EXIT_INTERRUPTED, ArmsigError, VerdictFailError, one_line
 from pipeline.quiet import DEBUG_ENV, quiet
 
 EXIT_REFUSED = 1
@@ -54,6 +55,13 @@ EXIT_INTERNAL = 70  # EX_SOFTWARE of sysexits.h
 def _fail(message: str, code: int) -> int:
     typer.echo(f"error: {one_line(message)}", err=True)
     return code
+
+
+def _missing_command(ctx: Any) -> str:
+    """The message of a group called without its command (click's is empty after the
+    help it printed: ``pipeline fleet`` said "error: ; try: ...", issue 44)."""
+    names = ctx.command.list_commands(ctx) if hasattr(ctx, "command") else []
+    return "Missing command" + (f"; expected one of {', '.join(names)}" if names else "")
 
 
 class _Pipeline(TyperGroup):
@@ -75,8 +83,10 @@ class _Pipeline(TyperGroup):
                 rv = super().main(argv, prog, complete_var, standalone_mode=False, **extra)
             code = rv if isinstance(rv, int) else 0  # an int: typer.Exit's code (--help: 0)
         except typer.TyperException as exc:  # the parser's: unknown option, bad value, ...
-            where = getattr(getattr(exc, "ctx", None), "command_path", None) or prog
-            code = _fail(f"{exc.format_message().rstrip('.')}; try: {where} --help", EXIT_USAGE)
+            ctx = getattr(exc, "ctx", None)
+            where = getattr(ctx, "command_path", None) or prog
+            what = exc.format_message().rstrip(".") or _missing_command(ctx)
+            code = _fail(f"{what}; try: {where} --help", EXIT_USAGE)
         except typer.Abort:
             code = _fail("aborted", EXIT_REFUSED)
         except VerdictFailError as exc:  # before ArmsigError, its base
@@ -85,7 +95,9 @@ class _Pipeline(TyperGroup):
             code = _fail(str(exc), EXIT_REFUSED)
         except NotReached:  # the output is complete; the exit code says a target was missed
             code = EXIT_NOT_REACHED
-        except (SystemExit, KeyboardInterrupt):
+        except KeyboardInterrupt:  # Ctrl-C outside typer's own handling: as typer's
+            code = EXIT_INTERRUPTED
+        except SystemExit:
             raise
         except BaseException as exc:  # noqa: B036  (also a Rust panic of polars / pyarrow)
             if debug:
@@ -138,6 +150,7 @@ app.add_typer(fleet.commands, name="fleet")
 __all__ = [
     "DEBUG_ENV",
     "EXIT_INTERNAL",
+    "EXIT_INTERRUPTED",
     "EXIT_NOT_REACHED",
     "EXIT_REFUSED",
     "EXIT_USAGE",

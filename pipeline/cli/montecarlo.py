@@ -52,7 +52,7 @@ def montecarlo(
     else:
         from pipeline.fleet.engine import dask_client
 
-        with dask_client(scheduler, workers) as client:
+        with dask_client(scheduler, workers, progress=sys.stderr) as client:
             done = run_montecarlo(
                 study.value, robots, seed, out, progress=sys.stderr, client=client
             )

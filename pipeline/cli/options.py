@@ -16,7 +16,7 @@ from typing import Annotated, Any
 import typer
 
 from pipeline.errors import ArmsigError, os_errors_refused
-from pipeline.stages.base import session_path
+from pipeline.stages.base import refuse_long_names, session_path
 
 
 class Method(StrEnum):
@@ -223,6 +223,7 @@ def new_session_folder(name: str) -> Path:
             fix="pipeline simulate demo (or a path such as runs/demo)",
         )
     p = Path(name) if ("/" in name or Path(name).is_absolute()) else Path("sessions") / name
+    refuse_long_names(p)
     with os_errors_refused(p, "give a folder name of at most 255 bytes"):
         if p.is_symlink() and not p.exists():  # it read "File exists" (issue 32)
             raise ArmsigError(

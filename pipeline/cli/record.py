@@ -4,6 +4,7 @@ or imported from a file of measured points (robots, simulate, import)."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Annotated, Any
 
 import typer
@@ -27,7 +28,7 @@ from pipeline.cli.options import (
     optional_session_path,
 )
 from pipeline.cli.output import print_json, warn
-from pipeline.errors import ArmsigError
+from pipeline.errors import ArmsigError, positive_in_range
 
 commands = typer.Typer()
 
@@ -464,7 +465,15 @@ def plan_(
     (docs/plan.md)."""
     from pipeline.planning import plan_from_session, plan_poses, write_plan
     from pipeline.robots import get_robot
+    from pipeline.stages.recording_points import MAX_SIGMA_CM, MIN_SIGMA_CM
 
+    for name, value, low, high, unit, example in (
+        ("--sigma-mm", sigma_mm, MIN_SIGMA_CM * 10, MAX_SIGMA_CM * 10, "mm", "0.02"),
+        ("--target-rms-mm", target_rms_mm, 0.0, math.inf, "mm", "0.1"),
+        ("--center-sigma-mm", center_sigma_mm, 0.0, math.inf, "mm", "0.02"),
+        ("--plane-sigma-deg", plane_sigma_deg, 0.0, math.inf, "deg", "0.005"),
+    ):
+        positive_in_range(name, value, low, high, unit=unit, fix=f"{name} {example}")
     target = None if target_rms_mm is None else target_rms_mm / 10.0
     sigma = None if sigma_mm is None else sigma_mm / 10.0
     if (robot is None) == (from_session is None):
@@ -550,6 +559,7 @@ def _sweep_plan(
     """``plan --sweeps``: :func:`pipeline.planning.sweeps.plan_sweeps`, written and printed
     (``source``: the robot as given, an input ``--force`` never replaces)."""
     from pipeline.cli.output import print_json
+    from pipeline.features.accuracy import MAX_POINTS
     from pipeline.planning.sweeps import plan_sweeps, write_sweep_plan
 
     plan = plan_sweeps(robot, sensor.value, plane_sigma_deg, center_sigma_cm, target, sigma,
@@ -570,6 +580,15 @@ def _sweep_plan(
         f"predicted RMS tool error {plan.rms_cm * 10:.3g} mm (under {plan.rms_q95_cm * 10:.3g} "
         f"mm with 95 % probability; 95 % of the workspace under {plan.p95_cm * 10:.3g} mm)"
     )
+    unmet = [f"{s.joint} {s.name}" for s in plan.sweeps if s.law != "line" and (
+        (plane_sigma_deg is not None and s.plane_sigma_deg > plane_sigma_deg)
+        or (center_sigma_cm is not None and s.center_sigma_cm > center_sigma_cm))]  # fmt: skip
+    if unmet:
+        warn(
+            f"the wanted plane / center σ is not met by sweep {', '.join(unmet)} at "
+            f"{points or MAX_POINTS} points per sweep (the table says what is reached); "
+            + ("drop --points" if points else "measure a longer sweep or with less noise")
+        )
     more = "points (--target-rms-mm is capped at 1000 per sweep)"
     target_mm = None if target is None else target * 10
     _warn_plan(target, target_mm, plan.rms_q95_cm, plan.unidentified, more)

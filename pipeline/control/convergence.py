@@ -79,7 +79,9 @@ def _tables(c: Controller, q_true: np.ndarray, label: str) -> list[ConvergenceTa
         res = c.solve(T_base, branch=branch, method=method, record_history=True)
         h = res.history
         assert h is not None
-        k = int(res.iterations[0]) + 1
+        # The iterations recorded: a restart into the limits adds iterations that the
+        # history does not hold (IKResult.history; a 7- and a 4-row column, issue 44).
+        k = min(int(res.iterations[0]) + 1, h.delta.shape[0])
         d = h.delta[:k, 0, :3]
         rows = np.column_stack([np.arange(k), d, h.position_error_cm[:k, 0]])
         out.append(ConvergenceTable(label, method, rows))

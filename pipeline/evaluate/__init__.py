@@ -16,14 +16,9 @@ from typing import Any, TextIO
 from pipeline.contract.evaluation import read_evaluation
 from pipeline.progress import Progress
 from pipeline.report.evaluation_summary import summarize
+from pipeline.stages.catalog import EVALUATE_STAGE_MODULES
 from pipeline.stages.lock import session_lock
-from pipeline.stages.runner import (
-    EVALUATE_STAGE_MODULES,
-    StageRun,
-    run,
-    session_folder,
-    stage_path,
-)
+from pipeline.stages.runner import StageRun, run, session_folder, stage_path
 from pipeline.stages.tables import read_provenance, read_table
 
 

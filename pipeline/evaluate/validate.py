@@ -25,6 +25,7 @@ from pipeline.evaluation.validation import (
 )
 from pipeline.importers import OS_FIX, expand_paths, parse_foreign
 from pipeline.importers.mapping import ImportMap, load_map
+from pipeline.importers.rows import refuse_absurd_coordinates
 from pipeline.signature.file import FILE_NAME, Signature
 from pipeline.signature.session import load_session_signature
 from pipeline.units import joints_to_internal
@@ -107,6 +108,7 @@ def validate_against(
         if fmt != "sscanss2":
             imap = _as_poses(imap)
         rows, _ = parse_foreign(files, fmt, sig.robot, imap)
+        refuse_absurd_coordinates(rows)
         if tool_point == REGISTERED:
             target = imap.tool_target or next(iter(rows.targets))
         elif tool_point is not None:

@@ -37,6 +37,9 @@ _BOMS = (
 )  # fmt: skip
 #: Without a mark, a document's first bytes ``<?`` in a wider encoding (XML 1.0 app. F).
 _WIDE = ((b"<\0?\0", "utf-16-le"), (b"\0<\0?", "utf-16-be"))
+#: The most of a vendor URDF read (bytes): the largest URDFs (a humanoid's, meshes
+#: referenced, not inlined) are a few hundred kilobytes.
+MAX_URDF_BYTES = 64 * 2**20
 #: A start tag, its attribute values may hold ``>``.
 _TAG = r'(?:[^>"\']|"[^"]*"|\'[^\']*\')*'
 _ORIGIN = re.compile(rb"<origin\b" + _TAG.encode() + rb"?(/?)>")  # lazy: "/" stays out
@@ -109,12 +112,25 @@ def read_vendor_urdf(path: str | Path) -> VendorURDF:
     tree that is not one robot (no single root, a joint whose links are unknown)."""
     p = Path(path)
     try:
-        raw = p.read_bytes()
+        if p.exists() and not p.is_file():  # /dev/zero was read until memory ran out
+            raise ArmsigError(
+                f"the vendor URDF {p} is not a regular file",
+                expected="a .urdf file", got="a device, pipe, socket or folder",
+                fix="give the path of a .urdf file (xacro files: run xacro first)",
+            )  # fmt: skip
+        with p.open("rb") as f:
+            raw = f.read(MAX_URDF_BYTES + 1)
     except OSError as exc:
         raise ArmsigError(
             f"cannot read the vendor URDF {p}", got=exc.strerror or str(exc),
             fix="give the path of a .urdf file (xacro files: run xacro first)",
         ) from exc  # fmt: skip
+    if len(raw) > MAX_URDF_BYTES:
+        raise ArmsigError(
+            f"the vendor URDF {p} is over {MAX_URDF_BYTES // 2**20} MiB",
+            expected="a robot's URDF (kilobytes; meshes are separate files)",
+            fix="give the .urdf file itself, not a bundle or a mesh",
+        )
     bom, encoding = _encoding(raw, p)
     try:
         text = raw[len(bom) :].decode(encoding)

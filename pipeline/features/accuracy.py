@@ -235,10 +235,11 @@ def points_for_accuracy(
         )
 
     d0, c0, _ = sweep_accuracy(sigma_n, sigma_r, radius, MIN_POINTS, sweep)
-    scale = max(
-        (d0 / plane_sigma) ** 2 if plane_sigma else 0.0,
-        (c0 / center_sigma) ** 2 if center_sigma else 0.0,
-    )
+    with np.errstate(over="ignore"):  # a σ of 1e-300 asks for infinitely many: the cap
+        scale = max(
+            float(np.square(np.float64(d0) / plane_sigma)) if plane_sigma else 0.0,
+            float(np.square(np.float64(c0) / center_sigma)) if center_sigma else 0.0,
+        )
     n = int(np.clip(np.ceil(MIN_POINTS * scale), MIN_POINTS, MAX_POINTS + 1))
     while n <= MAX_POINTS and not meets(n):
         n += 1

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import contextlib
 import os
+import time
 from collections.abc import Iterator
-from typing import Any
+from typing import Any, TextIO
 
 from pipeline.errors import ArmsigError
 from pipeline.quiet import debugging, quiet
@@ -36,6 +37,13 @@ LOCAL_CONFIG = {
     "distributed.nanny.pre-spawn-environ": {},
     "distributed.worker.profile.enabled": False,
 }
+#: How long local workers may take to start, and a restarted one to return (s). Idle, a
+#: worker with the fleet preload starts in ~2-4 s on 2 cores; loaded (two busy processes
+#: per core and other users' runs, load 8-14) it took over 60 s (Dask's 60 s wait in the
+#: tests: "Only 0/1 workers arrived after 60") and a restart over 120 s (Dask's default).
+#: Ten minutes leaves a busy workstation time; a worker that is still missing then is
+#: refused in one line (docs/scale.md).
+WORKER_START_TIMEOUT_S = 600.0
 #: Thread pools of the numerical libraries, capped per worker by ``share_cores``.
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -65,17 +73,20 @@ def dask_client(
     processes: bool = True,
     preload: tuple[str, ...] = (),
     share_cores: bool = False,
+    progress: TextIO | None = None,
 ) -> Iterator[Any]:
     """A :class:`distributed.Client`: on ``scheduler`` (see :func:`scheduler_address`), else
     on a local cluster of ``workers`` (default: the machine's cores) started for the block,
     each worker importing the modules ``preload`` (e.g. :data:`FLEET_PRELOAD`) as it starts
     and, with ``share_cores``, its share of the cores for BLAS (:func:`shared_cores_environ`).
-    An existing cluster is used as it is configured. Inside the block, and in the local
-    workers, Dask logs nothing and other packages warn nothing (:mod:`pipeline.quiet`)."""
+    The block starts once every local worker has (up to :data:`WORKER_START_TIMEOUT_S`;
+    ``progress``: where to say what it waits for). An existing cluster is used as it is
+    configured. Inside the block, and in the local workers, Dask logs nothing and other
+    packages warn nothing (:mod:`pipeline.quiet`)."""
     import distributed  # noqa: F401  (it sets its loggers' levels on import; quiet() after)
 
     with quiet():  # Dask's log records and warnings (the workers': QUIET_PRELOAD)
-        with _client(scheduler, workers, processes, preload, share_cores) as client:
+        with _client(scheduler, workers, processes, preload, share_cores, progress) as client:
             yield client
 
 
@@ -86,6 +97,7 @@ def _client(
     processes: bool,
     preload: tuple[str, ...],
     share_cores: bool,
+    progress: TextIO | None,
 ) -> Iterator[Any]:
     import dask
     from distributed import Client, LocalCluster
@@ -117,6 +129,11 @@ def _client(
     if share_cores:
         config["distributed.nanny.pre-spawn-environ"] = shared_cores_environ(n)
     nanny = {"config": config} if processes else {}
+    if progress is not None:
+        print(f"starting {n} local Dask worker{'s' if n > 1 else ''} (waiting up to "
+              f"{WORKER_START_TIMEOUT_S:.0f} s: a busy machine starts them slowly)",
+              file=progress, flush=True)  # fmt: skip
+    t0 = time.monotonic()
     with dask.config.set(config):
         cluster = LocalCluster(
             n_workers=n,
@@ -128,4 +145,14 @@ def _client(
             **nanny,
         )
     with cluster, Client(cluster) as client:
+        left = max(WORKER_START_TIMEOUT_S - (time.monotonic() - t0), 1.0)
+        try:
+            client.wait_for_workers(n, timeout=left)
+        except TimeoutError as exc:  # distributed's WorkerStartTimeoutError
+            raise ArmsigError(
+                f"only {len(client.scheduler_info()['workers'])} of {n} local Dask workers "
+                f"started within {WORKER_START_TIMEOUT_S:.0f} s",
+                fix="try --workers 1, or again when the machine is less busy, or "
+                "--scheduler tcp://HOST:PORT of a running cluster",
+            ) from exc
         yield client

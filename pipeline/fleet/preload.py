@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import importlib
 
-from pipeline.stages.runner import (
+from pipeline.stages.catalog import (
     EVALUATE_STAGE_MODULES,
     POINT_STAGE_MODULES,
     STAGE_MODULES,

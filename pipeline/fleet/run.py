@@ -152,7 +152,8 @@ def fleet(
 
     sessions = find_sessions(folders)
     folder = check_writable(out or folders[0], "--out", folder=True)
-    with dask_client(scheduler, workers, preload=FLEET_PRELOAD, share_cores=True) as client:
+    with dask_client(scheduler, workers, preload=FLEET_PRELOAD, share_cores=True,
+                     progress=progress) as client:  # fmt: skip
         return run_fleet(command, sessions, client, folder, progress=progress)
 
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
+from pipeline.errors import os_errors_refused
 from pipeline.identify import record
 from pipeline.progress import Progress
 from pipeline.signature.verdict import SignatureVerdict, verdict_of
@@ -91,7 +92,8 @@ def _run(
 ) -> IdentifyResult:
     """The runner's full check and work (call under the session lock)."""
     from pipeline.signature.file import FILE_NAME, read_signature_document
-    from pipeline.stages.runner import PRODUCT, run
+    from pipeline.stages.catalog import PRODUCT
+    from pipeline.stages.runner import run
     from pipeline.stages.verdict import verdict_line
 
     runs = run(
@@ -145,8 +147,10 @@ def _camera_report(sdir: Path) -> Path:
 
 
 def _report_if_stale(sdir: Path, hashes: dict[str, str | None]) -> Path:
-    """Write the report unless the existing one was made from the same stage outputs."""
+    """Write the report unless the existing one was made from the same stage outputs; an
+    OSError while writing it (no space, a file size limit) in one line."""
     from pipeline.atomic import write_unless_same_inputs
+    from pipeline.signature.file import FILE_NAME
 
     def write() -> Path:
         from pipeline.report.identification import write_report  # matplotlib: when needed
@@ -154,4 +158,9 @@ def _report_if_stale(sdir: Path, hashes: dict[str, str | None]) -> Path:
         return write_report(sdir)
 
     report = sdir / "report"
-    return write_unless_same_inputs(report / "report.md", report / ".inputs.json", hashes, write)
+    fix = (f"the signature is written ({sdir / FILE_NAME}); free space or raise the file "
+           f"size limit, then `pipeline identify {sdir}` writes the report")  # fmt: skip
+    with os_errors_refused(report, fix, always_path=True):  # a full disk, `ulimit -f` (issue 44)
+        return write_unless_same_inputs(
+            report / "report.md", report / ".inputs.json", hashes, write
+        )

@@ -17,6 +17,7 @@ import numpy as np
 from pipeline.errors import ImportFileError
 from pipeline.robots.description import RobotDescription
 from pipeline.stages.recording import CHECK_SWEEP, LIMIT_MARGIN, POSES_SWEEP
+from pipeline.stages.recording_points import MAX_COORD_CM, MIN_SIGMA_CM
 
 #: Length units of imported points and prismatic readings -> cm.
 LENGTH_CM = {"mm": 0.1, "cm": 1.0, "m": 100.0}
@@ -193,15 +194,33 @@ def readings_in_boundary_units(
     return out
 
 
+def refuse_absurd_coordinates(rows: MeasuredRows) -> None:
+    """Refuse a finite coordinate farther from the sensor than the recording contract
+    takes (:data:`~pipeline.stages.recording_points.MAX_COORD_CM`, ±1,000 m), in one line
+    naming the row, before any linear algebra sees it: ``validate --against`` reads a
+    file without a recording (a coordinate of 1e308 made its registration's SVD spin or
+    fail, issue 44); ``import`` refuses such a recording as identify would."""
+    for t, p in rows.targets.items():
+        far = np.flatnonzero((np.abs(p) > MAX_COORD_CM).any(axis=1) & np.isfinite(p).all(axis=1))
+        if len(far):
+            k = far[0]
+            raise ImportFileError(
+                f"{rows.source.name}: {rows.where[k]}: target {t} lies "
+                f"{np.abs(p[k]).max():g} cm from the sensor",
+                expected=f"coordinates within {MAX_COORD_CM:g} cm (the recording contract's)",
+                fix="check the cell and the map's length_unit",
+            )
+
+
 def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: Tolerances) -> MeasuredRows:
     """Refuse rows that would make a wrong session; ``tol``: how far a held joint may be
     from its sweep's median, how close two stops of a sweep may be (joint values: the
     readings through the robot's coupling).
 
-    Refused: a non-finite value; a σ that is not positive; a joint value outside its
-    limits; a row measured twice (same sweep, the swept joint within ``tol.duplicate``); a
-    joint without a sweep (unless the rows are a pose set) or whose sweep does not move
-    it; a sweep in which another joint moves too.
+    Refused: a non-finite value; a σ that is not positive or under 1 nm; a joint value
+    outside its limits; a row measured twice (same sweep, the swept joint within
+    ``tol.duplicate``); a joint without a sweep (unless the rows are a pose set) or whose
+    sweep does not move it; a sweep in which another joint moves too.
     """
     src = rows.name
     extra = [] if rows.orientation_wxyz is None else [rows.orientation_wxyz]
@@ -220,6 +239,15 @@ def checked_rows(rows: MeasuredRows, robot: RobotDescription, tol: Tolerances) -
             f"{rows.at(small[0])}: a point's σ is zero or negative",
             expected="a positive standard deviation of every coordinate",
             fix="correct the σ column, or state one σ for the file (map: sigma = ...)",
+        )
+    tiny: Any = np.flatnonzero((np.column_stack(sigma) < MIN_SIGMA_CM).any(axis=1)) if sigma else []
+    if len(tiny):
+        raise ImportFileError(
+            f"{src}: {rows.where[tiny[0]]}: a point's σ is under 1 nm",
+            expected=f"a standard deviation of at least {MIN_SIGMA_CM:g} cm, in the map's "
+            "length_unit",
+            got=f"{np.column_stack(sigma)[tiny[0]].min():g} cm",
+            fix="correct the σ column or the map's sigma (and its length_unit)",
         )
     names = [j.name for j in robot.joints]
     values = robot.joints_from_readings(rows.q)

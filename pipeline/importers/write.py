@@ -6,7 +6,7 @@ import json
 import os
 from pathlib import Path
 
-from pipeline.atomic import TEMP_SUFFIX
+from pipeline.atomic import TEMP_SUFFIX, remove_debris
 from pipeline.contract.channels import POINT_CHANNELS, SOURCE_METADATA
 from pipeline.contract.digest import file_sha256
 from pipeline.errors import ImportFileError, RecordingError
@@ -41,6 +41,7 @@ def write_imported(
     recording = session_dir / "recording.mcap"
     with session_lock(session_dir):
         refuse_existing_recording(session_dir, force, "the imported one")
+        remove_debris(session_dir)  # the temp files of a killed import (issue 44)
         staged = session_dir / f".{recording.name}.import{TEMP_SUFFIX}"  # debris if killed
         write_recording(staged, messages, POINT_CHANNELS, {SOURCE_METADATA: source})
         try:

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.errors import ArmsigError
+from pipeline.errors import ArmsigError, positive_in_range
 from pipeline.refine.held_joints import whitening
 from pipeline.refine.identifiability import analyse
 from pipeline.refine.kinematics import ChainModel, chain_model
@@ -33,6 +33,7 @@ from pipeline.refine.plan import (
 from pipeline.refine.points import PointBlock
 from pipeline.refine.uncertainty import model_error_maps, predict, tool_model
 from pipeline.robots.description import RobotDescription
+from pipeline.stages.recording_points import MAX_SIGMA_CM, MIN_SIGMA_CM
 from pipeline.sweeps import POSES_SWEEP, TOOL_SWEEP, WHOLE_ARM_SWEEPS
 from pipeline.units import joints_to_internal
 
@@ -118,6 +119,8 @@ def plan_poses(
     seed: int = 0,
 ) -> Plan:
     """The plan (module docstring): ``sigma_cm`` None takes the simulated tracker's law."""
+    positive_in_range("plan: sigma_cm", sigma_cm, MIN_SIGMA_CM, MAX_SIGMA_CM, unit="cm")
+    positive_in_range("plan: target_rms_cm", target_rms_cm, unit="cm")
     if not (1 <= n_poses <= candidates and 1 <= candidates <= 1_000_000):
         raise ArmsigError(
             "plan sizes out of range",

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.errors import ArmsigError
+from pipeline.errors import ArmsigError, positive_in_range
 from pipeline.features.accuracy import MAX_POINTS, MIN_POINTS, points_for_accuracy, sweep_accuracy
 from pipeline.robots.description import RobotDescription
 from pipeline.sweeps import TOOL_SWEEP
@@ -121,11 +121,8 @@ def measurement_count(points: tuple[int, ...], n_avg: int, ranges_per_cycle: int
 def _check(plane_sigma_deg: float | None, center_sigma_cm: float | None, **sizes: Any) -> None:
     for name, v in (("plane_sigma_deg", plane_sigma_deg), ("center_sigma_cm", center_sigma_cm),
                     *sizes.items()):  # fmt: skip
-        if v is not None and not (np.isfinite(v) and v > 0):
-            raise ArmsigError(
-                f"sweep plan: {name} must be a positive number", got=repr(v), fix="--sweeps "
-                "--plane-sigma-deg 0.005 --center-sigma-mm 0.02, or --target-rms-mm 0.1"
-            )  # fmt: skip
+        positive_in_range(f"sweep plan: {name}", v, fix="--sweeps --plane-sigma-deg 0.005 "
+                          "--center-sigma-mm 0.02, or --target-rms-mm 0.1")  # fmt: skip
 
 
 def plan_sweeps(

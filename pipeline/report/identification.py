@@ -22,8 +22,9 @@ from pipeline.errors import StageError
 from pipeline.report import figures
 from pipeline.report.pose_set import pose_set_section
 from pipeline.report.validation import validation_section
+from pipeline.stages.catalog import identification_names
 from pipeline.stages.recording import CHECK_SWEEP, POSES_SWEEP
-from pipeline.stages.runner import identification_names, stage_path
+from pipeline.stages.runner import stage_path
 from pipeline.stages.session import session_plan, session_robot, session_sensor
 from pipeline.stages.tables import read_provenance, read_table
 

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.atomic import write_text_atomic
+from pipeline.atomic import remove_debris, write_text_atomic
 from pipeline.contract.channels import SENSOR_CHANNELS
 from pipeline.rig.options import SimulationOptions, options_for_truth
 from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
@@ -132,6 +132,7 @@ def write_session(
     # recording half replaced, and a recording that appeared meanwhile is still refused.
     with session_lock(out):
         refuse_existing_recording(out, force, "a simulated one")
+        remove_debris(out)  # the temp files of a killed simulate or import (issue 44)
         write_recording(recording, messages, SENSOR_CHANNELS[sensor])
         write_text_atomic(out / "rig-truth.json", json.dumps(truth, indent=1) + "\n")
     return recording

@@ -24,6 +24,7 @@ import pyarrow.compute as pc
 from pipeline.errors import ArmsigError
 from pipeline.sensor.compensation import rod_ratios
 from pipeline.sensor.geometry import MICROPHONES, DigitizerGeometry
+from pipeline.sensor.speed_spline import FINEST_S
 from pipeline.sweeps import sweep_id, sweep_name
 
 Array = npt.NDArray[np.float64]
@@ -166,10 +167,13 @@ def range_rows(ranges: pa.Table, geometry: DigitizerGeometry) -> RangeRows:
 
 
 #: How far a cycle's time may run back behind a cycle measured before it (s): a logger's
-#: or a clock's jitter. The speed of sound drifts over minutes and its spline's knots are
-#: 10 s or more apart (:mod:`pipeline.sensor.speed_spline`), so 2 s of disorder moves no
-#: knot's share of the data far; a permuted or reversed clock runs back by minutes.
-CLOCK_JITTER_S = 2.0
+#: or a clock's jitter. The speed of sound drifts over minutes, and its spline needs the
+#: times only to a fraction of its finest knot spacing (:data:`FINEST_S`, 15 s): a third
+#: of it moves no knot's share of the data far. A clock of another implementation of the
+#: recording contract with σ 0.4 s of jitter runs back by up to ~2.5 s over a few thousand
+#: cycles (the fixed 2 s before refused it, issue 44); a permuted or reversed clock runs
+#: back by minutes.
+CLOCK_JITTER_S = FINEST_S / 3.0
 
 
 def check_cycle_order(ranges: pa.Table, order: list[int | str]) -> None:

@@ -7,12 +7,13 @@ parsed recording for the extract stages) and its parameters.
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pipeline.errors import ArmsigError, StageError
+from pipeline.errors import ArmsigError, StageError, one_line
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -20,10 +21,28 @@ if TYPE_CHECKING:
 RECORDING = "recording"
 
 
+#: The longest name of one folder or file (bytes): Linux's NAME_MAX, and most file systems'.
+NAME_MAX = 255
+
+
+def refuse_long_names(path: str | Path) -> None:
+    """Refuse, in one line, a path with a part over :data:`NAME_MAX` bytes (its ``stat``
+    raised "File name too long" as an internal error in every session command, issue 44)."""
+    long = [part for part in Path(path).parts if len(os.fsencode(part)) > NAME_MAX]
+    if long:
+        raise ArmsigError(
+            f"session {one_line(str(path), 80)}: File name too long (a name of "
+            f"{len(os.fsencode(long[0]))} bytes)",
+            expected=f"names of at most {NAME_MAX} bytes (the file system's limit)",
+            fix="give the session's folder or NAME (pipeline status sessions/robot3)",
+        )
+
+
 def session_path(name: str) -> str:
     """A session argument as ``simulate`` and ``import`` name it (issue 30): a folder path as
     given; a bare NAME (no ``/``) that is not a folder here names ``sessions/NAME`` when that
     is one, so ``pipeline simulate robot8`` then ``pipeline identify robot8`` is one session."""
+    refuse_long_names(name)
     if "/" in name or Path(name).is_absolute() or Path(name).is_dir():
         return name
     under = Path("sessions") / name
@@ -46,6 +65,7 @@ def _no_folder(sdir: Path) -> str:
 def session_folder(session_dir: str | Path) -> Path:
     """``session_dir`` as a Path, refused with one line unless it holds a recording."""
     sdir = Path(session_dir)
+    refuse_long_names(sdir)
     if not (sdir / "recording.mcap").is_file():
         raise StageError(
             f"{sdir}: no recording.mcap" + ("" if sdir.is_dir() else _no_folder(sdir)),

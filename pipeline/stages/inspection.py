@@ -12,13 +12,8 @@ import pyarrow as pa
 
 from pipeline.errors import ArmsigError
 from pipeline.stages.base import session_folder
-from pipeline.stages.runner import (
-    EVALUATE_STAGE_MODULES,
-    StageStatus,
-    identification_modules,
-    stage_path,
-    status,
-)
+from pipeline.stages.catalog import EVALUATE_STAGE_MODULES
+from pipeline.stages.runner import StageStatus, identification_modules, stage_path, status
 from pipeline.stages.tables import check_table, read_provenance, read_table
 
 

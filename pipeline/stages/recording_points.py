@@ -7,8 +7,9 @@ target id the plan does not list for its sweep (``plan.sweeps[].targets``,
 ``plan.tool_target``, its only target), a ``plan.tool_targets`` without
 ``plan.tool_target`` among them, a pose set of several targets without its
 ``plan.tool_target``, ``sigma_cm``
-together with ``cov_cm2``, a covariance that is not symmetric positive definite, a
-quaternion that is not of unit length. Pairing with the joint states is the caller's.
+together with ``cov_cm2``, a covariance that is not symmetric positive definite, a σ
+under :data:`MIN_SIGMA_CM`, a quaternion that is not of unit length. Pairing with the
+joint states is the caller's.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import RecordingError
+from pipeline.schemas import mcap_json_schema
 from pipeline.stages.recording_keys import KEY_FIX, key_text, message_keys, refuse_duplicates
 from pipeline.sweeps import POSES_SWEEP, TOOL_SWEEP, sweep_name
 
@@ -30,6 +32,14 @@ SYMMETRY_REL = 1e-9
 #: A recorded quaternion's length may differ from 1 by this much: a float32 quaternion
 #: renormalised in float32 is within 1e-7; a non-rotation is off by far more.
 UNIT_TOL = 1e-6
+#: The smallest standard deviation of a coordinate taken (cm): 1 nm, below any instrument's
+#: statement; a σ far below it (1e-200 cm) squares to zero in float64 and broke the fit's
+#: whitening (a LinAlgError, issue 44).
+MIN_SIGMA_CM = 1e-7
+#: The largest (cm), and the farthest coordinate from the sensor's origin (cm, the
+#: contract's ±1,000 m): schemas/mcap/points.json's maxima of sigma_cm and x_cm.
+MAX_SIGMA_CM = float(mcap_json_schema("points")["properties"]["sigma_cm"]["maximum"])
+MAX_COORD_CM = float(mcap_json_schema("points")["properties"]["x_cm"]["maximum"])
 
 
 def no_points() -> dict[str, np.ndarray]:
@@ -83,7 +93,7 @@ def read_points(
                 fix="record either, not both (schemas/mcap/points.json)",
             )
         if "sigma_cm" in m:
-            sigma[k] = m["sigma_cm"]
+            sigma[k] = _checked_sigma(p, key, float(m["sigma_cm"]))
         if "cov_cm2" in m:
             cov[k] = _checked_cov(p, key, np.array(m["cov_cm2"], float))
         if "orientation_wxyz" in m:
@@ -184,7 +194,20 @@ def _checked_cov(p: Path, key: str, c: np.ndarray) -> np.ndarray:
             got=f"eigenvalues {np.linalg.eigvalsh(c).tolist()}",
             fix="record the covariance of (x, y, z) in cm^2, or sigma_cm",
         )
+    small = float(np.sqrt(np.linalg.eigvalsh(c)[0]))
+    _checked_sigma(p, key, small, "cov_cm2's smallest σ")
     return c
+
+
+def _checked_sigma(p: Path, key: str, sigma: float, what: str = "sigma_cm") -> float:
+    """``sigma`` (cm), refused under :data:`MIN_SIGMA_CM`."""
+    if not sigma >= MIN_SIGMA_CM:
+        raise RecordingError(
+            f"{p}: {TOPIC} {key} {what} is {sigma:g} cm, under {MIN_SIGMA_CM:g} cm (1 nm)",
+            expected=f"a standard deviation of at least {MIN_SIGMA_CM:g} cm",
+            fix="record the instrument's σ in cm (a σ in m or mm recorded as cm?)",
+        )
+    return sigma
 
 
 def _checked_quaternion(p: Path, key: str, q: np.ndarray) -> np.ndarray:

@@ -22,11 +22,10 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import datetime as dt
-import importlib
 import os
 import shutil
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
@@ -40,105 +39,27 @@ from pipeline.errors import ArmsigError, StageError, os_errors_refused
 from pipeline.progress import Progress
 from pipeline.schemas import validate_table
 from pipeline.stages.base import RECORDING, Stage, StageRun, session_folder
+from pipeline.stages.catalog import (
+    FILE_INPUTS,
+    LAST_STAGE,
+    PRODUCT,
+    SENSOR_STAGE_MODULES,
+    function_of,
+    identification_names,
+    is_identification,
+    stages,
+)
 from pipeline.stages.lock import session_lock
 from pipeline.stages.recording import read_recording
 from pipeline.stages.session import session_sensor
 from pipeline.stages.tables import CheckedTable, check_table, content_hash, write_table
 
-#: Identification stage modules of a sonic session in pipeline order (each defines
-#: ``STAGE``): ranges -> compensate -> triangulate -> the sensor-neutral ``positions``.
-STAGE_MODULES = (
-    "session",
-    "ranges",
-    "joints",
-    "compensate",
-    "triangulate",
-    "positions",
-    "features",
-    "residuals",
-    "frames",
-    "refine",
-    "chain",
-    "smodel",
-    "dh",
-    "uncertainty",
-    "holdout",
-    "verdict",
-)
-#: Identification stage modules of a point-sensor session: module ``points`` is the one
-#: stage that turns ``/points`` into the ``positions`` table (its stage name).
-POINT_STAGE_MODULES = (
-    "session",
-    "joints",
-    "points",
-    "features",
-    "residuals",
-    "frames",
-    "refine_points",
-    "chain",
-    "smodel",
-    "dh",
-    "validation",
-    "uncertainty",
-    "holdout_points",
-    "verdict",
-)
-#: recorded sensor kind (``/rig/description`` sensor) -> its identification stage modules
-SENSOR_STAGE_MODULES = {"sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES,
-                        "camera": ("session", "joints", "detections", "camera_fit",
-                                   "camera_residuals")}  # fmt: skip
-#: The last identification stage: a stage list holding it (and ``session``) has a product.
-LAST_STAGE = "verdict"
-#: Stage modules of ``pipeline evaluate`` (run after the identification, same runner).
-EVALUATE_STAGE_MODULES = (
-    "evaluate_teach",
-    "evaluate_program",
-    "evaluate_measurements",
-    "evaluate_indices",
-)
-#: Stage inputs that are files of the session folder other than stage outputs:
-#: name -> (file name, ``module:function`` that loads it from its path).
-#: They are hashed by content, like the recording.
-FILE_INPUTS = {
-    "signature": ("signature.json", "pipeline.signature.session:load_session_signature"),
-    "evaluation": ("evaluation.mcap", "pipeline.contract.evaluation:read_evaluation"),
-}
-#: The product of the identification stages, written by the run that commits them:
-#: its name (a :data:`FILE_INPUTS` key) and ``module:function`` of its writer
-#: ``(session_dir, hashes, force) -> (path, doc, written)`` and of its check
-#: ``(session_dir, hashes) -> (state, reason)``; ``hashes``: the stages' content hashes.
-PRODUCT = (
-    "signature",
-    "pipeline.signature.session:write_signature",
-    "pipeline.signature.session:signature_status",
-)
 FAILED = "failed"
-
-
-def stages(modules: tuple[str, ...] = STAGE_MODULES) -> list[Stage]:
-    """All stages of a stage list (default: a sonic session's identification), in order."""
-    return [importlib.import_module(f"pipeline.stages.{m}").STAGE for m in modules]
 
 
 def identification_modules(session_dir: str | Path) -> tuple[str, ...]:
     """The identification stage modules of a session, by its recorded sensor kind."""
     return _Hashes(session_folder(session_dir)).identification_modules()
-
-
-def identification_names(sensor: str) -> tuple[str, ...]:
-    """The names (output files ``stages/<name>.arrow``) of the identification stages of a
-    session of sensor kind ``sensor`` (``sonic`` or ``points``)."""
-    return tuple(s.name for s in stages(SENSOR_STAGE_MODULES[sensor]))
-
-
-def _is_identification(names: list[str] | set[str]) -> bool:
-    return LAST_STAGE in names and "session" in names
-
-
-def _function(ref: str) -> Callable[..., Any]:
-    """The function named by ``module:function``."""
-    module, func = ref.split(":")
-    return getattr(importlib.import_module(module), func)  # type: ignore[no-any-return]
 
 
 def _load_file_input(sdir: Path, name: str, hashes: _Hashes) -> Any:
@@ -151,8 +72,8 @@ def _load_file_input(sdir: Path, name: str, hashes: _Hashes) -> Any:
             f"{sdir}: no {fname}", fix="run `pipeline identify` / `pipeline evaluate` first"
         )
     if name == PRODUCT[0]:
-        return _function(loader)(path, {n: hashes.get(n) for n in hashes.identification()})
-    return _function(loader)(path)
+        return function_of(loader)(path, {n: hashes.get(n) for n in hashes.identification()})
+    return function_of(loader)(path)
 
 
 def stage_path(session_dir: Path, name: str) -> Path:
@@ -276,7 +197,7 @@ class _Hashes:
     def product_status(self) -> tuple[str, str]:
         """``(state, reason)`` of the product file against the committed stages."""
         if self._product is None:
-            check = _function(PRODUCT[2])
+            check = function_of(PRODUCT[2])
             self._product = check(self.session_dir, {n: self.get(n) for n in self.identification()})
         return self._product
 
@@ -364,7 +285,7 @@ def _statuses(
 ) -> list[StageStatus]:
     out: list[StageStatus] = []
     stale: set[str] = set()
-    has_product = product and _is_identification({s.name for s in all_stages})
+    has_product = product and is_identification({s.name for s in all_stages})
     for stage in all_stages:
         st = _check(stage, _params(stage, overrides), hashes, stale)
         if st.state != "fresh":
@@ -433,7 +354,7 @@ def run(
         shutil.rmtree(pending, ignore_errors=True)  # debris of a killed run
         for folder in (sdir, sdir / "stages", sdir / "report"):
             remove_debris(folder)  # temp files of killed atomic writes
-        label = "identify" if _is_identification(set(names)) else "evaluate"
+        label = "identify" if is_identification(set(names)) else "evaluate"
         own = not isinstance(progress, Progress)  # else the caller's bar, closed by it
         bar = (
             progress
@@ -460,7 +381,7 @@ def run(
             if own:
                 bar.close()
             shutil.rmtree(pending, ignore_errors=True)
-        if _is_identification(set(names)):
+        if is_identification(set(names)):
             runs.append(_write_product(sdir, all_stages, overrides, hashes, force))
     return runs
 
@@ -503,7 +424,7 @@ def _write_product(
         return StageRun(name, "not written", 0.0, 0)
     ident = {n: hashes.get(n) for n in hashes.identification()}
     with one_blas_thread():
-        _, _, written = _function(writer)(sdir, ident, force)
+        _, _, written = function_of(writer)(sdir, ident, force)
     return StageRun(name, "written" if written else "cached", time.perf_counter() - t0, -1)
 
 

@@ -92,7 +92,10 @@ class IKResult:
         One of the ``STATUS_*`` codes (see the package docstring).
     history : IKHistory or None
         Per-iteration record when the solver ran with ``record_history=True``
-        (with task axes, δ's unselected components are recorded as 0).
+        (with task axes, δ's unselected components are recorded as 0). It is the
+        first solve's: a restart into the joint limits (:mod:`pipeline.control.limits`)
+        adds to ``iterations``, not to the history, so the history may hold fewer than
+        ``iterations + 1`` rows.
     task_axes : tuple of int
         Components of δ the errors and tolerances refer to (package docstring,
         "Task axes"): ``position_error_cm`` is the norm of the selected
