@@ -106,6 +106,10 @@ def read_points(
                     fix="record orientation_wxyz, or drop orientation_sigma_deg",
                 )
             sigma_o[k] = m["orientation_sigma_deg"]
+    tiny = np.flatnonzero(sigma < MIN_SIGMA_CM)  # the messages the loop read unchecked
+    if tiny.size:
+        k = int(tiny[0])
+        _checked_sigma(p, key_text(sweep[k], step[k], target=target[k]), float(sigma[k]))
     return {
         "point_sweep": sweep,
         "point_step": step,
