@@ -34,7 +34,7 @@ from pipeline.errors import ArmsigError, ImportFileError, one_line
 from pipeline.importers.image_map import checked_document
 from pipeline.importers.rows import LENGTH_CM
 from pipeline.importers.sscanss2 import read_text
-from pipeline.importers.write import SOURCE_METADATA, source_metadata
+from pipeline.importers.write import SOURCE_METADATA, read_back, source_metadata
 from pipeline.importers.yamlfile import load_yaml
 from pipeline.quiet import debugging
 from pipeline.rig.camera import STATED_SIGMA_PX
@@ -404,24 +404,6 @@ def import_image_set(
         staged = sdir / f".{recording.name}.import{TEMP_SUFFIX}"  # debris if killed
         write_recording(staged, image_set_messages(s), channels, meta)
         if s.robot is not None:
-            _read_back(staged, s.source.name)
+            read_back(staged, s.source.name, "check the joint columns and their units")
         os.replace(staged, recording)
     return s, recording
-
-
-def _read_back(staged: Path, src: str) -> None:
-    """Read the staged recording with identify's reader; refuse (and remove) what it
-    would refuse (a joint reading beyond the limits, a wrong unit)."""
-    from pipeline.errors import RecordingError
-    from pipeline.stages.recording import read_recording
-
-    try:
-        read_recording(staged)
-    except RecordingError as exc:
-        staged.unlink(missing_ok=True)
-        what = exc.what.removeprefix(f"{staged.resolve()}: ").removeprefix(f"{staged}: ")
-        raise ImportFileError(
-            f"{src}: identify would refuse this recording: {what}",
-            got=exc.got,
-            fix="check the joint columns and their units",
-        ) from None

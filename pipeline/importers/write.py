@@ -44,15 +44,21 @@ def write_imported(
         remove_debris(session_dir)  # the temp files of a killed import (issue 44)
         staged = session_dir / f".{recording.name}.import{TEMP_SUFFIX}"  # debris if killed
         write_recording(staged, messages, POINT_CHANNELS, {SOURCE_METADATA: source})
-        try:
-            read_recording(staged)  # identify's reader: the schemas and the session contract
-        except RecordingError as exc:
-            staged.unlink(missing_ok=True)
-            what = exc.what.removeprefix(f"{staged.resolve()}: ").removeprefix(f"{staged}: ")
-            raise ImportFileError(
-                f"{source['file']}: identify would refuse this recording: {what}",
-                got=exc.got,
-                fix="check the map's length_unit (mm declared as m?), columns and target ids",
-            ) from None
+        read_back(staged, source["file"], "check the map's length_unit (mm declared as m?), "
+                  "columns and target ids")  # fmt: skip
         os.replace(staged, recording)
     return recording
+
+
+def read_back(staged: Path, src: str, fix: str) -> None:
+    """Read the staged recording with identify's reader (the schemas and the session
+    contract); what it would refuse is removed and refused in one line naming ``src``,
+    with ``fix``."""
+    try:
+        read_recording(staged)
+    except RecordingError as exc:
+        staged.unlink(missing_ok=True)
+        what = exc.what.removeprefix(f"{staged.resolve()}: ").removeprefix(f"{staged}: ")
+        raise ImportFileError(
+            f"{src}: identify would refuse this recording: {what}", got=exc.got, fix=fix
+        ) from None
