@@ -91,6 +91,12 @@ def test_an_offsets_only_robot_is_its_offsets(offsets_only: Path, tmp_path: Path
     stripped = re.sub(r"  <!-- armsig: the measured tool point.*?</joint>\n", "", stripped,
                       flags=re.S)  # fmt: skip
     assert stripped == vendor.read_text()
+    # a UTF-16 vendor file (issue 44) is written back in UTF-16, the same file otherwise
+    wide = tmp_path / "wide.urdf"
+    wide.write_bytes(b"\xff\xfe" + vendor.read_text().encode("utf-16-le"))
+    r16 = export_offsets(d, wide, out=tmp_path / "off16.urdf")
+    raw = Path(r16.path).read_bytes()
+    assert raw.startswith(b"\xff\xfe") and raw[2:].decode("utf-16-le") == text
 
 
 def test_a_vendor_file_with_offsets_is_refused(offsets_only: Path, tmp_path: Path) -> None:

@@ -26,10 +26,17 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.atomic import atomic_write, check_new_file, check_writable
+from pipeline.atomic import atomic_write
 from pipeline.errors import ArmsigError
-from pipeline.export import CHECK_POSITION_M, EXPORT_DIR
-from pipeline.export.onto import TOOL_LINK, _xml_tool, joint_names, match_vendor, vendor_chain
+from pipeline.export import CHECK_POSITION_M
+from pipeline.export.onto import (
+    TOOL_LINK,
+    _xml_tool,
+    joint_names,
+    match_vendor,
+    vendor_chain,
+    vendor_output,
+)
 from pipeline.export.rigid import MM_PER_CM, fit_readings, over_readings, session_held
 from pipeline.export.urdf import M_PER_CM
 from pipeline.export.vendor import VendorURDF, axis_frame, parse_vendor_urdf, read_vendor_urdf
@@ -134,15 +141,7 @@ def export_offsets(
     docstring); ``out`` defaults to ``SESSION/export/<vendor stem>.offsets.urdf``."""
     sdir, src = Path(session_dir), Path(vendor)
     urdf = read_vendor_urdf(src)
-    if out is None:
-        path = sdir / EXPORT_DIR / f"{src.stem}.offsets.urdf"
-        check_writable(path.parent, "export folder", folder=True)
-    else:
-        path = Path(out)
-        if path.exists() and path.resolve() == src.resolve():
-            raise ArmsigError(f"--out {path} is the vendor file itself",
-                              fix="write the file elsewhere")  # fmt: skip
-        path = check_new_file(out, "--out", force)
+    path = vendor_output(sdir, src, out, force, "offsets")
     if TOOL_LINK in urdf.links:
         raise ArmsigError(f"{urdf.path} already has a link named {TOOL_LINK!r}")
     doc = load_session_document(sdir / FILE_NAME)
@@ -170,8 +169,8 @@ def export_offsets(
                         _xml_tool(vc.joints[-1].child, tool, sdir.name))  # fmt: skip
     err = _check(data, path, names, conv, fit, q)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_write(path) as f:
-        f.write(data)  # type: ignore[arg-type]
+    with atomic_write(path) as f:  # the vendor's bytes, in the vendor's encoding
+        f.write(urdf.encoded(data))  # type: ignore[arg-type]
     shown = np.where(pris, fit.offsets, np.degrees(fit.offsets))
     return OffsetsResult(
         str(path), str(src), mapping, dict(zip(names, shown.tolist(), strict=True)),

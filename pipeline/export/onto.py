@@ -392,6 +392,21 @@ def check_calibrated(
     return pos, rot
 
 
+def vendor_output(sdir: Path, src: Path, out: str | Path | None, force: bool, kind: str) -> Path:
+    """Where a file written onto the vendor URDF ``src`` goes: ``out`` (an existing one
+    needs ``force``; never the vendor file itself), else ``SESSION/export/<vendor
+    stem>.<kind>.urdf`` (armsig's folder, rewritten)."""
+    if out is None:
+        path = sdir / EXPORT_DIR / f"{src.stem}.{kind}.urdf"
+        check_writable(path.parent, "export folder", folder=True)
+        return path
+    path = Path(out)
+    if path.exists() and path.resolve() == src.resolve():
+        raise ArmsigError(f"--out {path} is the vendor file itself",
+                          fix=f"write the {kind} file elsewhere")  # fmt: skip
+    return check_new_file(out, "--out", force)
+
+
 def export_onto(
     session_dir: str | Path,
     vendor: str | Path,
@@ -409,16 +424,7 @@ def export_onto(
     :mod:`pipeline.export.rigid`)."""
     sdir, src = Path(session_dir), Path(vendor)
     urdf = read_vendor_urdf(src)
-    if out is None:
-        path = sdir / EXPORT_DIR / f"{src.stem}.calibrated.urdf"
-        check_writable(path.parent, "export folder", folder=True)
-    else:
-        path = Path(out)
-        if path.exists() and path.resolve() == src.resolve():
-            raise ArmsigError(
-                f"--out {path} is the vendor file itself", fix="write the calibrated file elsewhere"
-            )
-        path = check_new_file(out, "--out", force)
+    path = vendor_output(sdir, src, out, force, "calibrated")
     doc = load_session_document(sdir / FILE_NAME)
     sig = signature_from_document(doc, str(sdir / FILE_NAME))
     warning = verdict_gate(sig.verdict, str(sdir), accept_verdict)
