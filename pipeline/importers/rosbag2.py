@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from pipeline.errors import ImportFileError, one_line
 from pipeline.importers.mapping import ImportMap
@@ -137,7 +138,8 @@ def read_rosbag2(path: Path, imap: ImportMap, robot: RobotDescription) -> BagRow
     """The stops of the bag ``path`` as rows (module docstring), before sweeps are formed."""
     cfg = _config(imap, robot, path)
     mcap = bag_file(path)
-    _check_topics(cfg, bag_topics(mcap), mcap.name)
+    have = bag_topics(mcap)
+    _check_topics(cfg, have, mcap.name)
     topics = {cfg["joint_states"], *TF_TOPICS}
     topics |= {t["topic"] for t in cfg["targets"] if "topic" in t}
     joints: list[tuple[int, list[float]]] = []
@@ -145,7 +147,7 @@ def read_rosbag2(path: Path, imap: ImportMap, robot: RobotDescription) -> BagRow
     by_topic = {t["topic"]: t["id"] for t in cfg["targets"] if "topic" in t}
     tf_ids = {t["tf"]: t["id"] for t in cfg["targets"] if "tf" in t}
     tf = TfTree()
-    for topic, kind, msg in _messages(mcap, topics & set(bag_topics(mcap))):
+    for topic, kind, msg in _messages(mcap, topics & set(have)):
         if topic == cfg["joint_states"]:
             joints.append((_stamp_ns(msg), _joint_values(msg, cfg["names"], mcap.name)))
         elif topic in TF_TOPICS:
@@ -376,8 +378,6 @@ class TfTree:
 
     def add(self, t: Any, static: bool) -> None:
         tr, r = t.transform.translation, t.transform.rotation
-        from scipy.spatial.transform import Rotation
-
         T = np.eye(4)
         T[:3, :3] = Rotation.from_quat([r.x, r.y, r.z, r.w]).as_matrix()
         T[:3, 3] = (tr.x, tr.y, tr.z)
@@ -400,7 +400,5 @@ class TfTree:
 
     @staticmethod
     def _done(T: np.ndarray) -> list[float]:
-        from scipy.spatial.transform import Rotation
-
         x, y, z, w = Rotation.from_matrix(T[:3, :3]).as_quat()
         return [*T[:3, 3], w, x, y, z]
