@@ -101,7 +101,7 @@ def parse_foreign(
                 f"--format rosbag2 takes one bag, got {len(files)}",
                 fix="import each bag as its own session (or merge them: ros2 bag convert)",
             )
-        return _rosbag2(files[0], robot, imap)
+        return _with_home(_rosbag2(files[0], robot, imap), imap, robot)
     for path in files:
         if not path.is_file():
             raise ImportFileError(f"{path}: no such file", fix="check the path")
@@ -141,20 +141,24 @@ def parse_foreign(
             rows = pose_set(rows, imap)
         elif imap.select:
             rows = select_sweeps(rows, imap, robot, _tolerances(fmt, imap, robot).held)
+    return _with_home(rows, imap, robot)
+
+
+def _with_home(
+    rows: MeasuredRows, imap: ImportMap, robot: RobotDescription
+) -> tuple[MeasuredRows, np.ndarray]:
+    """The rows and their home readings (zeros when no row is a joint's sweep)."""
     if not (rows.sweep > 0).any():
         return rows, np.zeros(robot.n_joints)
     return rows, home_readings(rows, imap, robot)
 
 
-def _rosbag2(
-    path: Path, robot: RobotDescription, imap: ImportMap
-) -> tuple[MeasuredRows, np.ndarray]:
+def _rosbag2(path: Path, robot: RobotDescription, imap: ImportMap) -> MeasuredRows:
     """A ROS 2 bag's stops (:mod:`pipeline.importers.rosbag2`) formed into sweeps or a
-    pose set as a table's rows are; the settle rule's counts in the rows' notes."""
-    from dataclasses import replace
-
+    pose set as a table's rows are (:func:`pipeline.importers.table.assigned`); the settle
+    rule's counts in the rows' notes."""
     from pipeline.importers.rosbag2 import read_rosbag2
-    from pipeline.importers.sweeps import infer_sweeps
+    from pipeline.importers.table import assigned
 
     bag = read_rosbag2(path, imap, robot)
     rows = replace(bag.rows.with_sigma(imap.sigma_cm), notes=(bag.note,))
@@ -164,16 +168,7 @@ def _rosbag2(
             expected="the arm still for settle_s with points measured then",
             fix="check rosbag2.still (deg / cm) and settle_s against the bag's joint states",
         )
-    if imap.poses:
-        return pose_set(rows, imap), np.zeros(robot.n_joints)
-    tol = tolerances(imap, robot).held
-    if imap.select:
-        rows = select_sweeps(rows, imap, robot, tol)
-    else:
-        rows = replace(rows, sweep=infer_sweeps(rows, robot, tol))
-    if not (rows.sweep > 0).any():
-        return rows, np.zeros(robot.n_joints)
-    return rows, home_readings(rows, imap, robot)
+    return assigned(rows, imap, robot, sweep_column=False)
 
 
 def _same_home(parsed: list[tuple[MeasuredRows, np.ndarray]], files: list[Path]) -> None:
