@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy import sparse
 
 from pipeline.optim.block import Linearization
 from pipeline.optim.lm import rho
@@ -143,23 +144,33 @@ def measured_positions(lin: Linearization, predicted: Array, w: Array | None = N
     gives ``m`` itself. Raw ranges give the position the block's sensor parameters
     triangulate, to second order in the residuals. NaN where the rows do not fix a point
     (fewer than three independent ranges, or none)."""
-    K = len(predicted)
+    H, fixed = position_information(lin, len(predicted), w)
     on = lin.pos >= 0
     key, d_p, r = lin.pos[on], lin.d_p[on], lin.r[on]
     wk = np.ones(len(r)) if w is None else w[on]
+    g = np.stack([np.bincount(key, wk * d_p[:, i] * r, len(predicted)) for i in range(3)], 1)
+    out = np.full((len(predicted), 3), np.nan)
+    out[fixed] = predicted[fixed] - np.linalg.solve(H[fixed], g[fixed][..., None])[..., 0]
+    return out
+
+
+def position_information(
+    lin: Linearization, K: int, w: Array | None = None
+) -> tuple[Array, npt.NDArray[np.bool_]]:
+    """Each of the ``K`` keys' information about its position (K, 3, 3), ``Σ w d_p d_pᵀ``
+    over its (whitened) rows, and whether the rows fix the point (K,): the inverse is the
+    covariance of :func:`measured_positions`' position, in the rows' noise units."""
+    on = lin.pos >= 0
+    key, d_p = lin.pos[on], lin.d_p[on]
+    wk = np.ones(len(key)) if w is None else w[on]
     H = np.zeros((K, 3, 3))
-    g = np.zeros((K, 3))
     for i in range(3):
-        g[:, i] = np.bincount(key, wk * d_p[:, i] * r, K)
         for j in range(i, 3):
             H[:, i, j] = H[:, j, i] = np.bincount(key, wk * d_p[:, i] * d_p[:, j], K)
     lam = np.linalg.eigvalsh(H)
     # 1e-10: a rank-deficient H (two ranges, or none) leaves its smallest eigenvalue at
     # round-off of the largest; three microphones' ranges are 1e-3 to 1 of it
-    fixed = lam[:, 0] > 1e-10 * np.maximum(lam[:, -1], 1e-300)
-    out = np.full((K, 3), np.nan)
-    out[fixed] = predicted[fixed] - np.linalg.solve(H[fixed], g[fixed][..., None])[..., 0]
-    return out
+    return H, lam[:, 0] > 1e-10 * np.maximum(lam[:, -1], 1e-300)
 
 
 @dataclass(frozen=True)
@@ -217,6 +228,38 @@ class StepRefit:
         for raw ranges, the positions the fitted sensor's ranges put there."""
         full, lin, w, _ = self._at_x_hat  # type: ignore[attr-defined]
         return measured_positions(lin, full.model.positions(self.x_hat[: full.n_kin]), w)
+
+    @property
+    def measured_covariance(self) -> Array:
+        """The covariances (K, 3, 3) of :attr:`measured` (and of :meth:`measured_without`,
+        whose rows keep their derivatives), ``(Σ w d_p d_pᵀ)⁻¹ · noise_var``; NaN where the
+        rows do not fix the point."""
+        full, lin, w, _ = self._at_x_hat  # type: ignore[attr-defined]
+        H, fixed = position_information(lin, len(full.model.link), w)
+        out = np.full(H.shape, np.nan)
+        out[fixed] = np.linalg.inv(H[fixed]) * self.noise_var
+        return out
+
+    def difference_variance(self, keep: npt.NDArray[np.bool_]) -> Array:
+        """Per position (K,), the variance (cm²) of :meth:`measured_without` ``(keep)``
+        minus the step's chain there, from the step's parameters alone (chain and
+        sensor together, ``A N Aᵀ · noise_var`` with ``A = [−∂p/∂θ, ∂m/∂b]``): a sensor
+        frame the fold fits moves its chain and its measured positions alike, which the
+        chain's covariance alone counts as error. ``∂m/∂b = −H⁻¹ Σ w d_p d_xᵀ`` per key
+        (:func:`measured_positions`' step, ``H`` :func:`position_information`)."""
+        full, lin, w, _ = self._at_x_hat  # type: ignore[attr-defined]
+        n, K = full.n_kin, len(full.model.link)
+        _, N = self.step(keep)
+        H, fixed = position_information(lin, K, w)
+        on = lin.pos >= 0
+        rows = sparse.csr_array((w[on], (lin.pos[on], np.flatnonzero(on))), (K, len(lin.r)))
+        d_x = sparse.csr_array(lin.d_x)
+        S = np.stack([np.asarray((rows @ d_x.multiply(lin.d_p[:, [i]])).todense()) for i in
+                      range(3)], 1)  # (K, 3, B): Σ w d_p d_xᵀ per key  # fmt: skip
+        dm = np.zeros_like(S)
+        dm[fixed] = -np.linalg.solve(H[fixed], S[fixed])
+        A = np.concatenate([-full.model.position_jacobian(self.x_hat[:n]), dm], axis=2)
+        return np.einsum("kip,pq,kiq->k", A, N[: A.shape[2], : A.shape[2]], A) * self.noise_var
 
     def measured_without(self, keep: npt.NDArray[np.bool_]) -> Array:
         """:attr:`measured` with the block's own parameters of the step without the

@@ -5,18 +5,22 @@ those are the held-out set: the refinement never used them, so the fitted chain 
 them as it is. Otherwise k-fold over each joint sweep's steps (fold ``f``: steps ≡ f mod
 k), each fold refit without its positions, warm-started at the full fit
 (:mod:`pipeline.refine.holdout`); positions without a usable measurement (null) are not
-scored. The measured position of a sonic session is the triangulated one (recorded
-calibration) also when the refinement fits the raw ranges. Each held-out position's
+scored. The measured position of a sonic session refined at its raw ranges is the one
+the fold's own sensor (its microphones, frame and speed of sound, fitted without the
+fold) triangulates from the held-out ranges, as the model choice's cross-validation
+scores it; otherwise (and at check configurations) the recorded one. Each held-out position's
 expected error combines its measurement covariance and the (refit's) parameter
 covariance, both scaled by the fit's χ²/dof as the refinement scales its covariance.
 Beside each, the design model's error at the same position (``design_error_cm``, issue
 41): the design chain with its base and every measured point registered to the positions
 the fit of that position used (the check configurations: every fit position; k-fold: the
 fold's kept positions) (:func:`pipeline.refine.baseline.register_design_points`), so the
-gain over the design is measured on data neither saw. Not for a sonic session refined at
-its ranges: its held-out positions are triangulated with the recorded calibration, which
-the design registered to them absorbs and the self-calibrated signature does not (the
-SCARA walk-through read 0.5× "the design" held out where the audit gives 31.6×). Zero
+gain over the design is measured on data neither saw. A sonic session's design is
+registered to, and scored at, its fold's own-sensor positions too: triangulated with the
+recorded calibration, which a design registered to them absorbs and the self-calibrated
+signature does not, the SCARA walk-through read 0.5× "the design" where the audit gives
+31.6× (now 2.0×; robot3 14×, audited 78×). Its expected error counts the fold's chain and
+sensor together (:meth:`pipeline.refine.holdout.StepRefit.difference_variance`). Zero
 rows when the refinement is disabled.
 """
 
@@ -74,17 +78,25 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     f = internal_factors(refine)
     cov = np.outer(f, f) * np.array(refine.column("covariance").to_pylist(), float)
     scale = float(summ.get("noise_scale", 1.0)) ** 2
-    keys, held = _held_out(inputs, params, sp, refined_x(refine), cov, scale)
+    keys, held, measured_by = _held_out(
+        inputs, params, sp, refined_x(refine), cov, scale, summ.get("level") == "ranges"
+    )
     rigid = None
     if sp.problem.model.terms:  # the same held-out positions without the terms (issue 27)
         rigid = _rigid_held_out(inputs, params, summ)
-    design = None if summ.get("level") == "ranges" else _design_held_out(inputs, sp, held)
+    ranges = summ.get("level") == "ranges"  # check rows keep the recorded triangulation
+    design = None if ranges and measured_by is None else _design_held_out(inputs, sp, held,
+                                                                           measured_by)  # fmt: skip
     return _table(*keys, held, rigid, design, inputs["joints"])
 
 
-def _design_held_out(inputs: Mapping[str, Any], sp: Any, held: Any) -> np.ndarray:
+def _design_held_out(
+    inputs: Mapping[str, Any], sp: Any, held: Any, measured_by: Any = None
+) -> np.ndarray:
     """The registered design model's error (cm) at each held-out position of ``held``
-    (module docstring); NaN where the positions it is registered to cannot fix it."""
+    (module docstring); NaN where the positions it is registered to cannot fix it. With
+    ``measured_by`` (a sonic session refined at its ranges) a fold's positions, kept and
+    held out, are those its own sensor triangulates, as the signature's are scored."""
     from pipeline.errors import StageError
     from pipeline.refine.baseline import register_design_points
     from pipeline.signature.alignment import design_alignment
@@ -119,7 +131,12 @@ def _design_held_out(inputs: Mapping[str, Any], sp: Any, held: Any) -> np.ndarra
                   model.point[held.index[held.fold == f]], np.flatnonzero(held.fold == f))
                  for f in np.unique(held.fold)]  # fmt: skip
     link = _link_of_points(model)
-    for train, q_test, m_test, point_test, where in folds:
+    for f, (train, q_test, m_test, point_test, where) in zip(np.unique(held.fold), folds,
+                                                              strict=True):  # fmt: skip
+        if measured_by is not None and f >= 0:  # the fold's sensor measures both sides
+            by = measured_by(~np.isin(np.arange(len(fit)), held.index[held.fold == f]))
+            m, m_test = by, by[held.index[held.fold == f]]
+            train = train & np.isfinite(m).all(axis=1)
         try:
             reg = register_design_points(design, q[train], m[train], model.link[train],
                                          model.point[train], base0)  # fmt: skip
@@ -156,18 +173,23 @@ def _rigid_held_out(inputs: Mapping[str, Any], params: Params, summ: Any) -> Any
     held = np.isin(np.array(sp.names), names)
     sp = dataclasses.replace(sp, problem=dataclasses.replace(sp.problem, held=held))
     scale = noise**2 if np.isfinite(noise) else 1.0
-    return _held_out(inputs, params, sp, x, np.zeros((len(x), len(x))), scale)[1]
+    ranges = summ.get("level") == "ranges"
+    return _held_out(inputs, params, sp, x, np.zeros((len(x), len(x))), scale, ranges)[1]
 
 
 def _held_out(
     inputs: Mapping[str, Any], params: Params, sp: Any, x_hat: np.ndarray, cov: np.ndarray,
-    scale: float,
-) -> tuple[tuple[list[Any], list[Any], list[Any]], Any]:  # fmt: skip
+    scale: float, own_sensor: bool = False,
+) -> tuple[tuple[list[Any], list[Any], list[Any]], Any, Any]:  # fmt: skip
     """The held-out positions' keys (sweep, step, target) and errors of the problem ``sp``
     fitted to ``x_hat`` with covariance ``cov`` (internal units), χ²/dof ``scale``: the
-    check configurations when the session has them, else k-fold (module docstring)."""
-    from pipeline.refine.holdout import StepRefit, check_configurations, kfold
-    from pipeline.refine.solve import refit
+    check configurations when the session has them, else k-fold (module docstring); and
+    with ``own_sensor`` (raw ranges fitted with their sensor) and k-fold, the fold's
+    measured positions ``measured_by(keep)`` (K, 3) they are scored against: those the
+    fold's own sensor triangulates, as the cross-validation of the model choice scores
+    them (``pipeline.stages.refine._scored``), else None."""
+    from pipeline.refine.holdout import StepRefit, check_configurations, kfold, measured_positions
+    from pipeline.refine.solve import linearize, refit
     from pipeline.stages.positions import positions as xyz_of
     from pipeline.stages.refine_problem import payloads_at, rows_at
 
@@ -184,25 +206,60 @@ def _held_out(
             model, theta, xyz_of(rows), cov_m, x_hat[:n_kin], cov[:n_kin, :n_kin], payload
         )
         cols = ("sweep", "step", "target")
-        return tuple(rows.column(c).to_pylist() for c in cols), held  # type: ignore[return-value]
+        keys_ = tuple(rows.column(c).to_pylist() for c in cols)
+        return keys_, held, None  # type: ignore[return-value]
     keys = sp.problem.block.keys
     at = rows_at(keys, pos)
     rows = pos.take(pa.array(at, mask=at < 0))  # a key without a position: a null row
     cov_m = _measurement_covariances(inputs, rows, scale)
 
+    solved: dict[bytes, Any] = {}  # each fold's refit, by its kept positions
+
+    def solve(keep: np.ndarray) -> Any:
+        key = np.packbits(keep).tobytes()
+        if key not in solved:
+            solved[key] = refit(sp.problem, keep, x_hat)
+        return solved[key]
+
     def full_refit(keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        sol = refit(sp.problem, keep, x_hat)
+        sol = solve(keep)
         return sol.x[:n_kin], sol.covariance[:n_kin, :n_kin]
 
-    fold_fit = StepRefit(sp.problem, x_hat, scale) if params.refit == "step" else full_refit
+    def full_measured(keep: np.ndarray) -> np.ndarray:
+        """The positions the fold's refit sensor triangulates (:func:`measured_positions`)."""
+        x = solve(keep).x
+        whole = dataclasses.replace(sp.problem, keep=None)
+        return measured_positions(linearize(whole, x), model.positions(x[:n_kin]))
+
+    step_fit = StepRefit(sp.problem, x_hat, scale) if params.refit == "step" else None
+    fold_fit = full_refit if step_fit is None else step_fit
+    measured_by = None
+    if own_sensor:  # the positions' covariances: as the fold's sensor triangulates them
+        measured_by = full_measured if step_fit is None else step_fit.measured_without
+        at_fit = StepRefit(sp.problem, x_hat, scale) if step_fit is None else step_fit
+        cov_m = at_fit.measured_covariance
 
     sweep = keys.column("sweep").to_numpy()
     held = kfold(model, sweep, keys.column("step").to_numpy(), xyz_of(rows), cov_m, fold_fit,
-                 params.folds)  # fmt: skip
+                 params.folds, measured_by=measured_by)  # fmt: skip
+    if own_sensor:  # the fold's chain and sensor move together (StepRefit.difference_variance)
+        held = _own_sensor_expected(held, at_fit, len(sweep))
     k = held.index
     step = keys.column("step").to_numpy()[k].tolist()
     target = [keys.column("target")[int(i)].as_py() for i in k]
-    return (sweep[k].tolist(), step, target), held
+    return (sweep[k].tolist(), step, target), held, measured_by
+
+
+def _own_sensor_expected(held: Any, at_fit: Any, K: int) -> Any:
+    """``held`` with each position's expected error from the fold's chain and sensor
+    together (:meth:`pipeline.refine.holdout.StepRefit.difference_variance`, at the full
+    fit's linearization for a full refit too) beside its measurement's."""
+    expected = held.expected_cm.copy()
+    for f in np.unique(held.fold):
+        on = held.fold == f
+        var = at_fit.difference_variance(~np.isin(np.arange(K), held.index[on]))
+        expected[on] = np.sqrt(var[held.index[on]] + held.measurement_cm[on] ** 2)
+    return dataclasses.replace(held, expected_cm=expected)
 
 
 def _measurement_covariances(inputs: Mapping[str, Any], rows: pa.Table, scale: float) -> np.ndarray:
@@ -288,13 +345,15 @@ def _table(
 #: The sonic session's stage: the raw ranges too (level ``ranges`` rebuilds its problem).
 STAGE = Stage(
     "holdout",
-    6,  # 2: the folds' normal equations by the solver's structured products;
+    7,  # 2: the folds' normal equations by the solver's structured products;
     # 3: the problem rebuilt with every refine.* parameter (speed_knot_s crashed it), and
     # single-cycle sonic positions' covariances from the range noise law (issue 33);
     # 4: rigid_error_cm, the same positions held out of the rigid fit (issue 27);
     # 5: design_error_cm, the registered design model at the same positions, and the
     # expected error with the fit's unmodelled error (issue 41); 6: source_file and
-    # source_line of an imported row (issue 42)
+    # source_line of an imported row (issue 42); 7: a sonic session refined at its ranges
+    # scored, and its design registered, at the positions each fold's own sensor
+    # triangulates (issue 41)
     ("session", "refine", "positions", "joints", "frames", "chain", "uncertainty", "ranges"),
     Params(),
     compute,
