@@ -1,5 +1,5 @@
 # armsig — every target creates .venv and installs on first use; the install compiles the
-# numerical kernels (`pipeline warmup`, ~30-60 s once) so the first `ik` answers at once.
+# numerical kernels (`pipeline warmup`, ~25 s of CPU once) so the first `ik` answers at once.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin

@@ -16,15 +16,18 @@ runner = CliRunner()
 
 
 def test_warmup_solves_every_builtin_robot_exactly() -> None:
-    r = runner.invoke(app, ["warmup", "--json"])
-    assert r.exit_code == 0, r.output
-    doc = json.loads(r.output)
-    assert [w["robot"] for w in doc["robots"]] == builtin_names()
-    for w in doc["robots"]:
-        assert w["max_error_cm"] <= 1e-9
-        # Newton and Jacobi (Puma), batch and one pose, rigid and with terms; real-time.
-        per_model = (2 * 2 + warmup.POSES) if w["robot"] == "puma560" else 2
-        assert w["calls"] == 2 * per_model
+    """By default what the commands use by default (issue 45): Newton, batch and one
+    pose, and the Puma's real-time solver; ``--all`` adds Jacobi (Puma) and the same
+    with non-geometric terms."""
+    for args, models, methods in ((["warmup"], 1, 1), (["warmup", "--all"], 2, 2)):
+        r = runner.invoke(app, [*args, "--json"])
+        assert r.exit_code == 0, r.output
+        doc = json.loads(r.output)
+        assert [w["robot"] for w in doc["robots"]] == builtin_names()
+        for w in doc["robots"]:
+            assert w["max_error_cm"] <= 1e-9
+            per_model = (methods * 2 + warmup.POSES) if w["robot"] == "puma560" else 2
+            assert w["calls"] == models * per_model, (args, w)
 
 
 def test_the_design_controller_with_terms_moves_the_tool() -> None:

@@ -360,15 +360,26 @@ def ik_convergence(
 
 
 @commands.command()
-def warmup(as_json: JsonOption = False) -> None:
-    """Compile the numerical kernels now (`make install` runs it): the first `ik` or
-    `identify` then answers as fast as a later one. Cached per checkout; ~20-40 s once."""
+def warmup(
+    everything: Annotated[
+        bool,
+        typer.Option(
+            "--all",
+            help="Also the Jacobi solver (`ik --method jacobi`) and signatures with "
+            "non-geometric terms, which otherwise compile on first use (~12 s of CPU).",
+        ),
+    ] = False,
+    as_json: JsonOption = False,
+) -> None:
+    """Compile the numerical kernels the commands use by default now (`make install` runs
+    it): the first `ik` then answers as fast as a later one. Cached per checkout; ~25 s
+    of CPU once (docs/scale.md)."""
     import time
 
     from pipeline.control.warmup import warm_all
 
     t0 = time.perf_counter()
-    warmed = warm_all()
+    warmed = warm_all(everything)
     seconds = time.perf_counter() - t0
     if as_json:
         print_json({"seconds": seconds, "robots": [w.__dict__ for w in warmed]})

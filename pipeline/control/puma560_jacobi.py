@@ -15,7 +15,6 @@ from pipeline.kinematics.ik_compiled import (
     Buf,
     _delta,
     _errors,
-    inline_jit,
     jit,
     pose,
 )
@@ -56,7 +55,7 @@ def _anderson(Qh: Buf, Gh: Buf, count: int, out: Buf, dF: Buf, dG: Buf, f: Buf) 
         out[i] = acc
 
 
-@inline_jit
+@jit
 def _jacobi_map(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
@@ -80,7 +79,7 @@ def _jacobi_map(
     return _design_start(pre, post, branch, margins, Tk, q, q_next, Tw)  # C.2 step 6
 
 
-@inline_jit
+@jit
 def _error_at(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     target: Buf, q: Buf, Ts: Buf, d: Buf, length: float,
@@ -107,7 +106,7 @@ def _jacobi_work(n: int) -> JacobiWork:
     )  # fmt: skip
 
 
-@inline_jit
+@jit
 def _jacobi_one(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,

@@ -46,7 +46,6 @@ from pipeline.kinematics.ik_compiled import (
     Buf,
     Work,
     _errors,
-    inline_jit,
     jit,
     solve_one_target,
     workspace,
@@ -114,7 +113,7 @@ def _solve_target(
     return FAST_DEFERRED, total
 
 
-@inline_jit
+@jit
 def _restart_into_limits(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf, res: Buf, limit: Buf,
     settings: Buf, target: Buf, q_near: Buf, q: Buf, delta: Buf, spare: Buf, ws: Work,

@@ -4,10 +4,13 @@ as fast as a later one (issue 30, item 4; ``make install`` runs ``pipeline warmu
 numba compiles a kernel on its first call, for the argument types of that call, and caches
 the machine code (:mod:`pipeline.kinematics.kernel_cache`). The cheapest way to compile
 exactly what the commands use is to make the calls they make: every built-in robot's
-design model solves a few of its own poses through :func:`solve_poses` (Newton-Raphson,
-and Jacobi on the Puma), the Puma's real-time solver answers one target, and the same with
-non-geometric terms (the compiled deflection). The answers are checked, so a warm-up that
-compiles a kernel which then gives wrong joints fails loudly instead of passing quietly.
+design model solves a few of its own poses through :func:`solve_poses` (Newton-Raphson, a
+batch and one pose) and the Puma's real-time solver answers one target. ``everything``
+(``pipeline warmup --all``) adds the Jacobi solver and the same with non-geometric terms
+(the compiled deflection), which otherwise compile on their first use: 25.7 s of CPU
+at install instead of 38.1 s for all (issue 45, measured 2026-11-29 on the shared
+machine; docs/scale.md). The answers are checked, so a warm-up that compiles a kernel
+which then gives wrong joints fails loudly instead of passing quietly.
 """
 
 from __future__ import annotations
@@ -59,21 +62,25 @@ def _in_limits(c: Controller, seed: int) -> np.ndarray:
                        (POSES, c.robot.n_joints))  # fmt: skip
 
 
-def warm_robot(name: str) -> Warmed:
-    """Solve a few of ``name``'s own design poses every way the commands do."""
+def warm_robot(name: str, everything: bool = False) -> Warmed:
+    """Solve a few of ``name``'s own design poses the ways the commands do by default
+    (Newton-Raphson, a batch and one pose; the Puma's real-time solver); with
+    ``everything`` also Jacobi (``--method jacobi``) and with non-geometric terms, which
+    otherwise compile on their first use (issue 45; module docstring)."""
     t0 = time.perf_counter()
     worst, calls = 0.0, 0
-    for ng in (False, True):
+    for ng in (False, True) if everything else (False,):
         c = design_controller(name, ng)
         p = c.poses(_in_limits(c, 0))
         xyz, rpy = p.xyz_cm, p.rpy_deg
-        methods = ("nr", "jacobi") if c.robot.name == "puma560" else ("nr",)
+        puma = c.robot.name == "puma560"
+        methods = ("nr", "jacobi") if puma and everything else ("nr",)
         for method in methods:
             for rows in (slice(None), slice(0, 1)):  # a batch, and one pose (`ik --pose`)
                 _, res = solve_poses(c, xyz[rows], rpy[rows], method=method)
                 worst = max(worst, float(np.max(res.position_error_cm, initial=0.0)))
                 calls += 1
-        if c.robot.name == "puma560":
+        if puma:
             solver = c.realtime()
             for T in p.matrix:
                 solver.solve_one(T)
@@ -87,6 +94,6 @@ def warm_robot(name: str) -> Warmed:
     return Warmed(name, calls, worst, time.perf_counter() - t0)
 
 
-def warm_all() -> list[Warmed]:
-    """Every built-in robot, warmed."""
-    return [warm_robot(name) for name in builtin_names()]
+def warm_all(everything: bool = False) -> list[Warmed]:
+    """Every built-in robot, warmed (:func:`warm_robot`)."""
+    return [warm_robot(name, everything) for name in builtin_names()]

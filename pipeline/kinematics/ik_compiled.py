@@ -76,20 +76,16 @@ Work = tuple[Buf, Buf, Buf, Buf, Buf, Buf]
 
 def jit(func: Kernel) -> Kernel:
     """Compile ``func`` with numba (no Python objects, GIL released, cached on disk in
-    :func:`~pipeline.kinematics.kernel_cache.cache_dir`)."""
+    :func:`~pipeline.kinematics.kernel_cache.cache_dir`). No kernel is inlined at numba's
+    level (``inline="always"``, issue 45): it retyped a callee at every call site, and the
+    kernels took 86 s of CPU to compile instead of 38 s, for 12-25 % of a batch's speed
+    (measured 2026-11-29 on robot3's signature, CPU per target, same run: Newton-Raphson
+    batch 6.3 against 7.2 µs, Jacobi 6.8 against 9.1 µs, one real-time target 14.4
+    against 14.8 µs; docs/scale.md). LLVM still inlines small callees."""
     return cast(Kernel, njit_cached(func, nogil=True))
 
 
-def inline_jit(func: Kernel) -> Kernel:
-    """:func:`jit` for a small kernel called per iteration, inlined into its callers by
-    numba. A call that is not inlined increments and decrements the (atomic) reference
-    count of each array argument: perf put 22-30 % of the Jacobi kernel's samples in
-    ``NRT_incref``/``NRT_decref``; inlined, the serial Jacobi solve of robot3 went from
-    11.8 to 8.9 µs per target and Newton-Raphson from 4.1 to 3.7 µs, with the same bits."""
-    return cast(Kernel, njit_cached(func, nogil=True, inline="always"))
-
-
-@inline_jit
+@jit
 def _pose_into(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     q: Buf, T: Buf, J: Buf, jacobian: bool,
@@ -172,7 +168,7 @@ def homogeneous(base: Array, links: Array, tool: Array) -> bool:
                 and np.all(tool[..., 3, :] == last))  # fmt: skip
 
 
-@inline_jit
+@jit
 def pose(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf, q: Buf, T: Buf
 ) -> None:  # fmt: skip
@@ -180,7 +176,7 @@ def pose(
     _pose_into(base, links, tool, offsets, prismatic, q, T, T, False)
 
 
-@inline_jit
+@jit
 def _pose_jacobian(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf, q: Buf, T: Buf, J: Buf,
 ) -> None:  # fmt: skip
@@ -189,7 +185,7 @@ def _pose_jacobian(
     _pose_into(base, links, tool, offsets, prismatic, q, T, J, True)
 
 
-@inline_jit
+@jit
 def _delta(T_from: Buf, T_to: Buf, out: Buf) -> None:
     """``differential_motion(T_from, T_to)`` into ``out`` (6,): origin difference and
     the axis-angle vector of ``R = R_to R_fromᵀ`` (its entries as scalars)."""
@@ -287,7 +283,7 @@ def _lu_solve6(A: Buf, b: Buf, x: Buf, M: Buf) -> bool:
     return True
 
 
-@inline_jit
+@jit
 def _errors(d: Buf) -> tuple[float, float]:
     """Radial position error (cm) and rotation angle (rad) of δ (6,)."""
     return (

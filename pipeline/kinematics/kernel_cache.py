@@ -4,7 +4,7 @@ stale machine code in use.
 
 Why: numba checks a cached kernel only against the file that *defines* it (its
 index stores that file's stamp, ``numba/core/caching.py``). A kernel of
-:mod:`pipeline.control.puma560_jacobi` inlines kernels of
+:mod:`pipeline.control.puma560_jacobi` calls (and LLVM inlines) kernels of
 :mod:`pipeline.kinematics.ik_compiled` and :mod:`pipeline.control.puma560_start`
 and freezes module globals (``STALL_RATIO``, ``JACOBI_SLOW_RATIO``, the Puma's
 design lengths) into its machine code as constants; after a change to those
@@ -13,7 +13,7 @@ package is cached in one folder named for a sha256 of all those files, so a
 change to any of them compiles afresh into a new folder.
 
 Files in the digest (:data:`KERNEL_SOURCES`): the modules that define
-:func:`~pipeline.kinematics.ik_compiled.jit` / ``inline_jit`` kernels and, transitively,
+:func:`~pipeline.kinematics.ik_compiled.jit` kernels and, transitively,
 every armsig module they import at module level. A kernel can only reach names
 of modules its module imports, and a constant it reads may be computed in a
 module further down (``puma560.DESIGN_D_CM`` from ``chain``/``transforms``), hence

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.kinematics.ik_compiled import Buf, inline_jit, jit
+from pipeline.kinematics.ik_compiled import Buf, jit
 from pipeline.kinematics.nongeometric import GRAVITY, READINGS_TOLERANCE, NonGeometric
 
 #: Fixed-point iterations at most (a deflection of 1e-3 rad converges in ~5).
@@ -20,7 +20,7 @@ MAX_ITER = 50
 TOLERANCE = READINGS_TOLERANCE
 
 
-@inline_jit
+@jit
 def _deflection_into(
     q: Buf, base: Buf, links: Buf, offsets: Buf, prismatic: Buf, comp: Buf, harm: Buf,
     beta: Buf, gravity: Buf, F: Buf, W: Buf, out: Buf,
