@@ -61,29 +61,35 @@ def detections_for_fit(inputs: Mapping[str, Any]) -> tuple[Any, Any, Any, str]:
     """(Detections, design chain, stated lens, set-up) of the stage tables."""
     from pipeline.refine.camera_fit import Detections
     from pipeline.sensor.camera import Intrinsics
-    from pipeline.sensor.target import target_from_dict
     from pipeline.stages.frames import readings_at
     from pipeline.units import joints_to_internal
 
-    session, table = inputs["session"], inputs["detections"]
+    session = inputs["session"]
     rig = json.loads(session.column("rig_json")[0].as_py())
     robot = session_robot(session)
     pris = robot.prismatic
-    target = target_from_dict(rig["target"], "/rig/description target")
-    ids, local = target.points()
-    sweep = table.column("sweep").to_numpy()
-    use = sweep == POSES_SWEEP  # validation images (check) stay out of the fit
-    steps = table.column("image").to_numpy()[use].astype(np.int64)
-    images, image = np.unique(steps, return_inverse=True)
+    images, image, local, uv, sigma = fit_pixels(rig, inputs["detections"])
     q = readings_at(inputs["joints"], POSES_SWEEP, images, robot.n_joints, pris)
     q_sig = robot.joints_from_readings(np.asarray(session_plan(session)["signature_q"], float))
-    point = table.column("point_id").to_numpy()[use]
-    at = np.searchsorted(ids, point)  # the target's ids are sorted
-    uv = np.stack([table.column("u_px").to_numpy()[use], table.column("v_px").to_numpy()[use]], 1)
-    det = Detections(image.astype(np.int64), local[at], uv,
-                     table.column("sigma_px").to_numpy()[use].astype(float),
-                     joints_to_internal(q, pris), joints_to_internal(q_sig, pris))  # fmt: skip
+    det = Detections(image, local, uv, sigma, joints_to_internal(q, pris),
+                     joints_to_internal(q_sig, pris))  # fmt: skip
     return det, robot.design_chain(), Intrinsics.from_dict(rig["camera"]), str(rig["setup"])
+
+
+def fit_pixels(rig: dict[str, Any], table: pa.Table) -> tuple[np.ndarray, ...]:
+    """The fit's detections of a ``detections`` table (the ``poses`` images: validation
+    images stay out): the images (steps, sorted), each point's image (0 … m − 1), its
+    target coordinates (cm, from the recorded target), pixel and σ."""
+    from pipeline.sensor.target import target_from_dict
+
+    ids, local = target_from_dict(rig["target"], "/rig/description target").points()
+    use = table.column("sweep").to_numpy() == POSES_SWEEP
+    steps = table.column("image").to_numpy()[use].astype(np.int64)
+    images, image = np.unique(steps, return_inverse=True)
+    at = np.searchsorted(ids, table.column("point_id").to_numpy()[use])  # ids are sorted
+    uv = np.stack([table.column("u_px").to_numpy()[use], table.column("v_px").to_numpy()[use]], 1)
+    sigma = table.column("sigma_px").to_numpy()[use].astype(float)
+    return images, image.astype(np.int64), local[at], uv, sigma
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
@@ -108,7 +114,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "start_frames_cm": fit.model.frames0.tolist(),
         "q_signature": det.q_signature.tolist(),
         "frames_cm": fit.model.signature_frames(s.x[: fit.model.n_params], 0).tolist(),
-        "images": _image_rows(fit, table_images(inputs["detections"])),
+        "images": image_rows(fit, table_images(inputs["detections"])),
         "identifiability": identifiability_summary(fit.identifiability, fit.names,
                                                    det.n_images, len(det.image)),
         "warning": held_line(fit, float(np.median(det.sigma_px))),
@@ -143,7 +149,7 @@ def table_images(table: pa.Table) -> np.ndarray:
     return np.unique(table.column("image").to_numpy()[use])
 
 
-def _image_rows(fit: Any, images: np.ndarray) -> list[list[float]]:
+def image_rows(fit: Any, images: np.ndarray) -> list[list[float]]:
     """Per image: [image, points, rms px, largest px] of the fit's reprojection."""
     count, rms, worst = fit.image_residuals()
     return [[int(i), int(c), float(r), float(w)]

@@ -51,7 +51,7 @@ from pipeline.stages.catalog import (
 )
 from pipeline.stages.lock import session_lock
 from pipeline.stages.recording import read_recording
-from pipeline.stages.session import session_sensor
+from pipeline.stages.session import session_kind
 from pipeline.stages.tables import CheckedTable, check_table, content_hash, write_table
 
 FAILED = "failed"
@@ -153,10 +153,10 @@ class _Hashes:
                 and checked.table is not None
                 and checked.table.column("recording_sha256")[0].as_py() == rec_hash
             ):
-                self._sensor = session_sensor(checked.table)
+                self._sensor = session_kind(checked.table)
             else:
                 rec = read_recording(self.session_dir / "recording.mcap", rec_hash)
-                self._sensor = rec.sensor
+                self._sensor = rec.kind
         return self._sensor
 
     def identification_modules(self) -> tuple[str, ...]:

@@ -13,7 +13,7 @@ from pipeline.stages.base import RECORDING, NoParams, Stage
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     rec = inputs[RECORDING]
-    robot = rec.robot["robot"]
+    robot = rec.robot.get("robot", {})  # none: flange poses without joints (issue 40)
     return pa.table(
         {
             "robot_name": [str(robot.get("name", "?"))],
@@ -48,6 +48,17 @@ def session_robot(session: pa.Table):  # -> RobotDescription
 def session_sensor(session: pa.Table) -> str:
     """The recorded sensor kind: ``sonic`` (also when absent) or ``points``."""
     return str(json.loads(session.column("rig_json")[0].as_py()).get("sensor", "sonic"))
+
+
+def session_kind(session: pa.Table) -> str:
+    """The stage list's key (:data:`pipeline.stages.catalog.SENSOR_STAGE_MODULES`): the
+    recorded sensor, or ``camera-flange`` for a camera session without an arm (flange
+    poses, no joints: :attr:`pipeline.stages.recording.Recording.kind`)."""
+    from pipeline.stages.recording import FLANGE_KIND
+
+    sensor = session_sensor(session)
+    no_arm = sensor == "camera" and session.column("n_joints")[0].as_py() == 0
+    return FLANGE_KIND if no_arm else sensor
 
 
 def session_plan(session: pa.Table) -> dict[str, Any]:
