@@ -9,6 +9,7 @@ report and the verdict line that says the arm is not calibrated."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import cv2
@@ -17,11 +18,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pipeline.contract.channels import IMAGE_SET_CHANNELS
-from pipeline.errors import RecordingError
+from pipeline.errors import ArmsigError, RecordingError
 from pipeline.identify import identify
-from pipeline.importers.images import ImageEntry, ImageSet, image_set_messages
+from pipeline.importers.images import ImageEntry, ImageSet, image_set_messages, import_image_set
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.refine.hand_eye import fit_hand_eye, fixed_in_base, flange_detections, tool_in_flange
+from pipeline.rig.camera_render import render
 from pipeline.rig.recorder import write_recording
 from pipeline.sensor.camera import Intrinsics
 from pipeline.sensor.camera_info import intrinsics_from_camera_info
@@ -41,7 +43,7 @@ def _pose(rvec: np.ndarray, t: np.ndarray) -> np.ndarray:
     return T
 
 
-def _session(setup: str, n: int = 16, seed: int = 1) -> dict:
+def _session(setup: str, n: int = 16, seed: int = 1, lens: Intrinsics = TRUE) -> dict:
     """Random views of the target, 60-110 cm from the camera, tilted up to 35°; the flange
     poses that put them there; the detections (every point inside the image)."""
     rng = np.random.default_rng(seed)
@@ -49,13 +51,13 @@ def _session(setup: str, n: int = 16, seed: int = 1) -> dict:
     tool = _pose(np.array([0.2, -0.5, 1.1]), np.array([3.0, -2.0, 12.0]))
     ids, local = TARGET.points()
     centre = local.mean(axis=0)
-    K, dist = TRUE.opencv()
-    flange, image, loc, uv = [], [], [], []
+    K, dist = lens.opencv()
+    flange, image, loc, uv, views = [], [], [], [], []
     while len(flange) < n:
         tilt = Rotation.from_rotvec(np.r_[rng.uniform(-0.6, 0.6, 2), rng.uniform(-3, 3)])
-        R = tilt.as_matrix() @ Rotation.from_rotvec([np.pi, 0, 0]).as_matrix()
+        R = tilt.as_matrix()  # the board's Z away from the camera: its front seen
         t = np.r_[rng.uniform(-15, 15, 2), rng.uniform(60, 110)] - R @ centre
-        cam_target = np.eye(4)
+        cam_target = np.eye(4)  # the target in the camera
         cam_target[:3, :3], cam_target[:3, 3] = R, t
         px = cv2.projectPoints(local, cv2.Rodrigues(R)[0], t, K, dist)[0][:, 0]
         if (
@@ -72,7 +74,9 @@ def _session(setup: str, n: int = 16, seed: int = 1) -> dict:
         flange.append(F)
         loc.append(local)
         uv.append(px)
+        views.append(cam_target)
     return {
+        "views": np.array(views),
         "flange": np.array(flange),
         "image": np.concatenate(image),
         "local": np.concatenate(loc),
@@ -126,7 +130,8 @@ def _recording(sdir: Path, setup: str, extra: list | None = None) -> Path:
     iset = ImageSet(sdir / "cal_data.yaml", setup, STATED, TARGET, tuple(entries))
     sdir.mkdir(parents=True)
     rec = sdir / "recording.mcap"
-    write_recording(rec, image_set_messages(iset) + (extra or []), IMAGE_SET_CHANNELS, {})
+    messages = [m for m in image_set_messages(iset) if m.topic != "/camera/images"]  # no files
+    write_recording(rec, messages + (extra or []), IMAGE_SET_CHANNELS, {})
     return rec
 
 
@@ -174,3 +179,64 @@ def test_detections_without_a_flange_pose_refused(tmp_path: Path) -> None:
         read_recording(tmp_path / "s" / "recording.mcap")
     assert "step 99) has no /robot/flange_pose" in str(err.value)
     assert "\n" not in str(err.value)
+
+
+def _rendered_set(folder: Path, setup: str) -> tuple[Path, dict]:
+    """The drawn session rendered (no distortion: the renderer's), in industrial_calibration's
+    layout: images, pose files (m, quaternion), cal_data.yaml."""
+    lens = Intrinsics(800, 600, 700.0, 700.0, 400.0, 300.0)
+    s = _session(setup, n=12, lens=lens)
+    (folder / "images").mkdir(parents=True)
+    (folder / "poses").mkdir()
+    lines = ["data:"]
+    for k, (F, view) in enumerate(zip(s["flange"], s["views"], strict=True)):
+        cv2.imwrite(str(folder / "images" / f"{k}.png"), render(TARGET, view, lens, px_per_cm=20))
+        q = [float(v) for v in Rotation.from_matrix(F[:3, :3]).as_quat()]
+        x, y, z = (float(v) / 100 for v in F[:3, 3])
+        (folder / "poses" / f"{k}.yaml").write_text(
+            f"x: {x!r}\ny: {y!r}\nz: {z!r}\nqx: {q[0]!r}\nqy: {q[1]!r}\nqz: {q[2]!r}\n"
+            f"qw: {q[3]!r}\n")  # fmt: skip
+        lines += [f"  - image: images/{k}.png", f"    pose: poses/{k}.yaml"]
+    lines += [
+        "target_finder:", "  type: CharucoGridTargetFinder", "  rows: 6", "  cols: 8",
+        "  chessboard_dim: 0.035", "  aruco_marker_dim: 0.026", "  dictionary: 6",
+        "intrinsics:", "  fx: 700.0", "  fy: 700.0", "  cx: 400.0", "  cy: 300.0",
+        f"static_camera: {'true' if setup == 'eye-to-hand' else 'false'}",
+    ]  # fmt: skip
+    (folder / "cal_data.yaml").write_text("\n".join(lines) + "\n")
+    return folder / "cal_data.yaml", s
+
+
+def test_detections_stage_detects_the_referenced_images(tmp_path: Path) -> None:
+    """Rendered images imported as they are: the detections stage detects them (one row
+    per corner found), a rerun detects nothing, a changed image makes the session stale
+    (status names it) and identify refuses it in one line; restored, all is fresh."""
+    cal, s = _rendered_set(tmp_path / "set", "eye-in-hand")
+    sdir = tmp_path / "s"
+    import_image_set(cal, sdir)
+    result = identify(sdir, overrides={"camera_fit": {"intrinsics": "fixed"}})
+    ran = {r.name: r for r in result.runs}
+    recorded = len(read_recording(sdir / "recording.mcap").detection_point)  # at import
+    assert ran["detections"].action == "ran" and ran["detections"].rows == recorded > 12 * 30
+    doc = json.loads((sdir / "camera_calibration.json").read_text())
+    assert doc["rms_px"] < 0.2  # rendered corners: 0.06-0.2 px from the truth (detect.py)
+    fixed, tool = doc["target_in_base"], doc["camera_in_flange"]
+    assert np.abs(np.array(fixed["translation_cm"]) - s["fixed"][:3, 3]).max() < 0.05
+    assert np.abs(np.array(tool["translation_cm"]) - s["tool"][:3, 3]).max() < 0.05
+    again = identify(sdir, overrides={"camera_fit": {"intrinsics": "fixed"}})
+    assert {r.action for r in again.runs} == {"cached"}
+    image = tmp_path / "set" / "images" / "3.png"
+    kept = image.read_bytes()
+    shutil.copy(tmp_path / "set" / "images" / "4.png", image)
+    states = {st.name: st for st in session_status(sdir)}
+    assert states["detections"].state == "stale"
+    assert "image images/3.png is not the one the recording holds" in states["detections"].reason
+    with pytest.raises(ArmsigError) as err:
+        identify(sdir, overrides={"camera_fit": {"intrinsics": "fixed"}})
+    assert "images/3.png" in str(err.value) and "\n" not in str(err.value)
+    image.write_bytes(kept)
+    states = {st.name: st for st in session_status(sdir)}  # the default lens: fitted
+    assert (states["detections"].state, states["camera_fit"].reason) == (
+        "fresh",
+        "parameters changed",
+    )
