@@ -93,40 +93,54 @@ def fit_pixels(rig: dict[str, Any], table: pa.Table) -> tuple[np.ndarray, ...]:
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
-    from pipeline.refine.camera_fit import fit_camera, held_line
-    from pipeline.refine.identifiability import summary as identifiability_summary
+    from pipeline.refine.camera_fit import fit_camera
 
     det, design, lens, setup = detections_for_fit(inputs)
     fit = fit_camera(det, design, lens, setup, params.intrinsics, params.prior_sigma(),
                      params.loss, params.f_scale)  # fmt: skip
     s = fit.solution
+    groups = ["axis"] * fit.model.n_axis_params + ["point"] * 3 + ["tool_rotation"] * 3
+    groups += ["intrinsics"] * len(fit.block.x0)
+    extra = {
+        "start_frames_cm": fit.model.frames0.tolist(),
+        "q_signature": det.q_signature.tolist(),
+        "frames_cm": fit.model.signature_frames(s.x[: fit.model.n_params], 0).tolist(),
+        "start_hand_eye": {"fixed_in_base": fit.start.fixed_in_base.tolist(),
+                           "tool_in_flange": fit.start.tool_in_flange.tolist()},
+    }  # fmt: skip
+    return fit_table(fit, det, params, setup, groups, table_images(inputs["detections"]), extra)
+
+
+def fit_table(
+    fit: Any, det: Any, params: Params, setup: str, groups: list[str], images: np.ndarray,
+    extra: dict[str, Any],
+) -> pa.Table:  # fmt: skip
+    """The ``camera_fit`` table of a fit: one row per parameter in ``groups`` (radians as
+    degrees), its summary (the fit, every image's reprojection, the identifiability, the
+    held line, and ``extra``) in the schema metadata."""
+    from pipeline.refine.camera_fit import held_line
+    from pipeline.refine.identifiability import summary as identifiability_summary
+
+    s = fit.solution
     units = [*fit.model.param_units, *fit.block.param_units]
     deg = np.array([u == "rad" for u in units])
     scale = np.where(deg, np.degrees(1.0), 1.0)
-    groups = ["axis"] * fit.model.n_axis_params + ["point"] * 3 + ["tool_rotation"] * 3
-    groups += ["intrinsics"] * len(fit.block.x0)
-    start = fit.x_start
     summary = {
         "setup": setup, "intrinsics": params.intrinsics, "status": s.status,
         "message": s.message, "iterations": s.iterations, "n_images": det.n_images,
         "n_points": len(det.image), "n_residuals": s.n_residuals, "chi2": s.chi2,
         "dof": s.dof, "rms_px": fit.rms_px, "loss": params.loss, "f_scale": params.f_scale,
-        "start_frames_cm": fit.model.frames0.tolist(),
-        "q_signature": det.q_signature.tolist(),
-        "frames_cm": fit.model.signature_frames(s.x[: fit.model.n_params], 0).tolist(),
-        "images": image_rows(fit, table_images(inputs["detections"])),
+        "images": image_rows(fit, images),
         "identifiability": identifiability_summary(fit.identifiability, fit.names,
                                                    det.n_images, len(det.image)),
-        "warning": held_line(fit, float(np.median(det.sigma_px))),
-        "start_hand_eye": {"fixed_in_base": fit.start.fixed_in_base.tolist(),
-                           "tool_in_flange": fit.start.tool_in_flange.tolist()},
+        "warning": held_line(fit, float(np.median(det.sigma_px))), **extra,
     }  # fmt: skip
     schema = arrow_schema("camera_fit")
     meta = {**(schema.metadata or {}), b"armsig.camera_fit": json.dumps(summary).encode()}
     columns = {
         "group": groups, "name": list(fit.names),
         "unit": ["deg" if d else u for d, u in zip(deg, units, strict=True)],
-        "start": start * scale, "value": s.x * scale, "sigma": s.sigma * scale,
+        "start": fit.x_start * scale, "value": s.x * scale, "sigma": s.sigma * scale,
     }  # fmt: skip
     return pa.table({f.name: pa.array(columns[f.name], f.type) for f in schema},
                     schema=schema.with_metadata(meta))  # fmt: skip

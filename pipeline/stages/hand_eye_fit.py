@@ -21,9 +21,8 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.schemas import arrow_schema
 from pipeline.stages.base import Stage
-from pipeline.stages.camera_fit import Params, fit_pixels, image_rows
+from pipeline.stages.camera_fit import Params, fit_pixels, fit_table
 
 #: What the summary says of the arm when the recording does not (``/rig/description`` arm).
 ARM = "not calibrated: flange poses, no joint readings"
@@ -48,42 +47,21 @@ def _arm(inputs: Mapping[str, Any]) -> str:
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
-    from pipeline.refine.camera_fit import held_line
     from pipeline.refine.hand_eye import fit_hand_eye, fixed_in_base, tool_in_flange
-    from pipeline.refine.identifiability import summary as identifiability_summary
 
     det, flange, lens, setup, images = hand_eye_inputs(inputs)
     fit = fit_hand_eye(det, flange, lens, setup, params.intrinsics, params.prior_sigma(),
                        params.loss, params.f_scale)  # fmt: skip
-    s = fit.solution
-    units = [*fit.model.param_units, *fit.block.param_units]
-    deg = np.array([u == "rad" for u in units])
-    scale = np.where(deg, np.degrees(1.0), 1.0)
     groups = ["point"] * 3 + ["tool_rotation"] * 3 + ["fixed"] * 6 + ["intrinsics"] * 9
-    summary = {
-        "setup": setup, "intrinsics": params.intrinsics, "status": s.status,
-        "message": s.message, "iterations": s.iterations, "n_images": det.n_images,
-        "n_points": len(det.image), "n_residuals": s.n_residuals, "chi2": s.chi2,
-        "dof": s.dof, "rms_px": fit.rms_px, "loss": params.loss, "f_scale": params.f_scale,
-        "images": image_rows(fit, images), "arm": _arm(inputs),
-        "identifiability": identifiability_summary(fit.identifiability, fit.names,
-                                                   det.n_images, len(det.image)),
-        "warning": held_line(fit, float(np.median(det.sigma_px))),
+    extra = {
+        "arm": _arm(inputs),
         "start_hand_eye": {"fixed_in_base": fit.start.fixed_in_base.tolist(),
                            "tool_in_flange": fit.start.tool_in_flange.tolist(),
                            "method": fit.start.method},
         "fixed_in_base_cm": fixed_in_base(fit).tolist(),
         "tool_in_flange_cm": tool_in_flange(fit).tolist(),
     }  # fmt: skip
-    schema = arrow_schema("camera_fit")
-    meta = {**(schema.metadata or {}), b"armsig.camera_fit": json.dumps(summary).encode()}
-    columns = {
-        "group": groups, "name": list(fit.names),
-        "unit": ["deg" if d else u for d, u in zip(deg, units, strict=True)],
-        "start": fit.x_start * scale, "value": s.x * scale, "sigma": s.sigma * scale,
-    }  # fmt: skip
-    return pa.table({f.name: pa.array(columns[f.name], f.type) for f in schema},
-                    schema=schema.with_metadata(meta))  # fmt: skip
+    return fit_table(fit, det, params, setup, groups, images, extra)
 
 
 STAGE = Stage(

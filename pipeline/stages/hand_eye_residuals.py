@@ -10,11 +10,10 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.schemas import arrow_schema
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.camera_fit import camera_summary
+from pipeline.stages.camera_residuals import residual_table
 from pipeline.stages.hand_eye_fit import hand_eye_inputs
-from pipeline.sweeps import POSES_SWEEP
 
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
@@ -28,16 +27,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     fitted = Intrinsics(lens.width_px, lens.height_px, *k)
     uv = predicted_pixels(det, flange, setup, np.array(s["fixed_in_base_cm"]),
                           np.array(s["tool_in_flange_cm"]), fitted)  # fmt: skip
-    d = inputs["detections"]
-    use = d.column("sweep").to_numpy() == POSES_SWEEP  # the fit's images (fit_pixels)
-    columns = {
-        "image": images[det.image], "point_id": d.column("point_id").to_numpy()[use],
-        "u_px": det.uv[:, 0], "v_px": det.uv[:, 1],
-        "du_px": uv[:, 0] - det.uv[:, 0], "dv_px": uv[:, 1] - det.uv[:, 1],
-    }  # fmt: skip
-    schema = arrow_schema("camera_residuals")
-    return pa.table({f.name: pa.array(np.asarray(columns[f.name]), f.type) for f in schema},
-                    schema=schema)  # fmt: skip
+    return residual_table(inputs["detections"], images, det, uv)
 
 
 STAGE = Stage(
