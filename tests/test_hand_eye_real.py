@@ -65,3 +65,23 @@ def test_circle_grid(circles) -> None:
     assert given.rms_px < 2.5
     fitted = armsig_fit(circles, "fitted")
     assert fitted.rms_px < 2.29
+
+
+def test_charuco_set_imports_and_identifies(tmp_path) -> None:
+    """`pipeline import cal_data.yaml --format images` with no edit, then `identify`: all
+    16 images detected by the detections stage, the camera calibrated with the given lens,
+    the arm said not calibrated; the calibration file holds both transforms with σ."""
+    import json
+
+    from pipeline.identify import identify
+    from pipeline.importers.images import import_image_set
+
+    cal = REALDATA / "industrial_calibration" / "test_set_charuco" / "cal_data.yaml"
+    import_image_set(cal, tmp_path / "s")
+    result = identify(tmp_path / "s", overrides={"camera_fit": {"intrinsics": "fixed"}})
+    assert {r.name: r.rows for r in result.runs}["detections"] == 382
+    assert result.verdict is not None and "the arm is not calibrated" in result.verdict
+    doc = json.loads((tmp_path / "s" / "camera_calibration.json").read_text())
+    assert doc["n_images"] == 16 and 2.5 < doc["rms_px"] <= 2.7  # measured 2.623
+    assert all(0 < s < 0.1 for s in doc["camera_in_base"]["sigma_translation_cm"])
+    assert all(0 < s < 0.2 for s in doc["target_in_flange"]["sigma_rotation_deg"])
