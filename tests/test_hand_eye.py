@@ -18,7 +18,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pipeline.contract.channels import IMAGE_SET_CHANNELS
-from pipeline.errors import ArmsigError, RecordingError
+from pipeline.errors import ArmsigError, RecordingError, StageError
 from pipeline.identify import identify
 from pipeline.importers.images import ImageEntry, ImageSet, image_set_messages, import_image_set
 from pipeline.kinematics.transforms import invert_transform
@@ -31,6 +31,8 @@ from pipeline.sensor.detect import ImageDetection
 from pipeline.sensor.target import Target
 from pipeline.stages.inspection import session_status
 from pipeline.stages.recording import read_recording
+from pipeline.stages.session import session_robot
+from pipeline.stages.tables import read_table
 
 TARGET = Target("charuco", 6, 8, 3.5, 2.6, "DICT_5X5_100")
 TRUE = Intrinsics(1280, 960, 1010.0, 1005.0, 650.0, 470.0, -0.12, 0.05, 5e-4, -3e-4, 0.0)
@@ -160,6 +162,9 @@ def test_identify_writes_the_camera_calibration(tmp_path: Path) -> None:
     assert "the arm is not calibrated" in report.lower() and "| 15 | 35 |" in report
     again = identify(sdir)
     assert {r.action for r in again.runs} == {"cached"}
+    with pytest.raises(StageError) as err:  # what needs an arm (audit, ...) says so
+        session_robot(read_table(sdir / "stages" / "session.arrow"))
+    assert "has no arm" in str(err.value) and "\n" not in str(err.value)
     assert {s.state for s in session_status(sdir)} == {"fresh"}
     held = identify(sdir, overrides={"camera_fit": {"intrinsics": "fixed"}})
     assert "lens as given" in (held.verdict or "")

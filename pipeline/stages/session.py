@@ -8,6 +8,7 @@ from typing import Any
 
 import pyarrow as pa
 
+from pipeline.errors import StageError
 from pipeline.stages.base import RECORDING, NoParams, Stage
 
 
@@ -42,6 +43,12 @@ def session_robot(session: pa.Table):  # -> RobotDescription
     from pipeline.robots.description import description_from_dict
 
     doc = json.loads(session.column("robot_json")[0].as_py())
+    if "robot" not in doc:  # flange poses without joints (issue 40)
+        raise StageError(
+            "the session has no arm (no /robot/description): its flange poses calibrate the "
+            "camera only", fix="its calibration is camera_calibration.json, camera_info.yaml "
+            "and report/report.md (`pipeline identify`)",
+        )  # fmt: skip
     return description_from_dict(doc["robot"], source="/robot/description")
 
 
