@@ -4,6 +4,7 @@ from bench import (
     camera,
     evaluate,
     fleet,
+    hand_eye_real,
     identify,
     ik,
     kinematics,
@@ -30,6 +31,8 @@ if __name__ == "__main__":
     camera.timing()  # the accuracy study: python -m bench.camera (minutes)
     print()
     camera.hand_eye_alone()
+    print()
+    hand_eye_real.main()
     print()
     evaluate.main()
     print()

@@ -14,7 +14,7 @@ import pytest
 from pipeline.contract.channels import IMAGE_SET_CHANNELS
 from pipeline.contract.digest import file_sha256
 from pipeline.contract.mcap_read import read_mcap
-from pipeline.errors import ImportFileError, RecordingError
+from pipeline.errors import ImportFileError
 from pipeline.importers.images import import_image_set
 from pipeline.kinematics.transforms import rot_x, rot_z, trans
 from pipeline.rig.camera_render import render
@@ -46,7 +46,7 @@ def test_real_sets_import_as_they_are(
     tmp_path: Path, folder: str, setup: str, kept: int, points: list[int]
 ) -> None:
     """cal_data.yaml read unchanged: every image kept, its hash and flange pose (cm,
-    w-first) recorded; the session says the arm cannot be calibrated, in one line."""
+    w-first) recorded; the session reads as a camera session of flange poses."""
     s, recording = import_image_set(IC / folder / "cal_data.yaml", tmp_path / "s")
     assert (s.setup, s.kept, len(s.images)) == (setup, kept, kept)
     msgs = _messages(recording)
@@ -64,9 +64,9 @@ def test_real_sets_import_as_they_are(
     first = msgs["/robot/flange_pose"][files.index("images/0.png")]
     assert abs(first["position_cm"][0] - 100 * x) < 1e-9
     assert abs(abs(first["orientation_wxyz"][0]) - abs(qw)) < 1e-9
-    with pytest.raises(RecordingError) as err:
-        read_recording(recording)
-    assert "arm cannot be calibrated" in str(err.value) and "\n" not in str(err.value)
+    rec = read_recording(recording)  # a camera session of flange poses (no arm: issue 40)
+    assert (rec.kind, len(rec.flange_step), len(rec.joint_step)) == ("camera-flange", kept, 0)
+    assert rec.flange_in_base_cm[files.index("images/0.png"), 0, 3] == pytest.approx(100 * x)
 
 
 TARGET = Target("charuco", 5, 7, 3.0, 2.2, "DICT_5X5_100")

@@ -105,6 +105,8 @@ def _run(
         progress=progress,
     )
     product = [r for r in runs if r.name == PRODUCT[0]]
+    if not product and any(r.name == "flange_poses" for r in runs):  # no arm (issue 40)
+        return _hand_eye(sdir, runs, report)
     if not product:  # a stage list without a product (a camera session, issue 39)
         names = ", ".join(r.name for r in runs)
         why = (
@@ -126,6 +128,19 @@ def _run(
     rep = _report_if_stale(sdir, doc["provenance"]["stages"]) if report else None
     line = verdict_line(sdir)
     return IdentifyResult(runs, sig, rep, doc["warnings"], line, verdict_of(doc))
+
+
+def _hand_eye(sdir: Path, runs: list[Any], report: bool) -> IdentifyResult:
+    """A camera session of flange poses without joints: the camera's calibration file,
+    ``camera_info.yaml``, the report and the verdict line; no signature (no arm)."""
+    from pipeline.report.hand_eye import write_hand_eye_products
+
+    out = write_hand_eye_products(sdir, report)
+    why = (f"signature.json not written: flange poses without joint readings calibrate the "
+           f"camera, not the arm; the camera's calibration is {out.result.name} and "
+           f"{out.camera_info.name}")  # fmt: skip
+    return IdentifyResult(runs, None, out.report, [why, *_camera_warnings(sdir, runs)],
+                          out.verdict)  # fmt: skip
 
 
 def _camera_warnings(sdir: Path, runs: list[Any]) -> list[str]:

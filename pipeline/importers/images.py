@@ -18,9 +18,8 @@ Without joint readings the arm cannot be calibrated: ``/rig/description`` says s
 
 from __future__ import annotations
 
-import contextlib
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,12 +35,11 @@ from pipeline.importers.rows import LENGTH_CM
 from pipeline.importers.sscanss2 import read_text
 from pipeline.importers.write import SOURCE_METADATA, read_back, source_metadata
 from pipeline.importers.yamlfile import load_yaml
-from pipeline.quiet import debugging
 from pipeline.rig.camera import STATED_SIGMA_PX
 from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
 from pipeline.robots.description import RobotDescription
 from pipeline.sensor.camera import Intrinsics
-from pipeline.sensor.detect import DetectorSettings, ImageDetection, detect_target
+from pipeline.sensor.detect import DetectorSettings, ImageDetection, detect_file
 from pipeline.sensor.target import Target
 from pipeline.stages.lock import session_lock
 
@@ -165,38 +163,9 @@ def _detect(path: Path, target: Target, settings: DetectorSettings) -> tuple[
 ]:  # fmt: skip
     """(sha256, detection, (width, height)) of one image; a missing or unreadable file is a
     drop."""
-    import cv2
-
-    from pipeline.sensor.detect import no_points
-
-    if not path.is_file():
-        return "", no_points("missing", "no such file"), None
-    sha = file_sha256(path)
-    with _libpng_quiet():
-        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)  # 8-bit grey, also from 16-bit
-    if image is None:
-        return sha, no_points("unreadable", "OpenCV cannot decode it (not an image, or "
-                          "corrupted)"), None  # fmt: skip
-    grey = np.asarray(image, np.uint8)
-    return sha, detect_target(grey, target, settings), (grey.shape[1], grey.shape[0])
-
-
-@contextlib.contextmanager
-def _libpng_quiet() -> Iterator[None]:
-    """libpng writes "libpng error: Read Error" straight to the process's stderr (fd 2)
-    for a corrupted PNG, past Python and OpenCV's log level; armsig says it in one line
-    itself, so fd 2 points at /dev/null while OpenCV decodes (unless ARMSIG_DEBUG=1)."""
-    if debugging():
-        yield
-        return
-    saved = os.dup(2)
-    try:
-        with open(os.devnull, "wb") as null:
-            os.dup2(null.fileno(), 2)
-            yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
+    sha = file_sha256(path) if path.is_file() else ""
+    found, size = detect_file(path, target, settings)
+    return sha, found, size
 
 
 def read_image_set(path: str | Path, settings: DetectorSettings | None = None) -> ImageSet:
@@ -308,7 +277,7 @@ def image_set_messages(s: ImageSet) -> list[Message]:
         "setup": s.setup,
         "camera": s.lens.to_dict(),
         "target": s.target.to_dict(),
-        "images_dir": str(s.images[0].path.parent.resolve()),
+        "images_dir": str(_images_dir(s.images[0]).resolve()),
     }
     if s.robot is None:
         rig["arm"] = ARM_NOT_CALIBRATED
@@ -342,6 +311,11 @@ def image_set_messages(s: ImageSet) -> list[Message]:
             "v_px": [float(v) for v in f.uv_px[:, 1]], "sigma_px": SIGMA_PX,
         }))  # fmt: skip
     return messages
+
+
+def _images_dir(e: ImageEntry) -> Path:
+    """The folder the images' ``file`` names are relative to (``path = folder / file``)."""
+    return e.path.parents[len(Path(e.file).parts) - 1]
 
 
 def _image_message(step: int, e: ImageEntry) -> dict[str, Any]:

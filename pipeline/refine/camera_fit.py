@@ -181,7 +181,7 @@ def held_line(fit: CameraFit, sigma_px: float) -> str | None:
     )
 
 
-def _check(det: Detections, setup: str, intrinsics: str) -> None:
+def check_detections(det: Detections, setup: str, intrinsics: str) -> None:
     if setup not in (EYE_TO_HAND, EYE_IN_HAND) or intrinsics not in INTRINSICS:
         raise StageError(
             f"camera fit: unknown set-up {setup!r} or intrinsics {intrinsics!r}",
@@ -239,34 +239,61 @@ def fit_camera(
     ``chain="design"``: the hand-eye problem of the peers, the chain held at its design
     (the sensor frame is then the design's base, the fixed body's pose six parameters of
     the block: :class:`~pipeline.refine.camera_block.CameraBlock`)."""
-    _check(det, setup, intrinsics)
+    check_detections(det, setup, intrinsics)
     start = camera_start(det, design, lens, setup, fit_lens=intrinsics == "fitted")
     model, x_kin = camera_model(det, design, start, setup, chain)
     k0 = lens.vector() if intrinsics != "fitted" else start.intrinsics
+    if chain == "design":
+        own = np.concatenate([np.zeros(3), start.fixed_in_base[:3, 3], k0])
+        block = camera_block(det, setup, own, lens, intrinsics, prior_sigma, start.fixed_in_base)
+        return fit_held(det, model, block, x_kin, start, intrinsics, loss, f_scale)
+    block = camera_block(det, setup, k0, lens, intrinsics, prior_sigma)
+    x_start = np.concatenate([x_kin, k0])
+    problem = Problem(model, block, loss, f_scale, fixed_block=intrinsics == "fixed")
+    units = (*model.param_units, *block.param_units)
+    solution, ident = fit_identifiable(problem, x_start, units, True, len(det.image))
+    return _result(det, model, block, solution, start, x_start, ident, intrinsics)
+
+
+def camera_block(
+    det: Detections, setup: str, own: Array, lens: Intrinsics, intrinsics: str,
+    prior_sigma: Array | None, fixed: Array | None = None,
+) -> CameraBlock:  # fmt: skip
+    """The pixel block of ``det`` started at ``own``; with ``intrinsics="prior"`` the
+    stated ``lens`` its prior (σ ``prior_sigma``); ``fixed``: the fixed body's start pose
+    in the base (:class:`~pipeline.refine.camera_block.CameraBlock`)."""
     keys = pa.table({"sweep": pa.array(np.full(det.n_images, POSES_SWEEP), pa.int32()),
                      "step": pa.array(np.arange(det.n_images), pa.int32()),
                      "target": ["tool"] * det.n_images})  # fmt: skip
     prior = lens.vector() if intrinsics == "prior" else None
     prior_s = None if prior is None else np.asarray(prior_sigma, float)
-    held_design = chain == "design"
-    fixed = start.fixed_in_base if held_design else None
-    own = np.concatenate([np.zeros(3), start.fixed_in_base[:3, 3], k0]) if held_design else k0
-    block = CameraBlock(keys, det.image, det.local, det.uv, det.sigma_px, setup, own, prior,
-                        prior_s, fixed)  # fmt: skip
-    x_start = np.concatenate([x_kin, own])
-    if held_design:  # the axes at the design; the lens held by mask, the fixed pose free
-        held = np.zeros(len(x_start), bool)
-        held[: model.n_axis_params] = True
-        held[len(x_start) - 9 :] = intrinsics == "fixed"
-        problem = Problem(model, block, loss, f_scale, held=held)
-        solution = solve(problem, x_start)
-        units = (*model.param_units, *block.param_units)
-        J = residuals_and_jacobian(problem, solution.x)[1]
-        ident = analyse(J, units, True, len(det.image), held)
-    else:
-        problem = Problem(model, block, loss, f_scale, fixed_block=intrinsics == "fixed")
-        units = (*model.param_units, *block.param_units)
-        solution, ident = fit_identifiable(problem, x_start, units, True, len(det.image))
+    return CameraBlock(keys, det.image, det.local, det.uv, det.sigma_px, setup, own, prior,
+                       prior_s, fixed)  # fmt: skip
+
+
+def fit_held(
+    det: Detections, model: ChainModel, block: CameraBlock, x_kin: Array, start: CameraStart,
+    intrinsics: str, loss: str, f_scale: float,
+) -> CameraFit:  # fmt: skip
+    """The fit with the chain's axes held (at the design, or none: a session of flange
+    poses, :mod:`pipeline.refine.hand_eye`), the fixed body's pose six parameters of the
+    block, the lens held by mask (``intrinsics="fixed"``)."""
+    x_start = np.concatenate([x_kin, block.x0])
+    held = np.zeros(len(x_start), bool)
+    held[: model.n_axis_params] = True
+    held[len(x_start) - 9 :] = intrinsics == "fixed"
+    problem = Problem(model, block, loss, f_scale, held=held)
+    solution = solve(problem, x_start)
+    units = (*model.param_units, *block.param_units)
+    J = residuals_and_jacobian(problem, solution.x)[1]
+    ident = analyse(J, units, True, len(det.image), held)
+    return _result(det, model, block, solution, start, x_start, ident, intrinsics)
+
+
+def _result(
+    det: Detections, model: ChainModel, block: CameraBlock, solution: Solution,
+    start: CameraStart, x_start: Array, ident: Identifiability, intrinsics: str,
+) -> CameraFit:  # fmt: skip
     r = block.predict(model, solution.x[: model.n_params], solution.x[model.n_params :]) - det.uv
     rms = float(np.sqrt(np.mean(np.sum(r**2, axis=1))))
     names = (*model.param_names, *block.param_names)

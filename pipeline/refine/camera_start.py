@@ -131,7 +131,17 @@ def camera_start(
     det: Any, design: SerialChain, lens: Intrinsics, setup: str, fit_lens: bool
 ) -> CameraStart:
     """The closed-form start of :class:`~pipeline.refine.camera_fit.Detections` ``det``
-    (module docstring)."""
+    (module docstring), the flange poses the design's at the readings."""
+    return start_from_flange(det, link_frames(design, det.q)[:, design.n_joints], lens, setup,
+                             fit_lens)  # fmt: skip
+
+
+def start_from_flange(
+    det: Any, base_from_flange: Array, lens: Intrinsics, setup: str, fit_lens: bool
+) -> CameraStart:
+    """The closed-form start of ``det`` with the flange in the base ``base_from_flange``
+    (m, 4, 4, cm) at every image: the design's at the readings, or the robot's own
+    (a session of flange poses, :mod:`pipeline.refine.hand_eye`)."""
     obj = [det.local[det.image == i].astype(np.float32) for i in range(det.n_images)]
     img = [det.uv[det.image == i].astype(np.float32) for i in range(det.n_images)]
     K, dist = _lens(obj, img, lens) if fit_lens else lens.opencv()
@@ -148,7 +158,6 @@ def camera_start(
         )
     good = found.copy()
     good[found] = ~_outliers(errors[found])
-    base_from_flange = link_frames(design, det.q)[:, design.n_joints]
     # calibrateRobotWorldHandEye solves cTw · wTb = cTg · gTb for wTb and cTg, "c" moving
     # with the gripper g, "w" fixed: eye-in-hand, c = the camera and w = the target;
     # eye-to-hand, c = the target and w = the camera.

@@ -32,13 +32,18 @@ wider than ``max_edge_width_px``), ``ambiguous`` (no way to number the points).
 
 from __future__ import annotations
 
+import contextlib
+import os
+from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from pipeline.errors import ArmsigError
+from pipeline.quiet import debugging
 from pipeline.sensor.target import Target
 
 Array = npt.NDArray[np.float64]
@@ -103,6 +108,42 @@ def no_points(
     empty = np.zeros(0)
     return ImageDetection(np.zeros(0, np.int64), np.zeros((0, 2)), empty, markers, width,
                           reason, why)  # fmt: skip
+
+
+def detect_file(
+    path: Path, target: Target, settings: DetectorSettings | None = None
+) -> tuple[ImageDetection, tuple[int, int] | None]:
+    """The target's points in the image file ``path`` and the image's (width, height); a
+    missing or undecodable file is a drop (``missing``, ``unreadable``; size None)."""
+    import cv2
+
+    if not path.is_file():
+        return no_points("missing", "no such file"), None
+    with _libpng_quiet():
+        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)  # 8-bit grey, also from 16-bit
+    if image is None:
+        return no_points("unreadable", "OpenCV cannot decode it (not an image, or "
+                         "corrupted)"), None  # fmt: skip
+    grey = np.asarray(image, np.uint8)
+    return detect_target(grey, target, settings), (grey.shape[1], grey.shape[0])
+
+
+@contextlib.contextmanager
+def _libpng_quiet() -> Iterator[None]:
+    """libpng writes "libpng error: Read Error" straight to the process's stderr (fd 2)
+    for a corrupted PNG, past Python and OpenCV's log level; armsig says it in one line
+    itself, so fd 2 points at /dev/null while OpenCV decodes (unless ARMSIG_DEBUG=1)."""
+    if debugging():
+        yield
+        return
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def detect_target(

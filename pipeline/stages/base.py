@@ -19,6 +19,9 @@ if TYPE_CHECKING:
     import pyarrow as pa
 
 RECORDING = "recording"
+#: The images a recording references by content hash (``/camera/images``, issue 40): a
+#: stage input hashed from the image files themselves (:mod:`pipeline.stages.image_inputs`).
+IMAGES = "images"
 
 
 #: The longest name of one folder or file (bytes): Linux's NAME_MAX, and most file systems'.

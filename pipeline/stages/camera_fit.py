@@ -61,66 +61,86 @@ def detections_for_fit(inputs: Mapping[str, Any]) -> tuple[Any, Any, Any, str]:
     """(Detections, design chain, stated lens, set-up) of the stage tables."""
     from pipeline.refine.camera_fit import Detections
     from pipeline.sensor.camera import Intrinsics
-    from pipeline.sensor.target import target_from_dict
     from pipeline.stages.frames import readings_at
     from pipeline.units import joints_to_internal
 
-    session, table = inputs["session"], inputs["detections"]
+    session = inputs["session"]
     rig = json.loads(session.column("rig_json")[0].as_py())
     robot = session_robot(session)
     pris = robot.prismatic
-    target = target_from_dict(rig["target"], "/rig/description target")
-    ids, local = target.points()
-    sweep = table.column("sweep").to_numpy()
-    use = sweep == POSES_SWEEP  # validation images (check) stay out of the fit
-    steps = table.column("image").to_numpy()[use].astype(np.int64)
-    images, image = np.unique(steps, return_inverse=True)
+    images, image, local, uv, sigma = fit_pixels(rig, inputs["detections"])
     q = readings_at(inputs["joints"], POSES_SWEEP, images, robot.n_joints, pris)
     q_sig = robot.joints_from_readings(np.asarray(session_plan(session)["signature_q"], float))
-    point = table.column("point_id").to_numpy()[use]
-    at = np.searchsorted(ids, point)  # the target's ids are sorted
-    uv = np.stack([table.column("u_px").to_numpy()[use], table.column("v_px").to_numpy()[use]], 1)
-    det = Detections(image.astype(np.int64), local[at], uv,
-                     table.column("sigma_px").to_numpy()[use].astype(float),
-                     joints_to_internal(q, pris), joints_to_internal(q_sig, pris))  # fmt: skip
+    det = Detections(image, local, uv, sigma, joints_to_internal(q, pris),
+                     joints_to_internal(q_sig, pris))  # fmt: skip
     return det, robot.design_chain(), Intrinsics.from_dict(rig["camera"]), str(rig["setup"])
 
 
+def fit_pixels(rig: dict[str, Any], table: pa.Table) -> tuple[np.ndarray, ...]:
+    """The fit's detections of a ``detections`` table (the ``poses`` images: validation
+    images stay out): the images (steps, sorted), each point's image (0 … m − 1), its
+    target coordinates (cm, from the recorded target), pixel and σ."""
+    from pipeline.sensor.target import target_from_dict
+
+    ids, local = target_from_dict(rig["target"], "/rig/description target").points()
+    use = table.column("sweep").to_numpy() == POSES_SWEEP
+    steps = table.column("image").to_numpy()[use].astype(np.int64)
+    images, image = np.unique(steps, return_inverse=True)
+    at = np.searchsorted(ids, table.column("point_id").to_numpy()[use])  # ids are sorted
+    uv = np.stack([table.column("u_px").to_numpy()[use], table.column("v_px").to_numpy()[use]], 1)
+    sigma = table.column("sigma_px").to_numpy()[use].astype(float)
+    return images, image.astype(np.int64), local[at], uv, sigma
+
+
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
-    from pipeline.refine.camera_fit import fit_camera, held_line
-    from pipeline.refine.identifiability import summary as identifiability_summary
+    from pipeline.refine.camera_fit import fit_camera
 
     det, design, lens, setup = detections_for_fit(inputs)
     fit = fit_camera(det, design, lens, setup, params.intrinsics, params.prior_sigma(),
                      params.loss, params.f_scale)  # fmt: skip
     s = fit.solution
+    groups = ["axis"] * fit.model.n_axis_params + ["point"] * 3 + ["tool_rotation"] * 3
+    groups += ["intrinsics"] * len(fit.block.x0)
+    extra = {
+        "start_frames_cm": fit.model.frames0.tolist(),
+        "q_signature": det.q_signature.tolist(),
+        "frames_cm": fit.model.signature_frames(s.x[: fit.model.n_params], 0).tolist(),
+        "start_hand_eye": {"fixed_in_base": fit.start.fixed_in_base.tolist(),
+                           "tool_in_flange": fit.start.tool_in_flange.tolist()},
+    }  # fmt: skip
+    return fit_table(fit, det, params, setup, groups, table_images(inputs["detections"]), extra)
+
+
+def fit_table(
+    fit: Any, det: Any, params: Params, setup: str, groups: list[str], images: np.ndarray,
+    extra: dict[str, Any],
+) -> pa.Table:  # fmt: skip
+    """The ``camera_fit`` table of a fit: one row per parameter in ``groups`` (radians as
+    degrees), its summary (the fit, every image's reprojection, the identifiability, the
+    held line, and ``extra``) in the schema metadata."""
+    from pipeline.refine.camera_fit import held_line
+    from pipeline.refine.identifiability import summary as identifiability_summary
+
+    s = fit.solution
     units = [*fit.model.param_units, *fit.block.param_units]
     deg = np.array([u == "rad" for u in units])
     scale = np.where(deg, np.degrees(1.0), 1.0)
-    groups = ["axis"] * fit.model.n_axis_params + ["point"] * 3 + ["tool_rotation"] * 3
-    groups += ["intrinsics"] * len(fit.block.x0)
-    start = fit.x_start
     summary = {
         "setup": setup, "intrinsics": params.intrinsics, "status": s.status,
         "message": s.message, "iterations": s.iterations, "n_images": det.n_images,
         "n_points": len(det.image), "n_residuals": s.n_residuals, "chi2": s.chi2,
         "dof": s.dof, "rms_px": fit.rms_px, "loss": params.loss, "f_scale": params.f_scale,
-        "start_frames_cm": fit.model.frames0.tolist(),
-        "q_signature": det.q_signature.tolist(),
-        "frames_cm": fit.model.signature_frames(s.x[: fit.model.n_params], 0).tolist(),
-        "images": _image_rows(fit, table_images(inputs["detections"])),
+        "images": image_rows(fit, images),
         "identifiability": identifiability_summary(fit.identifiability, fit.names,
                                                    det.n_images, len(det.image)),
-        "warning": held_line(fit, float(np.median(det.sigma_px))),
-        "start_hand_eye": {"fixed_in_base": fit.start.fixed_in_base.tolist(),
-                           "tool_in_flange": fit.start.tool_in_flange.tolist()},
+        "warning": held_line(fit, float(np.median(det.sigma_px))), **extra,
     }  # fmt: skip
     schema = arrow_schema("camera_fit")
     meta = {**(schema.metadata or {}), b"armsig.camera_fit": json.dumps(summary).encode()}
     columns = {
         "group": groups, "name": list(fit.names),
         "unit": ["deg" if d else u for d, u in zip(deg, units, strict=True)],
-        "start": start * scale, "value": s.x * scale, "sigma": s.sigma * scale,
+        "start": fit.x_start * scale, "value": s.x * scale, "sigma": s.sigma * scale,
     }  # fmt: skip
     return pa.table({f.name: pa.array(columns[f.name], f.type) for f in schema},
                     schema=schema.with_metadata(meta))  # fmt: skip
@@ -143,7 +163,7 @@ def table_images(table: pa.Table) -> np.ndarray:
     return np.unique(table.column("image").to_numpy()[use])
 
 
-def _image_rows(fit: Any, images: np.ndarray) -> list[list[float]]:
+def image_rows(fit: Any, images: np.ndarray) -> list[list[float]]:
     """Per image: [image, points, rms px, largest px] of the fit's reprojection."""
     count, rms, worst = fit.image_residuals()
     return [[int(i), int(c), float(r), float(w)]

@@ -28,11 +28,16 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     at = observing(model, det.q, q_sig)
     t, R = at.positions(x)[det.image], at.tool_rotations(x)[det.image]
     uv = project(camera_points(setup, t, R, det.local)[0], intrinsics)
-    d = inputs["detections"]
-    use = d.column("sweep").to_numpy() == POSES_SWEEP  # the fit's images (detections_for_fit)
+    return residual_table(inputs["detections"], table_images(inputs["detections"]), det, uv)
+
+
+def residual_table(detections: pa.Table, images: np.ndarray, det: Any, uv: np.ndarray) -> pa.Table:
+    """The residual rows of the fit's detections ``det`` (of the ``poses`` images, in the
+    ``detections`` table's order; ``images`` their steps) predicted at ``uv`` (D, 2)."""
+    use = detections.column("sweep").to_numpy() == POSES_SWEEP  # the fit's images
     columns = {
-        "image": table_images(d)[det.image],
-        "point_id": d.column("point_id").to_numpy()[use],
+        "image": images[det.image],
+        "point_id": detections.column("point_id").to_numpy()[use],
         "u_px": det.uv[:, 0], "v_px": det.uv[:, 1],
         "du_px": uv[:, 0] - det.uv[:, 0], "dv_px": uv[:, 1] - det.uv[:, 1],
     }  # fmt: skip

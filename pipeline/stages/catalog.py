@@ -54,7 +54,10 @@ POINT_STAGE_MODULES = (
 #: recorded sensor kind (``/rig/description`` sensor) -> its identification stage modules
 SENSOR_STAGE_MODULES = {"sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES,
                         "camera": ("session", "joints", "detections", "camera_fit",
-                                   "camera_residuals")}  # fmt: skip
+                                   "camera_residuals"),
+                        # flange poses, no joints (issue 40): the camera only, no product
+                        "camera-flange": ("session", "flange_poses", "image_detections",
+                                          "hand_eye_fit", "hand_eye_residuals")}  # fmt: skip
 #: The last identification stage: a stage list holding it (and ``session``) has a product.
 LAST_STAGE = "verdict"
 #: Stage modules of ``pipeline evaluate`` (run after the identification, same runner).

@@ -41,6 +41,8 @@ from pipeline.sweeps import CHECK_SWEEP, POSES_SWEEP, TOOL_SWEEP, sweep_id, swee
 
 __all__ = ["CHECK_SWEEP", "POSES_SWEEP", "TOOL_SWEEP", "Recording", "read_recording", "sweep_name"]
 
+#: The stage list of a session of flange poses without joints (issue 40)
+FLANGE_KIND = "camera-flange"
 #: every channel a session recording may hold (sonic and point sensors)
 _ALL = (*SENSOR_CHANNELS.values(), IMAGE_SET_CHANNELS)  # image sets: issue 40
 TOPICS = tuple(dict.fromkeys(t for ch in _ALL for t in ch))
@@ -103,6 +105,22 @@ class Recording:
     detection_point: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     detection_uv_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     detection_sigma_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    # a session of flange poses, no joints (issue 40): one row per image, sorted by key
+    flange_sweep: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    flange_step: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    flange_in_base_cm: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+    # the images referenced by content hash (/camera/images), one row per image
+    image_sweep: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    image_step: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    image_file: np.ndarray = field(default_factory=lambda: np.zeros(0, str))
+    image_sha256: np.ndarray = field(default_factory=lambda: np.zeros(0, str))
+    image_dropped: np.ndarray = field(default_factory=lambda: np.zeros(0, str))
+
+    @property
+    def kind(self) -> str:
+        """The stage list's key (:data:`pipeline.stages.catalog.SENSOR_STAGE_MODULES`): the
+        sensor, or ``camera-flange`` for flange poses without joints."""
+        return FLANGE_KIND if len(self.flange_step) else self.sensor
 
 
 def read_recording(path: str | Path, sha256: str | None = None) -> Recording:
@@ -131,12 +149,7 @@ def _read_cached(p: Path, sha: str) -> Recording:
     rigs = msgs["/rig/description"]
     sensor = str(rigs[0][1].get("sensor", "sonic")) if len(rigs) == 1 else "sonic"
     if msgs["/robot/flange_pose"]:  # an image set without joint readings (issue 40)
-        raise RecordingError(
-            f"{p}: flange poses and no joint readings: the arm cannot be calibrated from them",
-            expected="/robot/joint_state readings at each image to calibrate the arm",
-            fix="such a session calibrates the camera's intrinsics and hand-eye transforms "
-            "only (/rig/description arm), with the camera fit of issue 39",
-        )
+        return _flange_recording(p, sha, msgs, sensor)
     topics = tuple(SENSOR_CHANNELS[sensor])
     missing = [t for t in topics if not msgs[t]]
     if missing:
@@ -214,6 +227,31 @@ def _read_cached(p: Path, sha: str) -> Recording:
         "/sonic/ranges", "cycle",
     )  # fmt: skip
     return Recording(p, sha, rig, robot, sensor, **joints, **cycles, **recording_points.no_points())
+
+
+def _flange_recording(
+    p: Path, sha: str, msgs: dict[str, list[tuple[int, dict[str, Any]]]], sensor: str
+) -> Recording:
+    """A recording of flange poses and no joints (:mod:`pipeline.stages.recording_flange`)."""
+    from pipeline.stages import recording_flange, recording_points
+
+    foreign = [t for t in TOPICS if t not in IMAGE_SET_CHANNELS and msgs[t]]
+    if sensor != "camera" or foreign:
+        raise RecordingError(
+            f"{p}: /robot/flange_pose in a recording of sensor {sensor!r} with "
+            f"{', '.join(foreign) or 'no other channel'}",
+            expected="channels " + ", ".join(IMAGE_SET_CHANNELS) + " (sensor 'camera')",
+            fix="import the image set again (`pipeline import --format images`)",
+        )
+    rig = _single(p, msgs, "/rig/description")
+    none, n0 = np.zeros(0, np.int64), np.zeros((0, 0))
+    joints = {"joint_sweep": none, "joint_step": none, "joint_t_s": np.zeros(0),
+              "q_commanded": n0, "q_encoder": n0, "joint_payload_kg": np.zeros(0),
+              "joint_source_file": np.zeros(0, str), "joint_source_line": none,
+              "joint_drift_cm": np.zeros((0, 2))}  # fmt: skip
+    return Recording(p, sha, rig, {}, sensor, **joints, **_no_cycles(),
+                     **recording_points.no_points(),
+                     **recording_flange.flange_arrays(p, msgs))  # fmt: skip
 
 
 def _no_cycles() -> dict[str, np.ndarray]:

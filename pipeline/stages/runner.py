@@ -38,7 +38,7 @@ from pipeline.contract.digest import file_sha256
 from pipeline.errors import ArmsigError, StageError, os_errors_refused
 from pipeline.progress import Progress
 from pipeline.schemas import validate_table
-from pipeline.stages.base import RECORDING, Stage, StageRun, session_folder
+from pipeline.stages.base import IMAGES, RECORDING, Stage, StageRun, session_folder
 from pipeline.stages.catalog import (
     FILE_INPUTS,
     LAST_STAGE,
@@ -49,9 +49,10 @@ from pipeline.stages.catalog import (
     is_identification,
     stages,
 )
+from pipeline.stages.image_inputs import image_refs
 from pipeline.stages.lock import session_lock
 from pipeline.stages.recording import read_recording
-from pipeline.stages.session import session_sensor
+from pipeline.stages.session import session_kind
 from pipeline.stages.tables import CheckedTable, check_table, content_hash, write_table
 
 FAILED = "failed"
@@ -139,6 +140,7 @@ class _Hashes:
         self._tables: dict[str, CheckedTable | None] = {}
         self._product: tuple[str, str] | None = None
         self._sensor: str | None = None
+        self._images: Any = None
         self.pending: set[str] = set()  # stages written in this run, not committed yet
 
     def sensor(self) -> str:
@@ -153,10 +155,10 @@ class _Hashes:
                 and checked.table is not None
                 and checked.table.column("recording_sha256")[0].as_py() == rec_hash
             ):
-                self._sensor = session_sensor(checked.table)
+                self._sensor = session_kind(checked.table)
             else:
                 rec = read_recording(self.session_dir / "recording.mcap", rec_hash)
-                self._sensor = rec.sensor
+                self._sensor = rec.kind
         return self._sensor
 
     def identification_modules(self) -> tuple[str, ...]:
@@ -178,9 +180,18 @@ class _Hashes:
             self._tables[name] = check_table(path, name) if path.is_file() else None
         return self._tables[name]
 
+    def images(self) -> Any:
+        """The images the recording references, hashed once per run (:data:`IMAGES`)."""
+        if self._images is None:
+            rec = read_recording(self.session_dir / "recording.mcap", self.get(RECORDING))
+            self._images = image_refs(rec)
+        return self._images
+
     def get(self, name: str) -> str | None:
         """Content hash of an input; None when it is missing or fails its check (a stage
         file, or the product when it does not match the committed stages)."""
+        if name == IMAGES:
+            return None if self.get(RECORDING) is None else self.images().digest()
         if name == RECORDING or name in FILE_INPUTS:
             if name not in self._files:
                 fname = "recording.mcap" if name == RECORDING else FILE_INPUTS[name][0]
@@ -257,7 +268,9 @@ def _check(stage: Stage, params: Any, hashes: _Hashes, stale: set[str]) -> Stage
         if inp in stale or current is None:
             return StageStatus(stage.name, "stale", f"input {inp} is stale or missing")
         if prov.get("inputs", {}).get(inp) != current:
-            return StageStatus(stage.name, "stale", f"input {inp} changed")
+            why = hashes.images().changed() if inp == IMAGES else None
+            return StageStatus(stage.name, "stale", f"input {inp} changed" + (
+                f": {why}" if why else ""))  # fmt: skip
     return StageStatus(stage.name, "fresh", "inputs, parameters and version unchanged")
 
 
@@ -483,6 +496,8 @@ def _run_one(sdir: Path, stage: Stage, params: Any, hashes: _Hashes) -> Any:
             inputs[inp] = read_recording(sdir / "recording.mcap", hashes.get(RECORDING))
         elif inp in FILE_INPUTS:
             inputs[inp] = _load_file_input(sdir, inp, hashes)
+        elif inp == IMAGES:
+            inputs[inp] = hashes.images()
         else:
             checked = hashes.check(inp)
             if checked is None or checked.table is None:

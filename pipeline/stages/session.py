@@ -8,12 +8,13 @@ from typing import Any
 
 import pyarrow as pa
 
+from pipeline.errors import StageError
 from pipeline.stages.base import RECORDING, NoParams, Stage
 
 
 def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     rec = inputs[RECORDING]
-    robot = rec.robot["robot"]
+    robot = rec.robot.get("robot", {})  # none: flange poses without joints (issue 40)
     return pa.table(
         {
             "robot_name": [str(robot.get("name", "?"))],
@@ -42,12 +43,29 @@ def session_robot(session: pa.Table):  # -> RobotDescription
     from pipeline.robots.description import description_from_dict
 
     doc = json.loads(session.column("robot_json")[0].as_py())
+    if "robot" not in doc:  # flange poses without joints (issue 40)
+        raise StageError(
+            "the session has no arm (no /robot/description): its flange poses calibrate the "
+            "camera only", fix="its calibration is camera_calibration.json, camera_info.yaml "
+            "and report/report.md (`pipeline identify`)",
+        )  # fmt: skip
     return description_from_dict(doc["robot"], source="/robot/description")
 
 
 def session_sensor(session: pa.Table) -> str:
     """The recorded sensor kind: ``sonic`` (also when absent) or ``points``."""
     return str(json.loads(session.column("rig_json")[0].as_py()).get("sensor", "sonic"))
+
+
+def session_kind(session: pa.Table) -> str:
+    """The stage list's key (:data:`pipeline.stages.catalog.SENSOR_STAGE_MODULES`): the
+    recorded sensor, or ``camera-flange`` for a camera session without an arm (flange
+    poses, no joints: :attr:`pipeline.stages.recording.Recording.kind`)."""
+    from pipeline.stages.recording import FLANGE_KIND
+
+    sensor = session_sensor(session)
+    no_arm = sensor == "camera" and session.column("n_joints")[0].as_py() == 0
+    return FLANGE_KIND if no_arm else sensor
 
 
 def session_plan(session: pa.Table) -> dict[str, Any]:
