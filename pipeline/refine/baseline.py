@@ -13,6 +13,7 @@ where the alternation needs thousands of rounds).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,8 +82,6 @@ def register_design_points(
     (the least-squares point, ``R_k`` orthonormal), then Gauss-Newton (module
     docstring). Used for the tool point (:func:`register_design`) and for the joint
     sweeps' link targets (the design's held-out errors of stage ``holdout``)."""
-    from scipy.optimize import least_squares
-
     target = np.asarray(target, np.int64)
     F = link_frames(chain, q)[np.arange(len(q)), np.asarray(link)]
     R_k, o_k = F[:, :3, :3], F[:, :3, 3]
@@ -118,12 +117,34 @@ def register_design_points(
         return out
 
     x0 = np.r_[np.zeros(3), B0[:3, 3], t0.reshape(-1)]
-    sol = least_squares(residuals, x0, jac=jacobian, method="lm", xtol=1e-15, ftol=1e-15)
-    R, b, t = unpack(sol.x)
+    x = _least_squares(residuals, jacobian, x0)
+    R, b, t = unpack(x)
     base = np.eye(4)
     base[:3, :3], base[:3, 3] = R, b
-    errors = np.linalg.norm(residuals(sol.x).reshape(-1, 3), axis=1)
+    errors = np.linalg.norm(residuals(x).reshape(-1, 3), axis=1)
     return DesignBaseline(chain, base, t[0], errors, t)
+
+
+def _least_squares(
+    residuals: Callable[[Array], Array], jacobian: Callable[[Array], Array], x0: Array
+) -> Array:
+    """``argmin |residuals(x)|²`` from ``x0`` by armsig's Levenberg-Marquardt
+    (:func:`pipeline.optim.lm.levenberg_marquardt`, numpy only: scipy.optimize's import
+    cost ~0.1-0.4 s of CPU in a cold identify, which registers the design for the
+    held-out positions), to the tolerance a noiseless audit needs (1e-15)."""
+    from pipeline.optim.lm import levenberg_marquardt
+
+    def fun(x: Array) -> tuple[Array, Callable[[Array], tuple[Array, Array]]]:
+        r = residuals(x)
+
+        def normal(w: Array) -> tuple[Array, Array]:
+            J = jacobian(x)
+            Jw = J * w[:, None]
+            return Jw.T @ J, Jw.T @ r
+
+        return r, normal
+
+    return levenberg_marquardt(fun, np.asarray(x0, float), tol=1e-15).x
 
 
 @dataclass(frozen=True)
@@ -148,8 +169,6 @@ def register_offsets(
     ``δ_j`` held at 0 where ``held`` (n,); started at :func:`register_design_points`'s
     base and tool (``δ = 0``), then Gauss-Newton on all of them (its Jacobian: the tool
     point turned about joint ``j``'s axis, ``z_j × (p − o_j)``, or moved along it)."""
-    from scipy.optimize import least_squares
-
     n = chain.n_joints
     start = register_design_points(
         chain, q, measured, np.full(len(q), n), np.zeros(len(q), np.int64), base0
@@ -187,9 +206,9 @@ def register_offsets(
         return out
 
     x0 = np.r_[np.zeros(3), B0[:3, 3], start.tool, np.zeros(int(free.sum()))]
-    sol = least_squares(residuals, x0, jac=jacobian, method="lm", xtol=1e-15, ftol=1e-15)
-    R, b, t, delta = unpack(sol.x)
+    x = _least_squares(residuals, jacobian, x0)
+    R, b, t, delta = unpack(x)
     base = np.eye(4)
     base[:3, :3], base[:3, 3] = R, b
-    errors = np.linalg.norm(residuals(sol.x).reshape(-1, 3), axis=1)
+    errors = np.linalg.norm(residuals(x).reshape(-1, 3), axis=1)
     return OffsetsFit(delta, base, t, errors, ~free)
