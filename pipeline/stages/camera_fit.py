@@ -121,6 +121,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "group": groups, "name": list(fit.names),
         "unit": ["deg" if d else u for d, u in zip(deg, units, strict=True)],
         "start": start * scale, "value": s.x * scale, "sigma": s.sigma * scale,
+        "covariance": list(s.covariance * np.outer(scale, scale)),
     }  # fmt: skip
     return pa.table({f.name: pa.array(columns[f.name], f.type) for f in schema},
                     schema=schema.with_metadata(meta))  # fmt: skip
@@ -128,8 +129,9 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "camera_fit",
-    3,  # 2: per-image reprojection errors and the identifiability in the summary; 3: the
-    # start frames, q̄^s (rad / cm) and the fitted frames S̄_0 … S̄_n and tool (cm)
+    4,  # 2: per-image reprojection errors and the identifiability in the summary; 3: the
+    # start frames, q̄^s (rad / cm) and the fitted frames S̄_0 … S̄_n and tool (cm);
+    # 4: the covariance rows (the signature's uncertainty, holdout and verdict)
     ("session", "joints", "detections"),
     Params(),
     compute,
