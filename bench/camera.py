@@ -57,7 +57,7 @@ def one(d: Path, robot: str, setup: str, images: int, seed: int) -> dict:
     c0 = time.process_time()
     from pipeline.refine.camera_fit import fit_camera
 
-    fit = fit_camera(det, design, lens, setup)
+    fit = fit_camera(det, design, lens, setup, reading_sigma=camera_fit.reading_sigma(t["session"]))
     cpu = time.process_time() - c0
     desc = description_from_dict(t[RECORDING].robot["robot"])
     audit = audit_camera_fit(fit, truth, desc, det.q_signature)

@@ -179,6 +179,10 @@ def test_load_fleet_row_and_report_of_a_camera_session(tmp_path: Path) -> None:
     assert "## Verdict: PASS" in text and "## Held-out images" in text
     assert "## Reprojection per image" in text and "## Predicted accuracy" in text
     assert (report.parent / "camera_residuals.png").is_file()
+    from pipeline.planning import plan_from_session
+
+    with pytest.raises(ArmsigError, match="not a camera's images"):  # plan --from: one line
+        plan_from_session(d, 10)
 
 
 def test_plan_refuses_a_camera_in_one_line() -> None:
@@ -221,3 +225,38 @@ def test_design_chain_significantly_better_fails() -> None:
     h = PixelHoldout(np.full(8, 0.6) + np.arange(8) * 1e-3, np.full(8, 0.5), np.full(8, 0.3))
     v = judge_camera(_evidence(), h, 0.2, Thresholds())
     assert v.level == FAIL and any("worse than the design chain" in r for r in v.reasons)
+
+
+def test_reading_covariance_is_the_dense_sandwich(tmp_path: Path) -> None:
+    """``H⁻¹ (Σ_i J_iᵀ G_i Σ_q G_iᵀ J_i) H⁻¹`` grouped by image equals the dense
+    ``H⁻¹ Jᵀ C J H⁻¹`` with ``C`` the readings' block-diagonal pixel covariance; zero
+    without reading noise; the stage's covariance holds it."""
+    from pipeline.refine.camera_fit import fit_camera
+    from pipeline.refine.camera_readings import reading_covariance, reading_jacobian
+    from pipeline.refine.solve import Problem, residuals_and_jacobian
+    from pipeline.stages import camera_fit, detections, joints, session
+    from pipeline.stages.base import RECORDING, NoParams
+
+    d = tmp_path / "s"
+    simulate_session(d, SimulationOptions(sensor="camera", setup="eye-in-hand", poses=12))
+    t: dict = {RECORDING: read_recording(d / "recording.mcap")}
+    for stage in (session, joints, detections):
+        t[stage.STAGE.name] = stage.STAGE.compute(t, NoParams())
+    det, design, lens, setup = camera_fit.detections_for_fit(t)
+    fit = fit_camera(det, design, lens, setup)
+    x = fit.solution.x
+    J = residuals_and_jacobian(Problem(fit.model, fit.block), x)[1]
+    H_inv = fit.solution.covariance / fit.solution.noise_scale**2
+    sigma_q = camera_fit.reading_sigma(t["session"])
+    G = reading_jacobian(fit.block, fit.model, x)
+    image = np.repeat(fit.block.image, 2)
+    C = (G * sigma_q**2) @ G.T * (image[:, None] == image[None, :])
+    dense = H_inv @ J[: len(G)].T @ C @ J[: len(G)] @ H_inv
+    grouped = reading_covariance(fit.block, fit.model, x, J, H_inv, sigma_q)
+    assert np.abs(grouped - dense).max() <= 1e-9 * np.abs(dense).max(), (
+        np.abs(grouped - dense).max() / np.abs(dense).max()
+    )
+    assert np.abs(reading_covariance(fit.block, fit.model, x, J, H_inv, 0 * sigma_q)).max() == 0
+    with_q = fit_camera(det, design, lens, setup, reading_sigma=sigma_q)
+    n = fit.model.n_params
+    assert np.trace(with_q.solution.covariance[:n, :n]) > np.trace(fit.solution.covariance[:n, :n])

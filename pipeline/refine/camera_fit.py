@@ -30,7 +30,7 @@ robust loss). The start is closed form, as the peers do it (:func:`camera_start`
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -41,6 +41,7 @@ from pipeline.kinematics.chain import SerialChain, link_frames
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.optim.block import Array
 from pipeline.refine.camera_block import EYE_IN_HAND, EYE_TO_HAND, CameraBlock
+from pipeline.refine.camera_readings import reading_covariance
 from pipeline.refine.camera_start import CameraStart, camera_start
 from pipeline.refine.identifiability import Identifiability, analyse, fit_identifiable
 from pipeline.refine.kinematics import ChainModel, start_points
@@ -233,12 +234,15 @@ def fit_camera(
     loss: str = "soft_l1",
     f_scale: float = 3.0,
     chain: str = "fitted",
+    reading_sigma: Array | None = None,
 ) -> CameraFit:
     """The whole fit (module docstring). ``lens``: the stated lens (the start, the fixed
     values, or the prior's mean); ``prior_sigma`` (9,): the prior's σ (``intrinsics="prior"``).
     ``chain="design"``: the hand-eye problem of the peers, the chain held at its design
     (the sensor frame is then the design's base, the fixed body's pose six parameters of
-    the block: :class:`~pipeline.refine.camera_block.CameraBlock`)."""
+    the block: :class:`~pipeline.refine.camera_block.CameraBlock`). ``reading_sigma``
+    (n,): the joint readings' σ (rad / cm; the encoders' rounding), whose share of the
+    covariance the pixels' weights miss (:mod:`pipeline.refine.camera_readings`)."""
     _check(det, setup, intrinsics)
     start = camera_start(det, design, lens, setup, fit_lens=intrinsics == "fitted")
     model, x_kin = camera_model(det, design, start, setup, chain)
@@ -267,6 +271,12 @@ def fit_camera(
         problem = Problem(model, block, loss, f_scale, fixed_block=intrinsics == "fixed")
         units = (*model.param_units, *block.param_units)
         solution, ident = fit_identifiable(problem, x_start, units, True, len(det.image))
+    if reading_sigma is not None and solution.noise_scale > 0:  # noiseless: 0, as the rest
+        s2 = solution.noise_scale**2
+        J = residuals_and_jacobian(problem, solution.x)[1]
+        extra = reading_covariance(block, model, solution.x, J, solution.covariance / s2,
+                                   reading_sigma)  # fmt: skip
+        solution = replace(solution, covariance=solution.covariance + s2 * extra)
     r = block.predict(model, solution.x[: model.n_params], solution.x[model.n_params :]) - det.uv
     rms = float(np.sqrt(np.mean(np.sum(r**2, axis=1))))
     names = (*model.param_names, *block.param_names)

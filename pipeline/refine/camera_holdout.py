@@ -6,9 +6,10 @@ are held out; the whole fit is redone on the others (:func:`fit_camera`, its own
 closed-form start) and predicts the held-out images' pixels from their joint readings.
 Per held-out image: the RMS length of its points' reprojection errors, px, and its
 expected value, the stated noise and the refit's parameter covariance carried to the
-pixels (``J Σ Jᵀ``), both scaled by the refit's χ²/dof as its covariance is:
+pixels (``J Σ Jᵀ``) and the image's own readings' rounding (``G Σ_q Gᵀ``,
+:mod:`pipeline.refine.camera_readings`), scaled by the refit's χ²/dof as its covariance is:
 
-    ``e_i² = mean over the image's points of σ² (2 s² + tr(J_d Σ J_dᵀ))``
+    ``e_i² = mean over the image's points of σ² (s² (2 + tr(G_d Σ_q G_dᵀ)) + tr(J_d Σ J_dᵀ))``
 
 with ``J_d`` (2, P) the whitened pixels' derivatives (:func:`residuals_and_jacobian`).
 Beside each, the *design model*'s error on the same image (the measured gain, issue 41):
@@ -30,6 +31,7 @@ from pipeline.kinematics.chain import SerialChain
 from pipeline.optim.block import Array
 from pipeline.refine.camera_block import CameraBlock
 from pipeline.refine.camera_fit import MIN_IMAGES, CameraFit, Detections, fit_camera, observing
+from pipeline.refine.camera_readings import reading_jacobian
 from pipeline.refine.solve import Problem, residuals_and_jacobian
 from pipeline.sensor.camera import Intrinsics
 from pipeline.sweeps import POSES_SWEEP
@@ -73,9 +75,12 @@ def subset(det: Detections, images: np.ndarray) -> Detections:
                                q=det.q[images])  # fmt: skip
 
 
-def predicted(fit: CameraFit, det: Detections) -> tuple[Array, Array]:
+def predicted(
+    fit: CameraFit, det: Detections, reading_sigma: Array | None = None
+) -> tuple[Array, Array]:
     """Per detection of ``det`` (images the fit did not see): its reprojection error under
-    ``fit`` (D,) px, and its expected square (D,) px² (module docstring)."""
+    ``fit`` (D,) px, and its expected square (D,) px² (module docstring), with the share
+    of the joint readings' σ ``reading_sigma`` (n,) when given."""
     model = observing(fit.model, det.q, det.q_signature)
     n = det.n_images
     keys = pa.table(
@@ -91,6 +96,9 @@ def predicted(fit: CameraFit, det: Detections) -> tuple[Array, Array]:
     r, J = residuals_and_jacobian(Problem(model, block, "linear"), fit.solution.x)
     s = fit.solution
     var = np.einsum("rp,pq,rq->r", J, s.covariance, J)  # whitened, per coordinate
+    if reading_sigma is not None:  # the image's own readings' rounding, scaled as the rest
+        G = reading_jacobian(block, model, s.x)
+        var += s.noise_scale**2 * (G**2 @ np.asarray(reading_sigma, float) ** 2)
     sig2 = np.repeat(det.sigma_px**2, 2)
     err = np.hypot(*(r.reshape(-1, 2) * det.sigma_px[:, None]).T)
     expected = (sig2 * (s.noise_scale**2 + var)).reshape(-1, 2).sum(axis=1)
@@ -112,11 +120,11 @@ def camera_holdout(
     **fit_options: object,
 ) -> HeldOutImages:
     """The held-out images of ``det`` (module docstring); ``fit_options``: those of
-    :func:`fit_camera` (intrinsics, prior_sigma, loss, f_scale)."""
+    :func:`fit_camera` (intrinsics, prior_sigma, loss, f_scale, reading_sigma)."""
     out = held_out(det.n_images, fraction)
     kept, held = subset(det, ~out), subset(det, out)
     refit = fit_camera(kept, design, lens, setup, **fit_options)  # type: ignore[arg-type]
-    err, expected = predicted(refit, held)
+    err, expected = predicted(refit, held, fit_options.get("reading_sigma"))  # type: ignore[arg-type]
     peers = fit_camera(kept, design, lens, setup, chain="design", **fit_options)  # type: ignore[arg-type]
     design_err, _ = predicted(peers, held)
     h = held.n_images

@@ -86,13 +86,22 @@ def detections_for_fit(inputs: Mapping[str, Any]) -> tuple[Any, Any, Any, str]:
     return det, robot.design_chain(), Intrinsics.from_dict(rig["camera"]), str(rig["setup"])
 
 
+def reading_sigma(session: pa.Table) -> np.ndarray:
+    """The joint readings' σ (n,) rad / cm: the encoders' rounding, resolution / √12."""
+    from pipeline.units import joints_to_internal
+
+    robot = session_robot(session)
+    return np.asarray(joints_to_internal(robot.encoder_resolution, robot.prismatic)) / np.sqrt(12)
+
+
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.refine.camera_fit import fit_camera, held_line
     from pipeline.refine.identifiability import summary as identifiability_summary
 
     det, design, lens, setup = detections_for_fit(inputs)
     fit = fit_camera(det, design, lens, setup, params.intrinsics, params.prior_sigma(),
-                     params.loss, params.f_scale)  # fmt: skip
+                     params.loss, params.f_scale,
+                     reading_sigma=reading_sigma(inputs["session"]))  # fmt: skip
     s = fit.solution
     units = [*fit.model.param_units, *fit.block.param_units]
     deg = np.array([u == "rad" for u in units])
@@ -129,9 +138,10 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "camera_fit",
-    4,  # 2: per-image reprojection errors and the identifiability in the summary; 3: the
+    5,  # 2: per-image reprojection errors and the identifiability in the summary; 3: the
     # start frames, q̄^s (rad / cm) and the fitted frames S̄_0 … S̄_n and tool (cm);
-    # 4: the covariance rows (the signature's uncertainty, holdout and verdict)
+    # 4: the covariance rows (the signature's uncertainty, holdout and verdict);
+    # 5: the covariance with the joint readings' rounding (refine/camera_readings.py)
     ("session", "joints", "detections"),
     Params(),
     compute,

@@ -15,7 +15,7 @@ import pyarrow as pa
 
 from pipeline.schemas import arrow_schema
 from pipeline.stages.base import Stage, check_param
-from pipeline.stages.camera_fit import detections_for_fit, table_images
+from pipeline.stages.camera_fit import detections_for_fit, reading_sigma, table_images
 
 
 @dataclass(frozen=True)
@@ -46,7 +46,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     fit = fit_params(inputs["camera_fit"])
     h = camera_holdout(det, design, lens, setup, params.fraction, intrinsics=fit.intrinsics,
                        prior_sigma=fit.prior_sigma(), loss=fit.loss,
-                       f_scale=fit.f_scale)  # fmt: skip
+                       f_scale=fit.f_scale,
+                       reading_sigma=reading_sigma(inputs["session"]))  # fmt: skip
     columns = {
         "image": table_images(inputs["detections"])[h.image], "points": h.points,
         "rms_px": h.rms_px, "expected_px": h.expected_px, "design_rms_px": h.design_rms_px,
@@ -58,7 +59,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "camera_holdout",
-    1,
+    2,  # 2: the joint readings' rounding in the refit's covariance and the prediction
     ("session", "joints", "detections", "camera_fit"),
     Params(),
     compute,
