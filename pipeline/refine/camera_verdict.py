@@ -22,7 +22,18 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from pipeline.refine.verdict import CHECK, FAIL, PASS, Evidence, Reason, Thresholds, Verdict, judge
+from pipeline.refine.verdict import (
+    CHECK,
+    FAIL,
+    PASS,
+    Evidence,
+    Reason,
+    Thresholds,
+    Verdict,
+    judge,
+    predicted_part,
+    with_first_reason,
+)
 
 #: Held-out pixel errors below this are no finding, however many σ: a thousandth of a
 #: pixel, a fiftieth of a good corner detector's ~0.05 px, above a noiseless session's
@@ -101,14 +112,7 @@ def pixel_reasons(h: PixelHoldout, t: Thresholds) -> list[Reason]:
 def camera_line(level: str, e: Evidence, h: PixelHoldout, sigma_px: float) -> str:
     """``PASS  predicted 0.05 cm RMS (95 % 0.08), held-out 0.21 px (predicted there 0.2),
     31× the design chain held out (6.5 → 0.21 px), χ²/dof 0.97 (stated σ 0.2 px)``."""
-    parts = []
-    if e.predicted_rms_cm is not None:
-        p95 = "" if e.predicted_p95_cm is None else f"95 % {e.predicted_p95_cm:.2g}"
-        u = f"unmodelled {e.unmodelled_rms_cm:.2g}" if e.unmodelled_rms_cm else ""
-        inner = ", ".join(x for x in (p95, u) if x)
-        parts.append(
-            f"predicted {e.predicted_rms_cm:.2g} cm RMS" + (f" ({inner})" if inner else "")
-        )
+    parts = [p for p in (predicted_part(e),) if p]
     parts.append(f"held-out {h.rms:.2g} px (predicted there {h.expected:.2g})")
     if h.gain is not None and h.design > FLOOR_PX:
         parts.append(f"{h.gain:.3g}× the design chain held out ({h.design:.2g} → {h.rms:.2g} px)")
@@ -133,8 +137,5 @@ def judge_camera(e: Evidence, h: PixelHoldout, sigma_px: float, t: Thresholds) -
     found = sorted((*held, *pixel), key=lambda r: r.level != FAIL)
     level = FAIL if any(r.level == FAIL for r in found) else CHECK if found else PASS
     reasons = tuple(r.text for r in found)
-    line = camera_line(level, e, h, sigma_px)
-    if reasons and level != PASS:
-        more = f" (+{len(reasons) - 1} more)" if len(reasons) > 1 else ""
-        line += f" — {reasons[0]}{more}"
+    line = with_first_reason(camera_line(level, e, h, sigma_px), level, reasons)
     return Verdict(level, reasons, line, tuple(found), v.decided_by)
