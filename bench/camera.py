@@ -57,7 +57,7 @@ def one(d: Path, robot: str, setup: str, images: int, seed: int) -> dict:
     c0 = time.process_time()
     from pipeline.refine.camera_fit import fit_camera
 
-    fit = fit_camera(det, design, lens, setup)
+    fit = fit_camera(det, design, lens, setup, reading_sigma=camera_fit.reading_sigma(t["session"]))
     cpu = time.process_time() - c0
     desc = description_from_dict(t[RECORDING].robot["robot"])
     audit = audit_camera_fit(fit, truth, desc, det.q_signature)
@@ -105,11 +105,13 @@ def timing() -> None:
         d = Path(tmp) / "s"
         opts = SimulationOptions(sensor="camera", poses=150, target_file=str(board))
         simulate_session(d, opts)
-        det, design, lens, setup = camera_fit.detections_for_fit(tables(d))
+        t = tables(d)
+        det, design, lens, setup = camera_fit.detections_for_fit(t)
+        sigma_q = camera_fit.reading_sigma(t["session"])  # as the stage fits it
         cpu = []
         for _ in range(runs):
             c0 = time.process_time()
-            fit = fit_camera(det, design, lens, setup)
+            fit = fit_camera(det, design, lens, setup, reading_sigma=sigma_q)
             cpu.append(time.process_time() - c0)
     print(
         f"camera fit, {det.n_images} images x {len(det.image) // det.n_images} corners "

@@ -34,6 +34,7 @@ class ExportFormat(StrEnum):
     mdh = "mdh"
     json = "json"
     ur_kinematics = "ur-kinematics"
+    camera_info = "camera-info"
 
 
 class ExportFrame(StrEnum):

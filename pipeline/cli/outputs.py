@@ -63,8 +63,9 @@ def export(
     format_: Annotated[
         ExportFormat | None,
         choice(
-            "urdf, dh, mdh (Craig), json, or ur-kinematics (UR's kinematics.yaml) "
-            "(docs/export.md); urdf with --onto.",
+            "urdf, dh, mdh (Craig), json, ur-kinematics (UR's kinematics.yaml) or "
+            "camera-info (a camera session's lens, ROS camera_info YAML) (docs/export.md); "
+            "urdf with --onto.",
             "--format",
         ),
     ] = None,
@@ -167,6 +168,20 @@ def export(
         )
         if u.sidecar_warning:
             warn(u.sidecar_warning)
+        return
+    if format_ is ExportFormat.camera_info:
+        if design or frame is not None or joint_map is not None or over is not None:
+            raise ArmsigError(
+                "--format camera-info writes the camera session's lens",
+                expected="no --design, --frame, --joint-map or --over",
+            )
+        from pipeline.export.camera_info import export_camera_info
+
+        c = export_camera_info(session, out, force, accept_verdict)
+        report(c, as_json, f"wrote {c.path} (ROS camera_info of {session}'s lens; read back to "
+               f"{c.max_relative_error:.1e} relative)")  # fmt: skip
+        if c.verdict_warning:
+            warn(c.verdict_warning)
         return
     if format_ is None or joint_map is not None:
         raise ArmsigError(

@@ -25,10 +25,14 @@ from pipeline.export.documents import chain_document, chain_from_document, dh_do
 from pipeline.export.rigid import RigidLoss, rigid_signature
 from pipeline.export.sidecar import check_sidecar, sidecar_document, sidecar_path
 from pipeline.export.urdf import (
+    BASE_LINK,
     M_PER_CM,
     as_written,
+    camera_origins,
     chain_from_origins,
     fixed_origins,
+    joint_origins,
+    link_names,
     urdf_text,
     written_origins,
 )
@@ -49,9 +53,10 @@ from pipeline.signature.verdict import verdict_gate
 from pipeline.units import joints_to_internal
 
 #: The formats of :func:`export` (a chain in armsig's frames), and every ``--format``:
-#: ``ur-kinematics`` is :func:`pipeline.export.ur_kinematics.export_ur_kinematics`.
+#: ``ur-kinematics`` is :func:`pipeline.export.ur_kinematics.export_ur_kinematics`,
+#: ``camera-info`` :func:`pipeline.export.camera_info.export_camera_info`.
 CHAIN_FORMATS = ("urdf", "dh", "mdh", "json")
-FORMATS = (*CHAIN_FORMATS, "ur-kinematics")
+FORMATS = (*CHAIN_FORMATS, "ur-kinematics", "camera-info")
 #: The world frame of each format when ``--frame`` is not given: a URDF's root is the robot's
 #: base (ROS's ``base_link``); the tables and the chain JSON keep the signature's own frame.
 DEFAULT_FRAME = {"urdf": "design-base", "dh": "sensor", "mdh": "sensor", "json": "sensor"}
@@ -186,6 +191,24 @@ def json_text(doc: dict[str, Any]) -> str:
     return "{\n" + body + "\n}\n"
 
 
+def camera_frame(sig: Signature, chain: SerialChain, robot: Any) -> tuple[str, np.ndarray] | None:
+    """A camera session's camera in the URDF (issue 39): its parent link and its optical
+    frame there (cm): eye-to-hand the sensor frame itself, in the exported world
+    (``base_link``); eye-in-hand the signature's tool, on the last joint's link. None
+    without a camera."""
+    if sig.camera is None:
+        return None
+    if sig.camera["setup"] == "eye-to-hand":
+        return BASE_LINK, chain.base @ invert_transform(sig.chain.base)
+    return link_names(robot)[robot.n_joints], joint_origins(chain)[-1]
+
+
+def _static(T: np.ndarray, prismatic: np.ndarray) -> SerialChain:
+    """A chain whose every configuration puts its tool at ``T`` (for :func:`_check`)."""
+    n = len(prismatic)
+    return SerialChain(np.broadcast_to(np.eye(4), (n, 4, 4)).copy(), prismatic, np.eye(4), T)
+
+
 def _with_tool(chain: SerialChain, tool: np.ndarray) -> SerialChain:
     return SerialChain(chain.links, chain.prismatic, chain.base, tool, chain.joint_offsets)
 
@@ -216,10 +239,15 @@ def render(
         urdf_tool0 = SerialChain(
             np.concatenate((urdf_tool0.links[:-1], (flange @ tool0)[None])), pris, urdf_tool0.base
         )
+        camera = camera_frame(sig, chain, robot) if model == "signature" else None
+        pairs = [(_with_tool(chain, t0), urdf_tool0)]
+        if camera is not None:  # the optical frame as the two origins state it
+            link, optical = as_written(camera_origins(camera[1]))
+            pairs.append((_static(camera[1], pris), _static(link @ optical, pris)))
         return (
-            urdf_text(chain, robot, name, comment, t0),
+            urdf_text(chain, robot, name, comment, t0, camera),
             chain_from_origins(origins, pris),
-            [(_with_tool(chain, t0), urdf_tool0)],
+            pairs,
         )
     if fmt == "json":
         doc = chain_document(chain, robot, model, frame)

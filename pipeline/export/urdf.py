@@ -38,6 +38,12 @@ TOOL0_LINK, TOOL0_JOINT = "tool0", "tool0_joint"
 #: ``tool0`` in ``flange`` (ROS-Industrial's ur_description, REP-199): rpy (π/2, 0, π/2), so
 #: tool0's z is the flange's x (out of the flange) and tool0's x the flange's y.
 TOOL0_IN_FLANGE = transform_from_xyz_rpy([0.0, 0.0, 0.0], [np.pi / 2, 0.0, np.pi / 2])
+#: A camera's frames (ROS REP 103 and 105): ``camera_link`` (x forward, y left, z up) and
+#: ``camera_optical_frame`` (z along the optical axis, x right, y down: OpenCV's, armsig's
+#: camera frame) on it with rpy (−π/2, 0, −π/2).
+CAMERA_LINK, CAMERA_JOINT = "camera_link", "camera_joint"
+OPTICAL_LINK, OPTICAL_JOINT = "camera_optical_frame", "camera_optical_joint"
+OPTICAL_IN_CAMERA_LINK = transform_from_xyz_rpy([0.0, 0.0, 0.0], [-np.pi / 2, 0.0, -np.pi / 2])
 NO_RATES = (
     "velocity and effort limits: not in the robot description, written as 0 because urdfdom "
     "requires the attributes; set them (or velocity_limit and effort_limit in the "
@@ -119,12 +125,26 @@ def _limit(j: JointSpec) -> str:
     return f'<limit lower="{_num(lo)}" upper="{_num(hi)}" effort="{_num(e)}" velocity="{_num(v)}"/>'
 
 
+def camera_origins(optical_in_parent: Array) -> Array:
+    """Origins (cm) of ``camera_link`` on its parent and of ``camera_optical_frame`` on
+    ``camera_link`` (2, 4, 4), for the optical frame at ``optical_in_parent`` (4, 4)."""
+    link = optical_in_parent @ invert_transform(OPTICAL_IN_CAMERA_LINK)
+    return np.stack((link, OPTICAL_IN_CAMERA_LINK))
+
+
 def urdf_text(
-    chain: SerialChain, robot: RobotDescription, name: str, comment: str, tool0_from_last: Array
+    chain: SerialChain,
+    robot: RobotDescription,
+    name: str,
+    comment: str,
+    tool0_from_last: Array,
+    camera: tuple[str, Array] | None = None,
 ) -> str:
     """The URDF document of ``chain`` (cm, rad; single robot) with ``robot``'s names and
     limits, and the flange frames (:func:`fixed_origins`). ``comment`` (plain text) goes at
-    the top: which model, which frame."""
+    the top: which model, which frame. ``camera``: a camera's parent link and its optical
+    frame there (4, 4, cm): ``camera_link`` and ``camera_optical_frame``
+    (:func:`camera_origins`)."""
     origins = joint_origins(chain)
     flange, tool0 = fixed_origins(chain, tool0_from_last)
     links = link_names(robot)
@@ -151,8 +171,17 @@ def urdf_text(
         *_fixed(TOOL_JOINT, links[n], TOOL_LINK, origins[-1]),
         *_fixed(FLANGE_JOINT, links[n], FLANGE_LINK, flange),
         *_fixed(TOOL0_JOINT, FLANGE_LINK, TOOL0_LINK, tool0),
-        "</robot>",
     ]
+    if camera is not None:
+        parent, optical = camera
+        on_parent, on_link = camera_origins(optical)
+        lines += [
+            f"  <link name={quoteattr(CAMERA_LINK)}/>",
+            f"  <link name={quoteattr(OPTICAL_LINK)}/>",
+            *_fixed(CAMERA_JOINT, parent, CAMERA_LINK, on_parent),
+            *_fixed(OPTICAL_JOINT, CAMERA_LINK, OPTICAL_LINK, on_link),
+        ]
+    lines.append("</robot>")
     return "\n".join(lines) + "\n"
 
 

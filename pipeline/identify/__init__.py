@@ -107,12 +107,12 @@ def _run(
     product = [r for r in runs if r.name == PRODUCT[0]]
     if not product and any(r.name == "flange_poses" for r in runs):  # no arm (issue 40)
         return _hand_eye(sdir, runs, report)
-    if not product:  # a stage list without a product (a camera session, issue 39)
+    if not product:  # a stage list without a product
         names = ", ".join(r.name for r in runs)
         why = (
             f"{FILE_NAME} not written: this session's stages ({names}) end before a "
             "signature (stages/camera_fit.arrow holds the camera's fit, report/report.md "
-            "its report; a camera session's signature is not written yet, issue 39)"
+            "its report)"
         )
         camera = any(r.name == "camera_fit" for r in runs)
         rep = _camera_report(sdir) if camera and report else None
@@ -168,6 +168,8 @@ def _report_if_stale(sdir: Path, hashes: dict[str, str | None]) -> Path:
     from pipeline.signature.file import FILE_NAME
 
     def write() -> Path:
+        if "camera_fit" in hashes:  # a camera session's report (issue 39)
+            return _camera_report(sdir)
         from pipeline.report.identification import write_report  # matplotlib: when needed
 
         return write_report(sdir)

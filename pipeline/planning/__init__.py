@@ -270,6 +270,13 @@ def plan_from_session(
     from pipeline.stages.tables import read_table
 
     sdir = Path(session_dir)
+    if stage_path(sdir, "camera_fit").is_file():  # issue 39: a camera's images are not planned
+        raise ArmsigError(
+            f"{sdir}: plan --from chooses among a tracker's poses, not a camera's images",
+            expected="a tracker or digitizer session with a pose set",
+            fix="record camera images at random poses spread over the joint ranges "
+            "(docs/camera.md: what the fit needs)",
+        )
     names = ("session", "joints", "positions", "frames", "refine")
     if not all(stage_path(sdir, n).is_file() for n in names):
         raise ArmsigError(f"{sdir}: not identified", fix=f"run `pipeline identify {sdir}` first")

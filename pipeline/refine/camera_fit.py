@@ -30,7 +30,7 @@ robust loss). The start is closed form, as the peers do it (:func:`camera_start`
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -41,6 +41,7 @@ from pipeline.kinematics.chain import SerialChain, link_frames
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.optim.block import Array
 from pipeline.refine.camera_block import EYE_IN_HAND, EYE_TO_HAND, CameraBlock
+from pipeline.refine.camera_readings import reading_covariance
 from pipeline.refine.camera_start import CameraStart, camera_start
 from pipeline.refine.identifiability import Identifiability, analyse, fit_identifiable
 from pipeline.refine.kinematics import ChainModel, start_points
@@ -233,12 +234,15 @@ def fit_camera(
     loss: str = "soft_l1",
     f_scale: float = 3.0,
     chain: str = "fitted",
+    reading_sigma: Array | None = None,
 ) -> CameraFit:
     """The whole fit (module docstring). ``lens``: the stated lens (the start, the fixed
     values, or the prior's mean); ``prior_sigma`` (9,): the prior's σ (``intrinsics="prior"``).
     ``chain="design"``: the hand-eye problem of the peers, the chain held at its design
     (the sensor frame is then the design's base, the fixed body's pose six parameters of
-    the block: :class:`~pipeline.refine.camera_block.CameraBlock`)."""
+    the block: :class:`~pipeline.refine.camera_block.CameraBlock`). ``reading_sigma``
+    (n,): the joint readings' σ (rad / cm; the encoders' rounding), whose share of the
+    covariance the pixels' weights miss (:mod:`pipeline.refine.camera_readings`)."""
     check_detections(det, setup, intrinsics)
     start = camera_start(det, design, lens, setup, fit_lens=intrinsics == "fitted")
     model, x_kin = camera_model(det, design, start, setup, chain)
@@ -246,12 +250,14 @@ def fit_camera(
     if chain == "design":
         own = np.concatenate([np.zeros(3), start.fixed_in_base[:3, 3], k0])
         block = camera_block(det, setup, own, lens, intrinsics, prior_sigma, start.fixed_in_base)
-        return fit_held(det, model, block, x_kin, start, intrinsics, loss, f_scale)
+        return fit_held(det, model, block, x_kin, start, intrinsics, loss, f_scale,
+                        reading_sigma)  # fmt: skip
     block = camera_block(det, setup, k0, lens, intrinsics, prior_sigma)
     x_start = np.concatenate([x_kin, k0])
     problem = Problem(model, block, loss, f_scale, fixed_block=intrinsics == "fixed")
     units = (*model.param_units, *block.param_units)
     solution, ident = fit_identifiable(problem, x_start, units, True, len(det.image))
+    solution = _with_readings(problem, block, solution, reading_sigma)
     return _result(det, model, block, solution, start, x_start, ident, intrinsics)
 
 
@@ -273,11 +279,12 @@ def camera_block(
 
 def fit_held(
     det: Detections, model: ChainModel, block: CameraBlock, x_kin: Array, start: CameraStart,
-    intrinsics: str, loss: str, f_scale: float,
+    intrinsics: str, loss: str, f_scale: float, reading_sigma: Array | None = None,
 ) -> CameraFit:  # fmt: skip
     """The fit with the chain's axes held (at the design, or none: a session of flange
     poses, :mod:`pipeline.refine.hand_eye`), the fixed body's pose six parameters of the
-    block, the lens held by mask (``intrinsics="fixed"``)."""
+    block, the lens held by mask (``intrinsics="fixed"``); ``reading_sigma`` as
+    :func:`fit_camera`'s."""
     x_start = np.concatenate([x_kin, block.x0])
     held = np.zeros(len(x_start), bool)
     held[: model.n_axis_params] = True
@@ -287,7 +294,23 @@ def fit_held(
     units = (*model.param_units, *block.param_units)
     J = residuals_and_jacobian(problem, solution.x)[1]
     ident = analyse(J, units, True, len(det.image), held)
+    solution = _with_readings(problem, block, solution, reading_sigma)
     return _result(det, model, block, solution, start, x_start, ident, intrinsics)
+
+
+def _with_readings(
+    problem: Problem, block: CameraBlock, solution: Solution, reading_sigma: Array | None
+) -> Solution:
+    """``solution`` with the joint readings' share of its covariance added
+    (:func:`pipeline.refine.camera_readings.reading_covariance`); as it is without
+    ``reading_sigma`` or noise (noiseless: 0, as the rest)."""
+    if reading_sigma is None or not solution.noise_scale > 0:
+        return solution
+    s2 = solution.noise_scale**2
+    J = residuals_and_jacobian(problem, solution.x)[1]
+    extra = reading_covariance(block, problem.model, solution.x, J,
+                               solution.covariance / s2, reading_sigma)  # fmt: skip
+    return replace(solution, covariance=solution.covariance + s2 * extra)
 
 
 def _result(

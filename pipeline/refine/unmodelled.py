@@ -51,21 +51,29 @@ class Unmodelled:
 
 
 def unmodelled_error(
-    residuals: Array, n_params: int, chi2: float, dof: int, noise_stated: bool = True
+    residuals: Array,
+    n_params: int,
+    chi2: float,
+    dof: int,
+    noise_stated: bool = True,
+    components: int = 3,
 ) -> Unmodelled:
     """:class:`Unmodelled` of the 3-D fit residuals ``residuals`` (K, 3) cm of a model of
     ``n_params`` parameters whose fit had ``chi2`` on ``dof`` degrees of freedom
     (module docstring); ``noise_stated`` false: the points' noise is unknown. Rows with a
-    NaN are left out."""
+    NaN are left out. ``components``: the measured components per row (3; a camera's
+    pixel residuals carried to the target: 2, their third component 0), the ``3K`` of
+    the module docstring."""
     from scipy.special import chdtrc  # χ² survival function (scipy.stats imports ~0.3 s)
 
     r = np.asarray(residuals, float)
     r = r[np.isfinite(r).all(axis=1)]
     K = len(r)
-    if K == 0 or 3 * K <= n_params or dof <= 0:
+    n = components * K
+    if K == 0 or n <= n_params or dof <= 0:
         return Unmodelled(0.0, float("nan"), None, K)
     rms = float(np.sqrt(np.mean(np.sum(r**2, axis=1))))
-    ms = rms**2 * 3 * K / (3 * K - n_params)
+    ms = rms**2 * n / (n - n_params)
     if not noise_stated:
         return Unmodelled(float(np.sqrt(ms)), rms, None, K)
     p = float(chdtrc(dof, chi2))

@@ -476,14 +476,7 @@ def _line(level: str, e: Evidence, reasons: tuple[str, ...], t: Thresholds) -> s
     model held out (0.071 → 0.009 cm), χ²/dof 1.02, mic biases within 3.6σ`` (parts
     without a number left out; the unmodelled part after the 95 % when there is one); the
     first reason follows a non-PASS verdict."""
-    parts = []
-    if e.predicted_rms_cm is not None:
-        p95 = "" if e.predicted_p95_cm is None else f"95 % {_g(e.predicted_p95_cm)}"
-        u = f"unmodelled {_g(e.unmodelled_rms_cm)}" if e.unmodelled_rms_cm else ""
-        inner = ", ".join(x for x in (p95, u) if x)
-        parts.append(
-            f"predicted {_g(e.predicted_rms_cm)} cm RMS" + (f" ({inner})" if inner else "")
-        )
+    parts = [p for p in (predicted_part(e),) if p]
     if e.holdout_rms_cm is not None:
         hx = e.holdout_expected_rms_cm
         there = "" if hx is None else f" (predicted there {_g(hx)})"
@@ -507,8 +500,22 @@ def _line(level: str, e: Evidence, reasons: tuple[str, ...], t: Thresholds) -> s
             parts.append(
                 f"mic biases within {t.floor_cm:g} cm" if within else f"mic bias at {worst:.1f}σ"
             )
-    text = f"{level}  " + ", ".join(parts)
+    return with_first_reason(f"{level}  " + ", ".join(parts), level, reasons)
+
+
+def predicted_part(e: Evidence) -> str | None:
+    """``predicted 0.006 cm RMS (95 % 0.011, unmodelled 0.004)`` of the verdict's line."""
+    if e.predicted_rms_cm is None:
+        return None
+    p95 = "" if e.predicted_p95_cm is None else f"95 % {_g(e.predicted_p95_cm)}"
+    u = f"unmodelled {_g(e.unmodelled_rms_cm)}" if e.unmodelled_rms_cm else ""
+    inner = ", ".join(x for x in (p95, u) if x)
+    return f"predicted {_g(e.predicted_rms_cm)} cm RMS" + (f" ({inner})" if inner else "")
+
+
+def with_first_reason(line: str, level: str, reasons: tuple[str, ...]) -> str:
+    """The verdict's ``line`` and, for a non-PASS ``level``, its first reason."""
     if reasons and level != PASS:
         more = f" (+{len(reasons) - 1} more)" if len(reasons) > 1 else ""
-        text += f" — {reasons[0]}{more}"
-    return text
+        line += f" — {reasons[0]}{more}"
+    return line

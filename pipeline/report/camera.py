@@ -92,5 +92,49 @@ def write_camera_report(session_dir: str | Path) -> Path:
             "## Residuals on the image plane\n\nEvery detected point's residual (predicted − "
             f"detected), magnified {gain:.3g}×.\n\n![]({png.name})"
         )
+    parts[1:1] = _signature_parts(sdir, out.parent)
     write_text_atomic(out, "\n\n".join(parts) + "\n")
+    return out
+
+
+def _signature_parts(sdir: Path, folder: Path) -> list[str]:
+    """The verdict (with the predicted error's map), the predicted accuracy and the
+    held-out images, when the session's stage list has them."""
+    from pipeline.report.verdict import error_map, verdict_section
+    from pipeline.stages.uncertainty import summary
+
+    if not stage_path(sdir, "verdict").is_file():
+        return []
+    unc = read_table(stage_path(sdir, "uncertainty"))
+    u = summary(unc)
+    out = [verdict_section(read_table(stage_path(sdir, "verdict")).to_pylist()[0],
+                           error_map(unc, folder / "error_map.png"))]  # fmt: skip
+    if u is not None:
+        out.append(
+            "## Predicted accuracy\n\nThe fit's covariance carried to the tool (the body on "
+            "the flange) in the sensor frame, over 1,000 random configurations, mm: RMS "
+            f"**{10 * u['sigma_total_rms_cm']:.3g}** (95 % {10 * u['sigma_total_p95_cm']:.3g}); "
+            f"the parameters' part {10 * u['sigma_position_rms_cm']:.3g}, of which "
+            f"{10 * u['sigma_position_aligned_rms_cm']:.3g} is not placement (base and tool); "
+            f"unmodelled {10 * u['sigma_unmodelled_rms_cm']:.3g} (the pixel residual beyond "
+            "the stated noise, at the target)."
+        )
+    hold = read_table(stage_path(sdir, "camera_holdout")).to_pylist()
+    out.append(
+        "## Held-out images\n\nThe last images in measurement order, the fit redone without "
+        "them; the design chain's hand-eye fit of the same images beside it.\n\n"
+        + markdown_table(
+            ("image", "points", "rms px", "predicted px", "design chain px"),
+            [
+                [
+                    r["image"],
+                    r["points"],
+                    f"{r['rms_px']:.3f}",
+                    f"{r['expected_px']:.3f}",
+                    f"{r['design_rms_px']:.3f}",
+                ]
+                for r in hold
+            ],
+        )  # fmt: skip
+    )
     return out

@@ -115,6 +115,9 @@ def _check_numbers(doc: dict[str, Any], source: str) -> None:
         },
         **{f"smodel.links[{i}]": B for i, B in enumerate(doc["smodel"]["links"])},
     }
+    for k, T in doc.get("camera", {}).items():  # a camera's hand-eye transforms (issue 39)
+        if k.endswith(("_in_base", "_in_flange")):
+            matrices[f"camera.{k}"] = T
     if "thesis_smodel" in doc:  # files of the refinement (issue 15)
         th = doc["thesis_smodel"]
         matrices["thesis_smodel.base"], matrices["thesis_smodel.tool"] = th["base"], th["tool"]

@@ -66,14 +66,10 @@ def read_signature_document(path: str | Path) -> dict[str, Any]:
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        camera = (p.parent / "stages" / "camera_fit.arrow").is_file()  # issue 39
         raise ArmsigError(
             f"cannot read signature {p}",
             got=str(exc),
-            fix="a camera session writes no signature yet: its fit is stages/camera_fit.arrow "
-            "and report/report.md (`pipeline audit` compares a simulated one with its truth)"
-            if camera
-            else "run `pipeline identify SESSION` to write it",
+            fix="run `pipeline identify SESSION` to write it",
         ) from exc
     doc = parse_json(text, str(p))
     check_document(doc, str(p))
@@ -89,7 +85,9 @@ class Signature:
     ``design_flange_to_tool``: the design alignment X, Y (4, 4) of the file;
     ``verdict``: its verdict (None: the file has none); ``nongeometric``: where the
     joints sit for given readings, under gravity and with their angle errors (None: the
-    rigid signature; :mod:`pipeline.kinematics.nongeometric`).
+    rigid signature; :mod:`pipeline.kinematics.nongeometric`); ``camera``: a camera
+    session's ``camera`` section (the set-up, the lens, the hand-eye transforms; None for
+    other sensors).
     """
 
     robot: RobotDescription
@@ -98,6 +96,7 @@ class Signature:
     design_flange_to_tool: np.ndarray
     verdict: SignatureVerdict | None = None
     nongeometric: NonGeometric | None = None
+    camera: dict[str, Any] | None = None  # a camera session's section (issue 39)
 
     @property
     def prismatic(self) -> np.ndarray:
@@ -180,4 +179,5 @@ def signature_from_document(doc: dict[str, Any], source: str) -> Signature:
         np.array(al["design_flange_to_signature_tool"], float),
         verdict_of(doc),
         _nongeometric_of(doc, robot),
+        doc.get("camera"),
     )

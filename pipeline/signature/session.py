@@ -72,16 +72,25 @@ def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict
     pris = robot.prismatic
     chain = chain_from_frames(read_table(stage_path(session_dir, "chain")), pris)
     thesis = chain_from_frames(read_table(stage_path(session_dir, "frames")), pris)
-    refinement = refinement_section(read_table(stage_path(session_dir, "refine")))
+    camera = read_table(stage_path(session_dir, "camera_fit")) if "camera_fit" in hashes else None
+    if camera is not None:  # a camera session (issue 39): its fit is in pixels, no features
+        from pipeline.stages.camera_chain import camera_refinement
+        from pipeline.stages.camera_fit import camera_warning
+
+        refine, refinement, features = None, camera_refinement(camera), []
+        camera_warnings = [w for w in (camera_warning(camera),) if w is not None]
+    else:
+        camera_warnings = []
+        refine = read_table(stage_path(session_dir, "refine"))
+        refinement = refinement_section(refine)
+        features = read_table(stage_path(session_dir, "features")).to_pylist()
     if hashes.get("verdict") is not None:  # the stage list holds the verdict
         refinement["verdict"] = read_table(stage_path(session_dir, "verdict")).to_pylist()[0]
-    refine = read_table(stage_path(session_dir, "refine"))
-    nongeometric = nongeometric_model(refine, robot)
+    nongeometric = None if refine is None else nongeometric_model(refine, robot)
     pdh = pseudo_dh_from_chain(chain)
     X, Y, misfit = design_alignment(chain, robot)
     qs = joints_to_boundary(chain.joint_offsets, pris)
     off = joints_to_boundary(pdh.q_offset, pris)
-    features = read_table(stage_path(session_dir, "features")).to_pylist()
     pseudo = []
     for i, j in enumerate(robot.joints):
         if j.prismatic:
@@ -148,7 +157,8 @@ def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict
             }
             for f in features
         ],
-        "warnings": [f"joint {f['joint']}: {w}" for f in features for w in f["warnings"]],
+        "warnings": [f"joint {f['joint']}: {w}" for f in features for w in f["warnings"]]
+        + camera_warnings,
         "provenance": {
             "recording_sha256": session.column("recording_sha256")[0].as_py(),
             "stages": hashes,
@@ -156,7 +166,11 @@ def signature_document(session_dir: Path, hashes: dict[str, str | None]) -> dict
             "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         },
     }
-    if nongeometric is not None:
+    if camera is not None:
+        from pipeline.stages.camera_chain import camera_section
+
+        doc["camera"] = camera_section(session, camera, X, Y)
+    if nongeometric is not None and refine is not None:
         rows = np.isin(refine.column("group").to_pylist(), KINDS)
         sigma = refine.column("sigma").to_numpy()[rows] * internal_factors(refine)[rows]
         doc["nongeometric"] = nongeometric_section(nongeometric, sigma)

@@ -92,12 +92,21 @@ def fit_pixels(rig: dict[str, Any], table: pa.Table) -> tuple[np.ndarray, ...]:
     return images, image.astype(np.int64), local[at], uv, sigma
 
 
+def reading_sigma(session: pa.Table) -> np.ndarray:
+    """The joint readings' σ (n,) rad / cm: the encoders' rounding, resolution / √12."""
+    from pipeline.units import joints_to_internal
+
+    robot = session_robot(session)
+    return np.asarray(joints_to_internal(robot.encoder_resolution, robot.prismatic)) / np.sqrt(12)
+
+
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.refine.camera_fit import fit_camera
 
     det, design, lens, setup = detections_for_fit(inputs)
     fit = fit_camera(det, design, lens, setup, params.intrinsics, params.prior_sigma(),
-                     params.loss, params.f_scale)  # fmt: skip
+                     params.loss, params.f_scale,
+                     reading_sigma=reading_sigma(inputs["session"]))  # fmt: skip
     s = fit.solution
     groups = ["axis"] * fit.model.n_axis_params + ["point"] * 3 + ["tool_rotation"] * 3
     groups += ["intrinsics"] * len(fit.block.x0)
@@ -141,6 +150,7 @@ def fit_table(
         "group": groups, "name": list(fit.names),
         "unit": ["deg" if d else u for d, u in zip(deg, units, strict=True)],
         "start": fit.x_start * scale, "value": s.x * scale, "sigma": s.sigma * scale,
+        "covariance": list(s.covariance * np.outer(scale, scale)),
     }  # fmt: skip
     return pa.table({f.name: pa.array(columns[f.name], f.type) for f in schema},
                     schema=schema.with_metadata(meta))  # fmt: skip
@@ -148,8 +158,10 @@ def fit_table(
 
 STAGE = Stage(
     "camera_fit",
-    3,  # 2: per-image reprojection errors and the identifiability in the summary; 3: the
-    # start frames, q̄^s (rad / cm) and the fitted frames S̄_0 … S̄_n and tool (cm)
+    5,  # 2: per-image reprojection errors and the identifiability in the summary; 3: the
+    # start frames, q̄^s (rad / cm) and the fitted frames S̄_0 … S̄_n and tool (cm);
+    # 4: the covariance rows (the signature's uncertainty, holdout and verdict);
+    # 5: the covariance with the joint readings' rounding (refine/camera_readings.py)
     ("session", "joints", "detections"),
     Params(),
     compute,

@@ -17,7 +17,9 @@ from pipeline.stages.session import session_robot
 from pipeline.sweeps import POSES_SWEEP
 
 
-def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
+def fitted_points(inputs: Mapping[str, Any]) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
+    """The fit's detections, every detected point in the camera (D, 3) cm under the fitted
+    chain, its predicted pixel (D, 2) and the fitted intrinsics (9,)."""
     from pipeline.refine.camera_block import camera_points
     from pipeline.refine.camera_fit import observing
     from pipeline.sensor.camera import project
@@ -27,7 +29,12 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     model, x, intrinsics, q_sig = fitted_model(inputs["camera_fit"], robot)
     at = observing(model, det.q, q_sig)
     t, R = at.positions(x)[det.image], at.tool_rotations(x)[det.image]
-    uv = project(camera_points(setup, t, R, det.local)[0], intrinsics)
+    P = camera_points(setup, t, R, det.local)[0]
+    return det, P, project(P, intrinsics), intrinsics
+
+
+def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
+    det, _, uv, _ = fitted_points(inputs)
     return residual_table(inputs["detections"], table_images(inputs["detections"]), det, uv)
 
 

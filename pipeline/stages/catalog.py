@@ -51,10 +51,25 @@ POINT_STAGE_MODULES = (
     "holdout_points",
     "verdict",
 )
+#: Identification stage modules of a camera session (issue 39): the fit to the pixels,
+#: then its ``frames`` (the start), ``chain``, ``uncertainty``, held-out images and
+#: ``verdict`` (modules ``camera_*`` with the pose sets' stage names where the table is
+#: theirs).
+CAMERA_STAGE_MODULES = (
+    "session",
+    "joints",
+    "detections",
+    "camera_fit",
+    "camera_residuals",
+    "camera_frames",
+    "camera_chain",
+    "camera_uncertainty",
+    "camera_holdout",
+    "camera_verdict",
+)
 #: recorded sensor kind (``/rig/description`` sensor) -> its identification stage modules
 SENSOR_STAGE_MODULES = {"sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES,
-                        "camera": ("session", "joints", "detections", "camera_fit",
-                                   "camera_residuals"),
+                        "camera": CAMERA_STAGE_MODULES,
                         # flange poses, no joints (issue 40): the camera only, no product
                         "camera-flange": ("session", "flange_poses", "image_detections",
                                           "hand_eye_fit", "hand_eye_residuals")}  # fmt: skip

@@ -255,7 +255,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         ]
     )
     tool = tools.mean(axis=0) if len(tools) > 1 else tools[0]
-    return _frames_table(np.concatenate([F, tool[None]], axis=0), qs, pris)
+    return frames_table(np.concatenate([F, tool[None]], axis=0), qs, pris)
 
 
 def pose_tool_target(plan: Mapping[str, Any], pos: pa.Table) -> str:
@@ -296,10 +296,10 @@ def _design_start_table(inputs: Mapping[str, Any], robot: Any) -> pa.Table:
         np.asarray(plan["tool_local_cm"], float),
         joints_to_internal(qs, pris),
     )
-    return _frames_table(np.concatenate([start.frames, start.tool[None]], axis=0), qs, pris)
+    return frames_table(np.concatenate([start.frames, start.tool[None]], axis=0), qs, pris)
 
 
-def _frames_table(T: np.ndarray, qs: np.ndarray, pris: np.ndarray) -> pa.Table:
+def frames_table(T: np.ndarray, qs: np.ndarray, pris: np.ndarray) -> pa.Table:
     """The ``frames`` table of ``S̄_0 … S̄_n`` and the tool ``T`` (n + 2, 4, 4) at q̄^s ``qs``
     (n,, boundary units)."""
     n = len(pris)

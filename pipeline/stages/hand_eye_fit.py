@@ -66,7 +66,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "camera_fit",
-    1,
+    2,  # 2: the covariance rows of the joint session's table (schema camera_fit v2)
     ("session", "flange_poses", "detections"),
     Params(),
     compute,

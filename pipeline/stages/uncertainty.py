@@ -87,13 +87,15 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
     refine = inputs["refine"]
     if refine.num_rows == 0:  # refinement disabled: no covariance
-        return _table(np.zeros((0, 3)), None, 0.0)
+        return uncertainty_table(np.zeros((0, 3)), None, 0.0)
     robot = session_robot(inputs["session"])
     q = robot.random_configurations(params.configurations, params.seed)
     fit = _fit_model(inputs)  # the fit's own observations, for both parts below
     model, x, Sigma = _tool_model(inputs, q, held_joint_covariance(inputs, fit))
     pred = predict_model(model, x, Sigma, params.seed)
-    return _table(tool_poses(model, x)[0], pred, pred.max95_cm, fit_unmodelled(inputs, fit))
+    return uncertainty_table(
+        tool_poses(model, x)[0], pred, pred.max95_cm, fit_unmodelled(inputs, fit)
+    )
 
 
 def _tool_model(
@@ -254,11 +256,17 @@ def _measured_at(joints: pa.Table, rows: pa.Table) -> np.ndarray:
     return np.array([t.get(k, np.inf) for k in keys], float)
 
 
-def _table(p: np.ndarray, pred: Any, max95: float, unmodelled: Any = None) -> pa.Table:
+def uncertainty_table(
+    p: np.ndarray, pred: Any, max95: float, unmodelled: Any = None, raw: bool = False
+) -> pa.Table:
+    """The stage's rows: tool positions ``p`` (m, 3), the :class:`Prediction` ``pred``,
+    ``max95`` and the :class:`Unmodelled`; ``sigma_total_cm`` of the aligned parameters'
+    part, or with ``raw`` of the raw one (a camera: its frames are physical, no alignment
+    takes a part of the error away, :mod:`pipeline.stages.camera_uncertainty`)."""
     m = len(p)
     cols = ("position_cm", "position_aligned_cm", "orientation_deg", "orientation_aligned_deg")
     u = 0.0 if unmodelled is None else unmodelled.rms_cm
-    aligned = np.zeros(0) if pred is None else pred.position_aligned_cm
+    aligned = np.zeros(0) if pred is None else pred.position_cm if raw else pred.position_aligned_cm
 
     def each(v: float | None) -> pa.Array:  # null, not NaN, where there is none
         none = v is None or not np.isfinite(v)
