@@ -5,6 +5,7 @@ from bench import (
     evaluate,
     fleet,
     identify,
+    identify_cost,
     ik,
     kinematics,
     montecarlo,
@@ -26,6 +27,8 @@ if __name__ == "__main__":
     identify.main()
     print()
     pose_sets.main()
+    print()
+    identify_cost.main()
     print()
     camera.timing()  # the accuracy study: python -m bench.camera (minutes)
     print()
