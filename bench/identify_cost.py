@@ -51,13 +51,20 @@ def _clear(d: Path) -> None:
     clear(d)
 
 
+def _env(**extra: str) -> dict[str, str]:
+    """The children's environment: Python's own byte-code cache on (as in an
+    installation; a session that turned it off would time compiling armsig's sources)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    return {**env, **extra}
+
+
 def _identify(d: Path, *extra: str) -> tuple[float, list[dict[str, Any]]]:
     """Process CPU and the ``--json`` stage rows of one cold ``pipeline identify``."""
     _clear(d)
     exe = str(Path(sys.executable).with_name("pipeline"))
     c0 = _child_cpu()
     out = subprocess.run([exe, "identify", str(d), "--json", *extra],
-                         capture_output=True, text=True)  # fmt: skip
+                         capture_output=True, text=True, env=_env())  # fmt: skip
     cpu = _child_cpu() - c0
     if out.returncode not in (0, 4):  # 4: a FAIL verdict is a finished run
         raise RuntimeError(f"identify {d} exited {out.returncode}: {out.stderr.strip()}")
@@ -65,7 +72,7 @@ def _identify(d: Path, *extra: str) -> tuple[float, list[dict[str, Any]]]:
 
 
 def _python(*args: str) -> str:
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}  # as the CLI
+    env = _env(OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(ROOT))  # as the CLI starts
     out = subprocess.run([sys.executable, *args], capture_output=True, text=True, env=env)
     if out.returncode:
         raise RuntimeError(f"{args}: {out.stderr.strip()}")
@@ -73,7 +80,8 @@ def _python(*args: str) -> str:
 
 
 def _modules(d: Path) -> list[str]:
-    """The modules a cold identify (with its report) imports, from a child process."""
+    """The modules a cold identify (with its report) imports, from a child process (which
+    also leaves the byte-code cache of every module warm for the timed runs)."""
     _clear(d)
     code = (
         "import sys; from pipeline.identify import identify; identify(sys.argv[1]); "
