@@ -182,7 +182,7 @@ def measure(d: Path, label: str) -> None:
     rows += [(f"imports: {k}", v) for k, v in _median([t["imports"] for t in tables]).items()]
     stages = _median([t["stages"] for t in tables])
     rows += [(f"stage {k}" + (" (fit)" if k in FIT else ""), v) for k, v in stages.items()]
-    rows.append(("runner (checks, hashes, around the stages)",
+    rows.append(("outside the stages (reading the recording, checks)",
                  statistics.median(t["runner"] for t in tables)))  # fmt: skip
     rows += [(f"report: {k}", v) for k, v in _median([t["report"] for t in tables]).items()]
     for name, v in sorted(rows, key=lambda r: -r[1]):
@@ -193,26 +193,16 @@ def measure(d: Path, label: str) -> None:
 
 
 def main() -> None:
-    from bench.pose_sets import REAL, REAL_MAP, UR10
+    from bench.pose_sets import real_ur10_c, simulated_ur10
 
     exe = str(Path(sys.executable).with_name("pipeline"))
     with tempfile.TemporaryDirectory() as tmp:
-        d = Path(tmp) / "ur10_1000"
-        subprocess.run(
-            [exe, "simulate", str(d), "--robot", str(UR10), "--sensor", "tracker",
-             "--poses", "1000", "--no-sweeps"],
-            check=True, capture_output=True,
-        )  # fmt: skip
+        d = simulated_ur10(exe, Path(tmp))
         measure(d, "identify cost (issue 45): UR10 simulated, 1,000 poses")
-        if not (REAL.is_file() and REAL_MAP.is_file()):
-            print("identify cost, UR10 real Series C: skipped (no ../shared/realdata)")
+        r = real_ur10_c(exe, Path(tmp))
+        if isinstance(r, str):
+            print(f"identify cost, UR10 real Series C: skipped ({r})")
             return
-        r = Path(tmp) / "ur10_c"
-        subprocess.run(
-            [exe, "import", str(REAL), "--format", "table", "--robot", str(UR10),
-             "--map", str(REAL_MAP), str(r)],
-            check=True, capture_output=True,
-        )  # fmt: skip
         measure(r, "identify cost (issue 45): UR10 real, Series C (2,773 poses)")
 
 

@@ -87,28 +87,41 @@ def plan_time() -> None:
         )
 
 
+def simulated_ur10(exe: str, folder: Path) -> Path:
+    """A simulated UR10 session of 1,000 random poses (tracker noise) in ``folder``."""
+    d = folder / "ur10_1000"
+    subprocess.run(
+        [exe, "simulate", str(d), "--robot", str(UR10), "--sensor", "tracker",
+         "--poses", "1000", "--no-sweeps"],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    return d
+
+
+def real_ur10_c(exe: str, folder: Path) -> Path | str:
+    """The real UR10 Series C imported into ``folder`` (as the README shows), or why not."""
+    if not (REAL.is_file() and REAL_MAP.is_file()):
+        return "no ../shared/realdata" if not REAL.is_file() else f"no {REAL_MAP.name}"
+    r = folder / "ur10_c"
+    subprocess.run(
+        [exe, "import", str(REAL), "--format", "table", "--robot", str(UR10),
+         "--map", str(REAL_MAP), str(r)],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    return r
+
+
 def main() -> None:
     exe = str(Path(sys.executable).parent / "pipeline")
     plan_time()
     print(f"pose sets (issue 26), median of {RUNS} cold runs")
     with tempfile.TemporaryDirectory() as tmp:
-        d = Path(tmp) / "ur10_1000"
-        subprocess.run(
-            [exe, "simulate", str(d), "--robot", str(UR10), "--sensor", "tracker",
-             "--poses", "1000", "--no-sweeps"],
-            check=True, capture_output=True,
-        )  # fmt: skip
+        d = simulated_ur10(exe, Path(tmp))
         _measure(exe, d, "UR10 simulated, 1,000 poses, tracker noise")
-        if not (REAL.is_file() and REAL_MAP.is_file()):
-            why = "no ../shared/realdata" if not REAL.is_file() else f"no {REAL_MAP.name}"
-            print(f"{'UR10 real, Series C (2,773 poses)':44s} skipped: {why}")
+        r = real_ur10_c(exe, Path(tmp))
+        if isinstance(r, str):
+            print(f"{'UR10 real, Series C (2,773 poses)':44s} skipped: {r}")
             return
-        r = Path(tmp) / "ur10_c"
-        subprocess.run(
-            [exe, "import", str(REAL), "--format", "table", "--robot", str(UR10),
-             "--map", str(REAL_MAP), str(r)],
-            check=True, capture_output=True,
-        )  # fmt: skip
         _measure(exe, r, "UR10 real, Series C (2,773 poses)")
         # Issues 27, 41: the default fits the rigid chain and each non-geometric candidate,
         # and takes the one cross-validation chooses (here the compliance); the rigid chain
