@@ -5,10 +5,11 @@ Printed per session (the real UR10 also with ``refine.nongeometric=none``, the r
 chain alone: the default fits the non-geometric candidates too and chooses among them by
 cross-validation, issues 27 and 41): the CPU of the whole cold
 ``pipeline identify`` (child process:
-interpreter, imports, stages, signature; no report) and the seconds of the fit itself
-(stages ``frames``: the design start, and ``refine``: the whole-chain fit, from ``--json``;
-one thread, so wall ~ CPU on a quiet machine). Issue 26's goal: under 2 s of CPU for the
-fit. The machines are shared: the median of ``BENCH_RUNS`` runs.
+interpreter, imports, stages, signature; no report) and the CPU seconds of the fit itself
+(stages ``frames``: the design start, and ``refine``: the whole-chain fit, their
+``cpu_seconds`` in ``--json``; their wall seconds until issue 45, which a loaded machine
+inflates). Issue 26's goal: under 2 s of CPU for the fit. The machines are shared: the
+median of ``BENCH_RUNS`` runs.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ def _identify(exe: str, d: Path, *extra: str) -> tuple[float, str]:
 
 def _fit_seconds(exe: str, d: Path, *extra: str) -> float:
     stages = json.loads(_identify(exe, d, "--json", *extra)[1])["stages"]
-    return sum(r["seconds"] for r in stages if r["name"] in FIT)
+    return sum(r["cpu_seconds"] for r in stages if r["name"] in FIT)
 
 
 def _measure(exe: str, d: Path, label: str, *extra: str) -> None:
@@ -62,7 +63,7 @@ def _measure(exe: str, d: Path, label: str, *extra: str) -> None:
         fit.append(_fit_seconds(exe, d, *extra))
     print(
         f"{label:44s} identify CPU {statistics.median(cpu):6.2f} s   "
-        f"fit (frames + refine) {statistics.median(fit):5.2f} s   (goal < 2 s)"
+        f"fit (frames + refine) CPU {statistics.median(fit):5.2f} s   (goal < 2 s)"
     )
 
 
