@@ -6,6 +6,7 @@ from bench import (
     fleet,
     hand_eye_real,
     identify,
+    identify_cost,
     ik,
     kinematics,
     montecarlo,
@@ -27,6 +28,8 @@ if __name__ == "__main__":
     identify.main()
     print()
     pose_sets.main()
+    print()
+    identify_cost.main()
     print()
     camera.timing()  # the accuracy study: python -m bench.camera (minutes)
     print()

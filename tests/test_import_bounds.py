@@ -129,19 +129,31 @@ def test_full_disk_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     _refusal(r, str(tmp_path / "s" / "recording.mcap"), "No space left on device")
 
 
-def test_more_rows_than_one_import_takes_is_one_line(tmp_path: Path, monkeypatch) -> None:
-    """Issue 32 item 6: a million-row import, then identify, ran for minutes in GBs; the
-    limit (docs/import.md, Size) is refused in one line with the count, nothing written.
-    The limit is lowered here so that 14 rows exceed it."""
-    import pipeline.importers as importers
+def test_more_rows_than_memory_takes_is_one_line(tmp_path: Path, monkeypatch) -> None:
+    """Issue 32 item 6, issue 45: no fixed row limit; a file whose identify would not fit
+    in the memory available is refused in one line with the count and the estimate,
+    nothing written. The available memory is set here to what 10 rows need, so that 14
+    rows exceed it."""
+    from pipeline.importers import memory
 
-    monkeypatch.setattr(importers, "MAX_ROWS", 10)
+    monkeypatch.setattr(memory, "available_bytes", lambda: memory.needed_bytes(10))
     src = tmp_path / "two.txt"
     src.write_text(sscanss2_text(TWO_LINK, TWO_LINK_VALUES))
     r = CliRunner().invoke(app, ["import", str(src), "--format", "sscanss2", "--robot",
                                  str(TWO_LINK), str(tmp_path / "s")])  # fmt: skip
-    _refusal(r, "two.txt: 14 rows, over the 10 one import takes", "1 row in 2 of each sweep")
+    _refusal(r, "two.txt: 14 rows need about 0.2 GB to identify", "at most ~10 rows",
+             "1 row in 2 of each sweep")  # fmt: skip
     assert not (tmp_path / "s").exists()
+
+
+def test_memory_estimate_reads_this_machine() -> None:
+    """The estimate grows with the rows, and this machine's available memory is read
+    (positive, below its total)."""
+    from pipeline.importers import memory
+
+    assert memory.needed_bytes(1_000_000) > memory.needed_bytes(100_000) > 0
+    avail = memory.available_bytes()
+    assert avail is not None and 0 < avail
 
 
 @pytest.mark.parametrize("index", ["nan", "-1e400", "inf", "1.5", "3"])

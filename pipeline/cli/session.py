@@ -83,13 +83,14 @@ def identify(
 
 
 def _run_dict(r: Any) -> dict[str, Any]:
-    """A :class:`~pipeline.stages.base.StageRun` for ``--json`` (seconds and rows of a
-    stage that ran, else null)."""
+    """A :class:`~pipeline.stages.base.StageRun` for ``--json`` (wall and CPU seconds and
+    rows of a stage that ran, else null)."""
     ran = r.action == "ran"
     return {
         "name": r.name,
         "action": r.action,
         "seconds": round(r.seconds, 4) if ran else None,
+        "cpu_seconds": round(r.cpu_seconds, 4) if ran else None,
         "rows": r.rows if ran else None,
     }
 

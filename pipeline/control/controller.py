@@ -231,18 +231,26 @@ class Controller:
         return np.broadcast_to(q, (m, n))
 
     def initial_estimate(
-        self, T_sensor: np.ndarray, branch=None, q_near: np.ndarray | None = None
+        self,
+        T_sensor: np.ndarray,
+        branch=None,
+        q_near: np.ndarray | None = None,
+        *,
+        compiled: bool = True,
     ) -> np.ndarray:
         """q⁰: closed-form design inverse on ``branch`` (Puma; None: the branch of each
         ``q_near`` row, else of q^s), or damped least squares from ``q_near`` (else q^s).
-        ``q_near`` (n,) or (m, n), rad / cm; the Puma's q⁰ takes its 2π class from it."""
+        ``q_near`` (n,) or (m, n), rad / cm; the Puma's q⁰ takes its 2π class from it.
+        ``compiled``: the damped least squares may run compiled (``newton_raphson``'s)."""
         qs = self._starts(T_sensor.shape[0], q_near)
         if self.robot.name == "puma560":
             if branch is None and q_near is None:
                 branch = self.default_branch()
             return self._design_inverse(branch)(T_sensor, qs)
         design = self._design_model(self.sensor_from_base)
-        res = newton_raphson(design, T_sensor, qs, self.resolution, max_iter=100, damping=1e-2)
+        res = newton_raphson(
+            design, T_sensor, qs, self.resolution, max_iter=100, damping=1e-2, compiled=compiled
+        )
         return res.q
 
     def solve(
@@ -286,7 +294,10 @@ class Controller:
         if self.robot.name == "puma560" and branch is None and q_near is None:
             branch = self.default_branch()
         T_sensor = self.sensor_from_base @ T
-        q0 = self.initial_estimate(T_sensor, branch, q_near)
+        # A history (the report's convergence table, ik-convergence: a target or a few)
+        # solves in numpy from a numpy start: importing and loading the compiled kernel
+        # cost 0.3 s of CPU for a sub-millisecond solve (issue 45).
+        q0 = self.initial_estimate(T_sensor, branch, q_near, compiled=not record_history)
         if method == "nr":
             res = newton_raphson(
                 self.signature.chain, T_sensor, q0, self.resolution, record_history=record_history

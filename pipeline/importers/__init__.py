@@ -15,6 +15,7 @@ import numpy as np
 
 from pipeline.errors import ImportFileError, os_errors_refused
 from pipeline.importers.mapping import ImportMap, load_map
+from pipeline.importers.memory import check_fits
 from pipeline.importers.rows import LENGTH_CM, MeasuredRows, checked_rows, concat_rows
 from pipeline.importers.session import ToolChoice, session_messages, tool_rows
 from pipeline.importers.sweeps import (
@@ -28,10 +29,6 @@ from pipeline.importers.write import source_metadata, write_imported
 from pipeline.robots.description import RobotDescription, load_description
 
 FORMATS = ("sscanss2", "table", "rct", "mat", "rosbag2", "images")  # images: a camera session
-#: The most rows one import takes. Measured on 2 cores (docs/import.md, "Size"): 100,000
-#: rows import in 22 s (0.67 GB) and identify in 37 s (0.87 GB); time and memory grow at
-#: least in proportion (a million rows: minutes and ~7 GB each), for no better signature.
-MAX_ROWS = 100_000
 #: What to try after an OSError of import or validate (:func:`~pipeline.errors.os_errors_refused`).
 OS_FIX = "check the path (a name of at most 255 bytes), its permissions and the free space"
 
@@ -195,13 +192,7 @@ def read_foreign(
             fix='e.g. joint = 2 with held = { "1" = 0.0 }',
         )
     rows, home = parse_foreign(files, fmt, robot, imap)
-    if len(rows.where) > MAX_ROWS:
-        raise ImportFileError(
-            f"{rows.name}: {len(rows.where):,} rows, over the {MAX_ROWS:,} one import takes",
-            expected=f"at most {MAX_ROWS:,} rows (docs/import.md, Size)",
-            fix=f"subsample the file (1 row in {-(-len(rows.where) // MAX_ROWS)} of each "
-            "sweep), or import a part and choose the informative poses with `pipeline plan --from`",
-        )
+    check_fits(rows.name, len(rows.where))  # no fixed limit: what memory takes
     tol = _tolerances(fmt, imap, robot)
     rows = checked_rows(rows, robot, tol)
     return rows, tool_rows(rows, home, robot, tol.held)
@@ -252,7 +243,6 @@ def import_file(
 
 __all__ = [
     "FORMATS",
-    "MAX_ROWS",
     "OS_FIX",
     "Imported",
     "expand_paths",

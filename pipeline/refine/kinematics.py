@@ -277,6 +277,33 @@ class ChainModel:
             v = (A[:, k] @ v[..., None])[..., 0]
         return v[:, :3]
 
+    def joint_differences(self, x: npt.ArrayLike, h: float) -> Array:
+        """``(p(θ + h e_k) − p(θ − h e_k)) / 2h`` (K, n, 3) of every observation and joint k,
+        each :meth:`positions` with joint k moved, bit for bit, with the other joints'
+        motions formed once (a twelfth of the work on six joints, issue 45). For joint
+        values that are ``θ`` itself (no non-geometric terms, or ``β = 0``)."""
+        x = np.asarray(x, float)
+        theta = self.joint_values(x)
+        S = self.frames(x)
+        A = self._motions(S, theta)
+        S_inv = invert_transform(S)
+        v = self._points_h(x)
+        K, n = theta.shape
+        out = np.zeros((K, n, 3))
+        for k in range(n - 1, -1, -1):  # v: Π_{i>k} A_i p0, as positions() forms it
+            still = np.arange(K)[k + 1 > self.link]
+            ends = []
+            for t in (theta[:, k] + h, theta[:, k] - h):
+                Ak = S[k] @ (trans_z(t) if self.prismatic[k] else rot_z(t)) @ S_inv[k]
+                Ak[still] = np.eye(4)
+                w = (Ak @ v[..., None])[..., 0]
+                for i in range(k - 1, -1, -1):
+                    w = (A[:, i] @ w[..., None])[..., 0]
+                ends.append(w[:, :3])
+            out[:, k] = (ends[0] - ends[1]) / (2.0 * h)
+            v = (A[:, k] @ v[..., None])[..., 0]
+        return out
+
     def _prefix_suffix(self, A: Array, v0: Array) -> tuple[Array, Array]:
         """``Π_{i<k} A_i`` (K, n+1, 4, 4) and ``Π_{i>k} A_i · p0`` (K, n, 4) for k = 1..n."""
         K, n = A.shape[:2]

@@ -73,8 +73,13 @@ def check_coverage(
 
 def reading_tangents(model: ChainModel, x: Array) -> Array:
     """``∂p/∂q_k`` (K, n, 3) of every key's position, by central differences of the model
-    in its joint values (step 1e-6 rad / cm: the positions are smooth; only a weight)."""
+    in its joint values (step 1e-6 rad / cm: the positions are smooth; only a weight).
+    Where the joints sit at ``θ`` itself (no non-geometric deflection at ``x``: no terms,
+    or ``β = 0``, the fit's start) the same differences by
+    :meth:`ChainModel.joint_differences`, which moves one joint's motion at a time."""
     h = 1e-6
+    if not (model.terms and np.asarray(x, float)[model.beta_slice].any()):
+        return model.joint_differences(x, h)
     out = np.zeros((model.theta.shape[0], model.theta.shape[1], 3))
     for k in range(model.theta.shape[1]):
         step = np.zeros_like(model.theta)

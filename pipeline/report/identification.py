@@ -105,7 +105,10 @@ def _nongeometric_part(sdir: Path, robot: Any) -> list[str]:
     fitted = joints.filter(pc.not_equal(joints.column("sweep"), CHECK_SWEEP))
     keys = sorted(set(zip(*(fitted.column(c).to_pylist() for c in ("sweep", "step")), strict=True)))
     n, pris = robot.n_joints, robot.prismatic
-    q = np.vstack([readings_at(joints, s, np.array([k]), n, pris) for s, k in keys])
+    by_sweep: dict[int, list[int]] = {}
+    for s, k in keys:  # one join per sweep (one per key took 0.9 s for 2,773 poses)
+        by_sweep.setdefault(s, []).append(k)
+    q = np.vstack([readings_at(joints, s, np.array(k), n, pris) for s, k in by_sweep.items()])
     holdout = read_table(stage_path(sdir, "holdout"))
     return [nongeometric_section(refine, holdout, q, robot, markdown_table)]
 

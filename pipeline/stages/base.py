@@ -138,9 +138,11 @@ class Stage:
 
 @dataclass(frozen=True)
 class StageRun:
-    """What the runner did with one stage: ``ran`` or ``cached``, and how long it took."""
+    """What the runner did with one stage: ``ran`` or ``cached``, and how long it took
+    (``seconds`` wall, ``cpu_seconds`` this process's CPU: user + system, all threads)."""
 
     name: str
     action: str
     seconds: float
     rows: int
+    cpu_seconds: float = 0.0

@@ -432,13 +432,14 @@ def _write_product(
     """Write the signature from the committed stages unless a stage is stale (``--only``)
     or the file already matches them (and not ``force``)."""
     name, writer, _ = PRODUCT
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     if any(st.state != "fresh" for st in _statuses(sdir, all_stages, overrides, hashes, False)):
         return StageRun(name, "not written", 0.0, 0)
     ident = {n: hashes.get(n) for n in hashes.identification()}
     with one_blas_thread():
         _, _, written = function_of(writer)(sdir, ident, force)
-    return StageRun(name, "written" if written else "cached", time.perf_counter() - t0, -1)
+    action = "written" if written else "cached"
+    return StageRun(name, action, time.perf_counter() - t0, -1, time.process_time() - c0)
 
 
 def _run_all(
@@ -473,10 +474,11 @@ def _run_all(
         if not must:
             runs.append(StageRun(stage.name, "cached", 0.0, -1))
             continue
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         # Dependants compare their recorded input hash with the new one in `hashes`.
         table = _run_one(sdir, stage, params, hashes)
-        runs.append(StageRun(stage.name, "ran", time.perf_counter() - t0, table.num_rows))
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        runs.append(StageRun(stage.name, "ran", wall, table.num_rows, cpu))
     bar.step()
 
 
