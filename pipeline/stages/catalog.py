@@ -53,7 +53,7 @@ POINT_STAGE_MODULES = (
 )
 #: recorded sensor kind (``/rig/description`` sensor) -> its identification stage modules
 SENSOR_STAGE_MODULES = {"sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES,
-                        "camera": ("session", "joints", "detections", "camera_fit",
+                        "camera": ("session", "joints", "image_detections", "camera_fit",
                                    "camera_residuals"),
                         # flange poses, no joints (issue 40): the camera only, no product
                         "camera-flange": ("session", "flange_poses", "image_detections",
