@@ -15,18 +15,20 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
 from pipeline.atomic import atomic_write
-from pipeline.rig.camera_render import SUPERSAMPLE, render
+from pipeline.rig.camera_render import SUPERSAMPLE, board_image, render
 from pipeline.rig.options import SimulationOptions
 from pipeline.sensor.camera import Intrinsics
 from pipeline.sensor.detect import ImageDetection, detect_target
 from pipeline.sensor.target import Target
 
 IMAGES_DIR = "images"  # beside the recording, /rig/description images_dir
+MARGIN_PX = 40  # white around the drawn board (camera_render.render's default)
 
 
 @dataclass(frozen=True)
@@ -44,7 +46,23 @@ def board_px_per_cm(target: Target, T: np.ndarray, lens: Intrinsics, local: np.n
     per cm or more, whole pixels per square."""
     z = float(np.min((T[:3, :3] @ local.T)[2] + T[2, 3]))
     per_cm = SUPERSAMPLE * max(lens.fx, lens.fy) / max(z, 1.0)
-    return float(np.ceil(max(per_cm, 10.0) * target.spacing_cm) / target.spacing_cm)
+    n = int(np.ceil(max(per_cm, 10.0) * target.spacing_cm))
+    while not _drawable(target, n):
+        n += 1
+    return n / target.spacing_cm
+
+
+@lru_cache(maxsize=64)
+def _drawable(target: Target, px_per_square: int) -> bool:
+    """Whether OpenCV draws the board at ``px_per_square`` (its ``generateImage`` fails
+    an assertion at some sizes: the default board at 60 + 70 k px per square)."""
+    import cv2
+
+    try:
+        board_image(target, px_per_square / target.spacing_cm, MARGIN_PX)
+    except cv2.error:
+        return False
+    return True
 
 
 def render_images(
@@ -62,6 +80,7 @@ def render_images(
     for k, pose in enumerate(T):
         grey = render(
             target, pose, lens, rng=rng, px_per_cm=board_px_per_cm(target, pose, lens, local),
+            margin_px=MARGIN_PX,
             blur_px=0.0 if quiet else opts.blur_px, noise_grey=0.0 if quiet else opts.grey_noise,
             vignette=0.0 if quiet else opts.vignette,
         )  # fmt: skip
