@@ -80,7 +80,9 @@ def test_images_are_written_beside_the_recording_and_detected_by_the_stage(
     assert truth["options"]["images"] and truth["options"]["blur_px"] == 0.5
     dropped = truth["camera"]["dropped_images"]["rendered_not_detected"]
     assert len(rec.image_file) == len(rec.joint_step) + dropped
-    identify(d, report=False)
+    identify(d)  # the report shows the worst image itself with its residuals
+    report = (d / "report" / "report.md").read_text()
+    assert "## The worst image" in report and (d / "report" / "camera_worst_image.png").is_file()
     table = stage_table(d, "detections").table
     assert table.column("u_px").to_numpy().tolist() == rec.detection_uv_px[:, 0].tolist()
     assert table.column("point_id").to_numpy().tolist() == rec.detection_point.tolist()
@@ -108,6 +110,17 @@ def test_noiseless_rendered_session_identifies_from_its_pixels(tmp_path: Path) -
     audit = audit_camera_session(d)
     assert audit.tool_position_cm < 0.1  # 1 mm; 0.3 mm RMS measured (bench)
     assert audit.intrinsics_relative < 0.1
+
+
+def test_board_sizes_opencv_cannot_draw_are_skipped() -> None:
+    from pipeline.rig.camera_images import _drawable, board_px_per_cm
+
+    target, lens = camera.DEFAULT_TARGET, Intrinsics(640, 480, 1000.0, 1000.0, 320.0, 240.0)
+    assert not _drawable(target, 60) and _drawable(target, 61)
+    _, local = target.points()
+    T = np.eye(4)
+    T[2, 3] = 4 * 1000.0 * target.spacing_cm / 60  # 60 fine samples per square
+    assert board_px_per_cm(target, T, lens, local) * target.spacing_cm == pytest.approx(61)
 
 
 def test_image_options_need_images() -> None:
