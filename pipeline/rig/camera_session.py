@@ -8,6 +8,12 @@ fixed part (the camera for eye-to-hand, the target for eye-in-hand: the ``sensor
 of the audit), the tool point (the target's origin, or the camera's centre, in the last
 link), and under ``camera`` the true lens, both hand-eye transforms and the images a
 detector dropped (:mod:`pipeline.rig.camera`).
+
+With ``images`` (``--images``, issue 40) the detections are not the projected truth plus
+noise: every image is rendered and detected (:mod:`pipeline.rig.camera_images`), the
+PNGs written under ``images/`` and referenced by ``/camera/images`` (``/rig/description``
+``images_dir``); an image the detector drops keeps its reference (after the kept ones)
+and has no joint state.
 """
 
 from __future__ import annotations
