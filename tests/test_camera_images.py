@@ -127,3 +127,6 @@ def test_image_options_need_images() -> None:
     opts = SimulationOptions(robot="puma560", sensor="camera", poses=12, blur_px=1.0)
     with pytest.raises(ArmsigError, match="apply to rendered images"):
         simulate_session(Path("/nonexistent/never"), opts)
+    tracker = SimulationOptions(robot="puma560", sensor="tracker", images=True)
+    with pytest.raises(ArmsigError, match="--images applies to --sensor camera"):
+        simulate_session(Path("/nonexistent/never"), tracker)

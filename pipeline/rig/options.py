@@ -216,6 +216,9 @@ def _check_tracker(opts: SimulationOptions) -> None:
 
 def _check_camera(opts: SimulationOptions) -> None:
     if opts.sensor != "camera":
+        if opts.images:
+            raise ArmsigError("--images applies to --sensor camera", got=f"--sensor {opts.sensor}",
+                              fix="--sensor camera, or drop --images")  # fmt: skip
         return
     if opts.setup not in SETUPS:
         raise ArmsigError(
