@@ -2,6 +2,7 @@
 
 from bench import (
     camera,
+    camera_images,
     evaluate,
     fleet,
     hand_eye_real,
@@ -34,6 +35,8 @@ if __name__ == "__main__":
     camera.timing()  # the accuracy study: python -m bench.camera (minutes)
     print()
     camera.hand_eye_alone()
+    print()
+    camera_images.quick()  # the study: python -m bench.camera_images (~11 minutes)
     print()
     hand_eye_real.main()
     print()

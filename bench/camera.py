@@ -24,8 +24,9 @@ import numpy as np
 from pipeline.rig.camera_audit import audit_camera_fit, true_hand_eye
 from pipeline.rig.simulate import SimulationOptions, simulate_session
 from pipeline.robots.description import description_from_dict
-from pipeline.stages import camera_fit, detections, joints, session
-from pipeline.stages.base import RECORDING, NoParams
+from pipeline.stages import camera_fit, image_detections, joints, session
+from pipeline.stages.base import IMAGES, RECORDING, NoParams
+from pipeline.stages.image_inputs import image_refs
 from pipeline.stages.recording import read_recording
 from pipeline.units import joints_to_internal
 
@@ -37,8 +38,8 @@ ROBOTS = (("puma560", "puma560"), ("ur10", UR10))
 
 def tables(d: Path) -> dict:
     rec = read_recording(d / "recording.mcap")
-    out = {RECORDING: rec}
-    for stage in (session, joints, detections):
+    out = {RECORDING: rec, IMAGES: image_refs(rec)}  # rendered images: detected here
+    for stage in (session, joints, image_detections):
         out[stage.STAGE.name] = stage.STAGE.compute(out, NoParams())
     return out
 
@@ -48,8 +49,10 @@ def _rms(cov: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2))))
 
 
-def one(d: Path, robot: str, setup: str, images: int, seed: int) -> dict:
-    opts = SimulationOptions(robot=robot, sensor="camera", setup=setup, poses=images, seed=seed)
+def one(d: Path, robot: str, setup: str, images: int, seed: int, extra: dict | None = None) -> dict:
+    opts = SimulationOptions(
+        robot=robot, sensor="camera", setup=setup, poses=images, seed=seed, **(extra or {})
+    )
     simulate_session(d, opts, force=True)
     truth = json.loads((d / "rig-truth.json").read_text())
     t = tables(d)

@@ -53,7 +53,10 @@ def viz(
     else:
         shown = " ".join(f"{v:g}" for v in r.configuration)
         typer.echo(f"wrote {r.path}: {sum(r.topics.values())} messages on {len(r.topics)} topics")
-        typer.echo(f"link frames at q = {shown} (deg / cm); lengths in metres")
+        if r.configuration:
+            typer.echo(f"link frames at q = {shown} (deg / cm); lengths in metres")
+        else:  # a camera session (docs/viz.md): one image per second
+            typer.echo("camera images, annotations and poses one per second; lengths in metres")
     warn_outside_limits(r.outside_limits)
 
 

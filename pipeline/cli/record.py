@@ -146,6 +146,24 @@ def simulate(
     pixel_noise: Annotated[
         float, typer.Option(min=0.0, max=100.0, help="Camera: pixel noise σ per coordinate (px).")
     ] = 0.2,
+    images: Annotated[
+        bool,
+        typer.Option(
+            help="Camera: render every image (PNG beside the recording) and detect the target "
+            "in it; --pixel-noise then only states σ (docs/camera.md)."
+        ),
+    ] = False,
+    blur_px: Annotated[
+        float, typer.Option(min=0.0, max=20.0, help="Camera --images: Gaussian blur σ (px).")
+    ] = 0.5,
+    grey_noise: Annotated[
+        float,
+        typer.Option(min=0.0, max=100.0, help="Camera --images: grey-level noise σ (of 255)."),
+    ] = 2.0,
+    vignette: Annotated[
+        float,
+        typer.Option(min=0.0, max=0.99, help="Camera --images: light lost in the corners (0-1)."),
+    ] = 0.3,
     targets: Annotated[
         int, typer.Option(min=1, help="Tracker: reflectors per sweep in a nest, ids T1..TK.")
     ] = 1,
@@ -270,6 +288,10 @@ def simulate(
         focal_px=focal_px,
         distortion=distortion_terms(distortion),
         pixel_noise_px=pixel_noise,
+        images=images,
+        blur_px=blur_px,
+        grey_noise=grey_noise,
+        vignette=vignette,
     )
     path = simulate_session(folder, opts, force=force)
     truth = folder / "rig-truth.json"

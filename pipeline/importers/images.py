@@ -39,7 +39,7 @@ from pipeline.rig.camera import STATED_SIGMA_PX
 from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
 from pipeline.robots.description import RobotDescription
 from pipeline.sensor.camera import Intrinsics
-from pipeline.sensor.detect import DetectorSettings, ImageDetection, detect_file
+from pipeline.sensor.detect import DetectorSettings, ImageDetection, detect_file, image_message
 from pipeline.sensor.target import Target
 from pipeline.stages.lock import session_lock
 
@@ -319,15 +319,7 @@ def _images_dir(e: ImageEntry) -> Path:
 
 
 def _image_message(step: int, e: ImageEntry) -> dict[str, Any]:
-    f = e.found
-    out: dict[str, Any] = {
-        "sweep": "poses", "step": step, "file": e.file, "sha256": e.sha256,
-        "dropped": f.dropped, "why": f.why, "markers": f.markers,
-        "edge_width_px": None if np.isnan(f.edge_width_px) else round(f.edge_width_px, 3),
-    }  # fmt: skip
-    if e.size_px is not None:
-        out["width_px"], out["height_px"] = e.size_px
-    return out
+    return image_message(step, e.file, e.sha256, e.found, e.size_px)
 
 
 def _robot_message(robot: RobotDescription, kept: list[ImageEntry]) -> Message:

@@ -92,6 +92,11 @@ def write_camera_report(session_dir: str | Path) -> Path:
             "## Residuals on the image plane\n\nEvery detected point's residual (predicted − "
             f"detected), magnified {gain:.3g}×.\n\n![]({png.name})"
         )
+        if worst:  # the worst image itself, when the recording references it (issue 40)
+            from pipeline.report.camera_worst import worst_image_section
+
+            section = worst_image_section(sdir, read_table(residuals), worst[0], out.parent)
+            parts.extend([section] if section else [])
     parts[1:1] = _signature_parts(sdir, out.parent)
     write_text_atomic(out, "\n\n".join(parts) + "\n")
     return out

@@ -23,6 +23,7 @@ import numpy as np
 
 from pipeline.atomic import write_text_atomic
 from pipeline.report.camera import residual_figure
+from pipeline.report.camera_worst import worst_image_section
 from pipeline.report.identification import markdown_table
 from pipeline.stages.camera_fit import camera_summary
 from pipeline.stages.runner import stage_path
@@ -145,10 +146,12 @@ def _report(sdir: Path, doc: dict[str, Any], verdict: str) -> Path:
     out = sdir / "report" / "report.md"
     out.parent.mkdir(parents=True, exist_ok=True)
     w, h = doc["image_size_px"]
-    png, gain = residual_figure(read_table(stage_path(sdir, "camera_residuals")), w, h,
-                               out.parent / "camera_residuals.png")  # fmt: skip
+    residuals = read_table(stage_path(sdir, "camera_residuals"))
+    png, gain = residual_figure(residuals, w, h, out.parent / "camera_residuals.png")
     parts.append("## Residuals on the image plane\n\nEvery detected point's residual "
                  f"(predicted − detected), magnified {gain:.3g}×.\n\n![]({png.name})")  # fmt: skip
+    section = worst_image_section(sdir, residuals, int(worst["image"]), out.parent)
+    parts.extend([section] if section else [])
     write_text_atomic(out, "\n\n".join(parts) + "\n")
     return out
 

@@ -8,6 +8,12 @@ fixed part (the camera for eye-to-hand, the target for eye-in-hand: the ``sensor
 of the audit), the tool point (the target's origin, or the camera's centre, in the last
 link), and under ``camera`` the true lens, both hand-eye transforms and the images a
 detector dropped (:mod:`pipeline.rig.camera`).
+
+With ``images`` (``--images``, issue 40) the detections are not the projected truth plus
+noise: every image is rendered and detected (:mod:`pipeline.rig.camera_images`), the
+PNGs written under ``images/`` and referenced by ``/camera/images`` (``/rig/description``
+``images_dir``); an image the detector drops keeps its reference (after the kept ones)
+and has no joint state.
 """
 
 from __future__ import annotations
@@ -17,12 +23,13 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.contract.channels import CAMERA_IMAGE_CHANNELS
 from pipeline.errors import ArmsigError
 from pipeline.kinematics.chain import link_frames
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.rig import camera
 from pipeline.rig.options import SimulationOptions
-from pipeline.rig.recorder import Message
+from pipeline.rig.recorder import Message, refuse_existing_recording
 from pipeline.rig.session_files import (
     T0_NS,
     joint_state,
@@ -78,22 +85,46 @@ def simulate_camera(out: Path, opts: SimulationOptions, force: bool) -> Path:
     n = robot.n_joints
     flange = link_frames(true.chain, joints_to_internal(q_reached, robot.prismatic))[:, n]
     T = camera.camera_from_target(opts.setup, fixed, on_flange, flange)
-    _, found, _ = camera.detect(target, T, lens, local)
-    uv = project(camera.camera_points(T, local), lens.vector())
-    if not opts.noiseless:
-        uv = np.round(uv + rng_sensor.normal(0.0, opts.pixel_noise_px, uv.shape), PIXEL_DIGITS)
+    image_msgs: list[dict[str, Any]] = []
+    if opts.images:  # rendered and detected (pipeline.rig.camera_images)
+        from pipeline.rig.camera_images import IMAGES_DIR, render_images
+        from pipeline.sensor.detect import image_message
+
+        refuse_existing_recording(out, force, "a simulated one")
+        shots = render_images(out, opts, target, lens, T, rng_sensor)
+        keep = np.array([s.found.kept for s in shots], bool)
+        order = [*np.flatnonzero(keep), *np.flatnonzero(~keep)]
+        image_msgs = [image_message(step, shots[k].file, shots[k].sha256, shots[k].found,
+                                    (lens.width_px, lens.height_px))
+                      for step, k in enumerate(order)]  # fmt: skip
+        seen_uv = [(shots[k].found.point_ids, shots[k].found.uv_px) for k in order[: keep.sum()]]
+        q_cmd, q_enc, flange = q_cmd[keep], q_enc[keep], flange[keep]
+        dropped = {**dropped, "rendered_not_detected": int((~keep).sum())}
+    else:
+        _, found, _ = camera.detect(target, T, lens, local)
+        uv = project(camera.camera_points(T, local), lens.vector())
+        if not opts.noiseless:
+            noise = rng_sensor.normal(0.0, opts.pixel_noise_px, uv.shape)
+            uv = np.round(uv + noise, PIXEL_DIGITS)
+        seen_uv = [(ids[found[k]], uv[k, found[k]]) for k in range(opts.poses)]
+    n_images = len(seen_uv)
     plan = {
         "n_avg": 1, "order": ["poses"], "sweeps": [],
         "tool_local_cm": [round(float(v)) for v in on_flange[:3, 3]],  # the nominal mount
-        "poses": {"n_points": int(opts.poses)},
+        "poses": {"n_points": n_images},
     }  # fmt: skip
+    rig = rig_description(opts, nominal, target)
+    if opts.images:
+        rig["images_dir"] = IMAGES_DIR  # relative: the folder of the recording
     messages = [
-        Message("/rig/description", T0_NS, rig_description(opts, nominal, target)),
+        Message("/rig/description", T0_NS, rig),
         robot_message(
             robot, np.clip(0.0, robot.limits[:, 0], robot.limits[:, 1]), plan, opts.robot_id
         ),
     ]
-    for k in range(opts.poses):
+    for k, m in enumerate(image_msgs):
+        messages.append(Message("/camera/images", T0_NS + int(round(IMAGE_S * (k + 1) * 1e9)), m))
+    for k, (seen_ids, seen) in enumerate(seen_uv):
         t_ns = T0_NS + int(round(IMAGE_S * (k + 1) * 1e9))
         messages.append(
             Message(
@@ -102,10 +133,9 @@ def simulate_camera(out: Path, opts: SimulationOptions, force: bool) -> Path:
                 joint_state(robot, "poses", k, q_cmd[k], q_enc[k], opts.noiseless),
             )
         )
-        seen = found[k]
         messages.append(Message("/camera/detections", t_ns + 10**8, {
-            "sweep": "poses", "step": k, "point_ids": [int(i) for i in ids[seen]],
-            "u_px": [float(u) for u in uv[k, seen, 0]], "v_px": [float(v) for v in uv[k, seen, 1]],
+            "sweep": "poses", "step": k, "point_ids": [int(i) for i in seen_ids],
+            "u_px": [float(u) for u in seen[:, 0]], "v_px": [float(v) for v in seen[:, 1]],
             "sigma_px": float(opts.pixel_noise_px or camera.STATED_SIGMA_PX),
         }))  # fmt: skip
     sensor_from_world = invert_transform(fixed)
@@ -114,11 +144,12 @@ def simulate_camera(out: Path, opts: SimulationOptions, force: bool) -> Path:
     truth["sensor"] = {"kind": "camera", "setup": opts.setup}
     truth["camera"] = camera_truth(opts.setup, lens, nominal, fixed, on_flange, target, dropped)
     tool_in_sensor = (sensor_from_world @ flange @ on_flange)[:, :3, 3]
-    steps = list(range(opts.poses))
+    steps = list(range(n_images))
     truth["target_positions_cm"] = {
-        "sweep": ["poses"] * opts.poses, "step": steps, "p": tool_in_sensor.tolist()
+        "sweep": ["poses"] * n_images, "step": steps, "p": tool_in_sensor.tolist()
     }  # fmt: skip
-    return write_session(out, force, logged(messages, opts), truth, "camera")
+    channels = CAMERA_IMAGE_CHANNELS if opts.images else None
+    return write_session(out, force, logged(messages, opts), truth, "camera", channels)
 
 
 def rig_description(opts: SimulationOptions, nominal: Any, target: Target) -> dict[str, Any]:

@@ -61,6 +61,14 @@ class SimulationOptions:
     focal_px: float = 1000.0
     distortion: tuple[float, float, float, float, float] = (-0.12, 0.05, 5e-4, -3e-4, 0.0)
     pixel_noise_px: float = 0.2
+    # rendered images (issue 40, ``--images``): the detections come from images of the
+    # target drawn through the true lens (pipeline.rig.camera_render), blurred by a Gaussian
+    # of σ ``blur_px``, dimmed towards the corners by ``vignette`` and with grey-level noise
+    # of σ ``grey_noise`` (of 255); ``--noiseless``: none of the three
+    images: bool = False
+    blur_px: float = 0.5
+    grey_noise: float = 2.0
+    vignette: float = 0.3
 
 
 def check_options(opts: SimulationOptions) -> None:
@@ -148,6 +156,9 @@ def options_for_truth(opts: SimulationOptions) -> dict[str, object]:
     ):  # fmt: skip
         if out[name] == default:
             del out[name]
+    for name in ("images", "blur_px", "grey_noise", "vignette"):  # rendered images only
+        if not opts.images:
+            del out[name]
     return out
 
 
@@ -205,6 +216,9 @@ def _check_tracker(opts: SimulationOptions) -> None:
 
 def _check_camera(opts: SimulationOptions) -> None:
     if opts.sensor != "camera":
+        if opts.images:
+            raise ArmsigError("--images applies to --sensor camera", got=f"--sensor {opts.sensor}",
+                              fix="--sensor camera, or drop --images")  # fmt: skip
         return
     if opts.setup not in SETUPS:
         raise ArmsigError(
@@ -232,6 +246,13 @@ def _check_camera(opts: SimulationOptions) -> None:
             "--pixel-noise and --poses",
             fix=f"drop {given[0]}",
         )
+    if not opts.images and (opts.blur_px, opts.grey_noise, opts.vignette) != (0.5, 2.0, 0.3):
+        raise ArmsigError("--blur-px, --grey-noise and --vignette apply to rendered images",
+                          fix="add --images, or drop them")  # fmt: skip
+    if not (0 <= opts.blur_px <= 20 and 0 <= opts.grey_noise <= 100 and 0 <= opts.vignette < 1):
+        raise ArmsigError("rendered image options out of range",
+                          expected="--blur-px 0 to 20, --grey-noise 0 to 100, --vignette 0 to <1",
+                          got=f"{opts.blur_px}, {opts.grey_noise}, {opts.vignette}")  # fmt: skip
     w, h = opts.resolution_px
     numbers = (opts.focal_px, opts.pixel_noise_px, *opts.distortion)
     if not (64 <= w <= 20_000 and 64 <= h <= 20_000 and np.isfinite(numbers).all()

@@ -121,9 +121,11 @@ def logged(messages: list[Message], opts: SimulationOptions) -> list[Message]:
 
 
 def write_session(
-    out: Path, force: bool, messages: list[Message], truth: dict[str, Any], sensor: str
-) -> Path:
-    """Write the recording (messages in log-time order) and ``rig-truth.json``."""
+    out: Path, force: bool, messages: list[Message], truth: dict[str, Any], sensor: str,
+    channels: dict[str, str] | None = None,
+) -> Path:  # fmt: skip
+    """Write the recording (messages in log-time order) and ``rig-truth.json``; its
+    channels are the sensor's unless ``channels`` are given."""
     # stable: descriptions stay first
     messages.sort(key=lambda m: m.time_ns if m.log_time_ns is None else m.log_time_ns)
     recording = out / "recording.mcap"
@@ -133,6 +135,6 @@ def write_session(
     with session_lock(out):
         refuse_existing_recording(out, force, "a simulated one")
         remove_debris(out)  # the temp files of a killed simulate or import (issue 44)
-        write_recording(recording, messages, SENSOR_CHANNELS[sensor])
+        write_recording(recording, messages, channels or SENSOR_CHANNELS[sensor])
         write_text_atomic(out / "rig-truth.json", json.dumps(truth, indent=1) + "\n")
     return recording

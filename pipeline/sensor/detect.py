@@ -110,6 +110,21 @@ def no_points(
                           reason, why)  # fmt: skip
 
 
+def image_message(
+    step: int, file: str, sha256: str, found: ImageDetection, size_px: tuple[int, int] | None
+) -> dict[str, Any]:
+    """The ``/camera/images`` message of one image (``schemas/mcap/camera_images.json``):
+    its file, hash and what its detection found, in sweep ``poses``."""
+    out: dict[str, Any] = {
+        "sweep": "poses", "step": step, "file": file, "sha256": sha256,
+        "dropped": found.dropped, "why": found.why, "markers": found.markers,
+        "edge_width_px": None if np.isnan(found.edge_width_px) else round(found.edge_width_px, 3),
+    }  # fmt: skip
+    if size_px is not None:
+        out["width_px"], out["height_px"] = size_px
+    return out
+
+
 def detect_file(
     path: Path, target: Target, settings: DetectorSettings | None = None
 ) -> tuple[ImageDetection, tuple[int, int] | None]:

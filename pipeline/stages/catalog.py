@@ -58,7 +58,7 @@ POINT_STAGE_MODULES = (
 CAMERA_STAGE_MODULES = (
     "session",
     "joints",
-    "detections",
+    "image_detections",  # stage ``detections``: the recorded ones, or detected in its images
     "camera_fit",
     "camera_residuals",
     "camera_frames",

@@ -1,7 +1,8 @@
 """The images a recording references by content hash (``/camera/images``, issue 40), as a
 stage input (:data:`pipeline.stages.base.IMAGES`).
 
-The recording names each image (a path relative to ``/rig/description`` ``images_dir``)
+The recording names each image (a path relative to ``/rig/description`` ``images_dir``,
+itself absolute, or relative to the recording's folder)
 and the SHA-256 of the bytes detected at import. The runner hashes the files as they are
 now: the input's content hash is over every image's name and current hash, so a changed,
 replaced or deleted image makes the stages that read it stale, and ``status`` names the
@@ -56,7 +57,7 @@ def image_refs(rec: Any) -> ImageRefs:
     if folder is None or not len(rec.image_file):
         none = np.zeros(0, np.int64)
         return ImageRefs(None, none, none, (), (), ())
-    root = Path(folder)
+    root = Path(rec.path).parent / folder  # relative: beside the recording (simulated)
     files = tuple(str(f) for f in rec.image_file)
     current = tuple(file_sha256(root / f) if (root / f).is_file() else "" for f in files)
     return ImageRefs(root, rec.image_sweep, rec.image_step, files,

@@ -199,7 +199,7 @@ def _read_cached(p: Path, sha: str) -> Recording:
         ).reshape(-1, 2),  # fmt: skip
     }
     if sensor == "camera":
-        from pipeline.stages import recording_camera
+        from pipeline.stages import recording_camera, recording_flange
 
         _, target = recording_camera.check_camera_rig(p, rig)
         det = recording_camera.read_detections(p, msgs["/camera/detections"], target, n_points)
@@ -208,8 +208,14 @@ def _read_cached(p: Path, sha: str) -> Recording:
             p, j_sweep, j_step, ds, dk, lambda k: key_text(ds[k], dk[k]),
             "/camera/detections", "image",
         )  # fmt: skip
+        images = recording_flange.image_arrays(p, msgs)  # rendered or imported (issue 40)
+        ik = images["image_step"][images["image_dropped"] == ""]
+        iw = images["image_sweep"][images["image_dropped"] == ""]
+        if len(images["image_step"]):  # every joint state has its kept image
+            pair_keys(p, j_sweep, j_step, iw, ik, lambda k: key_text(iw[k], ik[k]),
+                      "/camera/images", "kept image")  # fmt: skip
         return Recording(p, sha, rig, robot, sensor, **joints, **_no_cycles(),
-                         **recording_points.no_points(), **det)  # fmt: skip
+                         **recording_points.no_points(), **det, **images)  # fmt: skip
     if sensor == "points":
         measured = recording_points.read_points(p, msgs["/points"], robot["plan"], n_points, t0)
         ps, pk, pt = measured["point_sweep"], measured["point_step"], measured["point_target"]

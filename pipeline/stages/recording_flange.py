@@ -68,15 +68,23 @@ def flange_arrays(p: Path, msgs: dict[str, list[tuple[int, dict[str, Any]]]]) ->
             f"{FLANGE_TOPIC}", expected="the flange pose of every image, same (sweep, step)",
             fix=KEY_FIX,
         )  # fmt: skip
-    images, i_sweep, i_step = _sorted_keys(p, IMAGES_TOPIC, msgs[IMAGES_TOPIC])
     return {
         "flange_sweep": sweep,
         "flange_step": step,
         "flange_in_base_cm": T,
+        **image_arrays(p, msgs),
+        **det,
+    }
+
+
+def image_arrays(p: Path, msgs: dict[str, list[tuple[int, dict[str, Any]]]]) -> dict[str, Any]:
+    """The ``image_*`` arrays of :class:`pipeline.stages.recording.Recording`: the images
+    the recording references (``/camera/images``), sorted by key; none: zero rows."""
+    images, i_sweep, i_step = _sorted_keys(p, IMAGES_TOPIC, msgs[IMAGES_TOPIC])
+    return {
         "image_sweep": i_sweep,
         "image_step": i_step,
         "image_file": np.array([m["file"] for m in images], str),
         "image_sha256": np.array([m["sha256"] for m in images], str),
         "image_dropped": np.array([m["dropped"] for m in images], str),
-        **det,
     }

@@ -22,6 +22,8 @@ SCHEMAS = {
     "foxglove.FrameTransform": "FrameTransform.json",
     "foxglove.SceneUpdate": "SceneUpdate.json",
     "foxglove.PointCloud": "PointCloud.json",
+    "foxglove.CompressedImage": "CompressedImage.json",
+    "foxglove.ImageAnnotations": "ImageAnnotations.json",
 }
 FLOAT64 = 8  # foxglove.NumericType FLOAT64
 LINE_STRIP = 0  # foxglove.LineType LINE_STRIP
@@ -67,11 +69,16 @@ def color(rgba: RGBA) -> Json:
     return {"r": r, "g": g, "b": b, "a": a}
 
 
-def frame_transform(parent: str, child: str, T_cm: np.ndarray) -> Json:
+def stamp(time_ns: int) -> Json:
+    """``foxglove.Time`` of ``time_ns``."""
+    return {"sec": time_ns // 10**9, "nsec": time_ns % 10**9}
+
+
+def frame_transform(parent: str, child: str, T_cm: np.ndarray, time_ns: int = 0) -> Json:
     """``foxglove.FrameTransform``: frame ``child`` at ``T_cm`` (4, 4, cm) in ``parent``."""
     p = pose(T_cm)
     return {
-        "timestamp": ZERO_TIME,
+        "timestamp": stamp(time_ns),
         "parent_frame_id": parent,
         "child_frame_id": child,
         "translation": p["position"],
@@ -159,3 +166,29 @@ def scene_entity(frame: str, entity_id: str, **primitives: list[Json]) -> Json:
 def scene_update(entities: list[Json]) -> Json:
     """``foxglove.SceneUpdate`` adding ``entities``."""
     return {"deletions": [], "entities": entities}
+
+
+#: foxglove.PointsAnnotationType
+POINTS, LINE_LIST = 1, 4
+
+
+def compressed_image(frame: str, png: bytes, time_ns: int) -> Json:
+    """``foxglove.CompressedImage`` of PNG bytes."""
+    return {"timestamp": stamp(time_ns), "frame_id": frame,
+            "data": base64.b64encode(png).decode("ascii"), "format": "png"}  # fmt: skip
+
+
+def points_annotation(kind: int, uv_px: np.ndarray, rgba: RGBA, time_ns: int, size: float) -> Json:
+    """``foxglove.PointsAnnotation`` of pixels (m, 2) in OpenCV's convention (the top-left
+    pixel's centre at (0, 0)); Foxglove's origin is that pixel's top-left corner: + 0.5."""
+    return {
+        "timestamp": stamp(time_ns), "type": kind,
+        "points": [{"x": float(u) + 0.5, "y": float(v) + 0.5} for u, v in uv_px],
+        "outline_color": color(rgba), "outline_colors": [], "fill_color": color(rgba),
+        "thickness": size,
+    }  # fmt: skip
+
+
+def image_annotations(points: list[Json]) -> Json:
+    """``foxglove.ImageAnnotations`` holding ``points`` annotations."""
+    return {"circles": [], "points": points, "texts": []}

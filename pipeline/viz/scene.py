@@ -42,6 +42,7 @@ class VizMessage:
     topic: str
     schema: str
     payload: fg.Json
+    time_ns: int = 0  # log time; a camera session's images are 1 s apart (viz.camera)
 
 
 def measured_topic(sweep: int) -> str:

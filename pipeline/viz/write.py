@@ -12,6 +12,7 @@ import json
 import struct
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -26,6 +27,7 @@ from pipeline.robots.fk import outside_limits
 from pipeline.signature.file import FILE_NAME
 from pipeline.signature.session import load_session_signature
 from pipeline.stages.lock import session_lock
+from pipeline.stages.recording import read_recording
 from pipeline.stages.runner import session_folder, stage_path
 from pipeline.stages.tables import check_table
 from pipeline.units import joints_to_boundary, joints_to_internal
@@ -105,7 +107,9 @@ def write_mcap(path: Path, messages: list[VizMessage], metadata: dict[str, str])
             if m.topic not in channels:
                 channels[m.topic] = writer.register_channel(m.topic, "json", schema_ids[m.schema])
                 sequence[m.topic] = 0
-            writer.add_message(channels[m.topic], 0, json_bytes(m.payload), 0, sequence[m.topic])
+            writer.add_message(
+                channels[m.topic], m.time_ns, json_bytes(m.payload), m.time_ns, sequence[m.topic]
+            )
             sequence[m.topic] += 1
         writer.add_metadata(METADATA_NAME, metadata)
         writer.finish()
@@ -120,6 +124,9 @@ def viz(
     sdir = session_folder(session_dir)
     path = sdir / VIZ_NAME if out is None else check_writable(out, "--out")
     with session_lock(sdir):
+        rec = read_recording(sdir / "recording.mcap")
+        if rec.sensor == "camera":
+            return _camera_viz(sdir, path, rec, q)
         sig = load_session_signature(sdir / FILE_NAME)
         pris = sig.prismatic
         names = [j.name for j in sig.robot.joints]
@@ -147,7 +154,36 @@ def viz(
             },
         )
     outside = list(outside_limits(sig.robot, q_b))
+    return VizResult(path, _topics(messages), [float(v) for v in q_b], outside)
+
+
+def _topics(messages: list[VizMessage]) -> dict[str, int]:
     topics: dict[str, int] = {}
     for m in messages:
         topics[m.topic] = topics.get(m.topic, 0) + 1
-    return VizResult(path, topics, [float(v) for v in q_b], outside)
+    return topics
+
+
+def _camera_viz(sdir: Path, path: Path, rec: Any, q: list[float] | None) -> VizResult:
+    """A camera session's ``viz.mcap`` (:mod:`pipeline.viz.camera`), under the lock."""
+    from pipeline.viz.camera import camera_messages, check_fresh
+
+    if q is not None:
+        raise ArmsigError("--q does not apply to a camera session (its images' own joint "
+                          "readings place the camera and the target)", fix="drop --q")  # fmt: skip
+    if not len(rec.joint_step):
+        raise ArmsigError(
+            f"{sdir}: `pipeline viz` of a session of flange poses (no joint readings) is not "
+            "built yet", fix="open its report (report/report.md) for the reprojection figure",
+        )  # fmt: skip
+    check_fresh(sdir)
+    names = ("session", "joints", "detections", "camera_fit", "camera_residuals")
+    messages = camera_messages(sdir, {n: _checked(sdir, n) for n in names}, rec)
+    for m in messages:
+        fg.validate(m.schema, m.payload)
+    _refuse_foreign(path)
+    robot = rec.robot["robot"]["name"] if "robot" in rec.robot else ""
+    write_mcap(path, messages, {"session": sdir.name, "robot": str(robot),
+                                "setup": str(rec.rig["setup"]), "length_unit": "m",
+                                "package_version": __version__})  # fmt: skip
+    return VizResult(path, _topics(messages), [], [])
