@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -197,14 +198,17 @@ class StepRefit:
         w = rho(full.loss, (lin.r / full.f_scale) ** 2)[1]  # the solver's robust weights
         normal = normal_equations(full, self.x_hat, lin)
         object.__setattr__(self, "_at_x_hat", (full, lin, w, normal))
-        object.__setattr__(self, "_last", {})  # the last fold's step, for measured_without
+        # each fold's step, by its kept positions: the holdout stage asks for a fold's step
+        # for its chain, its expected error and its measured positions
+        object.__setattr__(self, "_steps", {})
 
     def step(self, keep: npt.NDArray[np.bool_]) -> tuple[Array, Array]:
         """The whole step's ``x`` (kinematics and block) without the positions ``~keep``,
         and ``(Jᵀ W J)⁺`` (unscaled)."""
-        last = self._last  # type: ignore[attr-defined]
-        if last.get("keep") is not None and np.array_equal(last["keep"], keep):
-            return last["x"], last["N"]  # type: ignore[no-any-return]
+        key = np.packbits(keep).tobytes() + len(keep).to_bytes(8, "little")
+        steps = self._steps  # type: ignore[attr-defined]
+        if key in steps:
+            return steps[key]  # type: ignore[no-any-return]
         full, lin, w, normal = self._at_x_hat  # type: ignore[attr-defined]
         kept = (lin.pos < 0) | keep[np.maximum(lin.pos, 0)]  # as kept_rows keeps them
         A, g = normal(np.where(kept, w, 0.0))  # a row of weight zero is out of the fit
@@ -213,7 +217,7 @@ class StepRefit:
         N[np.ix_(free, free)] = np.linalg.pinv(A[np.ix_(free, free)])
         x = self.x_hat.copy()
         x[: len(g)] -= N @ g
-        last.update(keep=np.array(keep), x=x, N=N)
+        steps[key] = (x, N)
         return x, N
 
     def __call__(self, keep: npt.NDArray[np.bool_]) -> tuple[Array, Array]:
@@ -245,11 +249,18 @@ class StepRefit:
         minus the step's chain there, from the step's parameters alone (chain and
         sensor together, ``A N Aᵀ · noise_var`` with ``A = [−∂p/∂θ, ∂m/∂b]``): a sensor
         frame the fold fits moves its chain and its measured positions alike, which the
-        chain's covariance alone counts as error. ``∂m/∂b = −H⁻¹ Σ w d_p d_xᵀ`` per key
-        (:func:`measured_positions`' step, ``H`` :func:`position_information`)."""
+        chain's covariance alone counts as error."""
+        A = self._difference_jacobian
+        _, N = self.step(keep)
+        return np.einsum("kip,pq,kiq->k", A, N[: A.shape[2], : A.shape[2]], A) * self.noise_var
+
+    @cached_property
+    def _difference_jacobian(self) -> Array:
+        """``A = [−∂p/∂θ, ∂m/∂b]`` (K, 3, n + B) at ``x_hat``, the same for every fold:
+        ``∂m/∂b = −H⁻¹ Σ w d_p d_xᵀ`` per key (:func:`measured_positions`' step, ``H``
+        :func:`position_information`)."""
         full, lin, w, _ = self._at_x_hat  # type: ignore[attr-defined]
         n, K = full.n_kin, len(full.model.link)
-        _, N = self.step(keep)
         H, fixed = position_information(lin, K, w)
         on = lin.pos >= 0
         rows = sparse.csr_array((w[on], (lin.pos[on], np.flatnonzero(on))), (K, len(lin.r)))
@@ -258,8 +269,7 @@ class StepRefit:
                       range(3)], 1)  # (K, 3, B): Σ w d_p d_xᵀ per key  # fmt: skip
         dm = np.zeros_like(S)
         dm[fixed] = -np.linalg.solve(H[fixed], S[fixed])
-        A = np.concatenate([-full.model.position_jacobian(self.x_hat[:n]), dm], axis=2)
-        return np.einsum("kip,pq,kiq->k", A, N[: A.shape[2], : A.shape[2]], A) * self.noise_var
+        return np.concatenate([-full.model.position_jacobian(self.x_hat[:n]), dm], axis=2)
 
     def measured_without(self, keep: npt.NDArray[np.bool_]) -> Array:
         """:attr:`measured` with the block's own parameters of the step without the
