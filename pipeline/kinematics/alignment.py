@@ -97,22 +97,13 @@ def fit_alignment(T_ref: ArrayLike, T_model: ArrayLike) -> tuple[Array, Array]:
 
     # The optimiser's Levenberg-Marquardt (numpy only): scipy.optimize's import cost
     # ~0.1-0.4 s of CPU in every identify for a fit of 12 parameters.
-    from pipeline.optim.lm import levenberg_marquardt
+    from pipeline.optim.lm import dense_least_squares
 
     V = _observable_directions(residual)  # (12, k)
-
-    def fun(z: Array) -> tuple[Array, Callable[[Array], tuple[Array, Array]]]:
-        r = residual(V @ z)
-
-        def normal(w: Array) -> tuple[Array, Array]:
-            J = _jacobian(residual, V @ z) @ V
-            Jw = J * w[:, None]
-            return Jw.T @ J, Jw.T @ r
-
-        return r, normal
-
     # Tolerance at 1e-15: the noiseless audit must see 1e-13 cm agreement.
-    fit = levenberg_marquardt(fun, np.zeros(V.shape[1]), tol=1e-15)
+    fit = dense_least_squares(lambda z: residual(V @ z),
+                              lambda z: _jacobian(residual, V @ z) @ V,
+                              np.zeros(V.shape[1]), tol=1e-15)  # fmt: skip
     x = V @ fit.x
     return X0 @ _pose(x[:6]), _pose(x[6:])
 

@@ -138,3 +138,26 @@ def levenberg_marquardt(
             break
     information = normal(w)[0] if A is None else A
     return LMResult(x, r, information, w, cost, iterations, evaluations, converged, message)
+
+
+def dense_least_squares(
+    residuals: Callable[[Array], Array],
+    jacobian: Callable[[Array], Array],
+    x0: Array,
+    tol: float = 1e-15,
+) -> LMResult:
+    """:func:`levenberg_marquardt` of ``residuals(x)`` (R,) with its dense ``jacobian(x)``
+    (R, P), unweighted: the small fits (a design's registration, an alignment) that would
+    otherwise import scipy.optimize (~0.1-0.4 s of CPU in a cold identify)."""
+
+    def fun(x: Array) -> tuple[Array, Normal]:
+        r = residuals(x)
+
+        def normal(w: Array) -> tuple[Array, Array]:
+            J = jacobian(x)
+            Jw = J * w[:, None]
+            return Jw.T @ J, Jw.T @ r
+
+        return r, normal
+
+    return levenberg_marquardt(fun, np.asarray(x0, float), tol=tol)

@@ -13,7 +13,6 @@ where the alternation needs thousands of rounds).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +21,7 @@ import numpy.typing as npt
 from pipeline.kinematics.chain import SerialChain, link_frames
 from pipeline.kinematics.so3 import rotation_from_vector, skew
 from pipeline.optim.block import Array
+from pipeline.optim.lm import dense_least_squares
 from pipeline.refine.start import design_start
 
 
@@ -117,34 +117,12 @@ def register_design_points(
         return out
 
     x0 = np.r_[np.zeros(3), B0[:3, 3], t0.reshape(-1)]
-    x = _least_squares(residuals, jacobian, x0)
+    x = dense_least_squares(residuals, jacobian, x0).x  # 1e-15: a noiseless audit
     R, b, t = unpack(x)
     base = np.eye(4)
     base[:3, :3], base[:3, 3] = R, b
     errors = np.linalg.norm(residuals(x).reshape(-1, 3), axis=1)
     return DesignBaseline(chain, base, t[0], errors, t)
-
-
-def _least_squares(
-    residuals: Callable[[Array], Array], jacobian: Callable[[Array], Array], x0: Array
-) -> Array:
-    """``argmin |residuals(x)|²`` from ``x0`` by armsig's Levenberg-Marquardt
-    (:func:`pipeline.optim.lm.levenberg_marquardt`, numpy only: scipy.optimize's import
-    cost ~0.1-0.4 s of CPU in a cold identify, which registers the design for the
-    held-out positions), to the tolerance a noiseless audit needs (1e-15)."""
-    from pipeline.optim.lm import levenberg_marquardt
-
-    def fun(x: Array) -> tuple[Array, Callable[[Array], tuple[Array, Array]]]:
-        r = residuals(x)
-
-        def normal(w: Array) -> tuple[Array, Array]:
-            J = jacobian(x)
-            Jw = J * w[:, None]
-            return Jw.T @ J, Jw.T @ r
-
-        return r, normal
-
-    return levenberg_marquardt(fun, np.asarray(x0, float), tol=1e-15).x
 
 
 @dataclass(frozen=True)
@@ -206,7 +184,7 @@ def register_offsets(
         return out
 
     x0 = np.r_[np.zeros(3), B0[:3, 3], start.tool, np.zeros(int(free.sum()))]
-    x = _least_squares(residuals, jacobian, x0)
+    x = dense_least_squares(residuals, jacobian, x0).x  # 1e-15: a noiseless audit
     R, b, t, delta = unpack(x)
     base = np.eye(4)
     base[:3, :3], base[:3, 3] = R, b
