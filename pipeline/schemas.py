@@ -165,6 +165,19 @@ def arrow_schema(name: str) -> pa.Schema:
     return pa.schema(fields, metadata=meta)
 
 
+def arrow_table(
+    name: str, columns: dict[str, Any], metadata: dict[bytes, bytes] | None = None
+) -> pa.Table:
+    """The table of schema ``name`` (:func:`arrow_schema`) holding ``columns`` (one array
+    or list per field, by name), with ``metadata`` added to the schema's."""
+    import pyarrow as pa
+
+    schema = arrow_schema(name)
+    if metadata:
+        schema = schema.with_metadata({**(schema.metadata or {}), **metadata})
+    return pa.table({f.name: pa.array(columns[f.name], f.type) for f in schema}, schema=schema)
+
+
 def validate_table(table: pa.Table, name: str, source: str = "table") -> pa.Table:
     """Check a table against schema ``name`` and return it cast to that schema.
 

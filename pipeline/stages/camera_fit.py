@@ -20,7 +20,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.optim.lm import LOSSES
-from pipeline.schemas import arrow_schema
+from pipeline.schemas import arrow_table
 from pipeline.stages.base import Stage, check_param
 from pipeline.stages.session import session_plan, session_robot
 from pipeline.sweeps import POSES_SWEEP
@@ -144,16 +144,13 @@ def fit_table(
                                                    det.n_images, len(det.image)),
         "warning": held_line(fit, float(np.median(det.sigma_px))), **extra,
     }  # fmt: skip
-    schema = arrow_schema("camera_fit")
-    meta = {**(schema.metadata or {}), b"armsig.camera_fit": json.dumps(summary).encode()}
     columns = {
         "group": groups, "name": list(fit.names),
         "unit": ["deg" if d else u for d, u in zip(deg, units, strict=True)],
         "start": fit.x_start * scale, "value": s.x * scale, "sigma": s.sigma * scale,
         "covariance": list(s.covariance * np.outer(scale, scale)),
     }  # fmt: skip
-    return pa.table({f.name: pa.array(columns[f.name], f.type) for f in schema},
-                    schema=schema.with_metadata(meta))  # fmt: skip
+    return arrow_table("camera_fit", columns, {b"armsig.camera_fit": json.dumps(summary).encode()})
 
 
 STAGE = Stage(

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.schemas import arrow_schema
+from pipeline.schemas import arrow_table
 from pipeline.stages.base import Stage, check_param
 from pipeline.stages.camera_fit import detections_for_fit, reading_sigma, table_images
 
@@ -52,9 +52,7 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
         "image": table_images(inputs["detections"])[h.image], "points": h.points,
         "rms_px": h.rms_px, "expected_px": h.expected_px, "design_rms_px": h.design_rms_px,
     }  # fmt: skip
-    schema = arrow_schema("camera_holdout")
-    return pa.table({f.name: pa.array(np.asarray(columns[f.name]), f.type) for f in schema},
-                    schema=schema)  # fmt: skip
+    return arrow_table("camera_holdout", {k: np.asarray(v) for k, v in columns.items()})
 
 
 STAGE = Stage(

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.schemas import arrow_schema
+from pipeline.schemas import arrow_table
 from pipeline.stages.base import NoParams, Stage
 from pipeline.stages.camera_fit import detections_for_fit, fitted_model, table_images
 from pipeline.stages.session import session_robot
@@ -48,9 +48,7 @@ def residual_table(detections: pa.Table, images: np.ndarray, det: Any, uv: np.nd
         "u_px": det.uv[:, 0], "v_px": det.uv[:, 1],
         "du_px": uv[:, 0] - det.uv[:, 0], "dv_px": uv[:, 1] - det.uv[:, 1],
     }  # fmt: skip
-    schema = arrow_schema("camera_residuals")
-    return pa.table({f.name: pa.array(np.asarray(columns[f.name]), f.type) for f in schema},
-                    schema=schema)  # fmt: skip
+    return arrow_table("camera_residuals", {k: np.asarray(v) for k, v in columns.items()})
 
 
 STAGE = Stage(

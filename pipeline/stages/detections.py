@@ -10,7 +10,7 @@ from typing import Any
 import pyarrow as pa
 
 from pipeline.errors import StageError
-from pipeline.schemas import arrow_schema
+from pipeline.schemas import arrow_table
 from pipeline.stages.base import RECORDING, NoParams, Stage
 
 
@@ -30,8 +30,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         "v_px": rec.detection_uv_px[:, 1],
         "sigma_px": rec.detection_sigma_px,
     }
-    schema = arrow_schema("detections")
-    return pa.table({f.name: pa.array(columns[f.name], f.type) for f in schema}, schema=schema)
+    return arrow_table("detections", columns)
 
 
 STAGE = Stage(

@@ -11,7 +11,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.errors import StageError
-from pipeline.schemas import arrow_schema
+from pipeline.schemas import arrow_table
 from pipeline.stages.base import RECORDING, NoParams, Stage
 from pipeline.sweeps import POSES_SWEEP
 
@@ -34,8 +34,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         "x_cm": T[:, 0, 3], "y_cm": T[:, 1, 3], "z_cm": T[:, 2, 3],
         "qw": xyzw[:, 3], "qx": xyzw[:, 0], "qy": xyzw[:, 1], "qz": xyzw[:, 2],
     }  # fmt: skip
-    schema = arrow_schema("flange_poses")
-    return pa.table({f.name: pa.array(columns[f.name], f.type) for f in schema}, schema=schema)
+    return arrow_table("flange_poses", columns)
 
 
 STAGE = Stage(

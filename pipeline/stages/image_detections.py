@@ -21,7 +21,7 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.errors import StageError
-from pipeline.schemas import arrow_schema
+from pipeline.schemas import arrow_table
 from pipeline.stages import detections
 from pipeline.stages.base import IMAGES, RECORDING, NoParams, Stage
 
@@ -59,8 +59,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
         "point_id": np.concatenate([r[2] for r in rows]) if rows else np.zeros(0, np.int64),
         "u_px": uv[:, 0], "v_px": uv[:, 1], "sigma_px": np.full(len(uv), sigma),
     }  # fmt: skip
-    schema = arrow_schema("detections")
-    return pa.table({f.name: pa.array(columns[f.name], f.type) for f in schema}, schema=schema)
+    return arrow_table("detections", columns)
 
 
 STAGE = Stage(
