@@ -10,8 +10,8 @@ chain against the truth, no alignment: :func:`bench.camera.one`), the corners' o
 coordinate, and their mean, the bias), the session's corner-level Cramér-Rao bound (the
 fit's unscaled covariance at the stated 0.2 px, rescaled to the corners' RMS: what a
 detector with unbiased errors of that size would allow) and their ratio.
-``BENCH_CAMERA_IMAGES_SEEDS``, ``BENCH_CAMERA_IMAGES`` and ``BENCH_CAMERA_RESOLUTION``
-set them; ``python -m bench.camera_images``.
+``BENCH_CAMERA_IMAGES_SEEDS``, ``BENCH_CAMERA_IMAGES``, ``BENCH_CAMERA_RESOLUTION`` and
+``BENCH_CAMERA_FOCAL`` (px) set them; ``python -m bench.camera_images``.
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from pipeline.units import joints_to_internal
 SEEDS = int(os.environ.get("BENCH_CAMERA_IMAGES_SEEDS", "5"))
 IMAGES = int(os.environ.get("BENCH_CAMERA_IMAGES", "40"))
 RESOLUTION = tuple(int(v) for v in os.environ.get("BENCH_CAMERA_RESOLUTION", "1280x960").split("x"))
+FOCAL_PX = float(os.environ.get("BENCH_CAMERA_FOCAL", "1000"))
 
 
 def corner_errors(d: Path) -> np.ndarray:
@@ -63,7 +64,8 @@ def corner_errors(d: Path) -> np.ndarray:
 
 
 def session(d: Path, setup: str, seed: int, noiseless: bool) -> dict:
-    extra = {"images": True, "noiseless": noiseless, "resolution_px": RESOLUTION}
+    extra = {"images": True, "noiseless": noiseless, "resolution_px": RESOLUTION,
+             "focal_px": FOCAL_PX}  # fmt: skip
     r = one(d, UR10, setup, IMAGES, seed, extra)
     err = corner_errors(d)
     sigma = float(np.sqrt(np.mean(err**2)))

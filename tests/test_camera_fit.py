@@ -186,10 +186,11 @@ def test_bad_stage_parameter_is_one_line() -> None:
     assert "\n" not in str(err.value)
 
 
-def _synthetic(setup: str, move: str) -> tuple:
+def _synthetic(setup: str, move: str, focal_px: float = 1000.0, noise_px: float = 0.2) -> tuple:
     """40 images of a Puma whose poses are random (``random``), or where only joints 1 and
     2 move a few degrees about one pose (``translate``: one target orientation), noise
-    0.2 px; detections, design, nominal lens."""
+    ``noise_px`` (0.2 px stated); detections, design, nominal lens (and the true lens,
+    ``_synthetic.truth``)."""
     from pipeline.kinematics.chain import link_frames
     from pipeline.refine.camera_fit import Detections
     from pipeline.rig import camera
@@ -202,8 +203,9 @@ def _synthetic(setup: str, move: str) -> tuple:
     true = draw_true_robot(robot, rng)
     target = camera.DEFAULT_TARGET
     fixed, onf = camera.placement(setup, true.chain, robot.limits, target, rng)
-    nominal = camera.nominal_intrinsics(1280, 960, 1000.0)
+    nominal = camera.nominal_intrinsics(1280, 960, focal_px)
     lens = camera.true_intrinsics(nominal, (-0.12, 0.05, 5e-4, -3e-4, 0.0), rng)
+    _synthetic.truth = lens  # type: ignore[attr-defined]
     q, _ = camera.draw_images(40, setup, true.chain, robot.limits, target, fixed, onf, lens, rng)
     if move == "translate":
         q = q[0] + np.zeros_like(q)
@@ -217,7 +219,7 @@ def _synthetic(setup: str, move: str) -> tuple:
     uv = project(camera.camera_points(T, local), lens.vector())[found]
     det = Detections(
         np.repeat(np.arange(len(q)), found.sum(1)), np.tile(local, (len(q), 1, 1))[found],
-        uv + rng.normal(0, 0.2, uv.shape), np.full(len(uv), 0.2),
+        uv + rng.normal(0, noise_px, uv.shape), np.full(len(uv), 0.2),
         joints_to_internal(q, robot.prismatic), np.zeros(robot.n_joints),
     )  # fmt: skip
     return det, robot.design_chain(), nominal
@@ -229,6 +231,28 @@ def test_random_poses_identify_every_parameter() -> None:
     det, design, lens = _synthetic("eye-to-hand", "random")
     fit = fit_camera(det, design, lens, "eye-to-hand")
     assert not fit.identifiability.held.any() and held_line(fit, 0.2) is None
+
+
+@pytest.mark.parametrize("setup", ["eye-to-hand", "eye-in-hand"])
+def test_a_narrow_view_fits_the_principal_point_its_start_knows_worse(setup: str) -> None:
+    """f 3,000 px, detections four times better than their stated 0.2 px (as rendered
+    noiseless images give): by the design's 1 px tolerance the principal point and k3
+    cannot be told from the noise, and held at OpenCV's start they left p2 22σ off the
+    truth. The images determine them better than that start does, so they are fitted:
+    nothing held, every lens term within 4σ of the truth."""
+    from pipeline.refine.camera_fit import tolerances
+    from pipeline.refine.identifiability import tolerance_scale
+
+    det, design, lens = _synthetic(setup, "random", 3000.0, 0.05)
+    truth = _synthetic.truth.vector()  # type: ignore[attr-defined]
+    fit = fit_camera(det, design, lens, setup)
+    assert not fit.identifiability.held.any()
+    sigma = fit.solution.sigma[-9:]
+    assert np.all(np.abs(fit.intrinsics - truth) < 4 * sigma)
+    units = (*fit.model.param_units, *fit.block.param_units)
+    tol, design_tol = tolerances(units, fit.start, fit.block), tolerance_scale(units)
+    assert np.array_equal(tol[:-9], design_tol[:-9])  # the chain's and hand-eye's: the design's
+    assert np.all(tol[-9:] >= design_tol[-9:]) and tol[-7] > design_tol[-7]  # cx: OpenCV's σ
 
 
 def test_one_target_orientation_holds_the_focal_length_and_says_what_to_measure() -> None:

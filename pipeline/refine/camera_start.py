@@ -51,6 +51,10 @@ class CameraStart:
     tool_in_flange: Array
     method: str = ""
     views: int = 0
+    #: σ of ``intrinsics`` (9,): OpenCV's calibration's (its ``stdDeviationsIntrinsics``,
+    #: at its own scatter) at the detections' stated σ when that is larger, as the fit's
+    #: identifiability whitens; None when the lens was given, not calibrated here
+    intrinsics_sigma: Array | None = None
 
 
 def _pose(R: Any, t: Any) -> Array:
@@ -65,25 +69,29 @@ def _outliers(errors: Array) -> np.ndarray:
     return np.asarray(errors > bound, dtype=bool)
 
 
-def _lens(obj: list[Any], img: list[Any], lens: Intrinsics) -> tuple[Any, Any]:
-    """OpenCV's calibration of the views, the outlier views left out (module docstring)."""
+def _lens(obj: list[Any], img: list[Any], lens: Intrinsics) -> tuple[Any, Any, Array, float]:
+    """OpenCV's calibration of the views, the outlier views left out (module docstring),
+    the σ it states for its nine intrinsics (OpenCV's order, armsig's) and the scatter
+    (px per coordinate) they are at: its rms reprojection error (px per point) over √2."""
     import cv2
 
     K0, dist0 = lens.opencv()
     use = np.arange(len(obj))
     K: Any = K0
     dist: Any = dist0
+    sigma, scatter = np.full(9, np.nan), float("nan")
     for _ in range(CALIBRATION_ROUNDS):  # float32: OpenCV's calibration takes points so
         out = cv2.calibrateCameraExtended(
             [obj[i] for i in use], [img[i] for i in use], (lens.width_px, lens.height_px),
             K0.copy(), dist0.copy(), flags=cv2.CALIB_USE_INTRINSIC_GUESS,
         )  # fmt: skip
         K, dist, per_view = out[1], out[2], np.ravel(np.asarray(out[7], float))
+        sigma, scatter = np.ravel(np.asarray(out[5], float))[:9], float(out[0]) / np.sqrt(2)
         bad = _outliers(per_view)
         if not bad.any():
             break
         use = use[~bad]
-    return K, dist
+    return K, dist, sigma, scatter
 
 
 def _pnp(o: Any, u: Any, K: Any, dist: Any) -> tuple[Array, float]:
@@ -144,7 +152,13 @@ def start_from_flange(
     (a session of flange poses, :mod:`pipeline.refine.hand_eye`)."""
     obj = [det.local[det.image == i].astype(np.float32) for i in range(det.n_images)]
     img = [det.uv[det.image == i].astype(np.float32) for i in range(det.n_images)]
-    K, dist = _lens(obj, img, lens) if fit_lens else lens.opencv()
+    sigma = None
+    if fit_lens:
+        K, dist, at, scatter = _lens(obj, img, lens)
+        stated = float(np.median(det.sigma_px))
+        sigma = at * max(stated, scatter) / scatter if scatter > 0 else np.full(9, np.nan)
+    else:
+        K, dist = lens.opencv()
     views = [_pnp(o, u, K, dist) for o, u in zip(obj, img, strict=True)]
     T = np.array([v[0] for v in views])
     errors = np.array([v[1] for v in views])
@@ -165,4 +179,5 @@ def start_from_flange(
     wTb, cTg, method = _hand_eye(moving_from_fixed[good], invert_transform(base_from_flange[good]))
     Kf, df = np.asarray(K, float), np.asarray(dist, float).ravel()
     k = np.concatenate([Kf[[0, 1, 0, 1], [0, 1, 2, 2]], df[:5]])
-    return CameraStart(k, T, invert_transform(wTb), invert_transform(cTg), method, int(good.sum()))
+    return CameraStart(k, T, invert_transform(wTb), invert_transform(cTg), method, int(good.sum()),
+                       sigma)  # fmt: skip

@@ -106,14 +106,17 @@ def analyse(
     noise_stated: bool,
     n_points: int,
     held_before: npt.NDArray[np.bool_] | None = None,
+    tolerance: Array | None = None,
 ) -> Identifiability:
     """The identifiability of the parameters of the whitened Jacobian ``J`` (R, P) with
     internal ``units`` (P,); ``noise_stated``: whether the whitening is the recorded
     noise (else only structural deficiencies are held); ``n_points``: measured points;
-    ``held_before``: parameters held already (at the start: they stay held)."""
+    ``held_before``: parameters held already (at the start: they stay held);
+    ``tolerance`` (P,): each parameter's, where its start is not a design value
+    (default :func:`tolerance_scale` of ``units``)."""
     from scipy.linalg import qr
 
-    Js = J * tolerance_scale(units)
+    Js = J * (tolerance_scale(units) if tolerance is None else tolerance)
     if held_before is not None:  # held already: out of the QR, so that the exact partner
         # of a held parameter (two lumped masses on one joint's axis) is not held too
         Js = np.where(held_before, 0.0, Js)
@@ -224,12 +227,13 @@ def fit_identifiable(
     n_points: int,
     x_warm: Array | None = None,
     f_scale_hint: float | None = None,
+    tolerance: Array | None = None,
 ) -> tuple[Solution, Identifiability]:
     """Solve ``problem`` from ``x0`` (or from ``x_warm``, a nearer start, with the robust
     scale ``f_scale_hint`` of the fit it came from: :func:`pipeline.refine.solve.solve`)
     with the parameters the data cannot identify held at ``x0`` (module docstring); a
     problem with fewer residuals than :data:`COORDINATES_PER_PARAMETER` per identifiable
-    parameter is refused."""
+    parameter is refused. ``tolerance``: as :func:`analyse`'s."""
     begin = x0 if x_warm is None else np.asarray(x_warm, float)
     r, J = residuals_and_jacobian(problem, begin)
     n = J.shape[1]
@@ -243,7 +247,7 @@ def fit_identifiable(
             got=f"{len(r)}",
             fix="measure more poses, spread over the joint ranges",
         )
-    start = analyse(J, units, noise_stated, n_points)
+    start = analyse(J, units, noise_stated, n_points, tolerance=tolerance)
     begin = begin.copy()
     begin[start.held] = x0[start.held]
     solution = solve(replace(problem, held=start.held), begin, f_scale_hint=f_scale_hint)
@@ -253,7 +257,7 @@ def fit_identifiable(
     # and a parameter below that scatter is fitted to it (UR10 Series C: joint 6's
     # direction fitted to 6.3° ± 5.7° at the stated σ).
     scale = solution.noise_scale if np.isfinite(solution.noise_scale) else 1.0
-    final = analyse(J / max(scale, 1.0), units, noise_stated, n_points, start.held)
+    final = analyse(J / max(scale, 1.0), units, noise_stated, n_points, start.held, tolerance)
     if (final.held & ~start.held).any():  # seen at the design, not at the solution
         warm = solution.x.copy()  # the rest from where the first fit left them
         warm[final.held] = x0[final.held]

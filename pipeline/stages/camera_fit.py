@@ -155,10 +155,12 @@ def fit_table(
 
 STAGE = Stage(
     "camera_fit",
-    5,  # 2: per-image reprojection errors and the identifiability in the summary; 3: the
+    6,  # 2: per-image reprojection errors and the identifiability in the summary; 3: the
     # start frames, q̄^s (rad / cm) and the fitted frames S̄_0 … S̄_n and tool (cm);
     # 4: the covariance rows (the signature's uncertainty, holdout and verdict);
-    # 5: the covariance with the joint readings' rounding (refine/camera_readings.py)
+    # 5: the covariance with the joint readings' rounding (refine/camera_readings.py);
+    # 6: lens terms held by the design's tolerance alone analysed again at their start's
+    # σ (refine/camera_fit.py, tolerances)
     ("session", "joints", "detections"),
     Params(),
     compute,

@@ -66,7 +66,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "camera_fit",
-    2,  # 2: the covariance rows of the joint session's table (schema camera_fit v2)
+    3,  # 2: the covariance rows of the joint session's table (schema camera_fit v2);
+    # 3: the identifiability analysed at the lens start's σ (refine/camera_fit.py, tolerances)
     ("session", "flange_poses", "detections"),
     Params(),
     compute,
