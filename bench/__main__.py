@@ -4,6 +4,7 @@ from bench import (
     camera,
     camera_images,
     evaluate,
+    fit_floor,
     fleet,
     hand_eye_real,
     identify,
@@ -31,6 +32,8 @@ if __name__ == "__main__":
     pose_sets.main()
     print()
     identify_cost.main()
+    print()
+    fit_floor.main()
     print()
     camera.timing()  # the accuracy study: python -m bench.camera (minutes)
     print()
