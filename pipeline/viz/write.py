@@ -165,25 +165,28 @@ def _topics(messages: list[VizMessage]) -> dict[str, int]:
 
 
 def _camera_viz(sdir: Path, path: Path, rec: Any, q: list[float] | None) -> VizResult:
-    """A camera session's ``viz.mcap`` (:mod:`pipeline.viz.camera`), under the lock."""
+    """A camera session's ``viz.mcap`` (:mod:`pipeline.viz.camera`; a session of flange
+    poses without joints: :mod:`pipeline.viz.hand_eye`), under the lock."""
+    from pipeline.stages.recording import FLANGE_KIND
     from pipeline.viz.camera import camera_messages, check_fresh
+    from pipeline.viz.hand_eye import hand_eye_messages
 
     if q is not None:
         raise ArmsigError("--q does not apply to a camera session (its images' own joint "
-                          "readings place the camera and the target)", fix="drop --q")  # fmt: skip
-    if not len(rec.joint_step):
-        raise ArmsigError(
-            f"{sdir}: `pipeline viz` of a session of flange poses (no joint readings) is not "
-            "built yet", fix="open its report (report/report.md) for the reprojection figure",
-        )  # fmt: skip
+                          "readings or flange poses place the camera and the target)",
+                          fix="drop --q")  # fmt: skip
     check_fresh(sdir)
-    names = ("session", "joints", "detections", "camera_fit", "camera_residuals")
-    messages = camera_messages(sdir, {n: _checked(sdir, n) for n in names}, rec)
+    flange = rec.kind == FLANGE_KIND
+    poses = "flange_poses" if flange else "joints"
+    names = ("session", poses, "detections", "camera_fit", "camera_residuals")
+    tables = {n: _checked(sdir, n) for n in names}
+    messages = hand_eye_messages(tables, rec) if flange else camera_messages(sdir, tables, rec)
     for m in messages:
         fg.validate(m.schema, m.payload)
     _refuse_foreign(path)
     robot = rec.robot["robot"]["name"] if "robot" in rec.robot else ""
     write_mcap(path, messages, {"session": sdir.name, "robot": str(robot),
                                 "setup": str(rec.rig["setup"]), "length_unit": "m",
+                                "display_frame": "base" if flange else "sensor",
                                 "package_version": __version__})  # fmt: skip
     return VizResult(path, _topics(messages), [], [])
