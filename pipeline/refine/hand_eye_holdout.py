@@ -20,7 +20,7 @@ A held-out RMS well above the in-sample one is a calibration that follows its ow
 (an over-fitted lens) or errors an image's points share (the recorded flange pose's own
 error): the prediction counts every point's noise as independent and sees neither. On
 industrial_calibration's real sets 25-50 % of the residuals' square is such a shift per
-image, and the held-out RMS is 1.4-1.6 times its prediction (docs/camera.md).
+image, and the held-out RMS is 1.47-1.61 times its prediction (docs/camera.md).
 """
 
 from __future__ import annotations
