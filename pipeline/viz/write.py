@@ -32,7 +32,13 @@ from pipeline.stages.runner import session_folder, stage_path
 from pipeline.stages.tables import check_table
 from pipeline.units import joints_to_boundary, joints_to_internal
 from pipeline.viz import foxglove as fg
-from pipeline.viz.scene import VizMessage, feature_messages, frame_messages, point_messages
+from pipeline.viz.scene import (
+    SENSOR,
+    VizMessage,
+    feature_messages,
+    frame_messages,
+    point_messages,
+)
 
 VIZ_NAME = "viz.mcap"
 LIBRARY = "armsig-viz"  # the header's library: marks a file this command may replace
@@ -41,12 +47,14 @@ METADATA_NAME = "armsig.viz"
 
 @dataclass(frozen=True)
 class VizResult:
-    """The file written, its messages per topic and the configuration shown (deg / cm)."""
+    """The file written, its messages per topic, the configuration shown (deg / cm) and
+    the frame to display it in."""
 
     path: Path
     topics: dict[str, int]
     configuration: list[float]
     outside_limits: list[str]
+    display_frame: str = SENSOR
 
 
 def _checked(sdir: Path, name: str) -> pa.Table:
@@ -169,7 +177,7 @@ def _camera_viz(sdir: Path, path: Path, rec: Any, q: list[float] | None) -> VizR
     poses without joints: :mod:`pipeline.viz.hand_eye`), under the lock."""
     from pipeline.stages.recording import FLANGE_KIND
     from pipeline.viz.camera import camera_messages, check_fresh
-    from pipeline.viz.hand_eye import hand_eye_messages
+    from pipeline.viz.hand_eye import BASE, hand_eye_messages
 
     if q is not None:
         raise ArmsigError("--q does not apply to a camera session (its images' own joint "
@@ -185,8 +193,9 @@ def _camera_viz(sdir: Path, path: Path, rec: Any, q: list[float] | None) -> VizR
         fg.validate(m.schema, m.payload)
     _refuse_foreign(path)
     robot = rec.robot["robot"]["name"] if "robot" in rec.robot else ""
+    frame = BASE if flange else SENSOR
     write_mcap(path, messages, {"session": sdir.name, "robot": str(robot),
                                 "setup": str(rec.rig["setup"]), "length_unit": "m",
-                                "display_frame": "base" if flange else "sensor",
+                                "display_frame": frame,
                                 "package_version": __version__})  # fmt: skip
-    return VizResult(path, _topics(messages), [], [])
+    return VizResult(path, _topics(messages), [], [], frame)
