@@ -17,7 +17,10 @@ the modified circle grid, eye-in-hand), on armsig's own detections:
 
 Each row: the RMS reprojection per corner with the given lens (px; "fitted" rows with
 their own lens), and how far both hand-eye transforms are from the reference's optimum
-(mm, degrees, the worse of the two). ``python -m bench.hand_eye_real``.
+(mm, degrees, the worse of the two). Then the held-out images (:func:`held_out`, the
+``hand_eye_holdout`` stage's folds) with the lens given and fitted: the in-sample RMS,
+the held-out one, its prediction, the closed-form start's and the worst image's.
+``python -m bench.hand_eye_real``.
 """
 
 from __future__ import annotations
