@@ -17,7 +17,10 @@ the modified circle grid, eye-in-hand), on armsig's own detections:
 
 Each row: the RMS reprojection per corner with the given lens (px; "fitted" rows with
 their own lens), and how far both hand-eye transforms are from the reference's optimum
-(mm, degrees, the worse of the two). ``python -m bench.hand_eye_real``.
+(mm, degrees, the worse of the two). Then the held-out images (:func:`held_out`, the
+``hand_eye_holdout`` stage's folds) with the lens given and fitted: the in-sample RMS,
+the held-out one, its prediction, the closed-form start's and the worst image's.
+``python -m bench.hand_eye_real``.
 """
 
 from __future__ import annotations
@@ -183,11 +186,28 @@ def difference(
     return mm, deg
 
 
-def armsig_fit(s: RealSet, intrinsics: str, loss: str = "soft_l1") -> Any:
-    from pipeline.refine.hand_eye import fit_hand_eye, flange_detections
+def detections(s: RealSet) -> Any:
+    """The set's :class:`~pipeline.refine.camera_fit.Detections` (σ 0.2 px, the default)."""
+    from pipeline.refine.hand_eye import flange_detections
 
-    det = flange_detections(s.image, s.local, s.uv, np.full(len(s.uv), 0.2), len(s.flange))
-    return fit_hand_eye(det, s.flange, s.lens, s.setup, intrinsics, loss=loss)
+    return flange_detections(s.image, s.local, s.uv, np.full(len(s.uv), 0.2), len(s.flange))
+
+
+def armsig_fit(s: RealSet, intrinsics: str, loss: str = "soft_l1") -> Any:
+    from pipeline.refine.hand_eye import fit_hand_eye
+
+    return fit_hand_eye(detections(s), s.flange, s.lens, s.setup, intrinsics, loss=loss)
+
+
+def held_out(s: RealSet, intrinsics: str) -> tuple[float, Any]:
+    """(The in-sample RMS, :class:`~pipeline.refine.hand_eye_holdout.HandEyeHeldOut`) of
+    the ``hand_eye_holdout`` stage's default folds."""
+    from pipeline.refine.hand_eye_holdout import hand_eye_folds, hand_eye_holdout
+
+    fold = hand_eye_folds(len(s.flange))
+    assert fold is not None  # both sets have more than MIN_IMAGES images
+    h = hand_eye_holdout(detections(s), s.flange, s.lens, s.setup, fold, intrinsics=intrinsics)
+    return armsig_fit(s, intrinsics).rms_px, h
 
 
 def rows(s: RealSet) -> list[tuple[str, float, float, float]]:
@@ -235,6 +255,17 @@ def main() -> None:
         print(f"  {'method':58s} {'rms px':>8s} {'mm':>8s} {'deg':>7s}")
         for name, px, mm, deg in rows(s):
             print(f"  {name:58s} {px:8.3f} {mm:8.3f} {deg:7.3f}")
+        print(
+            f"  held out (5 folds): {'lens':8s} {'in px':>7s} {'held px':>8s} "
+            f"{'predicted':>9s} {'start px':>8s} {'worst image':>11s}"
+        )
+        for intrinsics in ("fixed", "fitted"):
+            inside, h = held_out(s, intrinsics)
+            print(
+                f"  {'':20s}{intrinsics:8s} {inside:7.3f} {h.overall(h.rms_px):8.3f} "
+                f"{h.overall(h.expected_px):9.3f} {h.overall(h.start_rms_px):8.3f} "
+                f"{h.rms_px.max():11.3f}"
+            )
 
 
 if __name__ == "__main__":

@@ -112,9 +112,9 @@ def test_noiseless_identifies_exactly(setup: str, intrinsics: str) -> None:
     assert rel.max() < 1e-6
 
 
-def _recording(sdir: Path, setup: str, extra: list | None = None) -> Path:
+def _recording(sdir: Path, setup: str, extra: list | None = None, n: int = 16) -> Path:
     """The recording the image-set importer writes for the drawn session (no images)."""
-    s = _session(setup)
+    s = _session(setup, n)
     entries = []
     for i, F in enumerate(s["flange"]):
         at = s["image"] == i
@@ -146,12 +146,21 @@ def test_identify_writes_the_camera_calibration(tmp_path: Path) -> None:
     assert read_recording(sdir / "recording.mcap").kind == "camera-flange"
     result = identify(sdir)
     names = [r.name for r in result.runs]
-    assert names == ["session", "flange_poses", "detections", "camera_fit", "camera_residuals"]
+    assert names == [
+        "session",
+        "flange_poses",
+        "detections",
+        "camera_fit",
+        "camera_residuals",
+        "hand_eye_holdout",
+    ]
     assert result.signature is None and "not the arm" in result.warnings[0]
     assert result.verdict is not None and "CAMERA ONLY" in result.verdict
-    assert "the arm is not calibrated" in result.verdict
+    assert "the arm is not calibrated" in result.verdict and "px held out" in result.verdict
     doc = json.loads((sdir / "camera_calibration.json").read_text())
     assert doc["rms_px"] < 1e-6 and doc["arm"].startswith("not calibrated")
+    held = doc["held_out"]  # noiseless: every image held out is predicted exactly
+    assert held["folds"] == 5 and len(held["images"]) == 16 and held["rms_px"] < 1e-6
     assert doc["camera_in_base"]["translation_cm"] == pytest.approx([20.0, 130.0, 60.0], abs=1e-6)
     assert doc["target_in_flange"]["translation_cm"] == pytest.approx([3.0, -2.0, 12.0], abs=1e-6)
     assert set(doc["sigma_intrinsics"]) == {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"}
@@ -160,6 +169,7 @@ def test_identify_writes_the_camera_calibration(tmp_path: Path) -> None:
     assert info.vector() == pytest.approx(TRUE.vector(), rel=1e-6, abs=1e-6)
     report = (sdir / "report" / "report.md").read_text()
     assert "the arm is not calibrated" in report.lower() and "| 15 | 35 |" in report
+    assert "## Held-out images" in report and "px held out**" in report
     again = identify(sdir)
     assert {r.action for r in again.runs} == {"cached"}
     with pytest.raises(StageError) as err:  # what needs an arm (audit, ...) says so

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.hand_eye_real import REALDATA, armsig_fit, difference, load, reference_fit
+from bench.hand_eye_real import REALDATA, armsig_fit, difference, held_out, load, reference_fit
 from pipeline.refine.hand_eye import fixed_in_base, tool_in_flange
 
 pytestmark = pytest.mark.skipif(
@@ -67,6 +67,24 @@ def test_circle_grid(circles) -> None:
     assert fitted.rms_px < 2.29
 
 
+@pytest.mark.parametrize("name", ["charuco", "circles"])
+def test_held_out_images(name: str, request: pytest.FixtureRequest) -> None:
+    """Every image held out once (5 folds): the held-out RMS above the in-sample one and
+    its prediction (measured 1.47-1.61x the prediction: errors shared by an image's points,
+    docs/camera.md), below the closed-form start's; the lens fitted predicts held-out
+    images better than the given one (ChArUco 1.73 against 3.63 px, circle grid 2.56
+    against 3.39 px): fitting it is not over-fitting here."""
+    s = request.getfixturevalue(name)
+    out = {}
+    for intrinsics in ("fixed", "fitted"):
+        inside, h = held_out(s, intrinsics)
+        held = h.overall(h.rms_px)
+        assert inside < held < h.overall(h.start_rms_px)
+        assert 1.2 < held / h.overall(h.expected_px) < 2.0
+        out[intrinsics] = held
+    assert out["fitted"] < 0.8 * out["fixed"]
+
+
 def test_charuco_set_imports_and_identifies(tmp_path) -> None:
     """`pipeline import cal_data.yaml --format images` with no edit, then `identify`: all
     16 images detected by the detections stage, the camera calibrated with the given lens,
@@ -81,6 +99,7 @@ def test_charuco_set_imports_and_identifies(tmp_path) -> None:
     result = identify(tmp_path / "s", overrides={"camera_fit": {"intrinsics": "fixed"}})
     assert {r.name: r.rows for r in result.runs}["detections"] == 382
     assert result.verdict is not None and "the arm is not calibrated" in result.verdict
+    assert "px held out (predicted" in result.verdict
     doc = json.loads((tmp_path / "s" / "camera_calibration.json").read_text())
     assert doc["n_images"] == 16 and 2.5 < doc["rms_px"] <= 2.7  # measured 2.623
     assert all(0 < s < 0.1 for s in doc["camera_in_base"]["sigma_translation_cm"])

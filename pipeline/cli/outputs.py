@@ -36,7 +36,8 @@ def viz(
     ] = None,
     as_json: JsonOption = False,
 ) -> None:
-    """Write viz.mcap for Foxglove's 3-D panel: frames, fitted features, measured points (m)."""
+    """Write viz.mcap for Foxglove's 3-D panel: frames, fitted features, measured points (m);
+    of a camera session: its images with their corners, the frustum and both bodies."""
     from pipeline.viz.write import viz as run_viz
 
     r = run_viz(session, None if q is None else joint_values(q, "--q"), out)
@@ -48,6 +49,7 @@ def viz(
                 "topics": r.topics,
                 "configuration": r.configuration,
                 "outside_limits": r.outside_limits,
+                "display_frame": r.display_frame,
             }
         )
     else:
@@ -56,7 +58,8 @@ def viz(
         if r.configuration:
             typer.echo(f"link frames at q = {shown} (deg / cm); lengths in metres")
         else:  # a camera session (docs/viz.md): one image per second
-            typer.echo("camera images, annotations and poses one per second; lengths in metres")
+            typer.echo("camera images, annotations and poses one per second; lengths in metres; "
+                       f"display frame {r.display_frame}")  # fmt: skip
     warn_outside_limits(r.outside_limits)
 
 

@@ -32,6 +32,7 @@ from pipeline.optim.block import Array
 from pipeline.refine.camera_block import CameraBlock
 from pipeline.refine.camera_fit import MIN_IMAGES, CameraFit, Detections, fit_camera, observing
 from pipeline.refine.camera_readings import reading_jacobian
+from pipeline.refine.kinematics import ChainModel
 from pipeline.refine.solve import Problem, residuals_and_jacobian
 from pipeline.sensor.camera import Intrinsics
 from pipeline.sweeps import POSES_SWEEP
@@ -76,12 +77,13 @@ def subset(det: Detections, images: np.ndarray) -> Detections:
 
 
 def predicted(
-    fit: CameraFit, det: Detections, reading_sigma: Array | None = None
+    fit: CameraFit, det: Detections, model: ChainModel, reading_sigma: Array | None = None
 ) -> tuple[Array, Array]:
     """Per detection of ``det`` (images the fit did not see): its reprojection error under
     ``fit`` (D,) px, and its expected square (D,) px² (module docstring), with the share
-    of the joint readings' σ ``reading_sigma`` (n,) when given."""
-    model = observing(fit.model, det.q, det.q_signature)
+    of the joint readings' σ ``reading_sigma`` (n,) when given; ``model``: the fit's model
+    observing ``det``'s images (the chain at their readings, :func:`observing`, or their
+    flange poses, :func:`pipeline.refine.hand_eye.flange_model`)."""
     n = det.n_images
     keys = pa.table(
         {
@@ -105,7 +107,7 @@ def predicted(
     return err, expected
 
 
-def _per_image(values: Array, image: np.ndarray, n: int) -> Array:
+def per_image(values: Array, image: np.ndarray, n: int) -> Array:
     """RMS per image of per-detection lengths (or square root of the mean of squares)."""
     count = np.bincount(image, minlength=n)
     return np.sqrt(np.bincount(image, values, n) / np.maximum(count, 1))
@@ -124,10 +126,11 @@ def camera_holdout(
     out = held_out(det.n_images, fraction)
     kept, held = subset(det, ~out), subset(det, out)
     refit = fit_camera(kept, design, lens, setup, **fit_options)  # type: ignore[arg-type]
-    err, expected = predicted(refit, held, fit_options.get("reading_sigma"))  # type: ignore[arg-type]
+    seen = observing(refit.model, held.q, held.q_signature)
+    err, expected = predicted(refit, held, seen, fit_options.get("reading_sigma"))  # type: ignore[arg-type]
     peers = fit_camera(kept, design, lens, setup, chain="design", **fit_options)  # type: ignore[arg-type]
-    design_err, _ = predicted(peers, held)
+    design_err, _ = predicted(peers, held, observing(peers.model, held.q, held.q_signature))
     h = held.n_images
     return HeldOutImages(np.flatnonzero(out), np.bincount(held.image, minlength=h),
-                         _per_image(err**2, held.image, h), _per_image(expected, held.image, h),
-                         _per_image(design_err**2, held.image, h))  # fmt: skip
+                         per_image(err**2, held.image, h), per_image(expected, held.image, h),
+                         per_image(design_err**2, held.image, h))  # fmt: skip

@@ -72,7 +72,8 @@ SENSOR_STAGE_MODULES = {"sonic": STAGE_MODULES, "points": POINT_STAGE_MODULES,
                         "camera": CAMERA_STAGE_MODULES,
                         # flange poses, no joints (issue 40): the camera only, no product
                         "camera-flange": ("session", "flange_poses", "image_detections",
-                                          "hand_eye_fit", "hand_eye_residuals")}  # fmt: skip
+                                          "hand_eye_fit", "hand_eye_residuals",
+                                          "hand_eye_holdout")}  # fmt: skip
 #: The last identification stage: a stage list holding it (and ``session``) has a product.
 LAST_STAGE = "verdict"
 #: Stage modules of ``pipeline evaluate`` (run after the identification, same runner).

@@ -46,6 +46,19 @@ def _arm(inputs: Mapping[str, Any]) -> str:
     return str(json.loads(inputs["session"].column("rig_json")[0].as_py()).get("arm", ARM))
 
 
+def fitted_hand_eye(table: pa.Table, lens: Any) -> tuple[np.ndarray, np.ndarray, Any]:
+    """(The fixed body in the base, the flange's body in the flange (4, 4, cm), the fitted
+    lens :class:`~pipeline.sensor.camera.Intrinsics` of the size of ``lens``) of this
+    stage's table."""
+    from pipeline.sensor.camera import Intrinsics
+    from pipeline.stages.camera_fit import camera_summary
+
+    s = camera_summary(table)
+    k = [r["value"] for r in table.to_pylist() if r["group"] == "intrinsics"]
+    fitted = Intrinsics(lens.width_px, lens.height_px, *k)
+    return np.array(s["fixed_in_base_cm"]), np.array(s["tool_in_flange_cm"]), fitted
+
+
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.refine.hand_eye import fit_hand_eye, fixed_in_base, tool_in_flange
 

@@ -49,7 +49,6 @@ def camera_messages(sdir: Path, tables: dict[str, pa.Table], rec: Any) -> list[V
     from pipeline.refine.camera_fit import tool_poses
     from pipeline.stages.camera_fit import fit_pixels, fitted_model
     from pipeline.stages.frames import readings_at
-    from pipeline.stages.image_inputs import image_refs
     from pipeline.stages.session import session_robot
     from pipeline.sweeps import POSES_SWEEP
     from pipeline.units import joints_to_internal
@@ -61,20 +60,48 @@ def camera_messages(sdir: Path, tables: dict[str, pa.Table], rec: Any) -> list[V
     images = fit_pixels(rig, tables["detections"])[0]
     q = readings_at(tables["joints"], POSES_SWEEP, images, robot.n_joints, robot.prismatic)
     tool = tool_poses(model, x, joints_to_internal(q, robot.prismatic), q_sig)
-    eye_to_hand = rig["setup"] == "eye-to-hand"
-    fixed, moving = (CAMERA, TARGET) if eye_to_hand else (TARGET, CAMERA)
+    fixed, moving = bodies(rig["setup"])
     out = [VizMessage(TF_TOPIC, "foxglove.FrameTransform",
                       fg.frame_transform(SENSOR, fixed, np.eye(4)))]  # fmt: skip
-    res = tables["camera_residuals"].to_pydict()
+    out += [VizMessage(TF_TOPIC, "foxglove.FrameTransform",
+                       fg.frame_transform(SENSOR, moving, T, image_time(k)), image_time(k))
+            for k, T in enumerate(tool)]  # fmt: skip
+    depth = float(np.max(np.linalg.norm(tool[:, :3, 3], axis=1)))  # the farthest target
+    out += image_messages(images, tables["camera_residuals"], rec)
+    out.append(scene_message(intrinsics, rig, depth))
+    return in_time_order(out)
+
+
+def bodies(setup: str) -> tuple[str, str]:
+    """The frames of (the fixed body, the body on the flange) of a set-up."""
+    return (CAMERA, TARGET) if setup == "eye-to-hand" else (TARGET, CAMERA)
+
+
+def image_time(k: int) -> int:
+    """Log time (ns) of the fit's image ``k``: one image per second."""
+    return (k + 1) * IMAGE_NS
+
+
+def in_time_order(messages: list[VizMessage]) -> list[VizMessage]:
+    """``messages`` by log time (stable: each topic keeps its order)."""
+    return sorted(messages, key=lambda m: m.time_ns)
+
+
+def image_messages(images: np.ndarray, residuals: pa.Table, rec: Any) -> list[VizMessage]:
+    """Per image of the fit (``images``: their steps, in the fit's order; image ``k`` at
+    :func:`image_time`): the PNG the recording references, when it has one, and the
+    annotations (module docstring) from the ``camera_residuals`` table."""
+    from pipeline.stages.image_inputs import image_refs
+
+    res = residuals.to_pydict()
     r_image = np.asarray(res["image"])
     uv = np.stack([res["u_px"], res["v_px"]], axis=1)
     duv = np.stack([res["du_px"], res["dv_px"]], axis=1)
     refs = image_refs(rec)
     files = {int(s): f for s, f, h in zip(refs.step, refs.file, refs.recorded, strict=True) if h}
+    out = []
     for k, step in enumerate(images):
-        t = (k + 1) * IMAGE_NS
-        out.append(VizMessage(TF_TOPIC, "foxglove.FrameTransform",
-                              fg.frame_transform(SENSOR, moving, tool[k], t), t))  # fmt: skip
+        t = image_time(k)
         if refs.folder is not None and int(step) in files:
             png = (refs.folder / files[int(step)]).read_bytes()
             out.append(VizMessage(IMAGE_TOPIC, "foxglove.CompressedImage",
@@ -88,11 +115,16 @@ def camera_messages(sdir: Path, tables: dict[str, pa.Table], rec: Any) -> list[V
                                   fg.points_annotation(fg.POINTS, again, REPROJECTED, t, 4.0),
                                   fg.points_annotation(fg.LINE_LIST, vectors, RESIDUAL, t, 1.0),
                               ]), t))  # fmt: skip
-    depth = float(np.max(np.linalg.norm(tool[:, :3, 3], axis=1)))  # the farthest target
-    out.append(VizMessage(SCENE_TOPIC, "foxglove.SceneUpdate", fg.scene_update([
-        frustum(intrinsics, rig["camera"], depth), target_entity(rig["target"]),
-    ])))  # fmt: skip
     return out
+
+
+def scene_message(
+    intrinsics: np.ndarray, rig: dict[str, Any], depth_cm: float, *extra: fg.Json
+) -> VizMessage:
+    """``/camera/scene`` (time 0): the frustum out to ``depth_cm``, the target and
+    ``extra`` entities."""
+    entities = [frustum(intrinsics, rig["camera"], depth_cm), target_entity(rig["target"])]
+    return VizMessage(SCENE_TOPIC, "foxglove.SceneUpdate", fg.scene_update([*entities, *extra]))
 
 
 def frustum(intrinsics: np.ndarray, stated: dict[str, Any], depth_cm: float) -> fg.Json:
@@ -115,14 +147,8 @@ def target_entity(target_dict: dict[str, Any]) -> fg.Json:
     lo, hi = local.min(axis=0), local.max(axis=0)
     outline = np.array([[lo[0], lo[1], 0], [hi[0], lo[1], 0], [hi[0], hi[1], 0],
                         [lo[0], hi[1], 0], [lo[0], lo[1], 0]])  # fmt: skip
-    T = np.eye(4)
-    spheres = []
-    for p in local:
-        T[:3, 3] = p
-        spheres.append({"pose": fg.pose(T), "size": fg.vector_m(np.full(3, 0.6)),
-                        "color": fg.color(DETECTED)})  # fmt: skip
     return fg.scene_entity(TARGET, "target", lines=[fg.line_strip(outline, FRUSTUM)],
-                           spheres=spheres)  # fmt: skip
+                           spheres=fg.spheres(local, 0.6, DETECTED))  # fmt: skip
 
 
 def check_fresh(sdir: Path) -> None:

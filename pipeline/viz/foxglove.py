@@ -113,6 +113,16 @@ def line_strip(points_cm: np.ndarray, rgba: RGBA) -> Json:
     }
 
 
+def spheres(points_cm: np.ndarray, size_cm: float, rgba: RGBA) -> list[Json]:
+    """``foxglove.SpherePrimitive``s of diameter ``size_cm`` at points (m, 3) in cm."""
+    T = np.eye(4)
+    out = []
+    for p in points_cm:
+        T[:3, 3] = p
+        out.append({"pose": pose(T), "size": vector_m(np.full(3, size_cm)), "color": color(rgba)})
+    return out
+
+
 def arrow(tail_cm: np.ndarray, direction: np.ndarray, length_cm: float, rgba: RGBA) -> Json:
     """``foxglove.ArrowPrimitive`` from ``tail_cm`` along the unit vector ``direction``."""
     R = np.eye(3)

@@ -32,7 +32,13 @@ from pipeline.stages.runner import session_folder, stage_path
 from pipeline.stages.tables import check_table
 from pipeline.units import joints_to_boundary, joints_to_internal
 from pipeline.viz import foxglove as fg
-from pipeline.viz.scene import VizMessage, feature_messages, frame_messages, point_messages
+from pipeline.viz.scene import (
+    SENSOR,
+    VizMessage,
+    feature_messages,
+    frame_messages,
+    point_messages,
+)
 
 VIZ_NAME = "viz.mcap"
 LIBRARY = "armsig-viz"  # the header's library: marks a file this command may replace
@@ -41,12 +47,14 @@ METADATA_NAME = "armsig.viz"
 
 @dataclass(frozen=True)
 class VizResult:
-    """The file written, its messages per topic and the configuration shown (deg / cm)."""
+    """The file written, its messages per topic, the configuration shown (deg / cm) and
+    the frame to display it in."""
 
     path: Path
     topics: dict[str, int]
     configuration: list[float]
     outside_limits: list[str]
+    display_frame: str = SENSOR
 
 
 def _checked(sdir: Path, name: str) -> pa.Table:
@@ -165,25 +173,29 @@ def _topics(messages: list[VizMessage]) -> dict[str, int]:
 
 
 def _camera_viz(sdir: Path, path: Path, rec: Any, q: list[float] | None) -> VizResult:
-    """A camera session's ``viz.mcap`` (:mod:`pipeline.viz.camera`), under the lock."""
+    """A camera session's ``viz.mcap`` (:mod:`pipeline.viz.camera`; a session of flange
+    poses without joints: :mod:`pipeline.viz.hand_eye`), under the lock."""
+    from pipeline.stages.recording import FLANGE_KIND
     from pipeline.viz.camera import camera_messages, check_fresh
+    from pipeline.viz.hand_eye import BASE, hand_eye_messages
 
     if q is not None:
         raise ArmsigError("--q does not apply to a camera session (its images' own joint "
-                          "readings place the camera and the target)", fix="drop --q")  # fmt: skip
-    if not len(rec.joint_step):
-        raise ArmsigError(
-            f"{sdir}: `pipeline viz` of a session of flange poses (no joint readings) is not "
-            "built yet", fix="open its report (report/report.md) for the reprojection figure",
-        )  # fmt: skip
+                          "readings or flange poses place the camera and the target)",
+                          fix="drop --q")  # fmt: skip
     check_fresh(sdir)
-    names = ("session", "joints", "detections", "camera_fit", "camera_residuals")
-    messages = camera_messages(sdir, {n: _checked(sdir, n) for n in names}, rec)
+    flange = rec.kind == FLANGE_KIND
+    poses = "flange_poses" if flange else "joints"
+    names = ("session", poses, "detections", "camera_fit", "camera_residuals")
+    tables = {n: _checked(sdir, n) for n in names}
+    messages = hand_eye_messages(tables, rec) if flange else camera_messages(sdir, tables, rec)
     for m in messages:
         fg.validate(m.schema, m.payload)
     _refuse_foreign(path)
     robot = rec.robot["robot"]["name"] if "robot" in rec.robot else ""
+    frame = BASE if flange else SENSOR
     write_mcap(path, messages, {"session": sdir.name, "robot": str(robot),
                                 "setup": str(rec.rig["setup"]), "length_unit": "m",
+                                "display_frame": frame,
                                 "package_version": __version__})  # fmt: skip
-    return VizResult(path, _topics(messages), [], [])
+    return VizResult(path, _topics(messages), [], [], frame)
