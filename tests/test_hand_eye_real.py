@@ -49,12 +49,15 @@ def test_charuco_given_lens_reaches_the_peers_optimum(charuco) -> None:
 
 def test_charuco_lens_fitted_below_the_peer(charuco) -> None:
     """The intrinsics and distortion fitted in the same fit: 1.09 px (the peer's
-    calibrateCamera-then-hand-eye: 1.28 px), σ of every one of the nine intrinsics."""
+    calibrateCamera-then-hand-eye: 1.28 px), σ of every one of the nine intrinsics, with
+    the error an image's points share counted (0.76 px per coordinate beside 0.38 px of
+    independent scatter: refine/camera_readings.py)."""
     fit = armsig_fit(charuco, "fitted")
     assert fit.rms_px < 1.28
     sigma = fit.solution.sigma[-9:]
     assert np.isfinite(sigma).all() and (sigma > 0).all()
-    assert sigma[:4].max() < 5.0  # px: measured 1.1, 1.1, 3.2, 1.9
+    assert sigma[:4].max() < 15.0  # px: measured 2.8, 2.9, 8.5, 5.4 (1.1, 1.1, 3.2, 1.9
+    # with every point's error independent, which held-out images showed too small)
 
 
 def test_circle_grid(circles) -> None:
@@ -69,18 +72,19 @@ def test_circle_grid(circles) -> None:
 
 @pytest.mark.parametrize("name", ["charuco", "circles"])
 def test_held_out_images(name: str, request: pytest.FixtureRequest) -> None:
-    """Every image held out once (5 folds): the held-out RMS above the in-sample one and
-    its prediction (measured 1.47-1.61x the prediction: errors shared by an image's points,
-    docs/camera.md), below the closed-form start's; the lens fitted predicts held-out
-    images better than the given one (ChArUco 1.73 against 3.63 px, circle grid 2.56
-    against 3.39 px): fitting it is not over-fitting here."""
+    """Every image held out once (5 folds): the held-out RMS above the in-sample one, at
+    its prediction (measured 0.99-1.22x the prediction with the error an image's points
+    share counted, 1.47-1.61x without: docs/camera.md), below the closed-form start's;
+    the lens fitted predicts held-out images better than the given one (ChArUco 1.73
+    against 3.63 px, circle grid 2.56 against 3.39 px): fitting it is not over-fitting
+    here."""
     s = request.getfixturevalue(name)
     out = {}
     for intrinsics in ("fixed", "fitted"):
         inside, h = held_out(s, intrinsics)
         held = h.overall(h.rms_px)
         assert inside < held < h.overall(h.start_rms_px)
-        assert 1.2 < held / h.overall(h.expected_px) < 2.0
+        assert 0.8 < held / h.overall(h.expected_px) < 1.4
         out[intrinsics] = held
     assert out["fitted"] < 0.8 * out["fixed"]
 
@@ -103,4 +107,6 @@ def test_charuco_set_imports_and_identifies(tmp_path) -> None:
     doc = json.loads((tmp_path / "s" / "camera_calibration.json").read_text())
     assert doc["n_images"] == 16 and 2.5 < doc["rms_px"] <= 2.7  # measured 2.623
     assert all(0 < s < 0.1 for s in doc["camera_in_base"]["sigma_translation_cm"])
-    assert all(0 < s < 0.2 for s in doc["target_in_flange"]["sigma_rotation_deg"])
+    assert all(0 < s < 0.5 for s in doc["target_in_flange"]["sigma_rotation_deg"])
+    # measured 0.19-0.28° with the images' shared error (2.0 px per coordinate with the
+    # given lens, beside 0.51 px independent) counted

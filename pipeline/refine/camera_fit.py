@@ -41,7 +41,14 @@ from pipeline.kinematics.chain import SerialChain, link_frames
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.optim.block import Array
 from pipeline.refine.camera_block import EYE_IN_HAND, EYE_TO_HAND, CameraBlock
-from pipeline.refine.camera_readings import reading_covariance
+from pipeline.refine.camera_readings import (
+    image_pose_variance,
+    pose_basis,
+    pose_covariance,
+    reading_covariance,
+    reading_jacobian,
+    reading_pose_share,
+)
 from pipeline.refine.camera_start import CameraStart, camera_start
 from pipeline.refine.identifiability import (
     Identifiability,
@@ -97,6 +104,11 @@ class CameraFit:
     x_start: Array  # the closed-form start of every parameter
     identifiability: Identifiability  # what the pixels could identify; the rest held
     block_fixed: bool = False  # the lens held as given (not the data's verdict)
+    #: ``w²`` (px² per coordinate) of the independent pixels and ``τ²`` (px²) of an error
+    #: shared by each image's points as a rigid motion of the target, beyond the readings'
+    #: (refine/camera_readings.py, image_pose_variance), both in the covariance; 0: none
+    independent_px2: float = 0.0
+    shared_px2: float = 0.0
 
     @property
     def intrinsics(self) -> Array:
@@ -267,8 +279,8 @@ def fit_camera(
             problem, x_start, units, True, len(det.image), solution.x, solution.f_scale,
             tolerances(units, start, block),
         )  # fmt: skip
-    solution = _with_readings(problem, block, solution, reading_sigma)
-    return _result(det, model, block, solution, start, x_start, ident, intrinsics)
+    solution, w2, tau2 = _with_shared(problem, block, solution, reading_sigma)
+    return _result(det, model, block, solution, start, x_start, ident, intrinsics, w2, tau2)
 
 
 def camera_block(
@@ -327,31 +339,49 @@ def fit_held(
     units = (*model.param_units, *block.param_units)
     J = residuals_and_jacobian(problem, solution.x)[1]
     ident = analyse(J, units, True, len(det.image), held, tolerances(units, start, block))
-    solution = _with_readings(problem, block, solution, reading_sigma)
-    return _result(det, model, block, solution, start, x_start, ident, intrinsics)
+    solution, w2, tau2 = _with_shared(problem, block, solution, reading_sigma)
+    return _result(det, model, block, solution, start, x_start, ident, intrinsics, w2, tau2)
 
 
-def _with_readings(
+def _with_shared(
     problem: Problem, block: CameraBlock, solution: Solution, reading_sigma: Array | None
-) -> Solution:
-    """``solution`` with the joint readings' share of its covariance added
-    (:func:`pipeline.refine.camera_readings.reading_covariance`); as it is without
-    ``reading_sigma`` or noise (noiseless: 0, as the rest)."""
-    if reading_sigma is None or not solution.noise_scale > 0:
-        return solution
+) -> tuple[Solution, float, float]:
+    """``solution`` with the errors an image's points share added to its covariance: the
+    joint readings' rounding (:func:`~pipeline.refine.camera_readings.reading_covariance`,
+    with ``reading_sigma``) and a rigid motion of the target in the camera per image
+    beyond it, when the residuals show one
+    (:func:`~pipeline.refine.camera_readings.image_pose_variance`); and that error's
+    ``w²``, ``τ²`` (px²; 0, 0: none). With one, the independent pixels' share is scaled
+    by ``w²`` instead of the fit's χ²/dof, which holds the shared error too. As it is
+    without noise (noiseless: 0, as the rest)."""
+    if not solution.noise_scale > 0:
+        return solution, 0.0, 0.0
     s2 = solution.noise_scale**2
-    J = residuals_and_jacobian(problem, solution.x)[1]
-    extra = reading_covariance(block, problem.model, solution.x, J,
-                               solution.covariance / s2, reading_sigma)  # fmt: skip
-    return replace(solution, covariance=solution.covariance + s2 * extra)
+    model, x = problem.model, solution.x
+    J = residuals_and_jacobian(problem, x)[1]
+    unscaled = solution.covariance / s2
+    Q = pose_basis(block, model, x)
+    known, readings, G = None, np.zeros_like(unscaled), None
+    if reading_sigma is not None:
+        G = reading_jacobian(block, model, x)
+        readings = reading_covariance(block, model, x, J, unscaled, reading_sigma, G)
+        known = reading_pose_share(block, G, reading_sigma, Q)
+    r_px = block.predict(model, x[: model.n_params], x[model.n_params :]) - block.measured
+    w2, tau2 = image_pose_variance(block.image, r_px, Q, J, known)
+    scale = w2 / float(np.mean(block.sigma_px**2)) if tau2 > 0 else s2
+    cov = scale * (unscaled + readings)
+    if tau2 > 0:
+        cov += pose_covariance(block, J, unscaled, tau2, Q)
+    return replace(solution, covariance=cov), w2, tau2
 
 
 def _result(
     det: Detections, model: ChainModel, block: CameraBlock, solution: Solution,
     start: CameraStart, x_start: Array, ident: Identifiability, intrinsics: str,
+    independent_px2: float = 0.0, shared_px2: float = 0.0,
 ) -> CameraFit:  # fmt: skip
     r = block.predict(model, solution.x[: model.n_params], solution.x[model.n_params :]) - det.uv
     rms = float(np.sqrt(np.mean(np.sum(r**2, axis=1))))
     names = (*model.param_names, *block.param_names)
     return CameraFit(model, block, solution, start, names, rms, x_start, ident,
-                     intrinsics == "fixed")  # fmt: skip
+                     intrinsics == "fixed", independent_px2, shared_px2)  # fmt: skip

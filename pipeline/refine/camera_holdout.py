@@ -103,7 +103,10 @@ def predicted(
         var += s.noise_scale**2 * (G**2 @ np.asarray(reading_sigma, float) ** 2)
     sig2 = np.repeat(det.sigma_px**2, 2)
     err = np.hypot(*(r.reshape(-1, 2) * det.sigma_px[:, None]).T)
-    expected = (sig2 * (s.noise_scale**2 + var)).reshape(-1, 2).sum(axis=1)
+    own = sig2 * s.noise_scale**2  # the image's own error per coordinate: the fit's scatter,
+    if fit.shared_px2 > 0:  # or its independent and shared parts (camera_readings.py)
+        own = np.full(len(sig2), fit.independent_px2 + 3.0 * fit.shared_px2)
+    expected = (own + sig2 * var).reshape(-1, 2).sum(axis=1)
     return err, expected
 
 

@@ -18,6 +18,16 @@ of the predicted pixels, :data:`STEP`) and ``Σ_q = diag(σ_k²)``. Measured on 
 row (``python -m bench.camera_spread``): without it the Puma eye-in-hand sessions' audited
 errors were 1.8-2.9× their predicted variance along the predicted directions (mean z²),
 the same sessions with the readings exact 1.1-1.3.
+
+Real images share more than the readings' rounding: on industrial_calibration's two sets
+25-50 % of the residuals' square was a shift common to all points of an image (where
+independent pixels put ~3 %: the robot's own pose error at each image, the lens's misfit
+over the board's patch), and held-out images were 1.47-1.61× their prediction
+(docs/camera.md). The same sandwich takes that shift, ``τ²`` px² per coordinate, as a
+shared error whose Jacobian is the identity in the image's pixels
+(:func:`shift_covariance`), ``τ²`` estimated from the fit's residuals by the scatter of
+each image's mean residual beyond what its points' own scatter puts there, and counted
+only when that excess is significant (:func:`image_shift_variance`).
 """
 
 from __future__ import annotations
@@ -27,8 +37,9 @@ import dataclasses
 import numpy as np
 
 from pipeline.optim.block import Array
-from pipeline.refine.camera_block import CameraBlock
+from pipeline.refine.camera_block import CameraBlock, _skew
 from pipeline.refine.kinematics import ChainModel
+from pipeline.sensor.camera import project_with_jacobians
 
 #: Central-difference step of a joint reading (rad / cm): the pixels' error is ~h² times
 #: their third derivative (~1e-12 px), their rounding ~1e-13 px / h = 1e-7 relative.
@@ -52,12 +63,14 @@ def reading_jacobian(block: CameraBlock, model: ChainModel, x: Array) -> Array:
 
 
 def reading_covariance(
-    block: CameraBlock, model: ChainModel, x: Array, J: Array, unscaled: Array, sigma_q: Array
-) -> Array:
+    block: CameraBlock, model: ChainModel, x: Array, J: Array, unscaled: Array, sigma_q: Array,
+    G: Array | None = None,
+) -> Array:  # fmt: skip
     """``Σ_q-part`` (P, P) of the module docstring: ``J`` (R, P) the fit's whitened
     Jacobian (its first 2D rows the pixels, any prior rows after), ``unscaled`` (P, P) its
-    ``H⁻¹``, ``sigma_q`` (n,) the readings' σ (rad / cm)."""
-    G = reading_jacobian(block, model, x)
+    ``H⁻¹``, ``sigma_q`` (n,) the readings' σ (rad / cm); ``G``: :func:`reading_jacobian`
+    when formed already."""
+    G = reading_jacobian(block, model, x) if G is None else G
     rows = len(G)
     image = np.repeat(block.image, 2)
     m, P = len(model.theta), J.shape[1]
@@ -65,3 +78,113 @@ def reading_covariance(
     np.add.at(K, image, J[:rows, :, None] * G[:, None, :])
     S = np.einsum("ipk,k,iqk->pq", K, np.asarray(sigma_q, float) ** 2, K)
     return np.asarray(unscaled @ S @ unscaled)
+
+
+#: False-alarm level of the test for an image-shared shift: below it the images' mean
+#: residuals scatter as independent pixels would and no shift is counted.
+SHIFT_ALARM = 0.01
+
+
+def pose_basis(block: CameraBlock, model: ChainModel, x: Array) -> list[Array]:
+    """Per image, an orthonormal basis (2 n_i, 6) of the pixels' motion (px, unwhitened,
+    ``[u_1, v_1, u_2, …]``) under a small rigid motion of the target in the camera: a
+    translation ``δt`` and a turn ``δω`` move a point ``P`` by ``δt + δω × P``."""
+    n_kin = model.n_params
+    P = block._points(model, x[:n_kin], x[n_kin:])[0]
+    J_p = project_with_jacobians(P, x[-9:])[1]  # (D, 2, 3)
+    A = np.concatenate([J_p, -J_p @ _skew(P)], axis=2)  # (D, 2, 6)
+    out = []
+    for i in range(int(block.image.max()) + 1):
+        rows = A[block.image == i].reshape(-1, 6)
+        out.append(np.linalg.qr(rows)[0] if len(rows) > 6 else np.zeros((len(rows), 0)))
+    return out
+
+
+def reading_pose_share(block: CameraBlock, G: Array, sigma_q: Array, Q: list[Array]) -> Array:
+    """Per image (M,), the readings' rounding's expected square (px²) along its pose
+    basis ``Q`` (:func:`pose_basis`): ``tr(Qᵀ G Σ_q Gᵀ Q)``, ``G`` from
+    :func:`reading_jacobian` (whitened: unwhitened here)."""
+    n = G.shape[1]
+    g = G.reshape(-1, 2, n) * block.sigma_px[:, None, None]
+    sq = np.asarray(sigma_q, float) ** 2
+    out = np.zeros(len(Q))
+    for i, Qi in enumerate(Q):
+        gi = g[block.image == i].reshape(-1, n)  # (2 n_i, n)
+        proj = Qi.T @ gi
+        out[i] = float(np.einsum("ak,k,ak->", proj, sq, proj))
+    return out
+
+
+def image_pose_variance(
+    image: np.ndarray, r_px: Array, Q: list[Array], J: Array, known: Array | None = None
+) -> tuple[float, float]:
+    """``w²`` (px² per coordinate) of the independent pixels and ``τ²`` (px²) of an error
+    shared by each image's points as a rigid motion of the target in the camera (the
+    robot's pose error at that image, a lens misfit over the board's patch), from the
+    fit's residuals ``r_px`` (D, 2) and its whitened Jacobian ``J`` (its first 2D rows the
+    pixels), beyond ``known`` (M,) px² already counted along each image's pose basis ``Q``
+    (the readings', :func:`reading_pose_share`); both 0 unless the shared error is
+    significant at :data:`SHIFT_ALARM` (the fit's own χ²/dof then stands).
+
+    The model: image ``i``'s shared error is ``√n_i Q_i z_i``, ``z_i ~ N(0, τ² I₆)`` (its
+    size per point independent of the number of points), beside independent pixels of
+    variance ``w²``. The fit takes up part of both (its hat matrix ``H = U Uᵀ``, ``U`` an
+    orthonormal basis of ``J``'s columns; with a few images, what the hand-eye and lens
+    parameters absorb of the images' shared errors is large), so ``w²`` and ``τ²`` are the
+    unbiased moment solution of the residuals' square along the pose bases (``Σ |Q_iᵀ
+    r_i|²``) and outside them: with ``B_i = Uᵀ Q_i``, ``E |Q_iᵀ r_i|² = w² (6 − |B_i|²)
+    + τ² Σ_j n_j |δ_ij I − B_jᵀ B_i|²`` and ``E |r|² = w² (2D − P) + τ² Σ_j n_j (6 −
+    |B_j|²)``. The shared error is counted when ``Σ |Q_iᵀ r_i|² / w²`` exceeds the
+    (1 − α) quantile of χ² with ``Σ (6 − |B_i|²)`` degrees of freedom."""
+    from scipy.special import gammaincinv
+
+    used = [i for i, Qi in enumerate(Q) if Qi.shape[1] == 6]
+    if len(used) < 2:
+        return 0.0, 0.0
+    rows_of = [np.flatnonzero(np.repeat(image == i, 2)) for i in range(len(Q))]
+    Jp = J[: 2 * len(image)]
+    U = np.linalg.qr(Jp)[0] if Jp.shape[1] else np.zeros((len(Jp), 0))
+    r = r_px.reshape(-1)
+    B = [U[rows_of[i]].T @ Q[i] for i in used]  # (P, 6) each
+    n_i = np.array([len(rows_of[i]) / 2 for i in used])
+    p2 = np.array([float(np.sum((Q[i].T @ r[rows_of[i]]) ** 2)) for i in used])
+    if known is not None:
+        p2 = p2 - np.asarray(known, float)[used]
+    a = np.array([6.0 - float(np.sum(b * b)) for b in B])
+    Bs = np.stack(B)  # (M, P, 6)
+    cross = np.einsum("jpx,ipy->jixy", Bs, Bs)  # B_jᵀ B_i
+    cross[np.arange(len(B)), np.arange(len(B))] -= np.eye(6)
+    b = np.einsum("j,jixy->i", n_i, cross**2)
+    total = float(r @ r) - (0.0 if known is None else float(np.sum(np.asarray(known)[used])))
+    rank = int(np.linalg.matrix_rank(Jp)) if Jp.size else 0
+    A = np.array([[a.sum(), b.sum()],
+                  [len(r) - rank - a.sum(), float(np.sum(n_i * a)) - b.sum()]])  # fmt: skip
+    try:
+        w2, tau2 = np.linalg.solve(A, [p2.sum(), total - p2.sum()])
+    except np.linalg.LinAlgError:
+        return 0.0, 0.0
+    if not (w2 > 0 and tau2 > 0):
+        return 0.0, 0.0
+    dof = float(a.sum())
+    if p2.sum() / w2 <= 2.0 * gammaincinv(dof / 2.0, 1.0 - SHIFT_ALARM):  # χ² quantile
+        return 0.0, 0.0
+    return float(w2), float(tau2)
+
+
+def pose_covariance(
+    block: CameraBlock, J: Array, unscaled: Array, tau2_px: float, Q: list[Array]
+) -> Array:
+    """What the shared error of :func:`image_pose_variance` adds to the fit's covariance
+    (P, P): the sandwich of the module docstring with image ``i``'s ``G_i = √n_i Q_i``
+    (whitened by each point's σ), ``Σ = τ² I₆``."""
+    m, P = len(Q), J.shape[1]
+    S = np.zeros((P, P))
+    for i in range(m):
+        if Q[i].shape[1] != 6:
+            continue
+        rows = np.flatnonzero(np.repeat(block.image == i, 2))
+        n_i = len(rows) / 2
+        G = np.sqrt(n_i) * Q[i] / np.repeat(block.sigma_px[block.image == i], 2)[:, None]
+        K = J[rows].T @ G  # (P, 6)
+        S += K @ K.T
+    return np.asarray(unscaled @ (tau2_px * S) @ unscaled)

@@ -142,7 +142,13 @@ def fit_table(
         "images": image_rows(fit, images),
         "identifiability": identifiability_summary(fit.identifiability, fit.names,
                                                    det.n_images, len(det.image)),
-        "warning": held_line(fit, float(np.median(det.sigma_px))), **extra,
+        "warning": held_line(fit, float(np.median(det.sigma_px))),
+        # the images' shared error (refine/camera_readings.py, image_pose_variance): px per
+        # coordinate of the independent pixels and of the share common to an image's points
+        "shared_error": {"independent_px": float(np.sqrt(fit.independent_px2)),
+                         "shared_px": float(np.sqrt(3.0 * fit.shared_px2)),
+                         "counted": bool(fit.shared_px2 > 0)},
+        **extra,
     }  # fmt: skip
     columns = {
         "group": groups, "name": list(fit.names),
@@ -155,12 +161,13 @@ def fit_table(
 
 STAGE = Stage(
     "camera_fit",
-    6,  # 2: per-image reprojection errors and the identifiability in the summary; 3: the
+    7,  # 2: per-image reprojection errors and the identifiability in the summary; 3: the
     # start frames, q̄^s (rad / cm) and the fitted frames S̄_0 … S̄_n and tool (cm);
     # 4: the covariance rows (the signature's uncertainty, holdout and verdict);
     # 5: the covariance with the joint readings' rounding (refine/camera_readings.py);
     # 6: lens terms held by the design's tolerance alone analysed again at their start's
-    # σ (refine/camera_fit.py, tolerances)
+    # σ (refine/camera_fit.py, tolerances); 7: the images' shared error in the covariance
+    # (refine/camera_readings.py, image_pose_variance) and the summary's shared_error
     ("session", "joints", "detections"),
     Params(),
     compute,

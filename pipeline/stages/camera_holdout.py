@@ -57,7 +57,8 @@ def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
 
 STAGE = Stage(
     "camera_holdout",
-    2,  # 2: the joint readings' rounding in the refit's covariance and the prediction
+    3,  # 2: the joint readings' rounding in the refit's covariance and the prediction;
+    # 3: the images' shared error (refine/camera_readings.py) in both
     ("session", "joints", "detections", "camera_fit"),
     Params(),
     compute,

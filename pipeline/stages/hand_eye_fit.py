@@ -81,6 +81,7 @@ STAGE = Stage(
     "camera_fit",
     3,  # 2: the covariance rows of the joint session's table (schema camera_fit v2);
     # 3: the identifiability analysed at the lens start's σ (refine/camera_fit.py, tolerances)
+    # and the images' shared error in the covariance (refine/camera_readings.py)
     ("session", "flange_poses", "detections"),
     Params(),
     compute,

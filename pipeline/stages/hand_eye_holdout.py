@@ -75,7 +75,7 @@ def holdout_summary(table: pa.Table) -> dict[str, Any]:
 
 STAGE = Stage(
     "hand_eye_holdout",
-    1,
+    2,  # 2: the images' shared error (refine/camera_readings.py) in the prediction
     ("session", "flange_poses", "detections", "camera_fit"),
     Params(),
     compute,
