@@ -16,6 +16,7 @@ from test_import_layouts import _refused, imported, messages
 from pipeline.importers import Imported, import_file
 from pipeline.importers.fixed_motion import FALSE_ALARM, motion_test
 
+DOC = Path(__file__).resolve().parent.parent / "docs" / "import.md"
 NOT = "poses.csv: fixed targets b1, b2, b3: no drift beyond their noise, not corrected (F = "
 DONE = "poses.csv: fixed targets b1, b2, b3: drift beyond their noise, corrected (F = "
 
@@ -38,6 +39,7 @@ def test_a_driftless_session_with_reflectors_imports_the_plain_points(tmp_path: 
     (note,) = out.rows.notes
     assert note.startswith(NOT) and "<= 1.5, the 1% false-alarm level of F(66, 465)" in note
     assert "; every pose used uncorrected; drift median" in note, note
+    assert f"warning: {note}\n" in DOC.read_text()  # docs/import.md quotes it
     plain = imported(tmp_path / "plain", one_file, pose_set(n=60))
     got = messages(tmp_path / "fixed" / "s")
     for m in got["/robot/joint_state"]:  # the drift per pose stays; no residual: not applied
