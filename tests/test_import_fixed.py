@@ -115,3 +115,15 @@ def test_the_motion_test_sees_a_drift_and_takes_missing_readings() -> None:
     test = motion_test(fixed, np.nanmedian(fixed, axis=0), 5)
     assert test is not None and test.moved and test.d1 == 6 * 12 - 1 - 6, test
     assert motion_test(fixed[:4], np.nanmedian(fixed, axis=0), 5) is None  # one block
+
+
+def test_the_report_says_when_the_points_were_not_corrected() -> None:
+    from pipeline.report.validation import drift_text
+
+    rows = [{"sweep": "poses", "step": s, "tracker_drift_cm": 0.001 * (s + 1)} for s in range(3)]
+    text = drift_text([{**r, "tracker_residual_cm": None} for r in rows])
+    assert "median 0.002 cm, max 0.003 cm before the correction. Not corrected" in text, text
+    assert "the points above are as measured" in text
+    text = drift_text([{**r, "tracker_residual_cm": 0.0005} for r in rows])
+    assert "after registering each pose by them, median 0.0005 cm" in text, text
+    assert text.endswith("The points above are the registered ones.")
