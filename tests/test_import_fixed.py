@@ -127,3 +127,14 @@ def test_the_report_says_when_the_points_were_not_corrected() -> None:
     text = drift_text([{**r, "tracker_residual_cm": 0.0005} for r in rows])
     assert "after registering each pose by them, median 0.0005 cm" in text, text
     assert text.endswith("The points above are the registered ones.")
+
+
+def test_noiseless_readings_are_not_tested_and_registered() -> None:
+    """No scatter to judge the motion by: ``auto`` registers, as before, and says so."""
+    from pipeline.importers.fixed import _decided
+
+    fixed = _readings(np.random.default_rng(5), sigma_cm=0.0)
+    assert motion_test(fixed, np.median(fixed, axis=0), 5) is None
+    assert _decided("auto", None) == (True, "corrected (not tested: too few readings, or "
+                                      "none scattered)")  # fmt: skip
+    assert _decided("never", None)[0] is False

@@ -126,11 +126,11 @@ def registered(rows: MeasuredRows, imap: ImportMap) -> MeasuredRows:
 def _decided(how: str, test: MotionTest | None) -> tuple[bool, str]:
     """Whether to apply the registration (``fixed_correction`` ``how``, the fixed
     readings' ``test``), and why in words."""
-    said = "no test (too few readings)" if test is None else test.words()
+    said = "not tested: too few readings, or none scattered" if test is None else test.words()
     if how != "auto":
         return how == "always", f'fixed_correction = "{how}" ({said})'
     if test is None:
-        return True, f"corrected, {said}"
+        return True, f"corrected ({said})"
     if test.moved:
         return True, f"drift beyond their noise, corrected ({said})"
     return False, (
