@@ -12,11 +12,18 @@ reflectors span ~1 m, the arm reaches beyond them; docs/import.md, Fixed targets
 the measured effect). A pose whose window holds fewer than three fixed targets takes the
 registration of the last pose before it that had three; one before any is used
 uncorrected and counted.
+Whether the registration is applied is ``fixed_correction`` in the map: ``"auto"`` (the
+default) applies it only when the fixed readings move beyond their noise
+(:func:`pipeline.importers.fixed_motion.motion_test`, 1 % false alarms): without drift
+it only carries the readings' noise onto the arm's points (docs/import.md has the
+measured cost); ``"always"`` and ``"never"`` force the choice. The line says which way
+it went and why (the statistic and its threshold).
 A fixed target that moves against the others (its distance from the registered reference
 beyond :data:`MOVED_CM`) is refused in one line naming the file, the line and the target.
 The drift (each pose's RMS distance of its fixed readings from the reference, before
 correction) and the residual after it are recorded per pose (``tracker_drift_cm``,
-``tracker_residual_cm``: the ``joints`` table) and summed up in one line.
+``tracker_residual_cm``: the ``joints`` table; the residual NaN when the registration is
+not applied) and summed up in one line.
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ from dataclasses import replace
 import numpy as np
 
 from pipeline.errors import ImportFileError
+from pipeline.importers.fixed_motion import MotionTest, motion_test
 from pipeline.importers.mapping import ImportMap
 from pipeline.importers.rows import MeasuredRows
 from pipeline.kinematics.alignment import register_rigid
@@ -77,9 +85,10 @@ def registered(rows: MeasuredRows, imap: ImportMap) -> MeasuredRows:
         idx = np.flatnonzero(seen[r])
         if len(idx):
             drift[r] = float(np.sqrt(np.mean(np.sum((fixed[r, idx] - ref[idx]) ** 2, axis=1))))
+    apply, why = _decided(imap.fixed_correction, motion_test(fixed, ref, k))
     arm = {t: p.copy() for t, p in rows.targets.items() if t not in ids}
     wxyz = None if rows.orientation_wxyz is None else rows.orientation_wxyz.copy()
-    for r, T in enumerate(T_of):
+    for r, T in enumerate(T_of if apply else ()):
         if T is None:
             continue
         for p in arm.values():
@@ -89,13 +98,19 @@ def registered(rows: MeasuredRows, imap: ImportMap) -> MeasuredRows:
     uncorrected = sum(T is None for T in T_of)
     ok = drift[np.isfinite(drift)]
     how = "each pose" if k == 1 else f"windows of {k} poses"
+    done = (
+        f"registered {own} poses by their own readings ({how}), {n - own - uncorrected} by "
+        f"an earlier one, {uncorrected} uncorrected"
+        if apply
+        else "every pose used uncorrected"
+    )
     note = (
-        f"{rows.name}: fixed targets {', '.join(ids)} registered {own} poses by their own "
-        f"readings ({how}), {n - own - uncorrected} by an earlier one, {uncorrected} "
-        "uncorrected; drift median "
+        f"{rows.name}: fixed targets {', '.join(ids)}: {why}; {done}; drift median "
         f"{np.median(ok) if len(ok) else float('nan'):.3g} cm, max "
         f"{ok.max() if len(ok) else float('nan'):.3g} cm"
     )
+    if not apply:
+        resid[:] = np.nan  # not registered at any pose
     sigma = None if rows.sigma is None else {t: s for t, s in rows.sigma.items() if t in arm}
     return replace(
         rows,
@@ -105,6 +120,22 @@ def registered(rows: MeasuredRows, imap: ImportMap) -> MeasuredRows:
         drift_cm=drift,
         residual_cm=resid,
         notes=(*rows.notes, note),
+    )
+
+
+def _decided(how: str, test: MotionTest | None) -> tuple[bool, str]:
+    """Whether to apply the registration (``fixed_correction`` ``how``, the fixed
+    readings' ``test``), and why in words."""
+    said = "not tested: too few readings, or none scattered" if test is None else test.words()
+    if how != "auto":
+        return how == "always", f'fixed_correction = "{how}" ({said})'
+    if test is None:
+        return True, f"corrected ({said})"
+    if test.moved:
+        return True, f"drift beyond their noise, corrected ({said})"
+    return False, (
+        f'no drift beyond their noise, not corrected ({said}; fixed_correction = "always" '
+        "forces it)"
     )
 
 

@@ -113,6 +113,7 @@ class ImportMap:
     pose_column: str | int | None = None  # stacked: rows sharing its value are one pose
     sigma_floor: float | None = None  # length_unit; None: the tracker's resolution
     fixed_block: int = 1  # fixed targets: poses per registration
+    fixed_correction: str = "auto"  # fixed targets: auto (when they move) | always | never
     tool_point_q: tuple[float, ...] | None = None  # validate --tool-point ID: where located
     strict: bool = False  # --strict, not a map key: refuse a missing value, do not drop
     rosbag2: dict[str, Any] | None = None  # the [rosbag2] table, checked (importers.rosbag2)
@@ -329,6 +330,7 @@ def map_from_dict(data: dict[str, Any], path: Path | None = None) -> ImportMap:
         pose_column=data.get("pose_column"),
         sigma_floor=data.get("sigma_floor"),
         fixed_block=int(data.get("fixed_block", 1)),
+        fixed_correction=data.get("fixed_correction", "auto"),
         tool_point_q=None
         if "tool_point_q" not in data
         else tuple(float(v) for v in data["tool_point_q"]),

@@ -74,7 +74,8 @@ def validation_section(
 def drift_text(joints: list[dict[str, Any]] | None) -> str:
     """The tracker's drift by fixed targets (issue 42: ``joints`` table,
     ``tracker_drift_cm`` per configuration): median and maximum before the correction,
-    and the residual after it; empty without fixed targets."""
+    and the residual after it (none: the correction was not applied); empty without
+    fixed targets."""
     per = {
         (r["sweep"], r["step"]): r for r in joints or [] if r.get("tracker_drift_cm") is not None
     }
@@ -90,7 +91,12 @@ def drift_text(joints: list[dict[str, Any]] | None) -> str:
         f"\n\nTracker drift by the fixed targets ({len(per)} configurations, RMS distance "
         f"of their readings from their reference, `joints` table `tracker_drift_cm`): median "
         f"{np.median(drift):.3g} cm, max {drift.max():.3g} cm before the correction{after}. "
-        "The points above are the registered ones."
+        + (
+            "The points above are the registered ones."
+            if len(res)
+            else 'Not corrected (no drift beyond their noise, or fixed_correction = "never"): '
+            "the points above are as measured."
+        )  # fmt: skip
     )
 
 
