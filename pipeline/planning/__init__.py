@@ -243,17 +243,20 @@ def write_plan(
     plan: Plan,
     force: bool = False,
     inputs: Sequence[str | Path] = (),
+    sensor: str = "",
 ) -> Path:
     """Write ``plan`` as a pose plan file (:mod:`pipeline.rig.pose_file`); an existing file
     is refused unless ``force``, and never one of the command's ``inputs``
-    (:func:`pipeline.atomic.check_new_file`)."""
+    (:func:`pipeline.atomic.check_new_file`); ``sensor``: what it plans for, when not a
+    tracker (``camera eye-to-hand``), in its first line."""
     from pipeline.atomic import check_new_file
     from pipeline.rig.pose_file import write_pose_plan
 
     out = Path(path)
     check_new_file(out, "pose plan", force, inputs)
     comment = (
-        f"armsig pose plan: {robot.name}, {len(plan.q)} poses; predicted RMS "
+        f"armsig pose plan: {robot.name}{', ' + sensor if sensor else ''}, {len(plan.q)} "
+        "poses; predicted RMS "
         f"{plan.rms_cm:.3g} cm (under {plan.rms_q95_cm:.3g} cm with 95 % probability), "
         f"95 % {plan.p95_cm:.3g} cm over the workspace "
         f"(as many random poses: {plan.random_rms_cm:.3g} cm)"

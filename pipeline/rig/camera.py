@@ -216,8 +216,7 @@ def planned_images(
                            local)  # fmt: skip
     if ok.sum() < 4:
         raise ArmsigError(
-            f"the simulated camera sees the target in {int(ok.sum())} of the plan's {len(q)} "
-            "poses",
+            f"the simulated camera sees the target in {int(ok.sum())} of the plan's {len(q)} poses",
             expected="4 or more images",
             got=", ".join(f"{k}: {int((reason == i).sum())}" for i, k in enumerate(DROP_REASONS)),
             fix="plan for this camera and set-up (`pipeline plan --sensor camera --setup ...` "
