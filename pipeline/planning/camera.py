@@ -10,10 +10,12 @@ The tracker's planner (:mod:`pipeline.planning`) with the camera's measurement:
 - **information**: the camera fit's whitened pixel Jacobian of every candidate image
   (:class:`~pipeline.refine.camera_block.CameraBlock` of the design's exact pixels, the
   model :func:`~pipeline.refine.camera_fit.camera_model` builds: the chain in the fixed
-  body's frame, both hand-eye transforms and the nine intrinsics, fitted). An image's
-  pixels depend on the parameters only through the tool body's pose (6) and the lens (9),
-  so its rows are compressed to their :data:`IMAGE_RANK` singular directions (the same
-  ``JᵀJ``) before the greedy's Woodbury step (:func:`pipeline.refine.plan.greedy_plan`);
+  body's frame, both hand-eye transforms and the nine intrinsics, fitted), its rows
+  weighed with the encoders' rounding that all of them share (a generalised least
+  squares' information: one reading error moves the whole image). An image's pixels
+  depend on the parameters only through the tool body's pose (6) and the lens (9), so its
+  information has rank :data:`IMAGE_RANK` and is kept as that many rows before the
+  greedy's Woodbury step (:func:`pipeline.refine.plan.greedy_plan`);
 - **criterion**: the predicted RMS tool error over the workspace, the tracker planner's,
   but raw (no alignment): a camera's frames are physical, nothing re-aligns its
   signature, and the camera audit compares the tool point raw
@@ -22,7 +24,8 @@ The tracker's planner (:mod:`pipeline.planning`) with the camera's measurement:
 - **prediction**: of the chosen images and of the first as many candidates (random
   visible poses), the fit's covariance at the design: the pixels' and the encoders'
   rounding shared by each image's points (:mod:`pipeline.refine.camera_readings`, as
-  ``camera_fit`` states it); the greedy weighs the pixels alone.
+  ``camera_fit`` states it: the fit weighs the pixels alone, and its covariance adds the
+  readings' share as a sandwich).
 """
 
 from __future__ import annotations
@@ -90,6 +93,7 @@ def plan_camera_poses(
     seed: int = 0,
 ) -> Plan:
     """The plan (module docstring)."""
+    from pipeline.refine.camera_readings import encoder_sigma
     from pipeline.refine.plan import greedy_plan
     from pipeline.rig import camera
     from pipeline.rig.true_robot import ErrorSigmas, draw_true_robot
@@ -116,12 +120,13 @@ def plan_camera_poses(
     names = (*problem.model.param_names, *problem.block.param_names)
     units = (*problem.model.param_units, *problem.block.param_units)
     A, M = _workspace(robot, problem, x, d)
-    Jc = np.concatenate([_image_rows(*_design_problem(robot, rig, d, q[k : k + BATCH]))
+    sigma_q = encoder_sigma(robot.encoder_resolution, robot.prismatic)
+    Jc = np.concatenate([_image_rows(*_design_problem(robot, rig, d, q[k : k + BATCH]), sigma_q)
                          for k in range(0, len(q), BATCH)])  # fmt: skip
     greedy = greedy_plan(Jc, M, WORKSPACE, units, n_poses, target_rms_cm)
     chosen = greedy.chosen
-    pred = _prediction(robot, rig, d, q[chosen], Jc[chosen], names, units, A, M)
-    random = _prediction(robot, rig, d, q[: len(chosen)], Jc[: len(chosen)], names, units, A, M)
+    pred = _prediction(robot, rig, d, q[chosen], names, units, A, M, sigma_q)
+    random = _prediction(robot, rig, d, q[: len(chosen)], names, units, A, M, sigma_q)
     return Plan(q=q[chosen], **{**pred, "rms_by_size_cm": greedy.rms_cm,
                                 "random_rms_cm": random["rms_cm"]})  # fmt: skip
 
@@ -163,21 +168,30 @@ def _design_problem(
     return Problem(model, block, "linear"), np.concatenate([x_kin, k])
 
 
-def _image_rows(problem: Any, x: np.ndarray) -> np.ndarray:
-    """Every image's whitened pixel Jacobian compressed to :data:`IMAGE_RANK` rows (K,
-    r, P) with the same ``JᵀJ``: ``Σ_r Vᵀ`` of its singular value decomposition."""
+def _image_rows(problem: Any, x: np.ndarray, sigma_q: np.ndarray) -> np.ndarray:
+    """Every image's information compressed to :data:`IMAGE_RANK` rows (K, r, P), ``Jcᵀ
+    Jc = Jᵀ (I + G Σ_q Gᵀ)⁻¹ J``: its whitened pixel rows ``J`` weighed with the error its
+    readings share (``G = ∂r/∂q``, :func:`pipeline.refine.camera_readings.reading_jacobian`;
+    ``Σ_q = diag(sigma_q²)``), by the Woodbury identity ``JᵀJ − JᵀGs (I + Gsᵀ Gs)⁻¹ GsᵀJ``,
+    ``Gs = G diag(sigma_q)``; ``Jc = Λ^½ Vᵀ`` of its largest eigenvalues."""
+    from pipeline.refine.camera_readings import reading_jacobian
     from pipeline.refine.solve import residuals_and_jacobian
 
     J = residuals_and_jacobian(problem, x)[1]
+    Gs = reading_jacobian(problem.block, problem.model, x) * sigma_q
     image = np.repeat(problem.block.image, 2)
-    K, P = len(problem.model.theta), J.shape[1]
+    K, P, n = len(problem.model.theta), J.shape[1], Gs.shape[1]
     count = np.bincount(image, minlength=K)
     rank_in_image = np.arange(len(image)) - np.repeat(np.cumsum(count) - count, count)
-    rows = np.zeros((K, int(count.max()), P))
-    rows[image, rank_in_image] = J
-    _, s, Vt = np.linalg.svd(rows, full_matrices=False)
-    r = min(IMAGE_RANK, s.shape[1])
-    return np.asarray(s[:, :r, None] * Vt[:, :r])
+    rows, G = np.zeros((K, int(count.max()), P)), np.zeros((K, int(count.max()), n))
+    rows[image, rank_in_image], G[image, rank_in_image] = J, Gs
+    JtG = np.swapaxes(rows, 1, 2) @ G  # (K, P, n)
+    C = np.eye(n) + np.swapaxes(G, 1, 2) @ G
+    info = np.swapaxes(rows, 1, 2) @ rows - JtG @ np.linalg.solve(C, np.swapaxes(JtG, 1, 2))
+    lam, V = np.linalg.eigh(0.5 * (info + np.swapaxes(info, 1, 2)))  # ascending
+    r = min(IMAGE_RANK, P)
+    return np.asarray(np.sqrt(np.clip(lam[:, -r:], 0.0, None))[:, :, None]
+                      * np.swapaxes(V[:, :, -r:], 1, 2))  # fmt: skip
 
 
 def _workspace(
@@ -199,19 +213,19 @@ def _workspace(
 
 
 def _prediction(
-    robot: RobotDescription, rig: CameraRig, d: _Design, q: np.ndarray, Jc: np.ndarray,
-    names: tuple[str, ...], units: tuple[str, ...], A: np.ndarray, M: np.ndarray,
+    robot: RobotDescription, rig: CameraRig, d: _Design, q: np.ndarray, names: tuple[str, ...],
+    units: tuple[str, ...], A: np.ndarray, M: np.ndarray, sigma_q: np.ndarray,
 ) -> dict[str, Any]:  # fmt: skip
-    """:func:`pipeline.planning.prediction` of the images at ``q`` (their compressed rows
-    ``Jc``): the covariance of the pixels (with the planner's weak prior) and the
-    encoders' rounding shared by each image's points (module docstring)."""
-    from pipeline.refine.camera_readings import encoder_sigma, reading_covariance
+    """:func:`pipeline.planning.prediction` of the images at ``q``: the fit's covariance,
+    the pixels' (with the planner's weak prior) and the encoders' rounding (σ
+    ``sigma_q``) shared by each image's points, as ``camera_fit`` states it (module
+    docstring)."""
+    from pipeline.refine.camera_readings import reading_covariance
     from pipeline.refine.plan import design_covariance
     from pipeline.refine.solve import residuals_and_jacobian
 
     problem, x = _design_problem(robot, rig, d, q)
     J = residuals_and_jacobian(problem, x)[1]
-    unscaled = design_covariance(Jc, units)
-    sigma_q = encoder_sigma(robot.encoder_resolution, robot.prismatic)
+    unscaled = design_covariance(J[None], units)
     cov = unscaled + reading_covariance(problem.block, problem.model, x, J, unscaled, sigma_q)
-    return prediction(Jc, names, units, A, A, M, cov, len(problem.block.image))
+    return prediction(J[None], names, units, A, A, M, cov, len(problem.block.image))
