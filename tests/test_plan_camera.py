@@ -105,11 +105,34 @@ def test_bad_input_is_one_line(tmp_path: Path, extra: list[str], fragments: list
     assert not out.exists()
 
 
-def test_plan_from_a_camera_session_is_refused_in_one_line(tmp_path: Path) -> None:
+def test_plan_from_a_camera_session_chooses_among_its_images(tmp_path: Path) -> None:
+    """``plan --from`` a camera session: its most informative images, their readings in the
+    order chosen, predicting less than its first as many; the plan recorded again."""
+    robot = get_robot("puma560")
     d = tmp_path / "s"
-    d.mkdir()
-    r = invoke("plan", str(tmp_path / "p.csv"), "--from", str(d), "--sensor", "camera")
-    assert_one_error(r, "not a camera's images")
+    simulate_session(d, SimulationOptions(sensor="camera", setup="eye-in-hand", poses=24))
+    identify(d, report=False)
+    out = tmp_path / "p.csv"
+    r = invoke("plan", str(out), "--from", str(d), "--poses", "12", "--json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    steps = doc["session_steps"]
+    assert len(set(steps)) == 12 and doc["predicted_rms_cm"] < doc["random_predicted_rms_cm"]
+    _, q = sweep_readings(read_table(stage_path(d, "joints")), POSES_SWEEP, 6, robot.prismatic)
+    assert np.allclose(read_pose_plan(out, robot), q[steps], atol=1e-6)
+    again = tmp_path / "t"
+    simulate_session(again, SimulationOptions(sensor="camera", setup="eye-in-hand",
+                                              plan_file=str(out), noiseless=True))  # fmt: skip
+    identify(again, report=False)
+    assert audit_camera_session(again).tool_position_cm <= 1e-6
+    assert_one_error(invoke("plan", str(out), "--from", str(d), "--poses", "25", "--force"),
+                     "more images asked than the session holds")  # fmt: skip
+    assert_one_error(invoke("plan", str(out), "--from", str(d), "--setup", "eye-in-hand"),
+                     "--setup with --from")  # fmt: skip
+    empty = tmp_path / "e"
+    empty.mkdir()
+    assert_one_error(invoke("plan", str(out), "--from", str(empty), "--sensor", "camera"),
+                     "not an identified camera session")  # fmt: skip
 
 
 def test_a_plan_the_camera_cannot_see_is_refused_in_one_line(tmp_path: Path) -> None:

@@ -105,6 +105,7 @@ def plan_(
     """Plan a measurement: the poses, or the joint sweeps, that give a wanted accuracy
     (docs/plan.md)."""
     from pipeline.planning import plan_from_session, plan_poses, write_plan
+    from pipeline.planning.camera import plan_from_camera_session
     from pipeline.robots import get_robot
     from pipeline.stages.recording_points import MAX_SIGMA_CM, MIN_SIGMA_CM
 
@@ -127,7 +128,8 @@ def plan_(
                     "--resolution": resolution != "1280x960", "--focal-px": focal_px != 1000.0,
                     "--distortion": distortion != "-0.12,0.05,0.0005,-0.0003,0",
                     "--pixel-noise": pixel_noise != 0.2}  # fmt: skip
-    if sensor != Sensor.camera and any(camera_given.values()):
+    camera_session = from_session is not None and _camera_session(from_session)
+    if sensor != Sensor.camera and not camera_session and any(camera_given.values()):
         what = next(k for k, v in camera_given.items() if v)
         raise ArmsigError(f"{what} is for --sensor camera",
                           fix=f"add --sensor camera, or drop {what}")  # fmt: skip
@@ -152,31 +154,35 @@ def plan_(
         fix = "add --sweeps, or drop it (pose plans are the tracker's)"
         raise ArmsigError(f"{what} is for sweep plans", fix=fix)
     n_poses = 50 if poses is None else poses
-    if sensor == Sensor.camera:
-        if from_session is not None:  # issue 39: a camera session's images are not chosen yet
-            raise ArmsigError("plan --from chooses among a tracker's poses, not a camera's images",
-                              fix="plan new images: `pipeline plan OUT --robot ROBOT --sensor "
-                              "camera --poses 40`")  # fmt: skip
+    inputs: list[str] = []  # what the plan was made from: never overwritten by --force
+    if sensor == Sensor.camera or camera_session:
         if sigma is not None:
             raise ArmsigError("--sigma-mm is a tracker's point noise",
                               fix="--pixel-noise for a camera")  # fmt: skip
+    if from_session is not None and (sensor == Sensor.camera or camera_session):
+        if any(camera_given.values()):
+            what = next(k for k, v in camera_given.items() if v)
+            raise ArmsigError(f"{what} with --from: the session's own camera is planned",
+                              fix=f"drop {what}")  # fmt: skip
+        rob, result = plan_from_camera_session(from_session, n_poses, target)
+    elif sensor == Sensor.camera:
         assert robot is not None
         rob = get_robot(robot)
         result = _camera_plan(rob, n_poses, target, candidates, seed, setup, target_file,
                               resolution, focal_px, distortion, pixel_noise)  # fmt: skip
-        inputs: list[str] = [robot, *([target_file] if target_file else [])]
+        inputs = [robot, *([target_file] if target_file else [])]
     elif from_session is not None:
         if sigma is not None:
             raise ArmsigError("--sigma-mm is for --robot", fix="drop --sigma-mm: --from "
                               "weighs each pose by its recorded noise")  # fmt: skip
         rob, result = plan_from_session(from_session, n_poses, target)
-        inputs = []
     else:
         assert robot is not None
         rob = get_robot(robot)
         result = plan_poses(rob, n_poses, target, sigma, candidates or 10_000, seed)
         inputs = [robot]
-    what = f"camera {setup.value}" if sensor == Sensor.camera else ""
+    what = (f"camera {setup.value}" if robot is not None else "camera") if (
+        sensor == Sensor.camera or camera_session) else ""  # fmt: skip
     path = write_plan(out, rob, result, force, inputs=inputs, sensor=what)
     if json_out:
         print_json({"path": str(path), **result.to_dict()})
@@ -256,6 +262,15 @@ def _sweep_plan(
     more = "points (--target-rms-mm is capped at 1000 per sweep)"
     target_mm = None if target is None else target * 10
     _warn_plan(target, target_mm, plan.rms_q95_cm, plan.unidentified, more)
+
+
+def _camera_session(folder: str) -> bool:
+    """Whether ``folder`` is an identified camera session (it has a ``camera_fit``)."""
+    from pathlib import Path
+
+    from pipeline.stages.runner import stage_path
+
+    return stage_path(Path(folder), "camera_fit").is_file()
 
 
 def _camera_plan(

@@ -287,8 +287,8 @@ def plan_from_session(
         raise ArmsigError(
             f"{sdir}: plan --from chooses among a tracker's poses, not a camera's images",
             expected="a tracker or digitizer session with a pose set",
-            fix="record camera images at random poses spread over the joint ranges "
-            "(docs/camera.md: what the fit needs)",
+            fix="choose among a camera session's images with `pipeline plan OUT --from "
+            "SESSION` (pipeline.planning.camera.plan_from_camera_session)",
         )
     names = ("session", "joints", "positions", "frames", "refine")
     if not all(stage_path(sdir, n).is_file() for n in names):

@@ -30,7 +30,10 @@ The tracker's planner (:mod:`pipeline.planning`) with the camera's measurement:
 
 from __future__ import annotations
 
+import json
+from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -93,8 +96,6 @@ def plan_camera_poses(
     seed: int = 0,
 ) -> Plan:
     """The plan (module docstring)."""
-    from pipeline.refine.camera_readings import encoder_sigma
-    from pipeline.refine.plan import greedy_plan
     from pipeline.rig import camera
     from pipeline.rig.true_robot import ErrorSigmas, draw_true_robot
 
@@ -116,19 +117,34 @@ def plan_camera_poses(
     d = _Design(fixed, on_flange, _internal(robot, q_sig))
     q, _ = camera.draw_images(candidates, rig.setup, nominal, robot.limits, rig.target,
                               fixed, on_flange, rig.lens, rng)  # fmt: skip
-    problem, x = _design_problem(robot, rig, d, q[:BATCH])
+    chosen, fields = _choose(robot, d.q_signature, len(q), n_poses, target_rms_cm,
+                             lambda k: _design_problem(robot, rig, d, q[k]))  # fmt: skip
+    return Plan(q=q[chosen], **fields)
+
+
+def _choose(
+    robot: RobotDescription, q_signature: np.ndarray, K: int, n_poses: int,
+    target_rms_cm: float | None, problem_of: Callable[[np.ndarray], tuple[Any, np.ndarray]],
+) -> tuple[np.ndarray, dict[str, Any]]:  # fmt: skip
+    """The images chosen among ``K`` candidates (indices, in the order chosen) and the
+    :class:`~pipeline.planning.Plan` fields of their prediction and of the first as many
+    candidates'; ``problem_of(indices)``: the camera fit's problem of those candidates
+    and its ``x`` (module docstring)."""
+    from pipeline.refine.camera_readings import encoder_sigma
+    from pipeline.refine.plan import greedy_plan
+
+    problem, x = problem_of(np.arange(min(K, BATCH)))
     names = (*problem.model.param_names, *problem.block.param_names)
     units = (*problem.model.param_units, *problem.block.param_units)
-    A, M = _workspace(robot, problem, x, d)
+    A, M = _workspace(robot, problem, x, q_signature)
     sigma_q = encoder_sigma(robot.encoder_resolution, robot.prismatic)
-    Jc = np.concatenate([_image_rows(*_design_problem(robot, rig, d, q[k : k + BATCH]), sigma_q)
-                         for k in range(0, len(q), BATCH)])  # fmt: skip
+    Jc = np.concatenate([_image_rows(*problem_of(np.arange(k, min(k + BATCH, K))), sigma_q)
+                         for k in range(0, K, BATCH)])  # fmt: skip
     greedy = greedy_plan(Jc, M, WORKSPACE, units, n_poses, target_rms_cm)
     chosen = greedy.chosen
-    pred = _prediction(robot, rig, d, q[chosen], names, units, A, M, sigma_q)
-    random = _prediction(robot, rig, d, q[: len(chosen)], names, units, A, M, sigma_q)
-    return Plan(q=q[chosen], **{**pred, "rms_by_size_cm": greedy.rms_cm,
-                                "random_rms_cm": random["rms_cm"]})  # fmt: skip
+    pred = _prediction(*problem_of(chosen), names, units, A, M, sigma_q)
+    random = _prediction(*problem_of(np.arange(len(chosen))), names, units, A, M, sigma_q)
+    return chosen, {**pred, "rms_by_size_cm": greedy.rms_cm, "random_rms_cm": random["rms_cm"]}
 
 
 def _internal(robot: RobotDescription, q: np.ndarray) -> np.ndarray:
@@ -195,7 +211,7 @@ def _image_rows(problem: Any, x: np.ndarray, sigma_q: np.ndarray) -> np.ndarray:
 
 
 def _workspace(
-    robot: RobotDescription, problem: Any, x: np.ndarray, d: _Design
+    robot: RobotDescription, problem: Any, x: np.ndarray, q_signature: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """The raw error maps ``A`` (m, 6, n_kin) of the tool point at the workspace's
     configurations (the uncertainty stage's) and their information ``M`` (P, P), the
@@ -205,7 +221,7 @@ def _workspace(
     from pipeline.refine.uncertainty import model_error_maps
 
     model = problem.model
-    at = observing(model, robot.random_configurations(WORKSPACE, 0), d.q_signature)
+    at = observing(model, robot.random_configurations(WORKSPACE, 0), q_signature)
     A, _ = model_error_maps(at, x[: model.n_params])
     M = np.zeros((len(x), len(x)))
     M[: model.n_params, : model.n_params] = workspace_information(A)
@@ -213,19 +229,64 @@ def _workspace(
 
 
 def _prediction(
-    robot: RobotDescription, rig: CameraRig, d: _Design, q: np.ndarray, names: tuple[str, ...],
-    units: tuple[str, ...], A: np.ndarray, M: np.ndarray, sigma_q: np.ndarray,
+    problem: Any, x: np.ndarray, names: tuple[str, ...], units: tuple[str, ...],
+    A: np.ndarray, M: np.ndarray, sigma_q: np.ndarray,
 ) -> dict[str, Any]:  # fmt: skip
-    """:func:`pipeline.planning.prediction` of the images at ``q``: the fit's covariance,
-    the pixels' (with the planner's weak prior) and the encoders' rounding (σ
-    ``sigma_q``) shared by each image's points, as ``camera_fit`` states it (module
-    docstring)."""
+    """:func:`pipeline.planning.prediction` of the images of ``problem`` at ``x``: the
+    fit's covariance, the pixels' (with the planner's weak prior) and the encoders'
+    rounding (σ ``sigma_q``) shared by each image's points, as ``camera_fit`` states it
+    (module docstring)."""
     from pipeline.refine.camera_readings import reading_covariance
     from pipeline.refine.plan import design_covariance
     from pipeline.refine.solve import residuals_and_jacobian
 
-    problem, x = _design_problem(robot, rig, d, q)
     J = residuals_and_jacobian(problem, x)[1]
     unscaled = design_covariance(J[None], units)
     cov = unscaled + reading_covariance(problem.block, problem.model, x, J, unscaled, sigma_q)
     return prediction(J[None], names, units, A, A, M, cov, len(problem.block.image))
+
+
+def plan_from_camera_session(
+    session_dir: str | Path, n_poses: int, target_rms_cm: float | None = None
+) -> tuple[RobotDescription, Plan]:
+    """The ``n_poses`` most informative images of an identified camera session (``plan
+    --from``), for a re-calibration with fewer: the candidates are the session's images,
+    each with the points it detected, seen through its fitted chain and lens, chosen as
+    :func:`plan_camera_poses` chooses; the comparison is its first ``n_poses`` images."""
+    from pipeline.refine.camera_fit import Detections, camera_block, observing
+    from pipeline.refine.solve import Problem
+    from pipeline.stages.camera_fit import detections_for_fit, fit_pixels, fitted_model
+    from pipeline.stages.runner import stage_path
+    from pipeline.stages.session import session_robot
+    from pipeline.stages.tables import read_table
+    from pipeline.units import joints_to_boundary
+
+    sdir = Path(session_dir)
+    names = ("session", "joints", "detections", "camera_fit")
+    if not all(stage_path(sdir, n).is_file() for n in names):
+        raise ArmsigError(f"{sdir}: not an identified camera session with joint readings",
+                          fix=f"run `pipeline identify {sdir}` first")  # fmt: skip
+    tables = {n: read_table(stage_path(sdir, n)) for n in names}
+    robot = session_robot(tables["session"])
+    det, _, lens, setup = detections_for_fit(tables)
+    model, x_kin, k, q_sig = fitted_model(tables["camera_fit"], robot)
+    if not 1 <= n_poses <= det.n_images:
+        raise ArmsigError("plan --from: more images asked than the session holds",
+                          expected=f"1 to {det.n_images} images", got=str(n_poses),
+                          fix=f"--poses {min(det.n_images, 20)}")  # fmt: skip
+
+    def problem_of(idx: np.ndarray) -> tuple[Any, np.ndarray]:
+        place = np.full(det.n_images, -1)
+        place[idx] = np.arange(len(idx))  # each image's place among the candidates idx
+        use = np.flatnonzero(place[det.image] >= 0)
+        use = use[np.argsort(place[det.image[use]], kind="stable")]  # sorted by image
+        sub = Detections(place[det.image[use]].astype(np.int64), det.local[use], det.uv[use],
+                         det.sigma_px[use], det.q[idx], q_sig)  # fmt: skip
+        block = camera_block(sub, setup, k, lens, "fitted", None)
+        return Problem(observing(model, det.q[idx], q_sig), block, "linear"), np.r_[x_kin, k]
+
+    chosen, fields = _choose(robot, q_sig, det.n_images, n_poses, target_rms_cm, problem_of)
+    q = joints_to_boundary(det.q[chosen], robot.prismatic)
+    rig = json.loads(tables["session"].column("rig_json")[0].as_py())
+    steps = fit_pixels(rig, tables["detections"])[0][chosen]  # the images' recorded steps
+    return robot, Plan(q=q, **fields, source_steps=tuple(int(v) for v in steps))
