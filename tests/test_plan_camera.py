@@ -8,9 +8,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_cli_errors import assert_one_error as assert_refused
 from typer.testing import CliRunner, Result
 
 from pipeline.cli import EXIT_REFUSED, app
+from pipeline.cli.options import (
+    DISTORTION,
+    FOCAL_PX,
+    PIXEL_NOISE,
+    RESOLUTION,
+    distortion_terms,
+    resolution_px,
+)
 from pipeline.errors import ArmsigError
 from pipeline.identify import identify
 from pipeline.planning import write_plan
@@ -33,11 +42,13 @@ def invoke(*args: str) -> Result:
 
 
 def assert_one_error(r: Result, *fragments: str) -> None:
-    assert r.exit_code == EXIT_REFUSED, (r.exit_code, r.output)
-    lines = r.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), r.stderr
-    for f in fragments:
-        assert f in lines[0], (f, lines[0])
+    assert_refused(r, EXIT_REFUSED, *fragments)
+
+
+def test_the_command_line_defaults_are_the_simulators() -> None:
+    o = SimulationOptions()
+    assert resolution_px(RESOLUTION) == o.resolution_px and FOCAL_PX == o.focal_px
+    assert distortion_terms(DISTORTION) == o.distortion and PIXEL_NOISE == o.pixel_noise_px
 
 
 @pytest.fixture(scope="module", params=["eye-to-hand", "eye-in-hand"])

@@ -281,7 +281,15 @@ def stage_params(values: list[str] | None) -> dict[str, dict[str, str]]:
     return out
 
 
-#: The camera of ``simulate --sensor camera`` and ``plan --sensor camera`` (docs/camera.md).
+#: The camera of ``simulate --sensor camera`` and ``plan --sensor camera`` (docs/camera.md),
+#: and their defaults: ``pipeline.rig.options.SimulationOptions``'s (as text; equal by
+#: tests/test_plan_camera.py).
+RESOLUTION, FOCAL_PX, DISTORTION, PIXEL_NOISE = (
+    "1280x960",
+    1000.0,
+    "-0.12,0.05,0.0005,-0.0003,0",
+    0.2,
+)
 SetupOption = Annotated[
     Setup,
     choice(

@@ -11,6 +11,10 @@ from typing import Annotated, Any
 import typer
 
 from pipeline.cli.options import (
+    DISTORTION,
+    FOCAL_PX,
+    PIXEL_NOISE,
+    RESOLUTION,
     DistortionOption,
     FocalOption,
     JsonOption,
@@ -83,10 +87,10 @@ def plan_(
     ] = None,
     setup: SetupOption = Setup.eye_to_hand,
     target_file: TargetFileOption = "",
-    resolution: ResolutionOption = "1280x960",
-    focal_px: FocalOption = 1000.0,
-    distortion: DistortionOption = "-0.12,0.05,0.0005,-0.0003,0",
-    pixel_noise: PixelNoiseOption = 0.2,
+    resolution: ResolutionOption = RESOLUTION,
+    focal_px: FocalOption = FOCAL_PX,
+    distortion: DistortionOption = DISTORTION,
+    pixel_noise: PixelNoiseOption = PIXEL_NOISE,
     plane_sigma_deg: Annotated[
         float | None, typer.Option(help="Sweeps: wanted σ of every plane-of-rotation (deg).")
     ] = None,
@@ -125,9 +129,9 @@ def plan_(
             fix="pipeline plan OUT.csv --robot puma560 --poses 50",
         )
     camera_given = {"--setup": setup != Setup.eye_to_hand, "--target": target_file != "",
-                    "--resolution": resolution != "1280x960", "--focal-px": focal_px != 1000.0,
-                    "--distortion": distortion != "-0.12,0.05,0.0005,-0.0003,0",
-                    "--pixel-noise": pixel_noise != 0.2}  # fmt: skip
+                    "--resolution": resolution != RESOLUTION, "--focal-px": focal_px != FOCAL_PX,
+                    "--distortion": distortion != DISTORTION,
+                    "--pixel-noise": pixel_noise != PIXEL_NOISE}  # fmt: skip
     camera_session = from_session is not None and _camera_session(from_session)
     if sensor != Sensor.camera and not camera_session and any(camera_given.values()):
         what = next(k for k, v in camera_given.items() if v)

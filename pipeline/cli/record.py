@@ -9,6 +9,10 @@ from typing import Annotated, Any
 import typer
 
 from pipeline.cli.options import (
+    DISTORTION,
+    FOCAL_PX,
+    PIXEL_NOISE,
+    RESOLUTION,
     Air,
     DistortionOption,
     Fault,
@@ -128,10 +132,10 @@ def simulate(
     ] = Sensor.sonic,
     setup: SetupOption = Setup.eye_to_hand,
     target: TargetFileOption = "",
-    resolution: ResolutionOption = "1280x960",
-    focal_px: FocalOption = 1000.0,
-    distortion: DistortionOption = "-0.12,0.05,0.0005,-0.0003,0",
-    pixel_noise: PixelNoiseOption = 0.2,
+    resolution: ResolutionOption = RESOLUTION,
+    focal_px: FocalOption = FOCAL_PX,
+    distortion: DistortionOption = DISTORTION,
+    pixel_noise: PixelNoiseOption = PIXEL_NOISE,
     images: Annotated[
         bool,
         typer.Option(
