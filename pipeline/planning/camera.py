@@ -48,8 +48,10 @@ from pipeline.sensor.target import Target
 IMAGE_RANK = 15
 #: Candidate images linearised at once: ~70 rows each, so ~30 MB of Jacobian per batch.
 BATCH = 500
-#: Candidates by default: fewer than the tracker's 10,000 (each image is 15 rows, not 3).
+#: Candidates by default: fewer than the tracker's 10,000 (each image is 15 rows, not 3),
+#: and at most: the greedy holds ~4 arrays of (K, 15, P) and (K, 15, 15), ~0.4 GB at 20,000.
 CANDIDATES = 3000
+MAX_CANDIDATES = 20_000
 
 
 @dataclass(frozen=True)
@@ -100,10 +102,10 @@ def plan_camera_poses(
     from pipeline.rig.true_robot import ErrorSigmas, draw_true_robot
 
     positive_in_range("plan: target_rms_cm", target_rms_cm, unit="cm")
-    if not (1 <= n_poses <= candidates <= 100_000):
+    if not (1 <= n_poses <= candidates <= MAX_CANDIDATES):
         raise ArmsigError(
             "plan sizes out of range",
-            expected="1 <= poses <= candidates <= 100,000 (camera)",
+            expected=f"1 <= poses <= candidates <= {MAX_CANDIDATES:,} (camera)",
             got=f"poses {n_poses}, candidates {candidates}",
             fix=f"--poses 40 --candidates {CANDIDATES}",
         )
