@@ -50,9 +50,9 @@ def _rms(cov: np.ndarray) -> float:
 
 
 def one(d: Path, robot: str, setup: str, images: int, seed: int, extra: dict | None = None) -> dict:
-    opts = SimulationOptions(
-        robot=robot, sensor="camera", setup=setup, poses=images, seed=seed, **(extra or {})
-    )
+    planned = bool((extra or {}).get("plan_file"))  # a pose plan gives the images
+    opts = SimulationOptions(robot=robot, sensor="camera", setup=setup, seed=seed,
+                             poses=0 if planned else images, **(extra or {}))  # fmt: skip
     simulate_session(d, opts, force=True)
     truth = json.loads((d / "rig-truth.json").read_text())
     t = tables(d)
@@ -92,6 +92,7 @@ def one(d: Path, robot: str, setup: str, images: int, seed: int, extra: dict | N
         "flange_mm": 10 * audit.flange_position_cm,
         "flange_deg": audit.flange_orientation_deg,
         "points": len(det.image),
+        "images": det.n_images,
     }
 
 

@@ -6,7 +6,6 @@ the verdict, the report, the URDF's camera frames, ``camera_info``, ``armsig.loa
 from __future__ import annotations
 
 import json
-import re
 from pathlib import Path
 
 import numpy as np
@@ -183,16 +182,6 @@ def test_load_fleet_row_and_report_of_a_camera_session(tmp_path: Path) -> None:
 
     with pytest.raises(ArmsigError, match="not a camera's images"):  # plan --from: one line
         plan_from_session(d, 10)
-
-
-def test_plan_refuses_a_camera_in_one_line() -> None:
-    from typer.testing import CliRunner
-
-    from pipeline.cli import app
-
-    out = CliRunner().invoke(app, ["plan", "plan.csv", "--robot", "puma560", "--sensor", "camera"])
-    assert out.exit_code != 0 and out.output.count("\n") <= 2
-    assert re.search(r"camera", out.output)
 
 
 def _evidence() -> Evidence:

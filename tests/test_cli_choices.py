@@ -72,6 +72,7 @@ CHOICES: dict[tuple[str, str], tuple[type[StrEnum], list[str]]] = {
     ("plan", "--sensor"): (Sensor, ["plan", "OUT.csv", "--robot", "puma560", "--sweeps"]),
     ("simulate", "--air"): (Air, ["simulate", "NEW"]),
     ("simulate", "--setup"): (Setup, ["simulate", "NEW", "--sensor", "camera", "--poses", "8"]),
+    ("plan", "--setup"): (Setup, ["plan", "OUT.csv", "--robot", "puma560", "--sensor", "camera"]),
     ("simulate", "--faults"): (Fault, ["simulate", "NEW"]),
     ("import", "--format"): (ImportFormat, ["import", "f.csv", "NEW", "--robot", "r.toml"]),
     ("validate", "--format"): (ImportFormat, ["validate", "S", "--against", "f.csv"]),

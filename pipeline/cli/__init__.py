@@ -1,10 +1,10 @@
 """The ``pipeline`` command line. Commands are thin; the work is in importable functions.
 
 One module per command group, in the order of the data's path:
-:mod:`~pipeline.cli.record` (robots, simulate, import), :mod:`~pipeline.cli.session`
-(identify, status, show, audit, validate), :mod:`~pipeline.cli.control` (fk, ik,
-ik-convergence), :mod:`~pipeline.cli.evaluate`, :mod:`~pipeline.cli.outputs` (viz,
-export), :mod:`~pipeline.cli.montecarlo` and the ``fleet`` group
+:mod:`~pipeline.cli.record` (robots, simulate, import), :mod:`~pipeline.cli.plan`,
+:mod:`~pipeline.cli.session` (identify, status, show, audit, validate),
+:mod:`~pipeline.cli.control` (fk, ik, ik-convergence), :mod:`~pipeline.cli.evaluate`,
+:mod:`~pipeline.cli.outputs` (viz, export), :mod:`~pipeline.cli.montecarlo` and the ``fleet`` group
 (:mod:`~pipeline.cli.fleet`); :mod:`~pipeline.cli.options` and
 :mod:`~pipeline.cli.output` hold what they share. Each command imports numpy and the
 modules doing its work when it runs, not when the command line starts (issue 18).
@@ -40,7 +40,7 @@ from typing import Annotated, Any
 import typer
 from typer.core import TyperGroup
 
-from pipeline.cli import control, evaluate, fleet, montecarlo, outputs, record, session
+from pipeline.cli import control, evaluate, fleet, montecarlo, outputs, plan, record, session
 from pipeline.cli.output import NotReached
 from pipeline.errors import EXIT_INTERRUPTED, ArmsigError, VerdictFailError, one_line
 from pipeline.quiet import DEBUG_ENV, quiet
@@ -143,7 +143,7 @@ def _main(
 
 
 # `pipeline --help` lists the commands in this order.
-for _group in (record, session, control, evaluate, outputs, montecarlo):
+for _group in (record, plan, session, control, evaluate, outputs, montecarlo):
     app.add_typer(_group.commands)
 app.add_typer(fleet.commands, name="fleet")
 

@@ -279,3 +279,67 @@ def stage_params(values: list[str] | None) -> dict[str, dict[str, str]]:
             )
         out.setdefault(stage, {})[name] = value
     return out
+
+
+#: The camera of ``simulate --sensor camera`` and ``plan --sensor camera`` (docs/camera.md),
+#: and their defaults: ``pipeline.rig.options.SimulationOptions``'s (as text; equal by
+#: tests/test_plan_camera.py).
+RESOLUTION, FOCAL_PX, DISTORTION, PIXEL_NOISE = (
+    "1280x960",
+    1000.0,
+    "-0.12,0.05,0.0005,-0.0003,0",
+    0.2,
+)
+SetupOption = Annotated[
+    Setup,
+    choice(
+        "Camera: eye-to-hand (a fixed camera watches a target on the flange) or "
+        "eye-in-hand (a camera on the flange watches a fixed target)."
+    ),
+]
+TargetFileOption = Annotated[
+    str,
+    typer.Option(
+        "--target",
+        help="Camera: target file (TOML, docs/camera.md); default a ChArUco "
+        "board of 6 x 8 squares of 3.5 cm.",
+    ),
+]
+ResolutionOption = Annotated[
+    str, typer.Option("--resolution", help="Camera: image size in px, WIDTHxHEIGHT.")
+]
+FocalOption = Annotated[
+    float,
+    typer.Option("--focal-px", min=10.0, max=100000.0, help="Camera: nominal focal length (px)."),
+]
+DistortionOption = Annotated[
+    str,
+    typer.Option(
+        "--distortion", help="Camera: the true lens's k1, k2, p1, p2, k3 (OpenCV's order)."
+    ),
+]
+PixelNoiseOption = Annotated[
+    float,
+    typer.Option(
+        "--pixel-noise", min=0.0, max=100.0, help="Camera: pixel noise σ per coordinate (px)."
+    ),
+]
+
+
+def resolution_px(text: str) -> tuple[int, int]:
+    """``--resolution WIDTHxHEIGHT`` as (width, height) px."""
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise ArmsigError("--resolution must be WIDTHxHEIGHT in px", got=repr(text),
+                          fix="--resolution 1280x960")  # fmt: skip
+    return int(parts[0]), int(parts[1])
+
+
+def distortion_terms(text: str) -> tuple[float, float, float, float, float]:
+    """``--distortion k1,k2,p1,p2,k3``: five numbers."""
+    values = joint_values(text, "--distortion", "-0.12,0.05,0,0,0")
+    if len(values) != 5:
+        raise ArmsigError("--distortion needs five numbers: k1, k2, p1, p2, k3 (OpenCV's order)",
+                          got=repr(text), fix="--distortion -0.12,0.05,0,0,0")  # fmt: skip
+    k1, k2, p1, p2, k3 = values
+    return k1, k2, p1, p2, k3

@@ -4,31 +4,41 @@ or imported from a file of measured points (robots, simulate, import)."""
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import Annotated, Any
 
 import typer
 
 from pipeline.cli.options import (
+    DISTORTION,
+    FOCAL_PX,
+    PIXEL_NOISE,
+    RESOLUTION,
     Air,
+    DistortionOption,
     Fault,
+    FocalOption,
     ForceRecording,
     ImportFormat,
     JsonOption,
     NewSessionArg,
+    PixelNoiseOption,
+    ResolutionOption,
     RobotIdOption,
     Sensor,
     Setup,
+    SetupOption,
     StrictOption,
+    TargetFileOption,
     choice,
     choice_list,
     choices_of,
+    distortion_terms,
     joint_values,
     new_session_folder,
-    optional_session_path,
+    resolution_px,
 )
 from pipeline.cli.output import print_json, warn
-from pipeline.errors import ArmsigError, positive_in_range
+from pipeline.errors import ArmsigError
 
 commands = typer.Typer()
 
@@ -120,32 +130,12 @@ def simulate(
             "(a camera and a target, --setup; docs/camera.md)."
         ),
     ] = Sensor.sonic,
-    setup: Annotated[
-        Setup,
-        choice(
-            "Camera: eye-to-hand (a fixed camera watches a target on the flange) or "
-            "eye-in-hand (a camera on the flange watches a fixed target)."
-        ),
-    ] = Setup.eye_to_hand,
-    target: Annotated[
-        str,
-        typer.Option(
-            help="Camera: target file (TOML, docs/camera.md); default a ChArUco "
-            "board of 6 x 8 squares of 3.5 cm."
-        ),
-    ] = "",
-    resolution: Annotated[
-        str, typer.Option(help="Camera: image size in px, WIDTHxHEIGHT.")
-    ] = "1280x960",
-    focal_px: Annotated[
-        float, typer.Option(min=10.0, max=100000.0, help="Camera: nominal focal length (px).")
-    ] = 1000.0,
-    distortion: Annotated[
-        str, typer.Option(help="Camera: the true lens's k1, k2, p1, p2, k3 (OpenCV's order).")
-    ] = "-0.12,0.05,0.0005,-0.0003,0",
-    pixel_noise: Annotated[
-        float, typer.Option(min=0.0, max=100.0, help="Camera: pixel noise σ per coordinate (px).")
-    ] = 0.2,
+    setup: SetupOption = Setup.eye_to_hand,
+    target: TargetFileOption = "",
+    resolution: ResolutionOption = RESOLUTION,
+    focal_px: FocalOption = FOCAL_PX,
+    distortion: DistortionOption = DISTORTION,
+    pixel_noise: PixelNoiseOption = PIXEL_NOISE,
     images: Annotated[
         bool,
         typer.Option(
@@ -302,25 +292,6 @@ def simulate(
     typer.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {truth}")
 
 
-def resolution_px(text: str) -> tuple[int, int]:
-    """``--resolution WIDTHxHEIGHT`` as (width, height) px."""
-    parts = text.lower().split("x")
-    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
-        raise ArmsigError("--resolution must be WIDTHxHEIGHT in px", got=repr(text),
-                          fix="--resolution 1280x960")  # fmt: skip
-    return int(parts[0]), int(parts[1])
-
-
-def distortion_terms(text: str) -> tuple[float, float, float, float, float]:
-    """``--distortion k1,k2,p1,p2,k3``: five numbers."""
-    values = joint_values(text, "--distortion", "-0.12,0.05,0,0,0")
-    if len(values) != 5:
-        raise ArmsigError("--distortion needs five numbers: k1, k2, p1, p2, k3 (OpenCV's order)",
-                          got=repr(text), fix="--distortion -0.12,0.05,0,0,0")  # fmt: skip
-    k1, k2, p1, p2, k3 = values
-    return k1, k2, p1, p2, k3
-
-
 @commands.command("import")
 def import_(
     file: Annotated[
@@ -422,195 +393,3 @@ def _import_images(
         )  # fmt: skip
     for line in s.drops():
         warn(line)
-
-
-@commands.command("plan")
-def plan_(
-    out: Annotated[
-        str, typer.Argument(help="The plan to write (CSV of joint readings, docs/plan.md).")
-    ],
-    robot: Annotated[
-        str | None, typer.Option(help="Built-in robot name or description .toml.")
-    ] = None,
-    from_session: Annotated[
-        str | None,
-        typer.Option(
-            "--from",
-            help="An identified session with a pose set (a folder, or a NAME for "
-            "sessions/NAME): choose its most informative poses (re-calibration with fewer), "
-            "instead of random candidates of --robot.",
-            callback=optional_session_path,
-        ),
-    ] = None,
-    poses: Annotated[int | None, typer.Option(min=1, help="Poses to plan (at most; 50).")] = None,
-    target_rms_mm: Annotated[
-        float | None,
-        typer.Option(
-            help="Plan the fewest measurements whose audited RMS tool error stays under this "
-            "with 95 % probability."
-        ),
-    ] = None,
-    sigma_mm: Annotated[
-        float | None,
-        typer.Option(help="Point noise per coordinate (default: the sensor's law, docs/rig.md)."),
-    ] = None,
-    candidates: Annotated[int, typer.Option(min=1, help="Random candidate poses.")] = 10_000,
-    seed: Annotated[int, typer.Option(min=0, help="Seed of the candidates.")] = 0,
-    sweeps: Annotated[
-        bool,
-        typer.Option(
-            "--sweeps",
-            help="Plan joint sweeps (points per sweep and range per joint, (6.11)-(6.13)) "
-            "instead of poses.",
-        ),
-    ] = False,
-    sensor: Annotated[
-        Sensor | None,
-        choice("sonic (sweeps only; their default) or tracker (the default for poses)."),
-    ] = None,
-    plane_sigma_deg: Annotated[
-        float | None, typer.Option(help="Sweeps: wanted σ of every plane-of-rotation (deg).")
-    ] = None,
-    center_sigma_mm: Annotated[
-        float | None, typer.Option(help="Sweeps: wanted σ of every center-of-rotation (mm).")
-    ] = None,
-    points: Annotated[
-        int | None, typer.Option(min=5, max=1000, help="Sweeps: points per sweep, N_i, fixed.")
-    ] = None,
-    repeats: Annotated[
-        int, typer.Option(min=1, max=100, help="Sweeps, sonic: cycles per position, N_avg.")
-    ] = 10,
-    json_out: JsonOption = False,
-    force: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
-) -> None:
-    """Plan a measurement: the poses, or the joint sweeps, that give a wanted accuracy
-    (docs/plan.md)."""
-    from pipeline.planning import plan_from_session, plan_poses, write_plan
-    from pipeline.robots import get_robot
-    from pipeline.stages.recording_points import MAX_SIGMA_CM, MIN_SIGMA_CM
-
-    for name, value, low, high, unit, example in (
-        ("--sigma-mm", sigma_mm, MIN_SIGMA_CM * 10, MAX_SIGMA_CM * 10, "mm", "0.02"),
-        ("--target-rms-mm", target_rms_mm, 0.0, math.inf, "mm", "0.1"),
-        ("--center-sigma-mm", center_sigma_mm, 0.0, math.inf, "mm", "0.02"),
-        ("--plane-sigma-deg", plane_sigma_deg, 0.0, math.inf, "deg", "0.005"),
-    ):
-        positive_in_range(name, value, low, high, unit=unit, fix=f"{name} {example}")
-    target = None if target_rms_mm is None else target_rms_mm / 10.0
-    sigma = None if sigma_mm is None else sigma_mm / 10.0
-    if (robot is None) == (from_session is None):
-        raise ArmsigError(
-            "plan needs one of --robot and --from",
-            expected="--robot ROBOT (random candidates) or --from SESSION (its recorded poses)",
-            fix="pipeline plan OUT.csv --robot puma560 --poses 50",
-        )
-    sweep_only = {"--plane-sigma-deg": plane_sigma_deg, "--center-sigma-mm": center_sigma_mm,
-                  "--points": points}  # fmt: skip
-    if sweeps:
-        if from_session is not None or poses is not None:
-            raise ArmsigError("--sweeps plans joint sweeps, not poses",
-                              fix="drop --from and --poses (or --sweeps)")  # fmt: skip
-        assert robot is not None
-        _sweep_plan(out, get_robot(robot), sensor or Sensor.sonic, plane_sigma_deg,
-                    None if center_sigma_mm is None else center_sigma_mm / 10.0, target, sigma,
-                    points, repeats, json_out, force, robot)  # fmt: skip
-        return
-    given = [k for k, v in sweep_only.items() if v is not None]
-    if sensor == Sensor.camera:  # issue 39: poses for a camera calibration are not planned yet
-        raise ArmsigError("pipeline plan plans a tracker's poses, not a camera's",
-                          expected="--sensor tracker (or no --sensor)",
-                          fix="simulate camera images at random poses (`pipeline simulate "
-                          "NAME --sensor camera --poses 40`)")  # fmt: skip
-    if given or sensor == Sensor.sonic:
-        what = (given or ["--sensor sonic"])[0]
-        fix = "add --sweeps, or drop it (pose plans are the tracker's)"
-        raise ArmsigError(f"{what} is for sweep plans", fix=fix)
-    n_poses = 50 if poses is None else poses
-    if from_session is not None:
-        if sigma is not None:
-            raise ArmsigError("--sigma-mm is for --robot", fix="drop --sigma-mm: --from "
-                              "weighs each pose by its recorded noise")  # fmt: skip
-        rob, result = plan_from_session(from_session, n_poses, target)
-    else:
-        assert robot is not None
-        rob = get_robot(robot)
-        result = plan_poses(rob, n_poses, target, sigma, candidates, seed)
-    path = write_plan(out, rob, result, force, inputs=[robot] if robot else [])
-    if json_out:
-        print_json({"path": str(path), **result.to_dict()})
-        return
-    typer.echo(
-        f"wrote {path}: {len(result.q)} poses, predicted RMS tool error "
-        f"{result.rms_cm * 10:.3g} mm (under {result.rms_q95_cm * 10:.3g} mm with 95 % "
-        f"probability; 95 % of the workspace under {result.p95_cm * 10:.3g} mm); "
-        f"as many random poses: {result.random_rms_cm * 10:.3g} mm"
-    )
-    _warn_plan(target, target_rms_mm, result.rms_q95_cm, result.unidentified, "poses (--poses)")
-
-
-def _warn_plan(
-    target: float | None, target_mm: float | None, q95: float, unidentified: tuple[str, ...],
-    more: str,
-) -> None:  # fmt: skip
-    """The warnings of ``plan``: a target not met, parameters not identifiable."""
-    if target is not None and q95 > target:
-        typer.echo(
-            f"warning: the plan stays under {q95 * 10:.3g} mm with 95 % probability, above "
-            f"the target {target_mm:g} mm; plan more {more}",
-            err=True,
-        )
-    if unidentified:
-        typer.echo("warning: not identifiable from this plan: " + ", ".join(unidentified),
-                   err=True)  # fmt: skip
-
-
-def _sweep_plan(
-    out: str,
-    robot: Any,
-    sensor: Sensor,
-    plane_sigma_deg: float | None,
-    center_sigma_cm: float | None,
-    target: float | None,
-    sigma: float | None,
-    points: int | None,
-    repeats: int,
-    json_out: bool,
-    force: bool,
-    source: str,
-) -> None:
-    """``plan --sweeps``: :func:`pipeline.planning.sweeps.plan_sweeps`, written and printed
-    (``source``: the robot as given, an input ``--force`` never replaces)."""
-    from pipeline.cli.output import print_json
-    from pipeline.features.accuracy import MAX_POINTS
-    from pipeline.planning.sweeps import plan_sweeps, write_sweep_plan
-
-    plan = plan_sweeps(robot, sensor.value, plane_sigma_deg, center_sigma_cm, target, sigma,
-                       points, repeats)  # fmt: skip
-    path = write_sweep_plan(out, robot, plan, force, inputs=(source,))
-    if json_out:
-        print_json({"path": str(path), **plan.to_dict()})
-        return
-    typer.echo(f"wrote {path}: {plan.positions} positions ({sensor.value}"
-               + (f", {plan.n_avg} cycles each" if plan.n_avg > 1 else "") + ")")  # fmt: skip
-    typer.echo("joint          range              radius  points  plane σ_δ   center σ_c  law")
-    for s in plan.sweeps:
-        typer.echo(
-            f"{s.joint} {s.name:11s} {s.first:7.1f} .. {s.last:7.1f} {s.radius_cm:6.2f} cm "
-            f"{s.points:6d}  {s.plane_sigma_deg:8.3g}°  {s.center_sigma_cm * 10:8.3g} mm  {s.law}"
-        )
-    typer.echo(
-        f"predicted RMS tool error {plan.rms_cm * 10:.3g} mm (under {plan.rms_q95_cm * 10:.3g} "
-        f"mm with 95 % probability; 95 % of the workspace under {plan.p95_cm * 10:.3g} mm)"
-    )
-    unmet = [f"{s.joint} {s.name}" for s in plan.sweeps if s.law != "line" and (
-        (plane_sigma_deg is not None and s.plane_sigma_deg > plane_sigma_deg)
-        or (center_sigma_cm is not None and s.center_sigma_cm > center_sigma_cm))]  # fmt: skip
-    if unmet:
-        warn(
-            f"the wanted plane / center σ is not met by sweep {', '.join(unmet)} at "
-            f"{points or MAX_POINTS} points per sweep (the table says what is reached); "
-            + ("drop --points" if points else "measure a longer sweep or with less noise")
-        )
-    more = "points (--target-rms-mm is capped at 1000 per sweep)"
-    target_mm = None if target is None else target * 10
-    _warn_plan(target, target_mm, plan.rms_q95_cm, plan.unidentified, more)

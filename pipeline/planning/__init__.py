@@ -200,7 +200,7 @@ def _choose(
     plan = greedy_plan(J, M, WORKSPACE, units, n_poses, target_rms_cm)
     chosen = plan.chosen
     fields = {
-        **prediction(J[chosen], model, A, B, M, plan.covariance),
+        **prediction(J[chosen], model.param_names, model.param_units, A, B, M, plan.covariance),
         "rms_cm": float(plan.rms_cm[-1]),  # the greedy's own (the same, to rounding)
         "rms_q95_cm": plan.rms_quantile_cm,
         "rms_by_size_cm": plan.rms_cm,
@@ -210,20 +210,30 @@ def _choose(
 
 
 def prediction(
-    J: np.ndarray, model: ChainModel, A: np.ndarray, B: np.ndarray, M: np.ndarray, cov: np.ndarray
+    J: np.ndarray,
+    names: tuple[str, ...],
+    units: tuple[str, ...],
+    A: np.ndarray,
+    B: np.ndarray,
+    M: np.ndarray,
+    cov: np.ndarray,
+    n_points: int | None = None,
 ) -> dict[str, Any]:
     """The predicted RMS, its 95 % quantile over robots, the 95 % over the workspace (cm)
     and the parameters not identifiable, of a measurement whose whitened Jacobians are
-    ``J`` (K, 3, P) and covariance ``cov`` (P, P), with the workspace's error maps ``A``,
-    ``B`` and their information ``M`` (:func:`pipeline.refine.plan.workspace_information`)."""
-    units = model.param_units
-    ident = analyse(J.reshape(-1, J.shape[-1]), units, True, len(J))
-    pred = predict(A, B, cov)
+    ``J`` (K, r, P) and covariance ``cov`` (P, P) of the parameters ``names`` (their
+    internal ``units``), with the workspace's error maps ``A``, ``B`` (m, 6, n_kin: the
+    first n_kin parameters, the chain's) and their information ``M``
+    (:func:`pipeline.refine.plan.workspace_information`, zero beyond the chain);
+    ``n_points``: points measured (default K)."""
+    ident = analyse(J.reshape(-1, J.shape[-1]), units, True, n_points or len(J))
+    n_kin = A.shape[-1]
+    pred = predict(A, B, cov[:n_kin, :n_kin])
     return {
         "rms_cm": float(np.sqrt(max(np.trace(M @ cov), 0.0) / WORKSPACE)),
         "p95_cm": float(np.percentile(pred.position_aligned_cm, 95)),
         "rms_q95_cm": rms_quantile_cm(cov, M, WORKSPACE),
-        "unidentified": tuple(model.param_names[k] for k in np.flatnonzero(ident.held)),
+        "unidentified": tuple(names[k] for k in np.flatnonzero(ident.held)),
     }
 
 
@@ -233,17 +243,20 @@ def write_plan(
     plan: Plan,
     force: bool = False,
     inputs: Sequence[str | Path] = (),
+    sensor: str = "",
 ) -> Path:
     """Write ``plan`` as a pose plan file (:mod:`pipeline.rig.pose_file`); an existing file
     is refused unless ``force``, and never one of the command's ``inputs``
-    (:func:`pipeline.atomic.check_new_file`)."""
+    (:func:`pipeline.atomic.check_new_file`); ``sensor``: what it plans for, when not a
+    tracker (``camera eye-to-hand``), in its first line."""
     from pipeline.atomic import check_new_file
     from pipeline.rig.pose_file import write_pose_plan
 
     out = Path(path)
     check_new_file(out, "pose plan", force, inputs)
     comment = (
-        f"armsig pose plan: {robot.name}, {len(plan.q)} poses; predicted RMS "
+        f"armsig pose plan: {robot.name}{', ' + sensor if sensor else ''}, {len(plan.q)} "
+        "poses; predicted RMS "
         f"{plan.rms_cm:.3g} cm (under {plan.rms_q95_cm:.3g} cm with 95 % probability), "
         f"95 % {plan.p95_cm:.3g} cm over the workspace "
         f"(as many random poses: {plan.random_rms_cm:.3g} cm)"
@@ -274,8 +287,8 @@ def plan_from_session(
         raise ArmsigError(
             f"{sdir}: plan --from chooses among a tracker's poses, not a camera's images",
             expected="a tracker or digitizer session with a pose set",
-            fix="record camera images at random poses spread over the joint ranges "
-            "(docs/camera.md: what the fit needs)",
+            fix="choose among a camera session's images with `pipeline plan OUT --from "
+            "SESSION` (pipeline.planning.camera.plan_from_camera_session)",
         )
     names = ("session", "joints", "positions", "frames", "refine")
     if not all(stage_path(sdir, n).is_file() for n in names):

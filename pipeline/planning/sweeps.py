@@ -275,7 +275,8 @@ def _whole_fit(
     cov = _point_cov(model.positions(x), sensor, geometry, n_avg, sigma_cm)
     J, Sigma = sweep_covariance(model, x, robot, cov, ids)
     A, B = model_error_maps(tool_model(model, robot.random_configurations(WORKSPACE, 0)), x)
-    pred = prediction(J, model, A, B, workspace_information(B), Sigma)
+    M = workspace_information(B)
+    pred = prediction(J, model.param_names, model.param_units, A, B, M, Sigma)
     from dataclasses import replace
 
     return replace(plan, rms_cm=pred["rms_cm"], rms_q95_cm=pred["rms_q95_cm"],

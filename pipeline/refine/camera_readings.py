@@ -46,6 +46,14 @@ from pipeline.sensor.camera import project_with_jacobians
 STEP = 1e-6
 
 
+def encoder_sigma(resolution: Array, prismatic: Array) -> Array:
+    """The joint readings' σ (n,) rad / cm of encoders of ``resolution`` (n, boundary
+    units): their rounding, resolution / √12."""
+    from pipeline.units import joints_to_internal
+
+    return np.asarray(joints_to_internal(resolution, prismatic)) / np.sqrt(12)
+
+
 def reading_jacobian(block: CameraBlock, model: ChainModel, x: Array) -> Array:
     """``∂(whitened pixel)/∂q`` (2D, n): each detection's two rows against its own image's
     readings (central differences)."""

@@ -13,10 +13,11 @@ The plan minimises ``E`` (an I-optimal design: the average prediction variance o
 region of interest, Atkinson, Donev & Tobias, *Optimum Experimental Designs*, ch. 10),
 not ``det Σ`` (D-optimal, figaroh's choice): ``E`` is the number the verdict predicts and
 the audit measures, and a D-optimal design spends poses on parameters the alignment
-absorbs. Greedy: each step adds the candidate with the largest drop of ``E``, a rank-3
-update by the Woodbury identity,
+absorbs. Greedy: each step adds the candidate with the largest drop of ``E``, a rank-r
+update by the Woodbury identity (r = 3 rows for a measured point; a camera image's
+pixels, compressed to their rank, :mod:`pipeline.planning.camera`),
 
-    ``ΔE = trace(S⁻¹ J A⁻¹ M A⁻¹ Jᵀ)``,  ``S = I₃ + J A⁻¹ Jᵀ``,
+    ``ΔE = trace(S⁻¹ J A⁻¹ M A⁻¹ Jᵀ)``,  ``S = I_r + J A⁻¹ Jᵀ``,
 
 vectorised over the candidates, then ``A⁻¹ ← A⁻¹ − A⁻¹ Jᵀ S⁻¹ J A⁻¹``. The start is a weak
 prior ``A₀ = ε I`` in tolerance-scaled parameters (1 cm, 1°: :data:`PRIOR_SIGMAS`
@@ -79,7 +80,7 @@ def greedy_plan(
     n_max: int,
     target_rms_cm: float | None = None,
 ) -> PosePlan:
-    """Choose up to ``n_max`` of the candidates whose whitened Jacobians are ``J`` (K, 3, P)
+    """Choose up to ``n_max`` of the candidates whose whitened Jacobians are ``J`` (K, r, P)
     (module docstring); with ``target_rms_cm`` stop at the first plan whose audited RMS
     meets it with probability :data:`TARGET_QUANTILE` (module docstring, "A target").
     ``M``: :func:`workspace_information` over ``n_workspace`` configurations; ``units``:
@@ -87,7 +88,7 @@ def greedy_plan(
     tol = tolerance_scale(units)
     Js = J * tol  # tolerance-scaled parameters: the prior treats them alike
     Ms = M * np.outer(tol, tol)
-    K, _, P = Js.shape
+    K, r, P = Js.shape
     A_inv = np.eye(P) * PRIOR_SIGMAS**2
     free = np.ones(K, bool)
     chosen: list[int] = []
@@ -95,9 +96,9 @@ def greedy_plan(
     z2 = _chi2_draws(P)
     quantile = np.inf
     for _ in range(min(n_max, K)):
-        JA = Js @ A_inv  # (K, 3, P)
-        S = np.eye(3) + JA @ np.swapaxes(Js, 1, 2)  # (K, 3, 3)
-        N = (JA @ Ms) @ np.swapaxes(JA, 1, 2)  # J A⁻¹ M A⁻¹ Jᵀ, (K, 3, 3)
+        JA = Js @ A_inv  # (K, r, P)
+        S = np.eye(r) + JA @ np.swapaxes(Js, 1, 2)  # (K, r, r)
+        N = (JA @ Ms) @ np.swapaxes(JA, 1, 2)  # J A⁻¹ M A⁻¹ Jᵀ, (K, r, r)
         gain = np.trace(np.linalg.solve(S, N), axis1=1, axis2=2)
         gain[~free] = -np.inf
         c = int(np.argmax(gain))

@@ -203,6 +203,29 @@ def _spread(found: np.ndarray, local: np.ndarray, spacing: float) -> np.ndarray:
     return np.asarray(smaller >= (MIN_SPREAD * spacing) ** 2)
 
 
+def planned_images(
+    q: np.ndarray, setup: str, chain: Any, target: Target, fixed: np.ndarray,
+    on_flange: np.ndarray, lens: Intrinsics,
+) -> tuple[np.ndarray, dict[str, Any]]:  # fmt: skip
+    """The configurations of a pose plan ``q`` (K, n, boundary units) whose image a
+    detector keeps, in the plan's order, and the count of dropped ones by reason with the
+    plan's step of every kept one (``plan_steps``)."""
+    _, local = target.points()
+    flange = link_frames(chain, joints_to_internal(q, chain.prismatic))[:, chain.n_joints]
+    ok, _, reason = detect(target, camera_from_target(setup, fixed, on_flange, flange), lens,
+                           local)  # fmt: skip
+    if ok.sum() < 4:
+        raise ArmsigError(
+            f"the simulated camera sees the target in {int(ok.sum())} of the plan's {len(q)} poses",
+            expected="4 or more images",
+            got=", ".join(f"{k}: {int((reason == i).sum())}" for i, k in enumerate(DROP_REASONS)),
+            fix="plan for this camera and set-up (`pipeline plan --sensor camera --setup ...` "
+            "with the same camera options)",
+        )
+    dropped: dict[str, Any] = {k: int((reason == i).sum()) for i, k in enumerate(DROP_REASONS)}
+    return q[ok], {**dropped, "plan_steps": np.flatnonzero(ok).tolist()}
+
+
 def draw_images(
     n_images: int, setup: str, chain: Any, limits: np.ndarray, target: Target,
     fixed: np.ndarray, on_flange: np.ndarray, lens: Intrinsics, rng: np.random.Generator,

@@ -14,6 +14,11 @@ noise: every image is rendered and detected (:mod:`pipeline.rig.camera_images`),
 PNGs written under ``images/`` and referenced by ``/camera/images`` (``/rig/description``
 ``images_dir``); an image the detector drops keeps its reference (after the kept ones)
 and has no joint state.
+
+With a pose plan (``--plan``, :func:`pipeline.planning.camera.plan_camera_poses`) the
+images are taken at the plan's poses in its order; the ones the detector drops at the
+true rig are left out (``rig-truth.json`` ``camera.dropped_images``, and ``plan_steps``:
+the plan's step of every recorded image).
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ from pipeline.kinematics.chain import link_frames
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.rig import camera
 from pipeline.rig.options import SimulationOptions
+from pipeline.rig.pose_file import read_pose_plan
 from pipeline.rig.recorder import Message, refuse_existing_recording
 from pipeline.rig.session_files import (
     T0_NS,
@@ -74,8 +80,13 @@ def simulate_camera(out: Path, opts: SimulationOptions, force: bool) -> Path:
     nominal = camera.nominal_intrinsics(*opts.resolution_px, opts.focal_px)
     lens = camera.true_intrinsics(nominal, opts.distortion, rng_world)
     fixed, on_flange = camera.placement(opts.setup, true.chain, robot.limits, target, rng_world)
-    q_cmd, dropped = camera.draw_images(opts.poses, opts.setup, true.chain, robot.limits,
-                                        target, fixed, on_flange, lens, rng_world)  # fmt: skip
+    if opts.plan_file:  # a pose plan (`pipeline plan --sensor camera`): its poses, in order
+        q_plan = read_pose_plan(Path(opts.plan_file), robot)
+        q_cmd, dropped = camera.planned_images(q_plan, opts.setup, true.chain, target, fixed,
+                                               on_flange, lens)  # fmt: skip
+    else:
+        q_cmd, dropped = camera.draw_images(opts.poses, opts.setup, true.chain, robot.limits,
+                                            target, fixed, on_flange, lens, rng_world)  # fmt: skip
     res = robot.encoder_resolution
     if opts.noiseless:
         q_enc = q_reached = q_cmd.copy()
@@ -106,7 +117,7 @@ def simulate_camera(out: Path, opts: SimulationOptions, force: bool) -> Path:
         if not opts.noiseless:
             noise = rng_sensor.normal(0.0, opts.pixel_noise_px, uv.shape)
             uv = np.round(uv + noise, PIXEL_DIGITS)
-        seen_uv = [(ids[found[k]], uv[k, found[k]]) for k in range(opts.poses)]
+        seen_uv = [(ids[found[k]], uv[k, found[k]]) for k in range(len(q_cmd))]
     n_images = len(seen_uv)
     plan = {
         "n_avg": 1, "order": ["poses"], "sweeps": [],
@@ -169,7 +180,7 @@ def rig_description(opts: SimulationOptions, nominal: Any, target: Target) -> di
 
 def camera_truth(
     setup: str, lens: Any, nominal: Any, fixed: np.ndarray, on_flange: np.ndarray,
-    target: Target, dropped: dict[str, int],
+    target: Target, dropped: dict[str, Any],
 ) -> dict[str, Any]:  # fmt: skip
     """The ``camera`` part of ``rig-truth.json``: the true and nominal lens, the hand-eye
     transforms (4 × 4, cm; ``world``: the robot's base frame, ``flange``: its last link

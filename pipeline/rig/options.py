@@ -43,7 +43,7 @@ class SimulationOptions:
     check: int = 0  # tracker: validation configurations (sweep "check")
     poses: int = 0  # tracker: random whole-arm configurations identified (sweep "poses")
     sweeps: bool = True  # joint sweeps and the tool measurement (False: a pose set only)
-    plan_file: str = ""  # tracker: a pose plan (pipeline plan) recorded as the pose set
+    plan_file: str = ""  # tracker or camera: a pose plan (pipeline plan) recorded as the pose set
     six_d: bool = False  # tracker: the pose set's tool target also measures its orientation
     air: str = "lab"  # or "drifting" (AIRS)
     log_jitter_s: float = 0.0  # each measurement logged U(0, this) s after it was measured
@@ -225,16 +225,16 @@ def _check_camera(opts: SimulationOptions) -> None:
             f"unknown camera set-up {opts.setup!r}", expected=" or ".join(SETUPS),
             fix="--setup eye-in-hand",
         )  # fmt: skip
-    if not 4 <= opts.poses <= 100_000:
+    if not (4 <= opts.poses <= 100_000 or (opts.plan_file and opts.poses == 0)):
         raise ArmsigError(
             "a camera session is a set of images at random poses",
-            expected="--poses from 4 to 100000 (one image per pose)",
+            expected="--poses from 4 to 100000 (one image per pose), or --plan FILE",
             got=f"--poses {opts.poses}",
             fix="--poses 40",
         )
     others = {
         "--targets": opts.targets != 1, "--nest-on-axis": opts.nest_on_axis != 0,
-        "--check": opts.check != 0, "--plan": bool(opts.plan_file), "--six-d": opts.six_d,
+        "--check": opts.check != 0, "--six-d": opts.six_d,
         "--compliance-mm": opts.compliance_mm != 0, "--harmonic-deg": opts.harmonic_deg != 0,
         "--payloads": bool(opts.payloads_kg), "--backlash-mm": opts.backlash_mm != 0,
     }  # fmt: skip
@@ -243,7 +243,7 @@ def _check_camera(opts: SimulationOptions) -> None:
         raise ArmsigError(
             f"{given[0]} does not apply to --sensor camera",
             expected="--setup, --target, --resolution, --focal-px, --distortion, "
-            "--pixel-noise and --poses",
+            "--pixel-noise and --poses (or --plan)",
             fix=f"drop {given[0]}",
         )
     if not opts.images and (opts.blur_px, opts.grey_noise, opts.vignette) != (0.5, 2.0, 0.3):

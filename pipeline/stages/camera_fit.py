@@ -94,10 +94,10 @@ def fit_pixels(rig: dict[str, Any], table: pa.Table) -> tuple[np.ndarray, ...]:
 
 def reading_sigma(session: pa.Table) -> np.ndarray:
     """The joint readings' σ (n,) rad / cm: the encoders' rounding, resolution / √12."""
-    from pipeline.units import joints_to_internal
+    from pipeline.refine.camera_readings import encoder_sigma
 
     robot = session_robot(session)
-    return np.asarray(joints_to_internal(robot.encoder_resolution, robot.prismatic)) / np.sqrt(12)
+    return encoder_sigma(robot.encoder_resolution, robot.prismatic)
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
