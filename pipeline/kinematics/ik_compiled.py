@@ -39,7 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.kinematics.ik_stall import STALL_RATIO
-from pipeline.kinematics.kernel_cache import njit_cached
+from pipeline.kinematics.kernels import Kernel
 from pipeline.kinematics.transforms import Array
 
 #: Kernel outcome of a target: converged by the stopping rule.
@@ -66,7 +66,7 @@ LM_MAX_ITER = 200
 LM_MU_MAX = 1e16
 
 
-Kernel = TypeVar("Kernel", bound=Callable[..., Any])
+Func = TypeVar("Func", bound=Callable[..., Any])
 IntArray = npt.NDArray[np.int64]
 #: Argument type of the compiled kernels: float, bool or int buffers.
 Buf = npt.NDArray[Any]
@@ -74,15 +74,16 @@ Buf = npt.NDArray[Any]
 Work = tuple[Buf, Buf, Buf, Buf, Buf, Buf]
 
 
-def jit(func: Kernel) -> Kernel:
+def jit(func: Func) -> Func:
     """Compile ``func`` with numba (no Python objects, GIL released, cached on disk in
-    :func:`~pipeline.kinematics.kernel_cache.cache_dir`). No kernel is inlined at numba's
+    :func:`~pipeline.kinematics.kernel_cache.cache_dir`) on its first compiled call
+    (:class:`~pipeline.kinematics.kernels.Kernel`). No kernel is inlined at numba's
     level (``inline="always"``, issue 45): it retyped a callee at every call site, and the
     kernels took 86 s of CPU to compile instead of 38 s, for 12-25 % of a batch's speed
     (measured 2026-11-29 on robot3's signature, CPU per target, same run: Newton-Raphson
     batch 6.3 against 7.2 µs, Jacobi 6.8 against 9.1 µs, one real-time target 14.4
     against 14.8 µs; docs/scale.md). LLVM still inlines small callees."""
-    return cast(Kernel, njit_cached(func, nogil=True))
+    return cast(Func, Kernel(func, {"nogil": True}))
 
 
 @jit
