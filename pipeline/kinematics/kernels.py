@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import math
+import threading
 import types
 from collections.abc import Callable
 from typing import Any
@@ -28,6 +29,8 @@ import numpy as np
 
 #: Every kernel made in this process (:func:`interpreted` switches them all).
 _KERNELS: list[Kernel] = []
+#: Held while a kernel's dispatcher is made (numba imported, the cache found).
+_MAKING = threading.RLock()
 #: Whether :func:`interpreted` is running (kernels made meanwhile start as Python).
 _INTERPRETING = False
 
@@ -64,12 +67,13 @@ class Kernel:
             raise AttributeError(name)
         if name in ("dispatcher", "run"):
             made = self.__dict__
-            if "dispatcher" not in made:
-                from pipeline.kinematics.kernel_cache import njit_cached
+            with _MAKING:  # a batch's threads may call a kernel first at once
+                if "dispatcher" not in made:
+                    from pipeline.kinematics.kernel_cache import njit_cached
 
-                _register_numba_type()
-                made["dispatcher"] = njit_cached(self.py_func, **self._options)
-            made.setdefault("run", made["dispatcher"])
+                    _register_numba_type()
+                    made["dispatcher"] = njit_cached(self.py_func, **self._options)
+                made.setdefault("run", made["dispatcher"])
             return made[name]
         return getattr(self.dispatcher, name)
 
