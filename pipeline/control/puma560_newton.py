@@ -165,9 +165,25 @@ def _solve_targets(
     outcome: Buf, iterations: Buf, errors: Buf, lower: Buf, upper: Buf, turn: Buf,
 ) -> None:  # fmt: skip
     """:func:`_solve_realtime` for each of ``T_base`` (m, 4, 4); outputs by row
-    (``errors`` (m, 2): position cm, rotation rad)."""
+    (``errors`` (m, 2): position cm, rotation rad). Allocates the scratch;
+    :func:`_solve_rows` loops (without reference counting: its views of each row)."""
     Tw, spare, ws = np.empty((4, 4)), np.empty((2, 6)), workspace(q.shape[1])
-    info = np.empty(2, np.int64)
+    _solve_rows(
+        base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
+        settings, X, T_base, q_near, q0, q, delta, target, outcome, iterations, errors,
+        lower, upper, turn, Tw, spare, ws, np.empty(2, np.int64),
+    )  # fmt: skip
+
+
+@jit_views
+def _solve_rows(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
+    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf,
+    outcome: Buf, iterations: Buf, errors: Buf, lower: Buf, upper: Buf, turn: Buf,
+    Tw: Buf, spare: Buf, ws: Work, info: Buf,
+) -> None:  # fmt: skip
+    """:func:`_solve_targets`' loop over the rows, with its scratch."""
     for k in range(T_base.shape[0]):
         _solve_realtime(
             base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
