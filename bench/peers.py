@@ -128,12 +128,12 @@ def main(c: Controller | None = None) -> None:
     t_ours = time.perf_counter() - t0
     T_base = _targets(c, BATCH, branch)
     c.solve(T_base[:2], branch=branch)  # the batched kernel loaded, as for newton_raphson above
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     r_ctl = c.solve(T_base, branch=branch)  # its own start: the kernel's design inverse
-    t_ctl = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    t_ctl, cpu_ctl = time.perf_counter() - t0, time.process_time() - c0
+    t0, c0 = time.perf_counter(), time.process_time()
     q_rtb = _rtb_loop(ets, T, q0, offsets)
-    t_rtb = time.perf_counter() - t0
+    t_rtb, cpu_rtb = time.perf_counter() - t0, time.process_time() - c0
     ok_rtb = np.isfinite(q_rtb).all(axis=1)
     ok_rtb[ok_rtb] = _accurate(chain, T[ok_rtb], q_rtb[ok_rtb])
     ok_ours = r.converged & _accurate(chain, T, r.q)
@@ -162,6 +162,10 @@ def main(c: Controller | None = None) -> None:
           f"off the branch unflagged {np.count_nonzero(silent)}")  # fmt: skip
     print(f"  ratio throughput armsig Controller.solve / rtb: {t_rtb / t_ctl:.1f}")
     print(f"  ratio throughput armsig newton_raphson / rtb: {t_rtb / t_ours:.1f}")
+    # CPU per target, all threads: what a loaded machine's wall-clock ratio hides (issue 45;
+    # armsig's batch runs on a thread per core, rtb's loop on one).
+    print(f"  CPU per target: armsig Controller.solve {cpu_ctl / BATCH * 1e6:.2f} µs, "
+          f"rtb {cpu_rtb / BATCH * 1e6:.2f} µs (ratio {cpu_rtb / cpu_ctl:.1f})")  # fmt: skip
     for name, ok in (("Controller.solve", ok_ctl), ("newton_raphson", ok_ours)):
         print(
             f"  solved by rtb, not armsig {name}: {np.count_nonzero(ok_rtb & ~ok)}; "

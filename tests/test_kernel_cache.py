@@ -14,7 +14,7 @@ import pytest
 from pipeline.kinematics import kernel_cache as C
 
 ROOT = Path(__file__).resolve().parent.parent
-KERNEL_DECORATORS = {"jit", "inline_jit", "njit_cached"}
+KERNEL_DECORATORS = {"jit", "jit_views", "inline_jit", "njit_cached"}
 
 
 def _module(path: Path) -> str:

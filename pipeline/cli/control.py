@@ -3,6 +3,7 @@ compensate, ik-convergence). The work is in :mod:`pipeline.control`."""
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import Annotated
 
@@ -216,7 +217,10 @@ def ik(
         return
     if pose is None:
         raise ArmsigError("give --pose x y z rx ry rz, or --targets FILE --out FILE")
-    r = solve_pose(
+    from pipeline.kinematics.kernels import interpreted
+
+    solve = functools.partial(
+        solve_pose,
         session,
         finite(pose, "--pose"),
         branch=None if branch is None else branch.value,
@@ -226,6 +230,9 @@ def ik(
         accept_verdict=accept_verdict,
         payload_kg=payload_kg,
     )
+    # One target in a process that then exits: Newton-Raphson's kernels run as Python, the
+    # same arithmetic, without loading numba (~0.5 s of CPU; pipeline.kinematics.kernels).
+    r = interpreted(solve) if method == Method.nr else solve()
     report(
         r,
         as_json,

@@ -16,6 +16,7 @@ from pipeline.kinematics.ik_compiled import (
     _delta,
     _errors,
     jit,
+    jit_views,
     pose,
 )
 from pipeline.kinematics.ik_stall import STALL_RATIO
@@ -55,7 +56,7 @@ def _anderson(Qh: Buf, Gh: Buf, count: int, out: Buf, dF: Buf, dG: Buf, f: Buf) 
         out[i] = acc
 
 
-@jit
+@jit_views
 def _jacobi_map(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
@@ -79,7 +80,7 @@ def _jacobi_map(
     return _design_start(pre, post, branch, margins, Tk, q, q_next, Tw)  # C.2 step 6
 
 
-@jit
+@jit_views
 def _error_at(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     target: Buf, q: Buf, Ts: Buf, d: Buf, length: float,

@@ -47,6 +47,7 @@ from pipeline.kinematics.ik_compiled import (
     Work,
     _errors,
     jit,
+    jit_views,
     solve_one_target,
     workspace,
 )
@@ -71,7 +72,7 @@ OUT_OF_LIMITS, OUT_OF_LIMITS_OFF_BRANCH = 4, 5
 #: iterations. The same turns restart a solution outside the joint limits there.
 
 
-@jit
+@jit_views
 def _solve_target(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
@@ -113,7 +114,7 @@ def _solve_target(
     return FAST_DEFERRED, total
 
 
-@jit
+@jit_views
 def _restart_into_limits(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf, res: Buf, limit: Buf,
     settings: Buf, target: Buf, q_near: Buf, q: Buf, delta: Buf, spare: Buf, ws: Work,
@@ -164,9 +165,25 @@ def _solve_targets(
     outcome: Buf, iterations: Buf, errors: Buf, lower: Buf, upper: Buf, turn: Buf,
 ) -> None:  # fmt: skip
     """:func:`_solve_realtime` for each of ``T_base`` (m, 4, 4); outputs by row
-    (``errors`` (m, 2): position cm, rotation rad)."""
+    (``errors`` (m, 2): position cm, rotation rad). Allocates the scratch;
+    :func:`_solve_rows` loops (without reference counting: its views of each row)."""
     Tw, spare, ws = np.empty((4, 4)), np.empty((2, 6)), workspace(q.shape[1])
-    info = np.empty(2, np.int64)
+    _solve_rows(
+        base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
+        settings, X, T_base, q_near, q0, q, delta, target, outcome, iterations, errors,
+        lower, upper, turn, Tw, spare, ws, np.empty(2, np.int64),
+    )  # fmt: skip
+
+
+@jit_views
+def _solve_rows(
+    base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
+    pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
+    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf,
+    outcome: Buf, iterations: Buf, errors: Buf, lower: Buf, upper: Buf, turn: Buf,
+    Tw: Buf, spare: Buf, ws: Work, info: Buf,
+) -> None:  # fmt: skip
+    """:func:`_solve_targets`' loop over the rows, with its scratch."""
     for k in range(T_base.shape[0]):
         _solve_realtime(
             base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
@@ -176,7 +193,7 @@ def _solve_targets(
         outcome[k], iterations[k] = info[0], info[1]
 
 
-@jit
+@jit_views
 def _solve_realtime(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
@@ -212,20 +229,25 @@ _PACK_SIZES = (16, 96, 16, 6, 16, 16, 3, 2, 6, 6, 4, 16, 6, 6, 6)
  _P_LIMIT, _P_SETTINGS, _P_X, _P_LOWER, _P_UPPER, _P_TURN, _P_END) = (
     np.cumsum((0, *_PACK_SIZES)).tolist())  # fmt: skip
 #: Its scratch packed likewise: q0, q, δ, errors, target, Tw, spare (2, 6), then the
-#: :func:`~pipeline.kinematics.ik_compiled.workspace` T, J, M, dq, q_new, δ_new.
-_SCRATCH_SIZES = (6, 6, 6, 2, 16, 16, 12, 16, 36, 42, 6, 6, 6)
+#: :func:`~pipeline.kinematics.ik_compiled.workspace` T, J, M, dq, q_new, δ_new, J_new, A,
+#: Am, g, r, Js.
+_SCRATCH_SIZES = (6, 6, 6, 2, 16, 16, 12, 16, 36, 42, 6, 6, 6, 36, 36, 36, 6, 6, 36)
 (_S_Q0, _S_Q, _S_DELTA, _S_ERRORS, _S_TARGET, _S_TW, _S_SPARE, _S_T, _S_J, _S_M, _S_DQ,
- _S_QNEW, _S_DNEW, _S_END) = np.cumsum((0, *_SCRATCH_SIZES)).tolist()  # fmt: skip
+ _S_QNEW, _S_DNEW, _S_JNEW, _S_A, _S_AM, _S_G, _S_R, _S_JS, _S_END) = np.cumsum(
+    (0, *_SCRATCH_SIZES)).tolist()  # fmt: skip
 
 
-@jit
+@jit_views
 def _solve_packed(
     P: Buf, prismatic: Buf, S: Buf, info: Buf, T_base: Buf, q_near: Buf
 ) -> None:  # fmt: skip
     """:func:`_solve_realtime` of one target with the model ``P`` and the scratch ``S``
     packed (:data:`_PACK_SIZES`, :data:`_SCRATCH_SIZES`): views, nothing allocated."""
     ws = (S[_S_T:_S_J].reshape(4, 4), S[_S_J:_S_M].reshape(6, 6), S[_S_M:_S_DQ].reshape(6, 7),
-          S[_S_DQ:_S_QNEW], S[_S_QNEW:_S_DNEW], S[_S_DNEW:_S_END])  # fmt: skip
+          S[_S_DQ:_S_QNEW], S[_S_QNEW:_S_DNEW], S[_S_DNEW:_S_JNEW],
+          S[_S_JNEW:_S_A].reshape(6, 6), S[_S_A:_S_AM].reshape(6, 6),
+          S[_S_AM:_S_G].reshape(6, 6), S[_S_G:_S_R], S[_S_R:_S_JS],
+          S[_S_JS:_S_END].reshape(6, 6))  # fmt: skip
     _solve_realtime(
         P[_P_BASE:_P_LINKS].reshape(4, 4), P[_P_LINKS:_P_TOOL].reshape(6, 4, 4),
         P[_P_TOOL:_P_OFFSETS].reshape(4, 4), P[_P_OFFSETS:_P_PRE], prismatic,

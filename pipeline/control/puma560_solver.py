@@ -8,6 +8,7 @@ finishes the targets those defer with the numpy iterations of
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import cast
 
 import numpy as np
 
@@ -48,12 +49,16 @@ from pipeline.kinematics.ik_compiled import (
     homogeneous,
     run_in_shares,
 )
+from pipeline.kinematics.kernels import Kernel
 from pipeline.kinematics.nongeometric import NonGeometric
 from pipeline.kinematics.nongeometric_compiled import CompiledDeflection
 from pipeline.kinematics.transforms import Array, differential_motion, invert_transform
 from pipeline.robots import puma560
 from pipeline.robots.puma560 import Branch
 
+#: The one-target kernel as a :class:`~pipeline.kinematics.kernels.Kernel`: its ``run``
+#: called directly (the compiled dispatcher, or Python inside ``interpreted``).
+_PACKED = cast(Kernel, _solve_packed)
 #: Templates of a one-target result's flags and status (:meth:`PumaSolver.solve`).
 _ONE_TRUE, _ONE_FALSE = np.ones(1, bool), np.zeros(1, bool)
 _ONE_ZERO = np.zeros(1, np.int64)
@@ -215,7 +220,7 @@ class PumaSolver:
         result as ``Controller.solve``.
         """
         near = self._q_ref if q_near is None else q_near
-        _solve_packed(self._packed, self._prismatic, self._scratch, self.info, T_base, near)
+        _PACKED.run(self._packed, self._prismatic, self._scratch, self.info, T_base, near)
         if self.info[0] == FAST_CONVERGED or self.info[0] == OFF_BRANCH:
             self.branch_changed = self.info[0] == OFF_BRANCH
             return self._to_readings()
@@ -260,17 +265,16 @@ class PumaSolver:
         if m == 1:
             one = self._q_ref if q_near is None else np.ascontiguousarray(q_near, float).reshape(n)
             S, info, q_one, errors_one = self._one
-            _solve_packed(self._packed, self._prismatic, S, info, Tb[0], one)
+            _PACKED.run(self._packed, self._prismatic, S, info, Tb[0], one)
             kind, count = info.tolist()
             if (kind == FAST_CONVERGED or kind == OFF_BRANCH) and self._deflection is None:
-                # The result's arrays copied from small templates: ~0.2 µs each, where
-                # np.ones(1, bool) or a comparison ufunc take ~1 µs.
-                errors = errors_one.copy()
+                # The result's arrays copied from small templates: ~0.1 µs each, where
+                # np.ones(1, bool), np.array([count]) or a comparison ufunc take 0.2-1 µs.
+                errors, iterations = errors_one.copy(), _ONE_ZERO.copy()
+                iterations[0] = count
                 return IKResult.of_one_target(
-                    q=q_one.copy(), converged=_ONE_TRUE.copy(),
-                    iterations=np.array([count]), position_error_cm=errors[:1],
-                    orientation_error_rad=errors[1:], status=_ONE_ZERO.copy(),
-                    branch_changed=(_ONE_FALSE if kind == FAST_CONVERGED else _ONE_TRUE).copy(),
+                    q_one.copy(), _ONE_TRUE.copy(), iterations, errors[:1], errors[1:],
+                    _ONE_ZERO.copy(), (_ONE_FALSE if kind == FAST_CONVERGED else _ONE_TRUE).copy(),
                 )  # fmt: skip
         near = np.ascontiguousarray(
             np.broadcast_to(self._q_ref if q_near is None else q_near, (m, n)), float

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from pipeline.kinematics.ik_compiled import Buf, jit
+from pipeline.kinematics.ik_compiled import Buf, jit_views
 from pipeline.robots import puma560
 
 #: Kernel outcome: the design inverse has no start (the clamped pose is still out
@@ -27,7 +27,7 @@ _TWO_PI = 2.0 * math.pi
 _SINGULAR = puma560.WRIST_SINGULAR_TOL
 
 
-@jit
+@jit_views
 def _wrap(t: float) -> float:
     """:func:`pipeline.kinematics.transforms.wrap_angle` of one angle: (-π, π]."""
     a = math.pi - t
@@ -35,7 +35,7 @@ def _wrap(t: float) -> float:
     return math.pi - (a if 0.0 <= a < _TWO_PI else np.mod(a, _TWO_PI))
 
 
-@jit
+@jit_views
 def _design_start(
     pre: Buf, post: Buf, branch: Buf, margins: Buf, target: Buf, q_near: Buf, q: Buf, Tw: Buf
 ) -> bool:
@@ -126,7 +126,7 @@ def _design_start(
     return True
 
 
-@jit
+@jit_views
 def _into_limits(q: Buf, lower: Buf, upper: Buf, turn: Buf) -> None:
     """``pipeline.control._shift_into`` of one configuration (6,), in place."""
     for j in range(q.shape[0]):
@@ -138,7 +138,7 @@ def _into_limits(q: Buf, lower: Buf, upper: Buf, turn: Buf) -> None:
                 q[j] = down
 
 
-@jit
+@jit_views
 def _inside(q: Buf, lower: Buf, upper: Buf) -> bool:
     """Whether every joint of ``q`` (6,) is inside its limits."""
     for j in range(q.shape[0]):
@@ -147,7 +147,7 @@ def _inside(q: Buf, lower: Buf, upper: Buf) -> bool:
     return True
 
 
-@jit
+@jit_views
 def _to_sensor(X: Buf, T_base: Buf, target: Buf) -> None:
     """``target = X · T_base`` (4, 4): a pose in the design base frame in the sensor frame."""
     for r in range(4):
@@ -156,7 +156,7 @@ def _to_sensor(X: Buf, T_base: Buf, target: Buf) -> None:
                             + X[r, 2] * T_base[2, c] + X[r, 3] * T_base[3, c])  # fmt: skip
 
 
-@jit
+@jit_views
 def _arm_flags(q: Buf) -> tuple[float, float]:
     """The shoulder and elbow flags (±1) of ``q`` (6,), as
     :func:`pipeline.robots.puma560.branch_of`."""
@@ -166,7 +166,7 @@ def _arm_flags(q: Buf) -> tuple[float, float]:
     return (1.0 if reach >= 0 else -1.0), (1.0 if elbow >= 0 else -1.0)
 
 
-@jit
+@jit_views
 def _same_arm(q: Buf, other: Buf) -> bool:
     """``q`` and ``other`` (6,) have the same shoulder and elbow flags."""
     s, e = _arm_flags(q)
@@ -174,7 +174,7 @@ def _same_arm(q: Buf, other: Buf) -> bool:
     return s == s_o and e == e_o
 
 
-@jit
+@jit_views
 def _on_branch(q: Buf, branch: Buf) -> bool:
     """:func:`pipeline.robots.puma560.branch_of` of ``q`` (6,) equals ``branch`` (3,)."""
     s, e = _arm_flags(q)

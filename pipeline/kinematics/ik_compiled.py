@@ -39,7 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.kinematics.ik_stall import STALL_RATIO
-from pipeline.kinematics.kernel_cache import njit_cached
+from pipeline.kinematics.kernels import Kernel
 from pipeline.kinematics.transforms import Array
 
 #: Kernel outcome of a target: converged by the stopping rule.
@@ -66,26 +66,40 @@ LM_MAX_ITER = 200
 LM_MU_MAX = 1e16
 
 
-Kernel = TypeVar("Kernel", bound=Callable[..., Any])
+Func = TypeVar("Func", bound=Callable[..., Any])
 IntArray = npt.NDArray[np.int64]
 #: Argument type of the compiled kernels: float, bool or int buffers.
 Buf = npt.NDArray[Any]
 #: :func:`workspace`: scratch buffers of one solve.
-Work = tuple[Buf, Buf, Buf, Buf, Buf, Buf]
+Work = tuple[Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf]
 
 
-def jit(func: Kernel) -> Kernel:
+def jit(func: Func) -> Func:
     """Compile ``func`` with numba (no Python objects, GIL released, cached on disk in
-    :func:`~pipeline.kinematics.kernel_cache.cache_dir`). No kernel is inlined at numba's
+    :func:`~pipeline.kinematics.kernel_cache.cache_dir`) on its first compiled call
+    (:class:`~pipeline.kinematics.kernels.Kernel`). No kernel is inlined at numba's
     level (``inline="always"``, issue 45): it retyped a callee at every call site, and the
     kernels took 86 s of CPU to compile instead of 38 s, for 12-25 % of a batch's speed
     (measured 2026-11-29 on robot3's signature, CPU per target, same run: Newton-Raphson
     batch 6.3 against 7.2 µs, Jacobi 6.8 against 9.1 µs, one real-time target 14.4
     against 14.8 µs; docs/scale.md). LLVM still inlines small callees."""
-    return cast(Kernel, njit_cached(func, nogil=True))
+    return cast(Func, Kernel(func, {"nogil": True}))
 
 
-@jit
+def jit_views(func: Func) -> Func:
+    """:func:`jit` for a kernel that allocates nothing (it reads and writes the buffers
+    it is given, and views of them), compiled without numba's reference counting; it may
+    call only such kernels (numba types a callee in its caller's mode). Measured (perf,
+    robot3, 100,000 targets of one branch on one thread, issue 45): the counting's atomic
+    increments and decrements of every array argument and view, at every call between
+    kernels, took 30 % of the samples, 2.8× the time in sin and cos; with the Newton and
+    Levenberg-Marquardt kernels (their scratch in :func:`workspace`) and the Puma's
+    compiled this way, 2.5 µs of CPU per target instead of 3.6. The arithmetic, hence
+    every answer, is the same."""
+    return cast(Func, Kernel(func, {"nogil": True, "_nrt": False}))
+
+
+@jit_views
 def _pose_into(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     q: Buf, T: Buf, J: Buf, jacobian: bool,
@@ -168,7 +182,7 @@ def homogeneous(base: Array, links: Array, tool: Array) -> bool:
                 and np.all(tool[..., 3, :] == last))  # fmt: skip
 
 
-@jit
+@jit_views
 def pose(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf, q: Buf, T: Buf
 ) -> None:  # fmt: skip
@@ -176,7 +190,7 @@ def pose(
     _pose_into(base, links, tool, offsets, prismatic, q, T, T, False)
 
 
-@jit
+@jit_views
 def _pose_jacobian(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf, q: Buf, T: Buf, J: Buf,
 ) -> None:  # fmt: skip
@@ -185,7 +199,7 @@ def _pose_jacobian(
     _pose_into(base, links, tool, offsets, prismatic, q, T, J, True)
 
 
-@jit
+@jit_views
 def _delta(T_from: Buf, T_to: Buf, out: Buf) -> None:
     """``differential_motion(T_from, T_to)`` into ``out`` (6,): origin difference and
     the axis-angle vector of ``R = R_to R_fromᵀ`` (its entries as scalars)."""
@@ -214,7 +228,7 @@ def _delta(T_from: Buf, T_to: Buf, out: Buf) -> None:
     out[3], out[4], out[5] = sx * scale, sy * scale, sz * scale
 
 
-@jit
+@jit_views
 def _lu_solve(A: Buf, b: Buf, x: Buf, M: Buf) -> bool:
     """``x = A⁻¹ b`` for a square ``A`` (n, n) by LU with partial pivoting (``M``: scratch
     (n, n + 1)). False when a pivot is zero or the solution is not finite.
@@ -252,7 +266,7 @@ def _lu_solve(A: Buf, b: Buf, x: Buf, M: Buf) -> bool:
     return True
 
 
-@jit
+@jit_views
 def _lu_solve6(A: Buf, b: Buf, x: Buf, M: Buf) -> bool:
     """:func:`_lu_solve` of a (6, 6) system."""
     for i in range(6):
@@ -283,7 +297,7 @@ def _lu_solve6(A: Buf, b: Buf, x: Buf, M: Buf) -> bool:
     return True
 
 
-@jit
+@jit_views
 def _errors(d: Buf) -> tuple[float, float]:
     """Radial position error (cm) and rotation angle (rad) of δ (6,)."""
     return (
@@ -296,12 +310,14 @@ def _errors(d: Buf) -> tuple[float, float]:
 def workspace(n: int) -> Work:
     """Scratch of :func:`solve_one_target` for ``n`` joints, made once per batch (or
     per real-time solver) so that no target allocates: T (4, 4), J (6, n),
-    M (n, n + 1), dq, q_new (n,), δ_new (6,)."""
+    M (n, n + 1), dq, q_new (n,), δ_new (6,), then :func:`_levenberg_marquardt`'s
+    J_new (6, n), A, Am (n, n), g (n,), r (6,), Js (6, n)."""
     return (np.empty((4, 4)), np.empty((6, n)), np.empty((n, n + 1)), np.empty(n),
-            np.empty(n), np.empty(6))  # fmt: skip
+            np.empty(n), np.empty(6), np.empty((6, n)), np.empty((n, n)), np.empty((n, n)),
+            np.empty(n), np.empty(6), np.empty((6, n)))  # fmt: skip
 
 
-@jit
+@jit_views
 def solve_one_target(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     target: Buf, q: Buf, res: Buf, limit: Buf, settings: Buf, delta: Buf, ws: Work,
@@ -322,7 +338,7 @@ def solve_one_target(
     n = q.shape[0]
     max_iter, length = int(settings[0]), settings[1]
     tol_p, tol_o = settings[2], settings[3]
-    T, J, M, dq, q_new, d_new = ws
+    T, J, M, dq, q_new, d_new = ws[0], ws[1], ws[2], ws[3], ws[4], ws[5]
     _pose_jacobian(base, links, tool, offsets, prismatic, q, T, J)
     _delta(T, target, delta)  # Appendix C.1 steps 1-2 at q⁰
     ep, eo = _errors(delta)
@@ -332,7 +348,7 @@ def solve_one_target(
         if not _lu_solve(J, delta, dq, M):  # Eq. (5.4): dq = J⁻¹ δ
             return _levenberg_marquardt(
                 base, links, tool, offsets, prismatic, target, q, res, limit, settings,
-                delta, J, it - 1,
+                delta, J, it - 1, ws,
             )  # fmt: skip
         worst = 1.0  # C.1 step 7, the step capped per joint (ik.steps._cap_step)
         for j in range(n):
@@ -353,7 +369,7 @@ def solve_one_target(
             _pose_jacobian(base, links, tool, offsets, prismatic, q, T, J)
             return _levenberg_marquardt(
                 base, links, tool, offsets, prismatic, target, q, res, limit, settings,
-                delta, J, it - 1,
+                delta, J, it - 1, ws,
             )  # fmt: skip
         accurate = ep <= tol_p and eo <= tol_o
         moved = False
@@ -368,20 +384,36 @@ def solve_one_target(
         if not accurate and not e_new < STALL_RATIO * e and not moved:
             return _levenberg_marquardt(
                 base, links, tool, offsets, prismatic, target, q, res, limit, settings,
-                delta, J, it,
+                delta, J, it, ws,
             )  # fmt: skip
         e = e_new
     return _levenberg_marquardt(
-        base, links, tool, offsets, prismatic, target, q, res, limit, settings, delta, J, max_iter
+        base,
+        links,
+        tool,
+        offsets,
+        prismatic,
+        target,
+        q,
+        res,
+        limit,
+        settings,
+        delta,
+        J,
+        max_iter,
+        ws,
     )
 
 
-@jit
+@jit_views
 def _levenberg_marquardt(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     target: Buf, q: Buf, res: Buf, limit: Buf, settings: Buf, delta: Buf, J: Buf, done: int,
+    ws: Work,
 ) -> tuple[int, int]:  # fmt: skip
-    """Damped least squares from ``q`` (δ and J given there) after ``done`` Newton steps.
+    """Damped least squares from ``q`` (δ and J given there) after ``done`` Newton steps;
+    ``ws``: :func:`solve_one_target`'s :func:`workspace` (its first six buffers free once
+    the Newton steps hand over, ``J`` read before any is written).
 
     Minimises ``½|W δ|²``, ``W = diag(1/L, 1/L, 1/L, 1, 1, 1)``, by steps
     ``h = (JᵀWᵀWJ + μ I)⁻¹ JᵀWᵀW δ`` capped per joint; μ follows Nielsen's rule
@@ -401,10 +433,8 @@ def _levenberg_marquardt(
     length = settings[1]
     tol_p, tol_o = settings[2], settings[3]
     w = 1.0 / length
-    T, J_new, M = np.empty((4, 4)), np.empty((6, n)), np.empty((n, n + 1))
-    A, Am, g = np.empty((n, n)), np.empty((n, n)), np.empty(n)
-    h, q_new, d_new, r = np.empty(n), np.empty(n), np.empty(6), np.empty(6)
-    Js = np.empty((6, n))
+    T, M, h, q_new, d_new = ws[0], ws[2], ws[3], ws[4], ws[5]
+    J_new, A, Am, g, r, Js = ws[6], ws[7], ws[8], ws[9], ws[10], ws[11]
 
     def normal_equations(J: Buf, d: Buf) -> float:  # A = JsᵀJs, g = Jsᵀ r; returns ½|r|²
         for i in range(6):

@@ -59,8 +59,6 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-import numba
-
 #: Every source the cached kernels are compiled from (see the module docstring).
 KERNEL_SOURCES = (
     "pipeline.errors",
@@ -76,6 +74,7 @@ KERNEL_SOURCES = (
     "pipeline.kinematics.ik_stall",
     "pipeline.kinematics.jacobian",
     "pipeline.kinematics.kernel_cache",
+    "pipeline.kinematics.kernels",
     "pipeline.kinematics.nongeometric",
     "pipeline.kinematics.nongeometric_compiled",
     "pipeline.kinematics.transforms",
@@ -149,6 +148,8 @@ def choose_cache_dir(
 @cache
 def cache_dir() -> Path | None:
     """This process's cache folder for the kernels (None: compile in memory)."""
+    import numba
+
     # numba.config's names are set from the environment at runtime: unknown to mypy.
     user_dir = str(numba.config.CACHE_DIR)  # type: ignore[attr-defined]
     tree_dir = Path(__file__).resolve().parent / "__pycache__"
@@ -185,6 +186,8 @@ def _say_first_compile(folder: Path | None) -> None:
 
 @contextmanager
 def _numba_config(**values: str) -> Iterator[None]:
+    import numba
+
     saved = {name: getattr(numba.config, name) for name in values}
     for name, value in values.items():
         setattr(numba.config, name, value)
@@ -197,7 +200,10 @@ def _numba_config(**values: str) -> Iterator[None]:
 
 def njit_cached(func: Callable[..., Any], **options: Any) -> Any:
     """``numba.njit(**options)(func)`` cached in :func:`cache_dir`, or in memory
-    where that folder cannot be used."""
+    where that folder cannot be used. numba is imported here, not with this module
+    (:mod:`pipeline.kinematics.kernels`: a process that runs no kernel compiled needs none)."""
+    import numba
+
     folder = cache_dir()
     if folder is None:
         return numba.njit(cache=False, **options)(func)

@@ -4,7 +4,6 @@ codes"), :class:`IKResult` and its per-iteration :class:`IKHistory`."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -119,14 +118,26 @@ class IKResult:
     branch_changed: BoolArray | None = None
 
     @classmethod
-    def of_one_target(cls, **fields: Any) -> IKResult:
+    def of_one_target(
+        cls, q: Array, converged: BoolArray, iterations: IntArray, position_error_cm: Array,
+        orientation_error_rad: Array, status: IntArray, branch_changed: BoolArray,
+    ) -> IKResult:  # fmt: skip
         """The result of one target (a real-time solver's), every field given but
         ``history`` and ``task_axes`` (their defaults). Filled in directly: the frozen
         dataclass's ``__init__`` sets its nine fields one ``object.__setattr__`` at a
-        time, 1.8 µs, a sixth of a one-target solve."""
-        result = object.__new__(cls)
-        result.__dict__.update(history=None, task_axes=ALL_AXES, **fields)
+        time, 1.8 µs, a sixth of a one-target solve; keywords into ``__dict__.update``
+        0.7 µs; one dict given as ``__dict__`` 0.35 µs."""
+        result = _new(cls)
+        _set(result, "__dict__", {
+            "q": q, "converged": converged, "iterations": iterations,
+            "position_error_cm": position_error_cm, "orientation_error_rad": orientation_error_rad,
+            "status": status, "history": None, "task_axes": ALL_AXES,
+            "branch_changed": branch_changed,
+        })  # fmt: skip
         return result
+
+
+_new, _set = object.__new__, object.__setattr__
 
 
 def mark_singular(
