@@ -35,7 +35,7 @@ if __name__ == "__main__":
     print()
     camera.timing()  # the accuracy study: python -m bench.camera (minutes)
     print()
-    camera_hand_eye.quick()  # the study: python -m bench.camera_hand_eye (~1 hour)
+    camera_hand_eye.quick()  # the study: python -m bench.camera_hand_eye (~30 min)
     print()
     camera_images.quick()  # the study: python -m bench.camera_images (~11 minutes)
     print()

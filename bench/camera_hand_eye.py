@@ -21,7 +21,7 @@ each against the truth's transforms (mm, deg). The primary transform is the one
 on the flange); ranks are over the 9 hand-eye-alone methods. Printed per row: each
 method's median over the seeds, armsig's median rank, how often it is at most the
 session's best, and at most the method best by median. ``python -m bench.camera_hand_eye``
-(the study, ~1 hour on a busy 2-core machine; ``BENCH_CAMERA_SEEDS``; ``--perfect``:
+(the study, 30 minutes on the shared 2-core machine; ``BENCH_CAMERA_SEEDS``; ``--perfect``:
 :func:`perfect`); ``make bench`` runs :func:`quick`.
 """
 
