@@ -2,6 +2,7 @@
 
 from bench import (
     camera,
+    camera_hand_eye,
     camera_images,
     evaluate,
     fit_floor,
@@ -37,7 +38,7 @@ if __name__ == "__main__":
     print()
     camera.timing()  # the accuracy study: python -m bench.camera (minutes)
     print()
-    camera.hand_eye_alone()
+    camera_hand_eye.quick()  # the study: python -m bench.camera_hand_eye (~30 min)
     print()
     camera_images.quick()  # the study: python -m bench.camera_images (~11 minutes)
     print()

@@ -124,76 +124,6 @@ def timing() -> None:
     )
 
 
-def hand_eye_alone(seed: int = 2) -> None:
-    """Issue 39's peer comparison on one noiseless Puma session per set-up (40 images):
-    the hand-eye with the chain held at its design, armsig's reprojection fit
-    (``chain="design"``, the lens fitted, or held at OpenCV's calibration) against OpenCV's
-    closed forms on the same PnP poses; the whole-chain fit last. Errors of the transform
-    each method gives (eye-to-hand: the camera in the base; eye-in-hand: the camera on the
-    flange) against the truth, cm and deg."""
-    import cv2
-
-    from pipeline.kinematics.chain import link_frames
-    from pipeline.kinematics.transforms import invert_transform
-    from pipeline.refine.camera_fit import fit_camera
-    from pipeline.refine.camera_start import _pose
-    from pipeline.rig.camera_audit import pose_errors
-    from pipeline.sensor.camera import Intrinsics
-
-    print(f"camera hand-eye alone (noiseless Puma, 40 images, seed {seed}): cm / deg")
-    with tempfile.TemporaryDirectory() as tmp:
-        for setup in ("eye-to-hand", "eye-in-hand"):
-            d = Path(tmp) / setup
-            opts = SimulationOptions(sensor="camera", setup=setup, poses=40, seed=seed,
-                                     noiseless=True)  # fmt: skip
-            simulate_session(d, opts)
-            truth = json.loads((d / "rig-truth.json").read_text())
-            fixed, on_flange = true_hand_eye(truth)
-            want = fixed if setup == "eye-to-hand" else on_flange
-            det, design, lens, _ = camera_fit.detections_for_fit(tables(d))
-            n = design.n_joints
-            F_s = link_frames(design, det.q_signature[None])[0, n]
-
-            rows = []
-            fit = fit_camera(det, design, lens, setup, chain="design")
-            rows.append(("armsig, chain at design, lens fitted", _held(fit, setup, det, F_s)))
-            calib = Intrinsics.from_vector(lens.width_px, lens.height_px, fit.start.intrinsics)
-            held = fit_camera(det, design, calib, setup, "fixed", chain="design")
-            rows.append(("armsig, chain at design, lens from calibrateCamera",
-                         _held(held, setup, det, F_s)))  # fmt: skip
-            T = fit.start.camera_from_target
-            base_flange = link_frames(design, det.q)[:, n]
-            grip = base_flange if setup == "eye-in-hand" else invert_transform(base_flange)
-            for name in ("TSAI", "PARK", "HORAUD", "ANDREFF", "DANIILIDIS"):
-                R, t = cv2.calibrateHandEye(
-                    list(grip[:, :3, :3]), list(grip[:, :3, 3]), list(T[:, :3, :3]),
-                    list(T[:, :3, 3]), method=getattr(cv2, f"CALIB_HAND_EYE_{name}"),
-                )  # fmt: skip
-                rows.append((f"OpenCV calibrateHandEye {name}", _pose(R, t)))
-            start = fit.start.fixed_in_base if setup == "eye-to-hand" else fit.start.tool_in_flange
-            rows.append((f"OpenCV calibrateRobotWorldHandEye {fit.start.method}", start))
-            whole = fit_camera(det, design, lens, setup)
-            audit = audit_camera_fit(whole, truth, get_desc(tables(d)), det.q_signature)
-            for label, T_he in rows:
-                p, a = pose_errors(T_he, want)
-                print(f"  {setup} | {label} | {float(p):.4f} | {float(a):.4f}")
-            p_w, a_w = ((audit.fixed_position_cm, audit.fixed_orientation_deg)
-                        if setup == "eye-to-hand"
-                        else (audit.flange_position_cm, audit.flange_orientation_deg))  # fmt: skip
-            print(f"  {setup} | armsig, whole chain fitted | {p_w:.1e} | {a_w:.1e}", flush=True)
-
-
-def _held(fit, setup: str, det, F_s: np.ndarray) -> np.ndarray:
-    """The hand-eye transform of a design-held fit the peers give: the camera in the base
-    (eye-to-hand) or on the flange (eye-in-hand; ``F_s`` the design's flange at q̄^s)."""
-    from pipeline.kinematics.transforms import invert_transform
-
-    if setup == "eye-to-hand":
-        return np.asarray(fit.fixed_in_base)
-    T = fit.tool_poses(det.q_signature[None], det.q_signature)[0]
-    return np.asarray(invert_transform(F_s) @ T)
-
-
 def beside_tracker(seeds: int = 3, images: int = 40) -> None:
     """What a camera buys (issue 39): the camera session (Puma, eye-to-hand, 0.2 px) and a
     laser tracker session of the same poses and the same true robot (the seed's), each
@@ -295,5 +225,3 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
-    print()
-    hand_eye_alone()

@@ -162,6 +162,31 @@ def test_noiseless_sessions_identify_exactly(
     assert audit.intrinsics_relative <= 1e-6
 
 
+@pytest.mark.parametrize("setup", SETUPS)
+def test_hand_eye_alone_is_exact_when_the_design_is_the_robot(tmp_path: Path, setup: str) -> None:
+    """The peers' problem (``chain="design"``) on a robot built to its design (no
+    manufacturing error), noiseless: both hand-eye transforms to 1e-6 cm and 1e-6° in
+    the truth's frames, and the lens to 1e-6 relative. The hand-eye-alone bench
+    (``bench.camera_hand_eye``) compares the same two transforms."""
+    from pipeline.kinematics.chain import link_frames
+    from pipeline.kinematics.transforms import invert_transform
+    from pipeline.rig.camera_audit import pose_errors, true_hand_eye
+    from pipeline.rig.true_robot import ErrorSigmas
+
+    d, truth = _simulated(tmp_path, "puma560", setup, 20, noiseless=True,
+                          sigmas=ErrorSigmas(0.0, 0.0, 0.0))  # fmt: skip
+    det, design, lens, _ = camera_fit.detections_for_fit(_tables(d))
+    fit = fit_camera(det, design, lens, setup, chain="design")
+    assert fit.solution.status == "converged" and fit.rms_px < 1e-6
+    F_s = link_frames(design, det.q_signature[None])[0, design.n_joints]
+    on_flange = invert_transform(F_s) @ fit.tool_poses(det.q_signature[None], det.q_signature)[0]
+    for got, want in zip((fit.fixed_in_base, on_flange), true_hand_eye(truth), strict=True):
+        cm, deg = pose_errors(np.asarray(got), want)
+        assert cm <= 1e-6 and deg <= 1e-6
+    true_k = Intrinsics.from_dict(truth["camera"]["intrinsics_true"]).vector()
+    assert (np.abs(fit.intrinsics - true_k) / np.maximum(np.abs(true_k), 1.0)).max() <= 1e-6
+
+
 def test_stage_holds_the_recorded_lens_when_fixed(tmp_path: Path) -> None:
     d, _ = _simulated(tmp_path, "puma560", "eye-in-hand", 15, noiseless=True)
     tables = _tables(d)
