@@ -144,6 +144,24 @@ def test_flange_session_viz_refuses_a_stale_session(session: Path) -> None:
         png.write_bytes(kept)
 
 
+def test_viz_of_a_session_identified_with_a_param(tmp_path: Path) -> None:
+    """`identify --param camera_fit.intrinsics=fixed`, then `viz`: the session is fresh at
+    the parameters it was identified with (the freshness check compared them with the
+    defaults and refused it); a changed input is still refused."""
+    from pipeline.errors import ArmsigError
+
+    cal, _ = _rendered_set(tmp_path / "set", "eye-to-hand")
+    sdir = tmp_path / "s"
+    import_image_set(cal, sdir)
+    identify(sdir, report=False, overrides={"camera_fit": {"intrinsics": "fixed"}})
+    assert len(_check(sdir)["/camera/image"]) == 12
+    rec = read_recording(sdir / "recording.mcap")
+    png = Path(rec.path).parent / rec.rig["images_dir"] / str(rec.image_file[0])
+    png.write_bytes(png.read_bytes() + b"\0")
+    with pytest.raises(ArmsigError, match="stage detections is stale"):
+        viz(sdir, out=sdir / "other.mcap")
+
+
 CHARUCO = REALDATA / "industrial_calibration" / "test_set_charuco" / "cal_data.yaml"
 
 
@@ -152,6 +170,6 @@ def test_real_charuco_viz(tmp_path: Path) -> None:
     """The real set imported as it is: 16 images, each with its corners and reprojections."""
     sdir = tmp_path / "charuco"
     import_image_set(CHARUCO, sdir)
-    identify(sdir, report=False)  # the lens fitted (viz checks the default parameters)
+    identify(sdir, report=False)  # the lens fitted
     by_topic = _check(sdir)
     assert len(by_topic["/camera/image"]) == 16

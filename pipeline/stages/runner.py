@@ -250,7 +250,9 @@ def recorded_committed_outdated(
     return hashes.get(RECORDING), committed, outdated
 
 
-def _check(stage: Stage, params: Any, hashes: _Hashes, stale: set[str]) -> StageStatus:
+def _check(
+    stage: Stage, params: Any, hashes: _Hashes, stale: set[str], as_recorded: bool = False
+) -> StageStatus:
     checked = hashes.check(stage.name)
     if checked is None:
         return StageStatus(stage.name, "missing", "never run")
@@ -261,7 +263,7 @@ def _check(stage: Stage, params: Any, hashes: _Hashes, stale: set[str]) -> Stage
         return StageStatus(
             stage.name, "stale", f"version {prov.get('stage_version')} -> {stage.version}"
         )
-    if prov.get("params") != stage.params_dict(params):
+    if not as_recorded and prov.get("params") != stage.params_dict(params):
         return StageStatus(stage.name, "stale", "parameters changed")
     for inp in stage.inputs:
         current = hashes.get(inp)
@@ -278,15 +280,19 @@ def status(
     session_dir: str | Path,
     overrides: Mapping[str, Mapping[str, Any]] | None = None,
     modules: tuple[str, ...] | None = None,
+    as_recorded: bool = False,
 ) -> list[StageStatus]:
     """Freshness of every stage of a session, and why (``modules``: the stage list,
     e.g. ``identification_modules(s) + EVALUATE_STAGE_MODULES``; default: the session's
     identification; staleness propagates along it). A list holding the identification
-    stages also gives the status of their product (``signature``) right after them."""
+    stages also gives the status of their product (``signature``) right after them.
+    ``as_recorded``: each stage judged at the parameters it was computed with (its
+    inputs and version still checked), for a command that shows what was identified,
+    with ``--param`` or without."""
     sdir = session_folder(session_dir)
     hashes = _Hashes(sdir)
     modules = hashes.identification_modules() if modules is None else modules
-    return _statuses(sdir, stages(modules), overrides or {}, hashes)
+    return _statuses(sdir, stages(modules), overrides or {}, hashes, as_recorded=as_recorded)
 
 
 def _statuses(
@@ -295,12 +301,13 @@ def _statuses(
     overrides: Mapping[str, Mapping[str, Any]],
     hashes: _Hashes,
     product: bool = True,
+    as_recorded: bool = False,
 ) -> list[StageStatus]:
     out: list[StageStatus] = []
     stale: set[str] = set()
     has_product = product and is_identification({s.name for s in all_stages})
     for stage in all_stages:
-        st = _check(stage, _params(stage, overrides), hashes, stale)
+        st = _check(stage, _params(stage, overrides), hashes, stale, as_recorded)
         if st.state != "fresh":
             stale.add(stage.name)
         out.append(st)

@@ -152,10 +152,11 @@ def target_entity(target_dict: dict[str, Any]) -> fg.Json:
 
 
 def check_fresh(sdir: Path) -> None:
-    """Refuse a camera session whose identification is not fresh (one line)."""
+    """Refuse a camera session whose identification is not fresh (one line): each stage
+    at the parameters it was identified with (``identify --param`` too)."""
     from pipeline.stages.runner import identification_modules, status
 
-    for s in status(sdir, modules=identification_modules(sdir)):
+    for s in status(sdir, modules=identification_modules(sdir), as_recorded=True):
         if s.state != "fresh":
             raise StageError(f"{sdir}: stage {s.name} is {s.state}: {s.reason}",
                              fix=f"run `pipeline identify {sdir}`")  # fmt: skip
