@@ -367,7 +367,8 @@ def _with_shared(
         readings = reading_covariance(block, model, x, J, unscaled, reading_sigma, G)
         known = reading_pose_share(block, G, reading_sigma, Q)
     r_px = block.predict(model, x[: model.n_params], x[model.n_params :]) - block.measured
-    w2, tau2 = image_pose_variance(block.image, r_px, Q, J, known)
+    free = np.diag(unscaled) > 0  # the fitted parameters: held ones absorb nothing
+    w2, tau2 = image_pose_variance(block.image, r_px, Q, J[:, free], known)
     scale = w2 / float(np.mean(block.sigma_px**2)) if tau2 > 0 else s2
     cov = scale * (unscaled + readings)
     if tau2 > 0:
