@@ -20,14 +20,13 @@ errors were 1.8-2.9× their predicted variance along the predicted directions (m
 the same sessions with the readings exact 1.1-1.3.
 
 Real images share more than the readings' rounding: on industrial_calibration's two sets
-25-50 % of the residuals' square was a shift common to all points of an image (where
-independent pixels put ~3 %: the robot's own pose error at each image, the lens's misfit
-over the board's patch), and held-out images were 1.47-1.61× their prediction
-(docs/camera.md). The same sandwich takes that shift, ``τ²`` px² per coordinate, as a
-shared error whose Jacobian is the identity in the image's pixels
-(:func:`shift_covariance`), ``τ²`` estimated from the fit's residuals by the scatter of
-each image's mean residual beyond what its points' own scatter puts there, and counted
-only when that excess is significant (:func:`image_shift_variance`).
+25-50 % of the residuals' square was common to the points of an image (where independent
+pixels put ~3 %: the robot's own pose error at each image, the lens's misfit over the
+board's patch), and held-out images were 1.47-1.61× their prediction (docs/camera.md).
+The same sandwich takes that error as a small rigid motion of the target in the camera
+per image (:func:`pose_basis`, :func:`pose_covariance`), its variance estimated from the
+fit's residuals along those motions and outside them, and counted only when it is
+significant (:func:`image_pose_variance`): held out 0.99-1.22× the prediction.
 """
 
 from __future__ import annotations
@@ -88,9 +87,9 @@ def reading_covariance(
     return np.asarray(unscaled @ S @ unscaled)
 
 
-#: False-alarm level of the test for an image-shared shift: below it the images' mean
-#: residuals scatter as independent pixels would and no shift is counted.
-SHIFT_ALARM = 0.01
+#: False-alarm level of the test for an error an image's points share: below it the
+#: residuals along the images' pose motions are what independent pixels leave.
+SHARED_ALARM = 0.01
 
 
 def pose_basis(block: CameraBlock, model: ChainModel, x: Array) -> list[Array]:
@@ -132,7 +131,7 @@ def image_pose_variance(
     fit's residuals ``r_px`` (D, 2) and its whitened Jacobian ``J`` (its first 2D rows the
     pixels), beyond ``known`` (M,) px² already counted along each image's pose basis ``Q``
     (the readings', :func:`reading_pose_share`); both 0 unless the shared error is
-    significant at :data:`SHIFT_ALARM` (the fit's own χ²/dof then stands).
+    significant at :data:`SHARED_ALARM` (the fit's own χ²/dof then stands).
 
     The model: image ``i``'s shared error is ``√n_i Q_i z_i``, ``z_i ~ N(0, τ² I₆)`` (its
     size per point independent of the number of points), beside independent pixels of
@@ -142,9 +141,10 @@ def image_pose_variance(
     unbiased moment solution of the residuals' square along the pose bases (``Σ |Q_iᵀ
     r_i|²``) and outside them: with ``B_i = Uᵀ Q_i``, ``E |Q_iᵀ r_i|² = w² (6 − |B_i|²)
     + τ² Σ_j n_j |δ_ij I − B_jᵀ B_i|²`` and ``E |r|² = w² (2D − P) + τ² Σ_j n_j (6 −
-    |B_j|²)``. The shared error is counted when ``Σ |Q_iᵀ r_i|² / w²`` exceeds the
-    (1 − α) quantile of χ² with ``Σ (6 − |B_i|²)`` degrees of freedom."""
-    from scipy.special import gammaincinv
+    |B_j|²)``. The shared error is counted when the two parts' ratio, each over its
+    degrees of freedom without one (``Σ (6 − |B_i|²)`` and ``2D − P − Σ (6 − |B_i|²)``),
+    exceeds the F distribution's (1 − α) quantile."""
+    from scipy.special import fdtri
 
     used = [i for i, Qi in enumerate(Q) if Qi.shape[1] == 6]
     if len(used) < 2:
@@ -158,11 +158,12 @@ def image_pose_variance(
     p2 = np.array([float(np.sum((Q[i].T @ r[rows_of[i]]) ** 2)) for i in used])
     if known is not None:
         p2 = p2 - np.asarray(known, float)[used]
-    a = np.array([6.0 - float(np.sum(b * b)) for b in B])
     Bs = np.stack(B)  # (M, P, 6)
-    cross = np.einsum("jpx,ipy->jixy", Bs, Bs)  # B_jᵀ B_i
-    cross[np.arange(len(B)), np.arange(len(B))] -= np.eye(6)
-    b = np.einsum("j,jixy->i", n_i, cross**2)
+    norm2 = np.einsum("ipx,ipx->i", Bs, Bs)  # |B_i|²
+    a = 6.0 - norm2
+    # Σ_j n_j |δ_ij I − B_jᵀ B_i|² = tr(B_iᵀ C B_i) − 2 n_i |B_i|² + 6 n_i, C = Σ n_j B_j B_jᵀ
+    C = np.einsum("j,jpx,jqx->pq", n_i, Bs, Bs)
+    b = np.einsum("ipx,pq,iqx->i", Bs, C, Bs) - 2.0 * n_i * norm2 + 6.0 * n_i
     total = float(r @ r) - (0.0 if known is None else float(np.sum(np.asarray(known)[used])))
     rank = int(np.linalg.matrix_rank(Jp)) if Jp.size else 0
     A = np.array([[a.sum(), b.sum()],
@@ -173,8 +174,10 @@ def image_pose_variance(
         return 0.0, 0.0
     if not (w2 > 0 and tau2 > 0):
         return 0.0, 0.0
-    dof = float(a.sum())
-    if p2.sum() / w2 <= 2.0 * gammaincinv(dof / 2.0, 1.0 - SHIFT_ALARM):  # χ² quantile
+    # without a shared error both parts are w² times χ² of Σ a and 2D − P − Σ a degrees of
+    # freedom: their ratio is F-distributed
+    d1, d2 = float(a.sum()), float(len(r) - rank - a.sum())
+    if d2 <= 0 or (p2.sum() / d1) / ((total - p2.sum()) / d2) <= fdtri(d1, d2, 1 - SHARED_ALARM):
         return 0.0, 0.0
     return float(w2), float(tau2)
 
