@@ -134,7 +134,7 @@ class CameraBlock:
             T[:3, 3] = x[3:6]
         return T
 
-    def _points(
+    def points_in_camera(
         self, model: ChainModel, x_kin: Array, x: Array
     ) -> tuple[Array, Array, Array, Array | None, Array | None]:
         """``P`` (D, 3), ``∂P/∂t``, ``∂P/∂ω`` (D, 3, 3) and, with a fixed pose, ``∂P/∂ρ``
@@ -158,13 +158,13 @@ class CameraBlock:
 
     def predict(self, model: ChainModel, x_kin: Array, x: Array) -> Array:
         """Predicted pixels (D, 2) at kinematic parameters ``x_kin``, block parameters ``x``."""
-        return project_with_jacobians(self._points(model, x_kin, x)[0], x[-9:])[0]
+        return project_with_jacobians(self.points_in_camera(model, x_kin, x)[0], x[-9:])[0]
 
     def linearize_pose(self, model: ChainModel, x_kin: Array, x: Array) -> Linearization:
         """Residuals and derivatives at ``x_kin`` (the chain) and ``x`` (the block's)."""
         W = model.tool_orientation_jacobian(x_kin)  # (K, 3, n_kin)
         img = self.image
-        P, dP_dt, dP_dw, dP_drho, dP_dtf = self._points(model, x_kin, x)
+        P, dP_dt, dP_dw, dP_drho, dP_dtf = self.points_in_camera(model, x_kin, x)
         uv, J_p, J_k = project_with_jacobians(P, x[-9:])
         s = self.sigma_px[:, None, None]
         r = (uv - self.measured) / self.sigma_px[:, None]

@@ -59,7 +59,7 @@ from pipeline.refine.identifiability import (
 from pipeline.refine.kinematics import ChainModel, start_points
 from pipeline.refine.orientation import OrientationRows, start_rotation
 from pipeline.refine.solve import Problem, Solution, residuals_and_jacobian, solve
-from pipeline.sensor.camera import Intrinsics
+from pipeline.sensor.camera import Intrinsics, project_with_jacobians
 from pipeline.sweeps import POSES_SWEEP
 
 #: Fewest detected points per image: a planar PnP needs 4; a few more keep it unique.
@@ -279,8 +279,8 @@ def fit_camera(
             problem, x_start, units, True, len(det.image), solution.x, solution.f_scale,
             tolerances(units, start, block),
         )  # fmt: skip
-    solution, w2, tau2 = _with_shared(problem, block, solution, reading_sigma)
-    return _result(det, model, block, solution, start, x_start, ident, intrinsics, w2, tau2)
+    return _result(problem, block, det, solution, start, x_start, ident, intrinsics,
+                   reading_sigma)  # fmt: skip
 
 
 def camera_block(
@@ -339,34 +339,36 @@ def fit_held(
     units = (*model.param_units, *block.param_units)
     J = residuals_and_jacobian(problem, solution.x)[1]
     ident = analyse(J, units, True, len(det.image), held, tolerances(units, start, block))
-    solution, w2, tau2 = _with_shared(problem, block, solution, reading_sigma)
-    return _result(det, model, block, solution, start, x_start, ident, intrinsics, w2, tau2)
+    return _result(problem, block, det, solution, start, x_start, ident, intrinsics,
+                   reading_sigma, J)  # fmt: skip
 
 
 def _with_shared(
-    problem: Problem, block: CameraBlock, solution: Solution, reading_sigma: Array | None
-) -> tuple[Solution, float, float]:
+    problem: Problem, block: CameraBlock, solution: Solution, reading_sigma: Array | None,
+    r_px: Array, P: Array, J_p: Array, J: Array | None,
+) -> tuple[Solution, float, float]:  # fmt: skip
     """``solution`` with the errors an image's points share added to its covariance: the
     joint readings' rounding (:func:`~pipeline.refine.camera_readings.reading_covariance`,
     with ``reading_sigma``) and a rigid motion of the target in the camera per image
-    beyond it, when the residuals show one
-    (:func:`~pipeline.refine.camera_readings.image_pose_variance`); and that error's
+    beyond it, when the residuals ``r_px`` (D, 2) show one along the images' pose bases
+    (of the points ``P`` in the camera and their pixels' derivatives ``J_p``:
+    :func:`~pipeline.refine.camera_readings.image_pose_variance`); and that error's
     ``w²``, ``τ²`` (px²; 0, 0: none). With one, the independent pixels' share is scaled
     by ``w²`` instead of the fit's χ²/dof, which holds the shared error too. As it is
-    without noise (noiseless: 0, as the rest)."""
+    without noise (noiseless: 0, as the rest). ``J``: the whitened Jacobian at the
+    solution when formed already."""
     if not solution.noise_scale > 0:
         return solution, 0.0, 0.0
     s2 = solution.noise_scale**2
     model, x = problem.model, solution.x
-    J = residuals_and_jacobian(problem, x)[1]
+    J = residuals_and_jacobian(problem, x)[1] if J is None else J
     unscaled = solution.covariance / s2
-    Q = pose_basis(block, model, x)
-    known, readings, G = None, np.zeros_like(unscaled), None
+    Q = pose_basis(block.image, P, J_p)
+    known, readings = None, np.zeros_like(unscaled)
     if reading_sigma is not None:
         G = reading_jacobian(block, model, x)
         readings = reading_covariance(block, model, x, J, unscaled, reading_sigma, G)
         known = reading_pose_share(block, G, reading_sigma, Q)
-    r_px = block.predict(model, x[: model.n_params], x[model.n_params :]) - block.measured
     free = np.diag(unscaled) > 0  # the fitted parameters: held ones absorb nothing
     w2, tau2 = image_pose_variance(block.image, r_px, Q, J[:, free], known)
     scale = w2 / float(np.mean(block.sigma_px**2)) if tau2 > 0 else s2
@@ -377,12 +379,18 @@ def _with_shared(
 
 
 def _result(
-    det: Detections, model: ChainModel, block: CameraBlock, solution: Solution,
+    problem: Problem, block: CameraBlock, det: Detections, solution: Solution,
     start: CameraStart, x_start: Array, ident: Identifiability, intrinsics: str,
-    independent_px2: float = 0.0, shared_px2: float = 0.0,
+    reading_sigma: Array | None, J: Array | None = None,
 ) -> CameraFit:  # fmt: skip
-    r = block.predict(model, solution.x[: model.n_params], solution.x[model.n_params :]) - det.uv
+    """The fit of ``solution``: its pixels projected once, for the rms and the errors the
+    images' points share (:func:`_with_shared`, ``J`` as its)."""
+    model, n = problem.model, problem.model.n_params
+    P = block.points_in_camera(model, solution.x[:n], solution.x[n:])[0]
+    uv, J_p, _ = project_with_jacobians(P, solution.x[-9:])
+    r = uv - det.uv
+    solution, w2, tau2 = _with_shared(problem, block, solution, reading_sigma, r, P, J_p, J)
     rms = float(np.sqrt(np.mean(np.sum(r**2, axis=1))))
     names = (*model.param_names, *block.param_names)
     return CameraFit(model, block, solution, start, names, rms, x_start, ident,
-                     intrinsics == "fixed", independent_px2, shared_px2)  # fmt: skip
+                     intrinsics == "fixed", w2, tau2)  # fmt: skip

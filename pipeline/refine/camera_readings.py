@@ -38,7 +38,6 @@ import numpy as np
 from pipeline.optim.block import Array
 from pipeline.refine.camera_block import CameraBlock, _skew
 from pipeline.refine.kinematics import ChainModel
-from pipeline.sensor.camera import project_with_jacobians
 
 #: Central-difference step of a joint reading (rad / cm): the pixels' error is ~h² times
 #: their third derivative (~1e-12 px), their rounding ~1e-13 px / h = 1e-7 relative.
@@ -92,17 +91,15 @@ def reading_covariance(
 SHARED_ALARM = 0.01
 
 
-def pose_basis(block: CameraBlock, model: ChainModel, x: Array) -> list[Array]:
-    """Per image, an orthonormal basis (2 n_i, 6) of the pixels' motion (px, unwhitened,
-    ``[u_1, v_1, u_2, …]``) under a small rigid motion of the target in the camera: a
-    translation ``δt`` and a turn ``δω`` move a point ``P`` by ``δt + δω × P``."""
-    n_kin = model.n_params
-    P = block._points(model, x[:n_kin], x[n_kin:])[0]
-    J_p = project_with_jacobians(P, x[-9:])[1]  # (D, 2, 3)
+def pose_basis(image: np.ndarray, P: Array, J_p: Array) -> list[Array]:
+    """Per image of ``image`` (D,), an orthonormal basis (2 n_i, 6) of the pixels' motion
+    (px, unwhitened, ``[u_1, v_1, u_2, …]``) under a small rigid motion of the target in
+    the camera: a translation ``δt`` and a turn ``δω`` move a point ``P`` (D, 3, the
+    camera's frame) by ``δt + δω × P``, its pixels by ``J_p`` (D, 2, 3) of that."""
     A = np.concatenate([J_p, -J_p @ _skew(P)], axis=2)  # (D, 2, 6)
     out = []
-    for i in range(int(block.image.max()) + 1):
-        rows = A[block.image == i].reshape(-1, 6)
+    for i in range(int(image.max()) + 1):
+        rows = A[image == i].reshape(-1, 6)
         out.append(np.linalg.qr(rows)[0] if len(rows) > 6 else np.zeros((len(rows), 0)))
     return out
 
