@@ -8,6 +8,7 @@ report and the verdict line that says the arm is not calibrated."""
 
 from __future__ import annotations
 
+import io
 import json
 import shutil
 from pathlib import Path
@@ -144,7 +145,9 @@ def test_identify_writes_the_camera_calibration(tmp_path: Path) -> None:
     sdir = tmp_path / "s"
     _recording(sdir, "eye-to-hand")
     assert read_recording(sdir / "recording.mcap").kind == "camera-flange"
-    result = identify(sdir)
+    shown = io.StringIO()
+    result = identify(sdir, progress=shown)
+    assert shown.getvalue().lstrip("\r").startswith("identify ")  # its bar, not "evaluate"
     names = [r.name for r in result.runs]
     assert names == [
         "session",

@@ -374,7 +374,9 @@ def run(
         shutil.rmtree(pending, ignore_errors=True)  # debris of a killed run
         for folder in (sdir, sdir / "stages", sdir / "report"):
             remove_debris(folder)  # temp files of killed atomic writes
-        label = "identify" if is_identification(set(names)) else "evaluate"
+        # the session's own stage list is an identification, signature or not (a camera
+        # session of flange poses ends at its hand-eye); evaluate passes its own bar
+        label = "identify" if modules is None or is_identification(set(names)) else "stages"
         own = not isinstance(progress, Progress)  # else the caller's bar, closed by it
         bar = (
             progress
