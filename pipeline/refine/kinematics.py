@@ -68,6 +68,7 @@ from pipeline.refine.motions import (
     prefixes,
     rotate,
     rotate_constant,
+    trig_basis,
     twists,
 )
 from pipeline.sweeps import WHOLE_ARM_SWEEPS
@@ -245,15 +246,29 @@ class ChainModel:
         )
         return S, dS @ invert_transform(S)[:, None]
 
-    def _motions(self, S: Array, theta: Array) -> tuple[Array, Array]:
-        """``A_k(θ_k)`` of every joint and observation at joint values ``theta`` (K, n), in
-        closed form (:func:`~pipeline.refine.motions.joint_motions`: columns (n, 3, 3, K),
-        translations (n, 3, K)); exactly I on joints past the observation's link (θ = 0)."""
+    def _moving(self, theta: Array) -> Array:
+        """``theta`` (K, n) as (n, K), 0 on joints past each observation's link."""
         theta_T = theta.T
         if (self.link != self.n_joints).any():  # pose sets: every point on link n
             moving = np.arange(1, self.n_joints + 1)[:, None] <= self.link[None, :]
             theta_T = np.where(moving, theta_T, 0.0)
-        return joint_motions(S, self.prismatic, np.ascontiguousarray(theta_T))
+        return np.ascontiguousarray(theta_T)
+
+    @cached_property
+    def _reading_motions(self) -> tuple[Array, Array]:
+        """The readings ``θ`` (n, K) as :meth:`_moving` and their sines and cosines
+        (:func:`~pipeline.refine.motions.trig_basis`), formed once: without non-geometric
+        terms every evaluation of the fit moves the joints by the same ``θ``."""
+        theta = self._moving(self.theta)
+        return theta, trig_basis(theta)
+
+    def _motions(self, S: Array, theta: Array) -> tuple[Array, Array]:
+        """``A_k(θ_k)`` of every joint and observation at joint values ``theta`` (K, n), in
+        closed form (:func:`~pipeline.refine.motions.joint_motions`: columns (n, 3, 3, K),
+        translations (n, 3, K)); exactly I on joints past the observation's link (θ = 0)."""
+        if theta is self.theta:
+            return joint_motions(S, self.prismatic, *self._reading_motions)
+        return joint_motions(S, self.prismatic, self._moving(theta))
 
     def _points(self, x: Array) -> Array:
         """``p0`` of every observation, shape (3, K)."""

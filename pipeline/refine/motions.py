@@ -26,22 +26,40 @@ from pipeline.kinematics.so3 import skew
 Array = npt.NDArray[np.float64]
 
 
+def trig_basis(theta: Array) -> Array:
+    """``(1, sin θ, 1 − cos θ)`` (n, 3, K) of joint values ``theta`` (n, K): what a joint's
+    motion is linear in (:func:`joint_motions`)."""
+    n, K = theta.shape
+    basis = np.empty((n, 3, K))
+    basis[:, 0] = 1.0
+    np.sin(theta, out=basis[:, 1])
+    np.cos(theta, out=basis[:, 2])
+    np.subtract(1.0, basis[:, 2], out=basis[:, 2])
+    return basis
+
+
 def joint_motions(
-    frames: Array, prismatic: npt.NDArray[np.bool_], theta: Array
+    frames: Array, prismatic: npt.NDArray[np.bool_], theta: Array, basis: Array | None = None
 ) -> tuple[Array, Array]:
     """``A_k(θ_k)`` of every joint and observation: columns ``Q`` (n, 3, 3, K) and
     translations ``t`` (n, 3, K), for joint values ``theta`` (n, K) (rad / cm) and the
-    joints' frames ``S_k`` (n, 4, 4) (module docstring)."""
+    joints' frames ``S_k`` (n, 4, 4) (module docstring); ``basis``: their
+    :func:`trig_basis` when already formed."""
+    n, K = theta.shape
     w, c = frames[:, :3, 2], frames[:, :3, 3]
     W = skew(w)  # (n, 3, 3)
     W2 = W @ W
-    s, omc = np.sin(theta)[:, None], 1.0 - np.cos(theta)[:, None]  # (n, 1, K)
-    # columns: Q[j, i] = R[i, j] = I[i, j] + sin θ W[i, j] + (1 − cos θ) W²[i, j]
-    Q = np.swapaxes(W, 1, 2)[..., None] * s[:, None]
-    Q += np.eye(3)[:, :, None]
-    Q += np.swapaxes(W2, 1, 2)[..., None] * omc[:, None]
-    t = (W @ c[..., None]) * -s
-    t -= (W2 @ c[..., None]) * omc  # c − R c
+    # Each of the twelve components is a fixed combination of (1, sin θ, 1 − cos θ):
+    # Q[j, i] = R[i, j] = I[i, j] + sin θ W[i, j] + (1 − cos θ) W²[i, j] and
+    # t = c − R c = −sin θ W c − (1 − cos θ) W² c; one matrix product per joint.
+    coef = np.zeros((n, 12, 3))
+    coef[:, :9, 0] = np.eye(3).ravel()
+    coef[:, :9, 1] = np.swapaxes(W, 1, 2).reshape(n, 9)
+    coef[:, :9, 2] = np.swapaxes(W2, 1, 2).reshape(n, 9)
+    coef[:, 9:, 1] = -(W @ c[..., None])[..., 0]
+    coef[:, 9:, 2] = -(W2 @ c[..., None])[..., 0]
+    out = coef @ (trig_basis(theta) if basis is None else basis)  # (n, 12, K)
+    Q, t = out[:, :9].reshape(n, 3, 3, K), out[:, 9:]
     if prismatic.any():
         Q[prismatic] = np.eye(3)[:, :, None]
         t[prismatic] = w[prismatic][..., None] * theta[prismatic][:, None]
