@@ -49,7 +49,7 @@ Non-geometric terms (issue 27, :mod:`pipeline.kinematics.nongeometric`): the joi
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
 
@@ -270,6 +270,21 @@ class ChainModel:
             return joint_motions(S, self.prismatic, *self._reading_motions)
         return joint_motions(S, self.prismatic, self._moving(theta))
 
+    def _motion(self, S: Array, theta: Array) -> Callable[[int], tuple[Array, Array]]:
+        """``k -> A_k(θ_k)`` (columns (3, 3, K), translation (3, K)): one joint's motions of
+        :meth:`_motions`, formed when asked, in one buffer (valid until the next call)."""
+        reading = theta is self.theta
+        theta_T, basis = self._reading_motions if reading else (self._moving(theta), None)
+        buffer = np.empty((1, 12, theta_T.shape[1]))
+
+        def motion(k: int) -> tuple[Array, Array]:
+            b = None if basis is None else basis[k : k + 1]
+            one = slice(k, k + 1)
+            Q, t = joint_motions(S[one], self.prismatic[one], theta_T[one], b, buffer)
+            return Q[0], t[0]
+
+        return motion
+
     def _points(self, x: Array) -> Array:
         """``p0`` of every observation, shape (3, K)."""
         p0 = x[self.n_axis_params : self.n_axis_params + 3 * self.n_points]
@@ -278,10 +293,11 @@ class ChainModel:
     def positions(self, x: npt.ArrayLike) -> Array:
         """Sensor-frame position of every observation, shape (K, 3)."""
         x = np.asarray(x, float)
-        Q, t = self._motions(self.frames(x), self.joint_values(x))
+        motion = self._motion(self.frames(x), self.joint_values(x))
         v = self._points(x)
         for k in range(self.n_joints - 1, -1, -1):  # A_1 (A_2 ( … A_n p0))
-            v = rotate(Q[k], v) + t[k]
+            Q, t = motion(k)
+            v = rotate(Q, v) + t
         return np.ascontiguousarray(v.T)
 
     def joint_differences(self, x: npt.ArrayLike, h: float) -> Array:
@@ -312,7 +328,7 @@ class ChainModel:
     def _chain(self, x: Array, S: Array) -> tuple[Array, Array, Array]:
         """The prefixes ``Π_{i<k} A_i`` (k = 0..n: columns (n + 1, 3, 3, K), translations
         (n + 1, 3, K)) and every observation's position (3, K) at ``x``."""
-        QP, tP = prefixes(*self._motions(S, self.joint_values(x)))
+        QP, tP = prefixes(self._motion(S, self.joint_values(x)), self.n_joints)
         return QP, tP, rotate(QP[-1], self._points(x)) + tP[-1]
 
     def _joint_twists(self, S: Array) -> tuple[Array, Array]:
@@ -375,7 +391,7 @@ class ChainModel:
         observation (sensor frame)."""
         x = np.asarray(x, float)
         F = self.frames(x)
-        QP, _ = prefixes(*self._motions(F, self.joint_values(x)))
+        QP, _ = prefixes(self._motion(F, self.joint_values(x)), self.n_joints)
         return np.asarray(by_observation(QP[-1]) @ (F[-1, :3, :3] @ self.tool_rotation_matrix(x)))
 
     def tool_orientation_jacobian(self, x: npt.ArrayLike) -> Array:
@@ -391,7 +407,7 @@ class ChainModel:
         """
         x = np.asarray(x, float)
         S, G = self._frame_generators(x)
-        QP, _ = prefixes(*self._motions(S, self.joint_values(x)))
+        QP, _ = prefixes(self._motion(S, self.joint_values(x)), self.n_joints)
         K, n = len(self.link), self.n_joints
         W = np.zeros((K, 3, self.n_params))
         w, _ = twists(G)
@@ -500,7 +516,7 @@ def start_points(model: ChainModel, p_measured: npt.ArrayLike) -> Array:
     """
     p = np.asarray(p_measured, float)
     x0 = np.zeros(model.n_params)
-    QP, tP = prefixes(*model._motions(model.frames(x0), model.theta))
+    QP, tP = prefixes(model._motion(model.frames(x0), model.theta), model.n_joints)
     back = (QP[-1] * (p.T - tP[-1])[None]).sum(axis=1).T  # Rᵀ (p − t): columns · (p − t)
     ok = np.isfinite(back).all(axis=1)
     out = np.zeros((model.n_points, 3))

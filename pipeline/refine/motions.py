@@ -18,6 +18,8 @@ model is such a product, formed on the point itself.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import numpy.typing as npt
 
@@ -39,12 +41,18 @@ def trig_basis(theta: Array) -> Array:
 
 
 def joint_motions(
-    frames: Array, prismatic: npt.NDArray[np.bool_], theta: Array, basis: Array | None = None
+    frames: Array,
+    prismatic: npt.NDArray[np.bool_],
+    theta: Array,
+    basis: Array | None = None,
+    out: Array | None = None,
 ) -> tuple[Array, Array]:
     """``A_k(θ_k)`` of every joint and observation: columns ``Q`` (n, 3, 3, K) and
     translations ``t`` (n, 3, K), for joint values ``theta`` (n, K) (rad / cm) and the
     joints' frames ``S_k`` (n, 4, 4) (module docstring); ``basis``: their
-    :func:`trig_basis` when already formed."""
+    :func:`trig_basis` when already formed; ``out`` (n, 12, K): where to write them (views
+    of it are returned: a buffer reused joint after joint spares the allocator's fresh
+    pages, a third of the positions' time at 20,000 rows)."""
     n, K = theta.shape
     w, c = frames[:, :3, 2], frames[:, :3, 3]
     W = skew(w)  # (n, 3, 3)
@@ -58,7 +66,7 @@ def joint_motions(
     coef[:, :9, 2] = np.swapaxes(W2, 1, 2).reshape(n, 9)
     coef[:, 9:, 1] = -(W @ c[..., None])[..., 0]
     coef[:, 9:, 2] = -(W2 @ c[..., None])[..., 0]
-    out = coef @ (trig_basis(theta) if basis is None else basis)  # (n, 12, K)
+    out = np.matmul(coef, trig_basis(theta) if basis is None else basis, out=out)  # (n, 12, K)
     Q, t = out[:, :9].reshape(n, 3, 3, K), out[:, 9:]
     if prismatic.any():
         Q[prismatic] = np.eye(3)[:, :, None]
@@ -88,18 +96,20 @@ def compose(Qa: Array, ta: Array, Qb: Array, tb: Array) -> tuple[Array, Array]:
     return Q, rotate(Qa, tb) + ta
 
 
-def prefixes(Q: Array, t: Array) -> tuple[Array, Array]:
+def prefixes(motion: Callable[[int], tuple[Array, Array]], n: int) -> tuple[Array, Array]:
     """``Π_{i<k} A_i`` for k = 0..n (columns (n + 1, 3, 3, K), translations (n + 1, 3, K))
-    of motions ``Q`` (n, 3, 3, K), ``t`` (n, 3, K); the first is the identity."""
-    n, K = Q.shape[0], Q.shape[-1]
+    of the motions ``motion(i)`` (columns (3, 3, K), translation (3, K)) of joints
+    i = 0..n − 1, each formed when its product is (one joint's motions in memory at a
+    time beside the prefixes); the first is the identity."""
+    Q, t = motion(0)
+    K = Q.shape[-1]
     QP = np.empty((n + 1, 3, 3, K))
     tP = np.empty((n + 1, 3, K))
     QP[0] = np.eye(3)[:, :, None]
     tP[0] = 0.0
-    if n:
-        QP[1], tP[1] = Q[0], t[0]
+    QP[1], tP[1] = Q, t
     for k in range(1, n):
-        QP[k + 1], tP[k + 1] = compose(QP[k], tP[k], Q[k], t[k])
+        QP[k + 1], tP[k + 1] = compose(QP[k], tP[k], *motion(k))
     return QP, tP
 
 
