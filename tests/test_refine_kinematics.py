@@ -8,7 +8,8 @@ import pytest
 from pipeline.kinematics.chain import forward_kinematics
 from pipeline.kinematics.signature import signature_chain
 from pipeline.kinematics.transforms import rot_x, rot_y, rot_z, trans
-from pipeline.refine.kinematics import ChainModel, _vee, start_points
+from pipeline.refine.kinematics import ChainModel, start_points
+from pipeline.refine.motions import vee
 
 
 def _random_frames(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -92,7 +93,7 @@ def _assert_central_differences(m, x: np.ndarray, rotation) -> tuple[np.ndarray,
         dp = (m.positions(x + e) - m.positions(x - e)) / (2 * h)
         np.testing.assert_allclose(J[:, :, i], dp, atol=1e-6 * (1 + np.abs(dp).max()))
         dR = (rotation(x + e) - rotation(x - e)) / (2 * h)
-        w = _vee(dR @ np.swapaxes(R, 1, 2))
+        w = vee(dR @ np.swapaxes(R, 1, 2))
         w[m.link != n] = 0.0
         np.testing.assert_allclose(W[:, :, i], w, atol=1e-7)
     return J, W

@@ -49,7 +49,7 @@ Non-geometric terms (issue 27, :mod:`pipeline.kinematics.nongeometric`): the joi
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
 
@@ -60,7 +60,17 @@ from pipeline.errors import StageError
 from pipeline.kinematics.chain import SerialChain
 from pipeline.kinematics.nongeometric import Terms, regressor
 from pipeline.kinematics.so3 import right_jacobian, rotation_from_vector
-from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, rot_z, trans, trans_z
+from pipeline.kinematics.transforms import invert_transform, rot_x, rot_y, trans
+from pipeline.refine.motions import (
+    by_observation,
+    joint_motions,
+    moved_by_twists,
+    prefixes,
+    rotate,
+    rotate_constant,
+    trig_basis,
+    twists,
+)
 from pipeline.sweeps import WHOLE_ARM_SWEEPS
 
 Array = npt.NDArray[np.float64]
@@ -78,19 +88,6 @@ _GX = np.zeros((4, 4))
 _GX[1, 2], _GX[2, 1] = -1.0, 1.0
 _GY = np.zeros((4, 4))
 _GY[0, 2], _GY[2, 0] = 1.0, -1.0
-# d/dθ Rot_z(θ) = Rot_z(θ) · _GZ; d/dθ Trans_z(θ) = Trans_z(θ) · _GT.
-_GZ = np.zeros((4, 4))
-_GZ[0, 1], _GZ[1, 0] = -1.0, 1.0
-_GT = np.zeros((4, 4))
-_GT[2, 3] = 1.0
-
-
-def _vee(W: Array) -> Array:
-    """Axial vectors (..., 3) of the skew parts of (..., 3, 3) matrices."""
-    return 0.5 * np.stack(
-        [W[..., 2, 1] - W[..., 1, 2], W[..., 0, 2] - W[..., 2, 0], W[..., 1, 0] - W[..., 0, 1]],
-        axis=-1,
-    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -249,33 +246,59 @@ class ChainModel:
         )
         return S, dS @ invert_transform(S)[:, None]
 
-    def _motions(self, S: Array, theta: Array) -> Array:
-        """``A_k(θ_k)`` of every observation (K, n, 4, 4) at joint values ``theta`` (K, n);
-        exactly I on joints past its link."""
-        n, K = self.n_joints, len(self.link)
-        M = np.where(
-            self.prismatic[None, :, None, None], trans_z(theta), rot_z(theta)
-        )  # (K, n, 4, 4)
-        A = S @ M @ invert_transform(S)
-        moving = np.arange(1, n + 1)[None, :] <= self.link[:, None]
-        A[~moving] = np.eye(4)
-        return A.reshape(K, n, 4, 4)
+    def _moving(self, theta: Array) -> Array:
+        """``theta`` (K, n) as (n, K), 0 on joints past each observation's link."""
+        theta_T = theta.T
+        if (self.link != self.n_joints).any():  # pose sets: every point on link n
+            moving = np.arange(1, self.n_joints + 1)[:, None] <= self.link[None, :]
+            theta_T = np.where(moving, theta_T, 0.0)
+        return np.ascontiguousarray(theta_T)
 
-    def _points_h(self, x: Array) -> Array:
-        """Homogeneous ``p0`` of every observation, shape (K, 4)."""
+    @cached_property
+    def _reading_motions(self) -> tuple[Array, Array]:
+        """The readings ``θ`` (n, K) as :meth:`_moving` and their sines and cosines
+        (:func:`~pipeline.refine.motions.trig_basis`), formed once: without non-geometric
+        terms every evaluation of the fit moves the joints by the same ``θ``."""
+        theta = self._moving(self.theta)
+        return theta, trig_basis(theta)
+
+    def _motions(self, S: Array, theta: Array) -> tuple[Array, Array]:
+        """``A_k(θ_k)`` of every joint and observation at joint values ``theta`` (K, n), in
+        closed form (:func:`~pipeline.refine.motions.joint_motions`: columns (n, 3, 3, K),
+        translations (n, 3, K)); exactly I on joints past the observation's link (θ = 0)."""
+        if theta is self.theta:
+            return joint_motions(S, self.prismatic, *self._reading_motions)
+        return joint_motions(S, self.prismatic, self._moving(theta))
+
+    def _motion(self, S: Array, theta: Array) -> Callable[[int], tuple[Array, Array]]:
+        """``k -> A_k(θ_k)`` (columns (3, 3, K), translation (3, K)): one joint's motions of
+        :meth:`_motions`, formed when asked, in one buffer (valid until the next call)."""
+        reading = theta is self.theta
+        theta_T, basis = self._reading_motions if reading else (self._moving(theta), None)
+        buffer = np.empty((1, 12, theta_T.shape[1]))
+
+        def motion(k: int) -> tuple[Array, Array]:
+            b = None if basis is None else basis[k : k + 1]
+            one = slice(k, k + 1)
+            Q, t = joint_motions(S[one], self.prismatic[one], theta_T[one], b, buffer)
+            return Q[0], t[0]
+
+        return motion
+
+    def _points(self, x: Array) -> Array:
+        """``p0`` of every observation, shape (3, K)."""
         p0 = x[self.n_axis_params : self.n_axis_params + 3 * self.n_points]
-        p0 = p0.reshape(self.n_points, 3)
-        p0 = p0[self.point]
-        return np.concatenate([p0, np.ones((len(p0), 1))], axis=1)
+        return np.ascontiguousarray(p0.reshape(self.n_points, 3)[self.point].T)
 
     def positions(self, x: npt.ArrayLike) -> Array:
         """Sensor-frame position of every observation, shape (K, 3)."""
         x = np.asarray(x, float)
-        A = self._motions(self.frames(x), self.joint_values(x))
-        v = self._points_h(x)
-        for k in range(self.n_joints - 1, -1, -1):
-            v = (A[:, k] @ v[..., None])[..., 0]
-        return v[:, :3]
+        motion = self._motion(self.frames(x), self.joint_values(x))
+        v = self._points(x)
+        for k in range(self.n_joints - 1, -1, -1):  # A_1 (A_2 ( … A_n p0))
+            Q, t = motion(k)
+            v = rotate(Q, v) + t
+        return np.ascontiguousarray(v.T)
 
     def joint_differences(self, x: npt.ArrayLike, h: float) -> Array:
         """``(p(θ + h e_k) − p(θ − h e_k)) / 2h`` (K, n, 3) of every observation and joint k,
@@ -285,88 +308,82 @@ class ChainModel:
         x = np.asarray(x, float)
         theta = self.joint_values(x)
         S = self.frames(x)
-        A = self._motions(S, theta)
-        S_inv = invert_transform(S)
-        v = self._points_h(x)
+        Q, t = self._motions(S, theta)
+        v = self._points(x)
         K, n = theta.shape
         out = np.zeros((K, n, 3))
         for k in range(n - 1, -1, -1):  # v: Π_{i>k} A_i p0, as positions() forms it
-            still = np.arange(K)[k + 1 > self.link]
             ends = []
-            for t in (theta[:, k] + h, theta[:, k] - h):
-                Ak = S[k] @ (trans_z(t) if self.prismatic[k] else rot_z(t)) @ S_inv[k]
-                Ak[still] = np.eye(4)
-                w = (Ak @ v[..., None])[..., 0]
+            for step in (h, -h):
+                th = np.where(k + 1 > self.link, 0.0, theta[:, k] + step)[None]  # as _motions
+                Qk, tk = joint_motions(S[k : k + 1], self.prismatic[k : k + 1], th)
+                w = rotate(Qk[0], v) + tk[0]
                 for i in range(k - 1, -1, -1):
-                    w = (A[:, i] @ w[..., None])[..., 0]
-                ends.append(w[:, :3])
-            out[:, k] = (ends[0] - ends[1]) / (2.0 * h)
-            v = (A[:, k] @ v[..., None])[..., 0]
+                    w = rotate(Q[i], w) + t[i]
+                ends.append(w)
+            out[:, k] = ((ends[0] - ends[1]) / (2.0 * h)).T
+            v = rotate(Q[k], v) + t[k]
         return out
 
-    def _prefix_suffix(self, A: Array, v0: Array) -> tuple[Array, Array]:
-        """``Π_{i<k} A_i`` (K, n+1, 4, 4) and ``Π_{i>k} A_i · p0`` (K, n, 4) for k = 1..n."""
-        K, n = A.shape[:2]
-        pre = np.empty((K, n + 1, 4, 4))
-        pre[:, 0] = np.eye(4)
-        for k in range(n):
-            pre[:, k + 1] = pre[:, k] @ A[:, k]
-        suf = np.empty((K, n, 4))
-        v = v0
-        for k in range(n - 1, -1, -1):
-            suf[:, k] = v
-            v = (A[:, k] @ v[..., None])[..., 0]
-        return pre, suf
+    def _chain(self, x: Array, S: Array) -> tuple[Array, Array, Array]:
+        """The prefixes ``Π_{i<k} A_i`` (k = 0..n: columns (n + 1, 3, 3, K), translations
+        (n + 1, 3, K)) and every observation's position (3, K) at ``x``."""
+        QP, tP = prefixes(self._motion(S, self.joint_values(x)), self.n_joints)
+        return QP, tP, rotate(QP[-1], self._points(x)) + tP[-1]
 
-    def _joint_generators(self, S: Array) -> Array:
-        """``Ĝ_j = S_j G S_j⁻¹`` (n, 4, 4) of every joint's own motion (``G_z`` or ``G_t``)."""
-        G = np.where(self.prismatic[:, None, None], _GT, _GZ)
-        return np.asarray(S @ G @ invert_transform(S), float)
+    def _joint_twists(self, S: Array) -> tuple[Array, Array]:
+        """``(w, v)`` (n, 3) of every joint's own generator ``Ĝ_j = S_j G S_j⁻¹``: the
+        rotation about its axis line (``w`` its direction, ``v = c × w``) or the
+        translation along it (``w = 0``, ``v`` its direction)."""
+        axis, c = S[:, :3, 2], S[:, :3, 3]
+        w = np.where(self.prismatic[:, None], 0.0, axis)
+        v = np.where(self.prismatic[:, None], axis, np.cross(c, axis))
+        return w, v
 
-    def _joint_tangents(self, S: Array, A: Array, pre: Array, suf: Array) -> Array:
+    def _joint_tangents(self, S: Array, QP: Array, tP: Array, p: Array) -> Array:
         """``∂p/∂θ_j`` (K, 3, n) of every observation: ``(Π_{i<j} A_i) Ĝ_j (Π_{i≥j} A_i
-        p0)``, zero for joints past the observation's link."""
-        Gh = self._joint_generators(S)
-        moved = np.einsum("knij,knj->kni", A, suf)  # Π_{i≥j} A_i p0, (K, n, 4)
-        t = np.einsum("nij,knj->kni", Gh[:, :3], moved)  # (K, n, 3)
-        t = np.einsum("knij,knj->kni", pre[:, :-1, :3, :3], t)
-        t[np.arange(1, self.n_joints + 1)[None, :] > self.link[:, None]] = 0.0
-        return np.swapaxes(t, 1, 2)
+        p0)``, the point moved by joint j's twist after its prefix; zero for joints past
+        the observation's link."""
+        w, v = self._joint_twists(S)
+        n = self.n_joints
+        t = np.empty((n, 3, p.shape[-1]))
+        for j in range(n):
+            t[j] = moved_by_twists(QP[j], tP[j], p, w[j : j + 1], v[j : j + 1])[0]
+        out = t.transpose(2, 1, 0).copy()
+        past = np.arange(1, n + 1)[None, :] > self.link[:, None]  # (K, n)
+        out[np.broadcast_to(past[:, None, :], out.shape)] = 0.0
+        return out
 
     def position_jacobian(self, x: npt.ArrayLike) -> Array:
         """``∂p/∂x`` of every observation, shape (K, 3, n_params) (exact, analytic).
 
-        ``∂A_k/∂δ_m = G_m A_k − A_k G_m`` with ``G_m = ∂S_k/∂δ_m · S_k⁻¹``, so
-        ``∂p/∂δ_m = (Π_{i<k} A_i)(G_m A_k − A_k G_m)(Π_{i>k} A_i p0)``
-        ``= (Π_{i<k} A_i) G_m (Π_{i≥k} A_i p0) − (Π_{i≤k} A_i) G_m (Π_{i>k} A_i p0)``
-        (matrix-vector products only); ``∂p/∂p0`` is the rotation of the whole product.
+        ``∂A_k/∂δ_m = G_m A_k − A_k G_m`` with ``G_m = ∂S_k/∂δ_m · S_k⁻¹`` a twist, so
+        ``∂p/∂δ_m = (Π_{i<k} A_i) G_m (Π_{i≥k} A_i p0) − (Π_{i≤k} A_i) G_m (Π_{i>k} A_i p0)``:
+        the point ``p`` moved by ``G_m`` after the prefix ``Π_{i<k}`` less moved by it after
+        ``Π_{i≤k}`` (:func:`~pipeline.refine.motions.moved_by_twists`); ``∂p/∂p0`` is the
+        rotation of the whole product.
         """
         x = np.asarray(x, float)
         S, G = self._frame_generators(x)
-        A = self._motions(S, self.joint_values(x))
-        pre, suf = self._prefix_suffix(A, self._points_h(x))
+        QP, tP, p = self._chain(x, S)
         K = len(self.link)
         J = np.zeros((K, 3, self.n_params))
         if self.terms:
-            J[:, :, self.beta_slice] = self._joint_tangents(S, A, pre, suf) @ self.regressor
+            J[:, :, self.beta_slice] = self._joint_tangents(S, QP, tP, p) @ self.regressor
+        w, v = twists(G)  # (n, 4, 3) each
         for k in range(self.n_joints):
             a, b = self.axis_offsets[k], self.axis_offsets[k + 1]
-            Gk = G[k, : b - a, :3]  # (m, 3, 4): only the rows that reach p's 3 coordinates
-            moved = np.einsum("kij,kj->ki", A[:, k], suf[:, k])  # Π_{i≥k} A_i p0
-            # (K, 3, m); G's last row is 0, so the prefixes' rotations suffice. Two products
-            # of two operands each: one three-operand einsum looped in C over all K·3·m·3·4
-            # terms and took a third of a 2,000-pose fit.
-            Gm = moved @ Gk.reshape(-1, 4).T  # (K, m·3): G_m (Π_{i≥k} A_i p0)
-            Gs = suf[:, k] @ Gk.reshape(-1, 4).T  # (K, m·3): G_m (Π_{i>k} A_i p0)
-            m = b - a
-            dp = pre[:, k, :3, :3] @ Gm.reshape(-1, m, 3).transpose(0, 2, 1) - pre[
-                :, k + 1, :3, :3
-            ] @ Gs.reshape(-1, m, 3).transpose(0, 2, 1)
-            J[:, :, a:b] = dp
-        R = pre[:, -1, :3, :3]
-        for j in range(self.n_points):
-            sel = self.point == j
-            J[sel, :, self.point_slice(j)] = R[sel]
+            wk, vk = w[k, : b - a], v[k, : b - a]
+            dp = moved_by_twists(QP[k], tP[k], p, wk, vk)
+            dp -= moved_by_twists(QP[k + 1], tP[k + 1], p, wk, vk)
+            J[:, :, a:b] = dp.transpose(2, 1, 0)
+        R = by_observation(QP[-1])
+        if self.n_points == 1:
+            J[:, :, self.point_slice(0)] = R
+        else:
+            for j in range(self.n_points):
+                sel = self.point == j
+                J[sel, :, self.point_slice(j)] = R[sel]
         return J
 
     def tool_rotations(self, x: npt.ArrayLike) -> Array:
@@ -374,45 +391,40 @@ class ChainModel:
         observation (sensor frame)."""
         x = np.asarray(x, float)
         F = self.frames(x)
-        A = self._motions(F, self.joint_values(x))
-        R = np.broadcast_to(np.eye(3), (len(self.link), 3, 3)).copy()
-        for k in range(self.n_joints):
-            R = R @ A[:, k, :3, :3]
-        return np.asarray(R @ F[-1, :3, :3] @ self.tool_rotation_matrix(x))
+        QP, _ = prefixes(self._motion(F, self.joint_values(x)), self.n_joints)
+        return np.asarray(by_observation(QP[-1]) @ (F[-1, :3, :3] @ self.tool_rotation_matrix(x)))
 
     def tool_orientation_jacobian(self, x: npt.ArrayLike) -> Array:
         """``ω`` with ``δR = [ω]× R`` of the tool frame per parameter, shape (K, 3, n_params).
 
         The tool frame is ``(Π_k A_k) · S_n · R_c`` (thesis convention: ``S̄_n = S̄_{n−1}``,
         ``R_c`` = I without ``tool_rotation``); rows of observations not on link n are
-        zero. A joint's ``δ`` enters through ``Ξ = ∂A_k A_k⁻¹ = G − A_k G A_k⁻¹`` carried
-        by the prefix's rotation, and ``δ_n`` also through ``S_n`` itself
-        (``R_Π · vee(G)``); the tool's rotation vector ``r`` (``R_c = Exp(r)``) through
-        ``ω = R_tool · J_r(r)`` (right Jacobian of SO(3)).
+        zero. A joint's ``δ`` (twist ``G``, rotation part ``w``) enters through
+        ``Ξ = ∂A_k A_k⁻¹ = G − A_k G A_k⁻¹`` carried by the prefix:
+        ``R_{<k} w − R_{≤k} w``, and ``δ_n`` also through ``S_n`` itself (``+ R_Π w``); the
+        tool's rotation vector ``r`` (``R_c = Exp(r)``) through ``ω = R_tool · J_r(r)``
+        (right Jacobian of SO(3)).
         """
         x = np.asarray(x, float)
         S, G = self._frame_generators(x)
-        A = self._motions(S, self.joint_values(x))
-        pre, _ = self._prefix_suffix(A, self._points_h(x))
+        QP, _ = prefixes(self._motion(S, self.joint_values(x)), self.n_joints)
         K, n = len(self.link), self.n_joints
         W = np.zeros((K, 3, self.n_params))
-        A_inv = invert_transform(A)
+        w, _ = twists(G)
         for k in range(n):
             a, b = self.axis_offsets[k], self.axis_offsets[k + 1]
-            Gk = G[k, : b - a]
-            Xi = Gk[None] - A[:, k, None] @ Gk[None] @ A_inv[:, k, None]  # (K, m, 4, 4)
-            w = (pre[:, k, None, :3, :3] @ _vee(Xi[..., :3, :3])[..., None])[..., 0]  # (K, m, 3)
-            W[:, :, a:b] = np.swapaxes(w, 1, 2)
-        a, b = self.axis_offsets[n - 1], self.axis_offsets[n]
-        w_n = (pre[:, -1, None, :3, :3] @ _vee(G[n - 1, : b - a, :3, :3])[None, ..., None])[..., 0]
-        W[:, :, a:b] += np.swapaxes(w_n, 1, 2)
+            wk = w[k, : b - a]
+            turn = rotate_constant(QP[k], wk)
+            if k < n - 1:  # δ_n: − R_Π w + R_Π w
+                turn -= rotate_constant(QP[k + 1], wk)
+            W[:, :, a:b] = turn.transpose(2, 1, 0)
         if self.tool_rotation:
             r = x[self.rotation_slice]
             W[:, :, self.rotation_slice] = self.tool_rotations(x) @ right_jacobian(r)
         if self.terms:  # joint j turns the tool about its axis: ω = R_{<j} · S_j's z
-            axis = np.where(self.prismatic[:, None], 0.0, S[:, :3, 2])  # (n, 3)
-            w_q = np.einsum("knij,nj->kin", pre[:, :-1, :3, :3], axis)  # (K, 3, n)
-            W[:, :, self.beta_slice] = w_q @ self.regressor
+            axis, _ = self._joint_twists(S)
+            w_q = np.stack([rotate_constant(QP[j], axis[j : j + 1])[0] for j in range(n)])
+            W[:, :, self.beta_slice] = w_q.transpose(2, 1, 0) @ self.regressor
         W[self.link != n] = 0.0
         return W
 
@@ -504,11 +516,8 @@ def start_points(model: ChainModel, p_measured: npt.ArrayLike) -> Array:
     """
     p = np.asarray(p_measured, float)
     x0 = np.zeros(model.n_params)
-    A = model._motions(model.frames(x0), model.theta)
-    P = np.broadcast_to(np.eye(4), (len(p), 4, 4)).copy()
-    for k in range(model.n_joints):
-        P = P @ A[:, k]
-    back = (np.swapaxes(P[:, :3, :3], 1, 2) @ (p - P[:, :3, 3])[..., None])[..., 0]
+    QP, tP = prefixes(model._motion(model.frames(x0), model.theta), model.n_joints)
+    back = (QP[-1] * (p.T - tP[-1])[None]).sum(axis=1).T  # Rᵀ (p − t): columns · (p − t)
     ok = np.isfinite(back).all(axis=1)
     out = np.zeros((model.n_points, 3))
     for j, name in enumerate(model.point_names):

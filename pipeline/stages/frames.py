@@ -335,8 +335,10 @@ STAGE = Stage(
     "frames",
     # 4: frames brought to q̄^s with each sweep's recorded readings;
     # 5: imports' sweep points join the tool; 6: the tool sweep's plan.tool_target rows
-    # (plan.tool_targets: several targets on the last link, issue 29)
-    6,
+    # (plan.tool_targets: several targets on the last link, issue 29); 7: a pose set's
+    # design start registered by a numpy SVD (Kabsch), not scipy's align_vectors: the
+    # same rotation to its last bits (issue 45)
+    7,
     ("features", "joints", "positions", "session"),
     NoParams(),
     compute,
