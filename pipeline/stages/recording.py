@@ -432,7 +432,7 @@ def _joint_arrays(
     }
     message = np.arange(len(js))
     if blocks is not None:
-        cols = merged([cols, blocks] if len(js) else [blocks])
+        cols = merged([cols, blocks]) if len(js) else blocks
         message = np.r_[message, np.full(len(blocks["joint_step"]), -1)]
     order = np.lexsort((cols["joint_step"], cols["joint_sweep"]))
     if not (order == np.arange(len(order))).all():  # blocks are written in key order

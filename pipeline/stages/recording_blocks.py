@@ -45,7 +45,8 @@ def block_rows(
     without blocks."""
     if not blocks:
         return None, None
-    joints, points = [], []
+    joints: list[dict[str, Any]] = []
+    points: list[dict[str, Any]] = []
     for k, (t_ns, m) in enumerate(blocks):
         cols = block_columns(p, k, m)
         sid = sweep_id(m["sweep"])
@@ -69,19 +70,58 @@ def block_rows(
                 got=f"units {m['units']} ({BLOCK_TOPIC} message {k}, {rows:,} rows)",
                 fix="record one value per joint of /robot/description, deg or cm by joint type",
             )
-        cols.setdefault("q_encoder", cols["q_commanded"])  # absent: the same readings
         for name in ("q_commanded", "q_encoder"):
-            check.bounded(name, cols[name], -_Q_MAX, _Q_MAX)
-        joints.append(_joint_columns(check, m, cols, sweep, step, t, one_file))
+            if name in cols:
+                check.bounded(name, cols[name], -_Q_MAX, _Q_MAX)
+        joints.append(_joint_columns(check, m, cols, sweep, step, t))
         points.append(_point_columns(check, m, cols, sweep, step, t))
-    return merged(joints), _with_uncertainty(p, merged(points))
+    joint = merged(joints, {**_ABSENT, "joint_source_file": (one_file, ())})
+    if joint["q_encoder"] is None or any(c["q_encoder"] is None for c in joints):
+        joint["q_encoder"] = joint["q_commanded"].copy()  # absent: the same readings
+        for a, c in zip(np.cumsum([0, *(len(c["t_ns"]) for c in joints)]), joints, strict=False):
+            if c["q_encoder"] is not None:
+                joint["q_encoder"][a : a + len(c["t_ns"])] = c["q_encoder"]
+    return joint, _with_uncertainty(p, merged(points, _ABSENT))
 
 
-def merged(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    """The columns of ``parts`` one after the other (the one part as it is)."""
-    if len(parts) == 1:
-        return parts[0]
-    return {k: np.concatenate([c[k] for c in parts]) for k in parts[0]}
+#: A column a block may leave out: its value there and its shape after the rows.
+_ABSENT: dict[str, tuple[Any, tuple[int, ...]]] = {
+    "joint_payload_kg": (np.nan, ()),
+    "joint_source_line": (0, ()),
+    "joint_drift_cm": (np.nan, (2,)),
+    "sigma_xyz_cm": (np.nan, (3,)),
+    "point_wxyz": (np.nan, (4,)),
+    "point_orientation_sigma_deg": (np.nan, ()),
+}
+
+
+def merged(
+    parts: list[dict[str, Any]], absent: dict[str, tuple[Any, tuple[int, ...]]] | None = None
+) -> dict[str, Any]:
+    """The columns of ``parts`` one after the other (the one part's as they are); a column
+    a part leaves out (None) holds its value of ``absent`` there (None where no part has
+    it and ``absent`` does not name it)."""
+    absent = absent or {}
+    rows = [len(c["t_ns"]) for c in parts]
+    out = {}
+    for k in parts[0]:
+        have = [c[k] for c in parts if c[k] is not None]
+        if len(have) == len(parts) == 1:
+            out[k] = have[0]
+        elif len(have) == len(parts):
+            out[k] = np.concatenate(have)
+        elif k in absent:
+            value, shape = absent[k]
+            dtype = have[0].dtype if have else np.asarray(value).dtype
+            if have and dtype.kind == "U":
+                dtype = np.result_type(dtype, np.asarray(value).dtype)
+            out[k] = np.full((sum(rows), *shape), value, dtype)
+            for a, n, c in zip(np.cumsum([0, *rows]), rows, parts, strict=False):
+                if c[k] is not None:
+                    out[k][a : a + n] = c[k]
+        else:
+            out[k] = None
+    return out
 
 
 def _joint_columns(
@@ -91,9 +131,8 @@ def _joint_columns(
     sweep: np.ndarray,
     step: np.ndarray,
     t: np.ndarray,
-    one_file: str,
-) -> dict[str, np.ndarray]:
-    rows = len(step)
+) -> dict[str, np.ndarray | None]:
+    """A block's joint-state columns, None where it leaves one out (:data:`_ABSENT`)."""
     payload = cols.get("payload_kg")
     if payload is not None:
         check.bounded("payload_kg", payload, 0.0, _PAYLOAD_MAX)
@@ -101,28 +140,28 @@ def _joint_columns(
     index = cols.get("source_file")
     if (files is None) != (index is None):
         check.refuse("source_file without source_files, or source_files without it")
+    source_file = None  # absent: the recording's one file (armsig.source)
     if index is not None:
         check.bounded("source_file", index, 0, len(files) - 1)  # type: ignore[arg-type]
         source_file = np.array(files, str)[index]
-    else:
-        source_file = np.full(rows, one_file, dtype=np.array([one_file], str).dtype)
     line = cols.get("source_line")
     if line is not None:
         check.bounded("source_line", line, 0, _LINE_MAX)
-    drift = np.full((rows, 2), np.nan)
+    drift = None
     for j, name in enumerate(("tracker_drift_cm", "tracker_residual_cm")):
         if name in cols:
             check.bounded(name, cols[name], 0.0, _DRIFT_MAX, nan=True)
+            drift = np.full((len(step), 2), np.nan) if drift is None else drift
             drift[:, j] = cols[name]
     return {
         "joint_sweep": sweep,
         "joint_step": step,
         "t_ns": t,
         "q_commanded": cols["q_commanded"],
-        "q_encoder": cols["q_encoder"],
-        "joint_payload_kg": np.full(rows, np.nan) if payload is None else payload,
+        "q_encoder": cols.get("q_encoder"),
+        "joint_payload_kg": payload,
         "joint_source_file": source_file,
-        "joint_source_line": np.zeros(rows, np.int64) if line is None else line,
+        "joint_source_line": line,
         "joint_drift_cm": drift,
     }
 
@@ -134,19 +173,17 @@ def _point_columns(
     sweep: np.ndarray,
     step: np.ndarray,
     t: np.ndarray,
-) -> dict[str, np.ndarray]:
-    """One point per row and target (row-major), with its σ or diagonal covariance and the
-    first target's orientation."""
+) -> dict[str, np.ndarray | None]:
+    """One point per row and target (row-major), with its σ of x, y, z and the first
+    target's orientation, None where the block leaves one out (:data:`_ABSENT`)."""
     targets = list(m["targets"])
     rows, n_t = len(step), len(targets)
     xyz = cols["points_cm"]
     check.bounded("points_cm", xyz, -_XYZ_MAX, _XYZ_MAX)
-    sigma = np.full((rows, n_t, 3), np.nan)
-    if "sigma_cm" in cols:
-        sigma = cols["sigma_cm"]
+    sigma = cols.get("sigma_cm")
+    if sigma is not None:
         check.bounded("sigma_cm", sigma, 0.0, _SIGMA_MAX, above=True)
-    wxyz = np.full((rows, n_t, 4), np.nan)
-    sigma_o = np.full((rows, n_t), np.nan)
+    wxyz = sigma_o = None
     if "orientation_wxyz" in cols:
         q = cols["orientation_wxyz"]
         check.bounded("orientation_wxyz", q, -_QUATERNION_MAX, _QUATERNION_MAX)
@@ -161,7 +198,9 @@ def _point_columns(
                 got=f"length {norm[r]:.9g}",
                 fix="normalise the quaternion (w, x, y, z) before recording it",
             )
+        wxyz = np.full((rows, n_t, 4), np.nan)
         wxyz[:, 0] = q
+        sigma_o = np.full((rows, n_t), np.nan)
         if "orientation_sigma_deg" in m:
             sigma_o[:, 0] = m["orientation_sigma_deg"]
     elif "orientation_sigma_deg" in m:
@@ -172,9 +211,9 @@ def _point_columns(
         "point_target": np.tile(np.array(targets, str), rows),
         "t_ns": np.repeat(t, n_t),
         "points_cm": xyz.reshape(-1, 3),
-        "sigma_xyz_cm": sigma.reshape(-1, 3),
-        "point_wxyz": wxyz.reshape(-1, 4),
-        "point_orientation_sigma_deg": sigma_o.reshape(-1),
+        "sigma_xyz_cm": None if sigma is None else sigma.reshape(-1, 3),
+        "point_wxyz": None if wxyz is None else wxyz.reshape(-1, 4),
+        "point_orientation_sigma_deg": None if sigma_o is None else sigma_o.reshape(-1),
     }
 
 
@@ -183,6 +222,13 @@ def _with_uncertainty(p: Path, cols: dict[str, np.ndarray]) -> dict[str, np.ndar
     ``sigma_cm``, unequal its diagonal ``cov_cm2`` of the σ squared, whose smallest σ is
     refused under :data:`MIN_SIGMA_CM` as there (an equal σ: by the points' reader)."""
     s = cols.pop("sigma_xyz_cm")
+    n = len(cols["t_ns"])
+    if s is None:  # no σ recorded
+        cols["point_sigma_cm"], cols["point_cov_cm2"] = (
+            np.full(n, np.nan),
+            np.full((n, 3, 3), np.nan),
+        )
+        return cols
     equal = (s[:, 0] == s[:, 1]) & (s[:, 1] == s[:, 2])
     diagonal = np.flatnonzero(~equal & ~np.isnan(s).all(axis=1))
     cols["point_sigma_cm"] = np.where(equal, s[:, 0], np.nan)
