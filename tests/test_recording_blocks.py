@@ -244,6 +244,10 @@ def test_an_unedited_rewrite_reads(pair: tuple[Path, Path], tmp_path: Path) -> N
     _same(_arrays(path), _arrays(pair[0]))
 
 
+def _normal(seed: int) -> np.ndarray:
+    return np.random.default_rng(seed).normal(size=3)
+
+
 TEXTS = {
     "plain": "a,b,c\n1,2.5,-3e-3\n4,5,6\n",
     "crlf and a byte-order mark": "\ufeffa,b,c\r\n1,2.5,-3e-3\r\n4,5,nan\r\n",
@@ -255,7 +259,7 @@ TEXTS = {
     "a quoted cell": 'a,b,c\n1,"2",3\n4,5,6\n',
     "a text cell": "a,b,c\n1,x,3\n4,5,6\n",
     "17 digits": "a,b,c\n" + "\n".join(
-        ",".join(repr(float(v)) for v in np.random.default_rng(k).normal(size=3) * 10.0 ** (k % 40 - 20))
+        ",".join(repr(float(v)) for v in _normal(k) * 10.0 ** (k % 40 - 20))
         for k in range(200)) + "\n",
 }  # fmt: skip
 
