@@ -32,12 +32,19 @@ from pipeline.stages.recording import read_recording
 CHECK = "payload_kg = 2.5\n\n[check]\nfraction = 0.25\nseed = 7"
 
 
-def _imported(folder: Path, n: int = 60, in_blocks: bool = True, **kw: Any) -> Path:
-    """A UR10 pose set (two reflectors, unequal σ, orientation, held-out rows, a payload)."""
+def _imported(
+    folder: Path, n: int = 60, in_blocks: bool = True, plain: bool = False, **kw: Any
+) -> Path:
+    """A UR10 pose set (two reflectors, unequal σ, orientation, held-out rows, a payload);
+    ``plain``: one stated σ, no orientation, no held-out rows, no payload."""
     folder.mkdir(parents=True, exist_ok=True)
     src, _ = pose_set_table(folder / "poses.csv", n=n, sep=",", decimal=".", unit="deg")
     mp = folder / "map.toml"
-    mp.write_text(pose_set_map(sep=",", decimal=".", unit="deg", extra=CHECK))
+    text = pose_set_map(sep=",", decimal=".", unit="deg", extra=CHECK)
+    if plain:
+        text = pose_set_map(sep=",", decimal=".", unit="deg", sigma="stated")
+        text = text.split("[orientation]")[0]
+    mp.write_text(text)
     if not in_blocks:  # the per-row messages written before issue 45
         real = session.session_messages
         kw["monkeypatch"].setattr(
@@ -83,6 +90,19 @@ def pair(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     finally:
         mp.undo()
     return blocks, rows
+
+
+def test_a_plain_pose_set_identifies_as_its_per_row_recording(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One stated σ, no orientation or payload: the blocks' absent columns read as the
+    per-row recording's NaN (read-only, without memory) and identify alike."""
+    blocks = _imported(tmp_path / "blocks", plain=True)
+    rows = _imported(tmp_path / "rows", in_blocks=False, plain=True, monkeypatch=monkeypatch)
+    a, b = _arrays(blocks), _arrays(rows)
+    _same(a, b)
+    assert np.isnan(a["point_cov_cm2"]).all() and np.isnan(a["point_wxyz"]).all()
+    assert _signature(blocks.parent) == _signature(rows.parent)
 
 
 def test_blocks_stand_for_the_per_row_messages(pair: tuple[Path, Path]) -> None:

@@ -110,6 +110,9 @@ def merged(
             out[k] = have[0]
         elif len(have) == len(parts):
             out[k] = np.concatenate(have)
+        elif k in absent and not have:  # one read-only value, no memory (issue 45)
+            value, shape = absent[k]
+            out[k] = np.broadcast_to(np.asarray(value), (sum(rows), *shape))
         elif k in absent:
             value, shape = absent[k]
             dtype = have[0].dtype if have else np.asarray(value).dtype
@@ -222,18 +225,12 @@ def _with_uncertainty(p: Path, cols: dict[str, np.ndarray]) -> dict[str, np.ndar
     ``sigma_cm``, unequal its diagonal ``cov_cm2`` of the σ squared, whose smallest σ is
     refused under :data:`MIN_SIGMA_CM` as there (an equal σ: by the points' reader)."""
     s = cols.pop("sigma_xyz_cm")
-    n = len(cols["t_ns"])
-    if s is None:  # no σ recorded
-        cols["point_sigma_cm"], cols["point_cov_cm2"] = (
-            np.full(n, np.nan),
-            np.full((n, 3, 3), np.nan),
-        )
-        return cols
     equal = (s[:, 0] == s[:, 1]) & (s[:, 1] == s[:, 2])
     diagonal = np.flatnonzero(~equal & ~np.isnan(s).all(axis=1))
     cols["point_sigma_cm"] = np.where(equal, s[:, 0], np.nan)
-    cov = np.full((len(s), 3, 3), np.nan)
-    if len(diagonal):
+    cov = np.broadcast_to(np.nan, (len(s), 3, 3))  # read-only NaN, no memory, unless
+    if len(diagonal):  # a point's σ differ by axis
+        cov = np.full((len(s), 3, 3), np.nan)
         var = s[diagonal] ** 2
         cov[diagonal] = 0.0
         cov[diagonal[:, None], [0, 1, 2], [0, 1, 2]] = var
