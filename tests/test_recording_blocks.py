@@ -288,14 +288,18 @@ PLAIN = ("plain", "crlf and a byte-order mark", "no final newline", "spaces afte
          "17 digits")  # fmt: skip
 
 
+@pytest.mark.parametrize("skip", [0, 1])
 @pytest.mark.parametrize("name", list(TEXTS))
-def test_plain_numeric_file_reads_as_the_csv_reader_reads_it(tmp_path: Path, name: str) -> None:
+def test_plain_numeric_file_reads_as_the_csv_reader_reads_it(
+    tmp_path: Path, name: str, skip: int
+) -> None:
     """polars' reading (a plain file) or its fallback gives the ``csv`` reader's header,
-    lines and numbers (the same doubles)."""
+    lines and numbers (the same doubles); ``skip``: the header line skipped (skip_rows 1,
+    no header)."""
     path = tmp_path / "t.csv"
     path.write_bytes(TEXTS[name].encode())
-    fast = delimited_block(path, 0, (), True, None, ".", numeric=True)
-    slow = delimited_block(path, 0, (), True, None, ".", numeric=False)
+    fast = delimited_block(path, skip, (), not skip, None, ".", numeric=True)
+    slow = delimited_block(path, skip, (), not skip, None, ".", numeric=False)
     assert fast.header == slow.header and fast.width == slow.width and fast.line == slow.line
     assert isinstance(fast.rows, NumberRows) == (name in PLAIN)
     assert [line for line, _ in fast.rows] == [line for line, _ in slow.rows]

@@ -11,6 +11,7 @@ its message (a short row, an empty cell, a text, a row too wide).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import overload
@@ -18,6 +19,7 @@ from typing import overload
 import numpy as np
 
 _BOM = b"\xef\xbb\xbf"
+_TEXT = re.compile(rb"\S")
 
 
 class NumberRows(Sequence[tuple[int, list[str | float]]]):
@@ -62,7 +64,7 @@ def numeric_rows(
     except OSError:
         return None
     data = data.removeprefix(_BOM)
-    if b'"' in data or data.count(b"\r") != data.count(b"\r\n"):
+    if b'"' in data or (b"\r" in data and data.count(b"\r") != data.count(b"\r\n")):
         return None
     start = 0
     for _ in range(skip_rows):
@@ -78,16 +80,20 @@ def numeric_rows(
     if delim == " " or len(delim) != 1:
         return None
     names = None
-    body = data[start:]
     if header:
         names = [h.strip() for h in lines[0].split(delim)]
-        body = data[data.find(b"\n", start) + 1 :] if b"\n" in data[start:] else b""
-    if not body.strip() or b"\n\n" in body or b"\n\r\n" in body or body[:1] in (b"\n", b"\r"):
-        return None
+        start = data.find(b"\n", start) + 1
+        if start == 0:
+            return None
+    if _TEXT.search(data, start) is None or data[start : start + 1] in (b"\n", b"\r"):
+        return None  # no row, or a blank first row
+    if data.find(b"\n\n", start) >= 0 or data.find(b"\n\r\n", start) >= 0:
+        return None  # a blank line: the csv reader skips it
     width = len(names) if names is not None else len(lines[0].split(delim))
     schema = {f"c{k}": pl.Float64 for k in range(width)}
     try:
-        frame = pl.read_csv(body, has_header=False, separator=delim, schema=schema, quote_char=None)
+        frame = pl.read_csv(data, has_header=False, separator=delim, schema=schema,
+                            quote_char=None, skip_lines=data.count(b"\n", 0, start))  # fmt: skip
     except Exception:  # noqa: BLE001 (any cell or row polars cannot read: the csv reader's)
         return None
     if frame.null_count().sum_horizontal().item():

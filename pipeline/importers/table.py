@@ -25,6 +25,7 @@ from pipeline.importers.rows import (
     ANGLE_DEG,
     LENGTH_CM,
     MeasuredRows,
+    Places,
     concat_rows,
     readings_in_boundary_units,
     unit_factor,
@@ -178,7 +179,7 @@ def _parsed(cols: Columns, path: Path, imap: ImportMap, robot: RobotDescription)
     if held:
         sw = np.where(held, CHECK_SWEEP, POSES_SWEEP)
     return MeasuredRows(
-        path, tuple(f"{block.word} {v}" for v in grid.lines[:, 0]), sw, qq,
+        path, Places(block.word, grid.lines[:, 0].copy()), sw, qq,
         pts,
         orientation_wxyz=_quaternions(angles, imap),
         sigma=_sigmas(rows_sigma=sig, ids=list(cols.targets), n=n),
