@@ -109,6 +109,15 @@ def block_columns(p: Path, k: int, payload: dict[str, Any]) -> dict[str, np.ndar
     return out
 
 
+def noise_fields(sigma: Any) -> dict[str, Any]:
+    """A ``/points`` message's uncertainty of a point's σ of x, y, z (cm): ``sigma_cm``
+    when they are equal, else the diagonal ``cov_cm2`` of their squares."""
+    if sigma[0] == sigma[1] == sigma[2]:
+        return {"sigma_cm": float(sigma[0])}
+    return {"cov_cm2": [[float(s * s) if r == c else 0.0 for c, s in enumerate(sigma)]
+                        for r in range(3)]}  # fmt: skip
+
+
 def row_messages(
     p: Path, messages: dict[str, list[tuple[int, dict[str, Any]]]]
 ) -> dict[str, list[tuple[int, dict[str, Any]]]]:
@@ -143,11 +152,6 @@ def row_messages(
                     if "orientation_sigma_deg" in m:
                         point["orientation_sigma_deg"] = m["orientation_sigma_deg"]
                 if "sigma_cm" in cols:
-                    s = cols["sigma_cm"][r][j]
-                    if s[0] == s[1] == s[2]:
-                        point["sigma_cm"] = s[0]
-                    else:
-                        point["cov_cm2"] = [[v * v if a == b else 0.0 for b in range(3)]
-                                            for a, v in enumerate(s)]  # fmt: skip
+                    point.update(noise_fields(cols["sigma_cm"][r][j]))
                 points.append((t, point))
     return out

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.contract.blocks import BLOCK_ROWS, BLOCK_TOPIC, block_payload
+from pipeline.contract.blocks import BLOCK_ROWS, BLOCK_TOPIC, block_payload, noise_fields
 from pipeline.importers.rows import MeasuredRows
 from pipeline.importers.sweeps import whole_turns
 from pipeline.rig.recorder import Message
@@ -185,7 +185,7 @@ def session_messages(
                 if rows.orientation_sigma_deg is not None:
                     point["orientation_sigma_deg"] = float(rows.orientation_sigma_deg)
             if rows.sigma is not None:
-                point.update(_noise(rows.sigma[target][k]))
+                point.update(noise_fields(rows.sigma[target][k]))
             messages.append(Message("/points", t_ns, point))
     return messages + blocked if blocks else messages
 
@@ -247,12 +247,3 @@ def _block(
         cols["source_line"] = np.maximum(rows.lines[k], 0)
     payload = block_payload(key[0], key[1], units, ids, cols, **fields)
     return Message(BLOCK_TOPIC, T0_NS + (c0 + 1) * STEP_NS, payload)
-
-
-def _noise(sigma: np.ndarray) -> dict[str, Any]:
-    """A point's stated σ of x, y, z (cm): ``sigma_cm`` when they are equal, else the
-    diagonal ``cov_cm2``."""
-    if sigma[0] == sigma[1] == sigma[2]:
-        return {"sigma_cm": float(sigma[0])}
-    return {"cov_cm2": [[float(s * s) if r == c else 0.0 for c, s in enumerate(sigma)]
-                        for r in range(3)]}  # fmt: skip

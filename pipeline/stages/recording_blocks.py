@@ -21,7 +21,12 @@ import numpy as np
 from pipeline.contract.blocks import BLOCK_SCHEMA, BLOCK_TOPIC, block_columns
 from pipeline.errors import RecordingError
 from pipeline.stages.recording_keys import key_text, planned_limit, refuse_unplanned
-from pipeline.stages.recording_points import MIN_SIGMA_CM, UNIT_TOL
+from pipeline.stages.recording_points import (
+    MIN_SIGMA_CM,
+    UNIT_TOL,
+    checked_quaternion,
+    checked_sigma,
+)
 from pipeline.sweeps import sweep_id
 
 #: Bounds of the schemas of /robot/joint_state and /points (schemas/mcap/).
@@ -48,33 +53,29 @@ def block_rows(
     joints: list[dict[str, Any]] = []
     points: list[dict[str, Any]] = []
     for k, (t_ns, m) in enumerate(blocks):
-        cols = block_columns(p, k, m)
-        sid = sweep_id(m["sweep"])
-        rows = int(m["rows"])
-        step = m["first_step"] + np.arange(rows, dtype=np.int64)
-        sweep = np.full(rows, sid, np.int64)
+        check = _Checker(p, k, m, block_columns(p, k, m))
+        sid, step, cols = check.sweep_id, check.step, check.cols
 
         def recorded(_: int, sweep_as_recorded: Any = m["sweep"]) -> Any:
             return sweep_as_recorded
 
         limit = planned_limit(n_points, sid)
-        refuse_unplanned(p, BLOCK_TOPIC, sweep, step, limit, recorded, n_points)
-        check = _Checker(p, k, sid, step)
+        refuse_unplanned(p, BLOCK_TOPIC, check.sweep, step, limit, recorded, n_points)
         dt = cols["dt_ns"]
         check.bounded("dt_ns", dt, 0, min(_UINT64_MAX - t_ns, _INT64_MAX))
-        t = np.uint64(t_ns) + dt.astype(np.uint64)
+        check.t = np.uint64(t_ns) + dt.astype(np.uint64)
         if m["units"] != units:
             raise RecordingError(
                 f"{p}: /robot/joint_state {key_text(sid, step[0])} does not fit the robot",
                 expected=f"{len(units)} joint values in units {units}",
-                got=f"units {m['units']} ({BLOCK_TOPIC} message {k}, {rows:,} rows)",
+                got=f"units {m['units']} ({BLOCK_TOPIC} message {k}, {len(step):,} rows)",
                 fix="record one value per joint of /robot/description, deg or cm by joint type",
             )
         for name in ("q_commanded", "q_encoder"):
             if name in cols:
                 check.bounded(name, cols[name], -_Q_MAX, _Q_MAX)
-        joints.append(_joint_columns(check, m, cols, sweep, step, t))
-        points.append(_point_columns(check, m, cols, sweep, step, t))
+        joints.append(_joint_columns(check))
+        points.append(_point_columns(check))
     joint = merged(joints, {**_ABSENT, "joint_source_file": (one_file, ())})
     if joint["q_encoder"] is None or any(c["q_encoder"] is None for c in joints):
         joint["q_encoder"] = joint["q_commanded"].copy()  # absent: the same readings
@@ -127,15 +128,9 @@ def merged(
     return out
 
 
-def _joint_columns(
-    check: _Checker,
-    m: dict[str, Any],
-    cols: dict[str, np.ndarray],
-    sweep: np.ndarray,
-    step: np.ndarray,
-    t: np.ndarray,
-) -> dict[str, np.ndarray | None]:
+def _joint_columns(check: _Checker) -> dict[str, np.ndarray | None]:
     """A block's joint-state columns, None where it leaves one out (:data:`_ABSENT`)."""
+    m, cols, sweep, step, t = check.m, check.cols, check.sweep, check.step, check.t
     payload = cols.get("payload_kg")
     if payload is not None:
         check.bounded("payload_kg", payload, 0.0, _PAYLOAD_MAX)
@@ -169,16 +164,10 @@ def _joint_columns(
     }
 
 
-def _point_columns(
-    check: _Checker,
-    m: dict[str, Any],
-    cols: dict[str, np.ndarray],
-    sweep: np.ndarray,
-    step: np.ndarray,
-    t: np.ndarray,
-) -> dict[str, np.ndarray | None]:
+def _point_columns(check: _Checker) -> dict[str, np.ndarray | None]:
     """One point per row and target (row-major), with its σ of x, y, z and the first
     target's orientation, None where the block leaves one out (:data:`_ABSENT`)."""
+    m, cols, sweep, step, t = check.m, check.cols, check.sweep, check.step, check.t
     targets = list(m["targets"])
     rows, n_t = len(step), len(targets)
     xyz = cols["points_cm"]
@@ -192,15 +181,9 @@ def _point_columns(
         check.bounded("orientation_wxyz", q, -_QUATERNION_MAX, _QUATERNION_MAX)
         norm = np.linalg.norm(q, axis=1)
         off = np.flatnonzero(np.abs(norm - 1.0) > UNIT_TOL)
-        if len(off):
+        if len(off):  # refused as a point message's
             r = off[0]
-            raise RecordingError(
-                f"{check.p}: /points {key_text(sweep[r], step[r], target=targets[0])} "
-                "orientation_wxyz is not a unit quaternion",
-                expected=f"length 1 (± {UNIT_TOL:g})",
-                got=f"length {norm[r]:.9g}",
-                fix="normalise the quaternion (w, x, y, z) before recording it",
-            )
+            checked_quaternion(check.p, key_text(sweep[r], step[r], target=targets[0]), q[r])
         wxyz = np.full((rows, n_t, 4), np.nan)
         wxyz[:, 0] = q
         sigma_o = np.full((rows, n_t), np.nan)
@@ -236,25 +219,25 @@ def _with_uncertainty(p: Path, cols: dict[str, np.ndarray]) -> dict[str, np.ndar
         cov[diagonal[:, None], [0, 1, 2], [0, 1, 2]] = var
         smallest = np.sqrt(var.min(axis=1))
         low = np.flatnonzero(~(smallest >= MIN_SIGMA_CM))
-        if len(low):
+        if len(low):  # refused as a point message's
             k = diagonal[low[0]]
             key = key_text(cols["point_sweep"][k], cols["point_step"][k],
                            target=cols["point_target"][k])  # fmt: skip
-            raise RecordingError(
-                f"{p}: /points {key} cov_cm2's smallest σ is {smallest[low[0]]:g} cm, under "
-                f"{MIN_SIGMA_CM:g} cm (1 nm)",
-                expected=f"a standard deviation of at least {MIN_SIGMA_CM:g} cm",
-                fix="record the instrument's σ in cm (a σ in m or mm recorded as cm?)",
-            )
+            checked_sigma(p, key, float(smallest[low[0]]), "cov_cm2's smallest σ")
     cols["point_cov_cm2"] = cov
     return cols
 
 
 class _Checker:
-    """Refusals of block message ``k``'s values, naming the column and the row's key."""
+    """Block message ``k`` (its payload ``m``, decoded ``cols``, rows' ``sweep``, ``step``
+    and times ``t``), and the refusals of its values, naming the column and the row's key."""
 
-    def __init__(self, p: Path, k: int, sweep: int, step: np.ndarray) -> None:
-        self.p, self.k, self.sweep, self.step = p, k, sweep, step
+    def __init__(self, p: Path, k: int, m: dict[str, Any], cols: dict[str, np.ndarray]) -> None:
+        self.p, self.k, self.m, self.cols = p, k, m, cols
+        self.sweep_id = sweep_id(m["sweep"])
+        self.step = m["first_step"] + np.arange(m["rows"], dtype=np.int64)
+        self.sweep = np.full(len(self.step), self.sweep_id, np.int64)
+        self.t = np.zeros(0, np.uint64)  # the rows' times (ns), once checked
 
     def refuse(self, got: str) -> None:
         raise RecordingError(
@@ -288,5 +271,5 @@ class _Checker:
             bound = hi if value > hi else lo
             self.refuse(
                 f"{name} must be {side} {bound:g}, a finite number: {value:g} at "
-                f"{key_text(self.sweep, self.step[r])}",
+                f"{key_text(self.sweep_id, self.step[r])}",
             )

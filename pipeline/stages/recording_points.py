@@ -119,11 +119,11 @@ def read_points(
                 fix="record either, not both (schemas/mcap/points.json)",
             )
         if "sigma_cm" in m:
-            sigma[k] = _checked_sigma(p, key, float(m["sigma_cm"]))
+            sigma[k] = checked_sigma(p, key, float(m["sigma_cm"]))
         if "cov_cm2" in m:
             cov[k] = _checked_cov(p, key, np.array(m["cov_cm2"], float))
         if "orientation_wxyz" in m:
-            wxyz[k] = _checked_quaternion(p, key, np.array(m["orientation_wxyz"], float))
+            wxyz[k] = checked_quaternion(p, key, np.array(m["orientation_wxyz"], float))
         if "orientation_sigma_deg" in m:
             if "orientation_wxyz" not in m:
                 raise RecordingError(
@@ -136,7 +136,7 @@ def read_points(
     if tiny.size:
         first = int(tiny[0])
         key = key_text(sweep[first], step[first], target=target[first])
-        _checked_sigma(p, key, float(sigma[first]))
+        checked_sigma(p, key, float(sigma[first]))
     cols["point_t_s"] = seconds_after(cols.pop("t_ns"), t0)
     return cols
 
@@ -218,11 +218,11 @@ def _checked_cov(p: Path, key: str, c: np.ndarray) -> np.ndarray:
             fix="record the covariance of (x, y, z) in cm^2, or sigma_cm",
         )
     small = float(np.sqrt(np.linalg.eigvalsh(c)[0]))
-    _checked_sigma(p, key, small, "cov_cm2's smallest σ")
+    checked_sigma(p, key, small, "cov_cm2's smallest σ")
     return c
 
 
-def _checked_sigma(p: Path, key: str, sigma: float, what: str = "sigma_cm") -> float:
+def checked_sigma(p: Path, key: str, sigma: float, what: str = "sigma_cm") -> float:
     """``sigma`` (cm), refused under :data:`MIN_SIGMA_CM`."""
     if not sigma >= MIN_SIGMA_CM:
         raise RecordingError(
@@ -233,7 +233,7 @@ def _checked_sigma(p: Path, key: str, sigma: float, what: str = "sigma_cm") -> f
     return sigma
 
 
-def _checked_quaternion(p: Path, key: str, q: np.ndarray) -> np.ndarray:
+def checked_quaternion(p: Path, key: str, q: np.ndarray) -> np.ndarray:
     """``q`` (4,), refused unless of unit length within :data:`UNIT_TOL`."""
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > UNIT_TOL:
