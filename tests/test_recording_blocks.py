@@ -315,3 +315,18 @@ def _number(cell: str | float) -> str | float:
         return float(cell)
     except ValueError:
         return cell
+
+
+def test_many_blocks_read_as_one(
+    pair: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Blocks of at most 2,000 bytes of columns (a few rows each: the size bound of wide
+    rows) read to the per-row recording's arrays."""
+    from pipeline.contract import blocks
+
+    monkeypatch.setattr(blocks, "BLOCK_BYTES", 2_000)
+    path = _imported(tmp_path / "small")
+    content = read_mcap(path, POINT_BLOCK_CHANNELS, "test")
+    sizes = [m["rows"] for _, m in content.messages[BLOCK_TOPIC]]
+    assert len(sizes) > 5 and sum(sizes) == 60 and max(sizes) <= 10, sizes
+    _same(_arrays(path), _arrays(pair[1]))

@@ -23,9 +23,11 @@ from pipeline.errors import RecordingError
 BLOCK_TOPIC = "/points/block"
 JOINT_TOPIC, POINT_TOPIC = "/robot/joint_state", "/points"
 BLOCK_SCHEMA = "points_block"
-#: Rows per block: 65,536 rows of a 6-joint, 1-target block are a 4.7 MB message, far
-#: under the reader's 256 MiB chunk bound, and a million rows are 16 messages.
+#: Rows per block: 65,536 rows of a 6-joint, 1-target block with σ are a 9.8 MB message, far
+#: under the reader's 256 MiB chunk bound, and a million rows are 16 messages; wider rows
+#: (many targets) are fewer a block, at most :data:`BLOCK_BYTES` of columns.
 BLOCK_ROWS = 1 << 16
+BLOCK_BYTES = 1 << 25
 _FIX = "repair the rig's writer; the schema is the contract (schemas/mcap/points_block.json)"
 
 
@@ -51,6 +53,13 @@ COLUMNS = {
     "tracker_drift_cm": Column("<f8", ()),
     "tracker_residual_cm": Column("<f8", ()),
 }
+
+
+def rows_per_block(columns: dict[str, np.ndarray]) -> int:
+    """How many rows of ``columns`` (rows first) a block takes: :data:`BLOCK_ROWS`, fewer
+    when they would hold more than :data:`BLOCK_BYTES`."""
+    row = sum(a[:1].nbytes for a in columns.values())
+    return max(1, min(BLOCK_ROWS, BLOCK_BYTES // max(row, 1)))
 
 
 def _encoded(values: np.ndarray, col: Column) -> str:

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.contract.blocks import BLOCK_ROWS, BLOCK_TOPIC, block_payload, noise_fields
+from pipeline.contract.blocks import BLOCK_TOPIC, block_payload, noise_fields, rows_per_block
 from pipeline.importers.rows import MeasuredRows
 from pipeline.importers.sweeps import whole_turns
 from pipeline.rig.recorder import Message
@@ -194,9 +194,9 @@ def _blocks(
     rows: MeasuredRows, sweeps: dict[str, np.ndarray], c0: int, units: list[str], ids: list[str]
 ) -> list[Message]:
     """The ``/points/block`` messages of a pose set: per sweep (``poses``, ``check``) its
-    rows in step order, :data:`~pipeline.contract.blocks.BLOCK_ROWS` a message, what the
-    per-configuration messages would carry (:mod:`pipeline.contract.blocks`); the first
-    is the ``c0``-th configuration of the recording."""
+    rows in step order, :func:`~pipeline.contract.blocks.rows_per_block` a message, what
+    the per-configuration messages would carry (:mod:`pipeline.contract.blocks`); the
+    first is the ``c0``-th configuration of the recording."""
     names = list(dict.fromkeys(rows.files))
     files = None
     if len(names) > 1:  # one file: armsig.source names it, not every row (issue 42)
@@ -204,25 +204,20 @@ def _blocks(
         files = np.array([number[f] for f in rows.files], np.int32)
     out = []
     for sweep, index in sweeps.items():
-        for start in range(0, len(index), BLOCK_ROWS):
-            k = index[start : start + BLOCK_ROWS]
-            out.append(_block(rows, (sweep, start), k, units, ids, names, files, c0 + start))
+        per = rows_per_block(_columns(rows, index[:1], ids, names, files)[0]) if len(index) else 1
+        for start in range(0, len(index), per):
+            cols, fields = _columns(rows, index[start : start + per], ids, names, files)
+            payload = block_payload(sweep, start, units, ids, cols, **fields)
+            out.append(Message(BLOCK_TOPIC, T0_NS + (c0 + start + 1) * STEP_NS, payload))
         c0 += len(index)
     return out
 
 
-def _block(
-    rows: MeasuredRows,
-    key: tuple[str | int, int],
-    k: np.ndarray,
-    units: list[str],
-    ids: list[str],
-    names: list[str],
-    files: np.ndarray | None,
-    c0: int,
-) -> Message:
-    """One block: rows ``k`` (in step order from ``key``), the ``c0``-th configuration of
-    the recording first (its time, as a per-configuration message's)."""
+def _columns(
+    rows: MeasuredRows, k: np.ndarray, ids: list[str], names: list[str], files: np.ndarray | None
+) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """A block's columns and fields of rows ``k``, in step order (its time as a
+    per-configuration message's: one configuration a second)."""
     cols: dict[str, np.ndarray] = {
         "dt_ns": np.arange(len(k), dtype=np.int64) * STEP_NS,
         "q_commanded": rows.q[k],  # and the encoder's: a file holds what the joints read
@@ -245,5 +240,4 @@ def _block(
         fields["source_files"] = names
     if rows.lines is not None:
         cols["source_line"] = np.maximum(rows.lines[k], 0)
-    payload = block_payload(key[0], key[1], units, ids, cols, **fields)
-    return Message(BLOCK_TOPIC, T0_NS + (c0 + 1) * STEP_NS, payload)
+    return cols, fields
