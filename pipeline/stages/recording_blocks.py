@@ -20,8 +20,11 @@ import numpy as np
 
 from pipeline.contract.blocks import BLOCK_SCHEMA, BLOCK_TOPIC, block_columns
 from pipeline.errors import RecordingError
+from pipeline.schemas import mcap_json_schema
 from pipeline.stages.recording_keys import key_text, planned_limit, refuse_unplanned
 from pipeline.stages.recording_points import (
+    MAX_COORD_CM,
+    MAX_SIGMA_CM,
     MIN_SIGMA_CM,
     UNIT_TOL,
     checked_quaternion,
@@ -29,10 +32,15 @@ from pipeline.stages.recording_points import (
 )
 from pipeline.sweeps import sweep_id
 
-#: Bounds of the schemas of /robot/joint_state and /points (schemas/mcap/).
-_Q_MAX, _XYZ_MAX, _SIGMA_MAX, _PAYLOAD_MAX, _DRIFT_MAX = 1e5, 1e5, 1e3, 1e4, 1e5
-_QUATERNION_MAX = 1.000001
-_LINE_MAX = 100_000_000
+#: Bounds of the schemas of /robot/joint_state and /points (schemas/mcap/), read there.
+_STATE = mcap_json_schema("joint_state")["properties"]
+_Q_MAX = float(_STATE["q_commanded"]["items"]["maximum"])
+_PAYLOAD_MAX = float(_STATE["payload_kg"]["maximum"])
+_DRIFT_MAX = float(_STATE["tracker_drift_cm"]["maximum"])
+_LINE_MAX = int(_STATE["source_line"]["maximum"])
+_QUATERNION_MAX = float(
+    mcap_json_schema("points")["properties"]["orientation_wxyz"]["items"]["maximum"]
+)
 _UINT64_MAX, _INT64_MAX = (1 << 64) - 1, (1 << 63) - 1
 _FIX = "repair the rig's writer; the schema is the contract (schemas/mcap/points_block.json)"
 
@@ -171,10 +179,10 @@ def _point_columns(check: _Checker) -> dict[str, np.ndarray | None]:
     targets = list(m["targets"])
     rows, n_t = len(step), len(targets)
     xyz = cols["points_cm"]
-    check.bounded("points_cm", xyz, -_XYZ_MAX, _XYZ_MAX)
+    check.bounded("points_cm", xyz, -MAX_COORD_CM, MAX_COORD_CM)
     sigma = cols.get("sigma_cm")
     if sigma is not None:
-        check.bounded("sigma_cm", sigma, 0.0, _SIGMA_MAX, above=True)
+        check.bounded("sigma_cm", sigma, 0.0, MAX_SIGMA_CM, above=True)
     wxyz = sigma_o = None
     if "orientation_wxyz" in cols:
         q = cols["orientation_wxyz"]
