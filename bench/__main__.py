@@ -11,6 +11,7 @@ from bench import (
     identify,
     identify_cost,
     ik,
+    import_rows,
     kinematics,
     montecarlo,
     peers,
@@ -49,3 +50,5 @@ if __name__ == "__main__":
     montecarlo.main()
     print()
     fleet.main()
+    print()
+    import_rows.quick()  # before/after: python -m bench.import_rows OTHER_ROOT

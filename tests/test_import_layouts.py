@@ -7,6 +7,7 @@ mismatch is one line naming the file."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +25,9 @@ from layout_data import (
 from typer.testing import CliRunner
 
 from pipeline.cli import EXIT_REFUSED, app
-from pipeline.contract.channels import POINT_CHANNELS
-from pipeline.contract.mcap_read import read_mcap
+from pipeline.contract.blocks import row_messages
+from pipeline.contract.channels import POINT_BLOCK_CHANNELS
+from pipeline.contract.mcap_read import McapContent, read_mcap
 from pipeline.importers import import_file
 
 LAYOUTS = {
@@ -49,10 +51,18 @@ def imported(folder: Path, layout, ps=None) -> Path:  # type: ignore[no-untyped-
     return folder / "s"
 
 
+def _read(session: Path) -> McapContent:
+    """The recording, a pose set's blocks as the per-row messages they stand for (issue
+    45: the messages as written before blocks)."""
+    path = session / "recording.mcap"
+    content = read_mcap(path, POINT_BLOCK_CHANNELS, "test")
+    return replace(content, messages=row_messages(path, content.messages))
+
+
 def messages(session: Path, keep_source: bool = False) -> dict[str, list[dict]]:
     """The recording's messages; ``keep_source``: each joint state's source_file as the
     contract gives it (its own, else armsig.source's one file), else none."""
-    content = read_mcap(session / "recording.mcap", POINT_CHANNELS, "test")
+    content = _read(session)
     out = {t: [m for _, m in msgs] for t, msgs in content.messages.items()}
     out["/rig/description"] = []  # names the files
     one_file = content.metadata["armsig.source"]["file"]
@@ -83,10 +93,10 @@ def test_rows_keep_their_source_file_and_line(tmp_path: Path) -> None:
     assert (first["source_file"], first["source_line"]) == ("region_1.csv", 2)
     last = max(js, key=lambda m: m["step"])
     assert last["source_file"] == "region_7.csv" and last["source_line"] == 7  # 6 rows + header
-    raw = read_mcap(session / "recording.mcap", POINT_CHANNELS, "test").messages
+    raw = _read(session).messages
     assert all("source_file" in m for _, m in raw["/robot/joint_state"])  # several files
     mat = imported(tmp_path / "mat", LAYOUTS["mat v7.3"])
-    content = read_mcap(mat / "recording.mcap", POINT_CHANNELS, "test")
+    content = _read(mat)
     assert all("source_file" not in m for _, m in content.messages["/robot/joint_state"])
     js = messages(mat, keep_source=True)["/robot/joint_state"]  # one file: armsig.source's
     assert {m["source_file"] for m in js} == {"poses_v73.mat"}

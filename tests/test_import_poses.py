@@ -16,7 +16,8 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from pipeline.cli import EXIT_REFUSED, app
-from pipeline.contract.channels import POINT_CHANNELS
+from pipeline.contract.blocks import row_messages
+from pipeline.contract.channels import POINT_BLOCK_CHANNELS
 from pipeline.contract.mcap_read import read_mcap
 from pipeline.errors import ImportFileError
 from pipeline.evaluate.validate import validate_against
@@ -29,8 +30,11 @@ from pipeline.units import joints_to_internal
 
 
 def _messages(session: Path) -> dict[str, list[dict]]:
-    content = read_mcap(session / "recording.mcap", POINT_CHANNELS, "re-import")
-    return {t: [m for _, m in msgs] for t, msgs in content.messages.items()}
+    """The recording's messages, a pose set's blocks as the per-row messages they stand
+    for (issue 45)."""
+    path = session / "recording.mcap"
+    content = read_mcap(path, POINT_BLOCK_CHANNELS, "re-import")
+    return {t: [m for _, m in msgs] for t, msgs in row_messages(path, content.messages).items()}
 
 
 def _import(tmp: Path, *, map_text: str | None = None, **table: str) -> tuple[Path, np.ndarray]:

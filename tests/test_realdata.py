@@ -275,25 +275,30 @@ SERIES_C_MESSAGES = "19f0b43ec769f87ee7739ef9f72bcba7763cc7a703484267ae353eaa556
 @needs_ur10
 def test_ur10_series_c_import_unchanged(tmp_path: Path) -> None:
     """Issue 42: the three-column-group layout imports to the same messages, bit for bit
-    (the joint states gain only source_line); every row names line and file."""
+    (the joint states gain only source_line); every row names line and file. Issue 45: the
+    pose set is written in blocks, which stand for these messages exactly."""
     import hashlib
     import json
 
-    from pipeline.contract.channels import POINT_CHANNELS
+    from pipeline.contract.blocks import row_messages
+    from pipeline.contract.channels import POINT_BLOCK_CHANNELS
     from pipeline.contract.mcap_read import read_mcap
 
     src = UR10_DATA / "Series_C" / "measurements_random_poses.csv"
     import_file(
         src, "table", UR10_EXAMPLE / "ur10.toml", tmp_path / "c", UR10_EXAMPLE / "series_c.toml"
     )
-    content = read_mcap(tmp_path / "c" / "recording.mcap", POINT_CHANNELS, "test")
+    path = tmp_path / "c" / "recording.mcap"
+    content = read_mcap(path, POINT_BLOCK_CHANNELS, "test")
+    assert content.messages["/points/block"]  # issue 45: a pose set's rows in blocks
+    messages = row_messages(path, content.messages)  # the per-row messages they stand for
     h = hashlib.sha256()
-    for topic in sorted(content.messages):
-        for t, m in content.messages[topic]:
+    for topic in sorted(messages):
+        for t, m in messages[topic]:
             m = {k: v for k, v in m.items() if k not in ("source_file", "source_line")}
             h.update(json.dumps([topic, t, m], sort_keys=True).encode())
     assert h.hexdigest() == SERIES_C_MESSAGES
-    lines = [m["source_line"] for _, m in content.messages["/robot/joint_state"]]
+    lines = [m["source_line"] for _, m in messages["/robot/joint_state"]]
     assert sorted(lines) == list(range(2, 2775))  # a header, then 2,773 poses
 
 

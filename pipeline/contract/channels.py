@@ -35,8 +35,12 @@ IMAGE_SET_CHANNELS = {
 #: An imported image set with joint readings (issue 40): a camera recording, and its
 #: images by content hash (a channel the reader allows and does not need).
 CAMERA_IMAGE_CHANNELS = {**CAMERA_CHANNELS, "/camera/images": "camera_images"}
+#: A point session whose configurations are written in blocks of columns (issue 45,
+#: ``pipeline import``): ``/points/block`` beside, or instead of, the per-configuration
+#: ``/robot/joint_state`` and ``/points`` messages (:mod:`pipeline.contract.blocks`).
+POINT_BLOCK_CHANNELS = {**POINT_CHANNELS, "/points/block": "points_block"}
 #: Channels a recording of a sensor kind may hold besides its own.
-OPTIONAL_CHANNELS = {"camera": ("/camera/images",)}
+OPTIONAL_CHANNELS = {"camera": ("/camera/images",), "points": ("/points/block",)}
 #: sensor kind of ``/rig/description`` (absent: ``sonic``) -> channels of its recording
 SENSOR_CHANNELS = {"sonic": CHANNELS, "points": POINT_CHANNELS, "camera": CAMERA_CHANNELS}
 #: topic -> schema file of the evaluation recording ``evaluation.mcap`` (docs/evaluation.md)

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import ImportFileError
+from pipeline.importers.numeric import NumberRows, numeric_rows
 
 #: A cell: the text of a delimited file, or a number of a MATLAB variable.
 CellValue = str | float
@@ -35,7 +36,7 @@ class Block:
     name: str
     file: str
     header: list[str] | None
-    rows: list[tuple[int, list[CellValue]]]
+    rows: Sequence[tuple[int, list[CellValue]]]  # NumberRows: a plain numeric file's
     line: int = 1
     word: str = "line"  # what a row's number counts: a text file's line, a .mat row
 
@@ -72,6 +73,8 @@ class Block:
         """Columns of a row (the header's, else the widest row's)."""
         if self.header is not None:
             return len(self.header)
+        if isinstance(self.rows, NumberRows):
+            return int(self.rows.values.shape[1])
         return max((len(c) for _, c in self.rows), default=0)
 
 
@@ -150,6 +153,9 @@ def joined(blocks: list[Block]) -> Grid:
             "each is pose i",
             fix="give files of the same poses, or delete the extra rows",
         )
+    numbers = blocks[0].rows
+    if len(blocks) == 1 and isinstance(numbers, NumberRows):  # numbers already
+        return Grid((blocks[0],), (0,), numbers.values, numbers.lines[:, None])  # type: ignore[arg-type]
     if len(blocks) == 1:
         b = blocks[0]
         lines = np.array([line for line, _ in b.rows], np.int64)[:, None]
@@ -173,14 +179,22 @@ def delimited_block(
     header: bool,
     delimiter: str | None,
     decimal: str,
+    numeric: bool = False,
 ) -> Block:
     """A delimited text file's block: its header (``header``) and its data rows after
-    ``skip_rows`` lines, without blank lines and the lines of ``skip_lines``."""
+    ``skip_rows`` lines, without blank lines and the lines of ``skip_lines``. ``numeric``:
+    a plain numeric file is read by polars (:mod:`pipeline.importers.numeric`; the caller
+    says that its map reads no text cell, stacks no rows and skips no line)."""
     from pipeline.importers.sscanss2 import csv_rows, editor_lines, read_text
 
     src = path.name
+    if numeric and decimal == "." and not skip_lines:
+        plain = numeric_rows(path, skip_rows, header, delimiter,
+                             lambda lines: guessed_delimiter(lines, decimal))  # fmt: skip
+        if plain is not None:
+            return Block(src, src, plain[0], plain[1], skip_rows + 1)
     lines = editor_lines(read_text(path))[skip_rows:]
-    delim = delimiter or _guessed_delimiter(lines, decimal)
+    delim = delimiter or guessed_delimiter(lines, decimal)
     reader = csv_rows(lines, src, skip_rows, delimiter=delim, skipinitialspace=True)
     names: list[str] | None = None
     hl = skip_rows + 1  # the header's line
@@ -216,7 +230,7 @@ def _no_wider(
         yield line, fields
 
 
-def _guessed_delimiter(lines: list[str], decimal: str) -> str:
+def guessed_delimiter(lines: list[str], decimal: str) -> str:
     """A delimiter guessed among , ; tab space (not ',' with decimal commas)."""
     candidates = ";\t " if decimal == "," else ",;\t "
     try:

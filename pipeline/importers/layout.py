@@ -157,8 +157,18 @@ def _stacked_blocks(
 def delimited_loader(imap: ImportMap) -> Callable[[Path, set[str | None]], dict[str | None, Block]]:
     """A delimited file's one block, read with the map's delimiter, skips and header."""
 
+    # A map that reads no text cell (sweep, check), stacks no rows and joins no files
+    # reads a plain numeric file with polars (issue 45).
+    numeric = (
+        imap.sweep_column in (None, "infer")
+        and (imap.check is None or imap.check.column is None)
+        and imap.points_per_pose is None
+        and imap.pose_column is None
+        and not imap.joined
+    )
+
     def load(path: Path, variables: set[str | None]) -> dict[str | None, Block]:
         return {None: delimited_block(path, imap.skip_rows, imap.skip_lines, imap.header,
-                                      imap.delimiter, imap.decimal)}  # fmt: skip
+                                      imap.delimiter, imap.decimal, numeric)}  # fmt: skip
 
     return load

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.contract.blocks import BLOCK_TOPIC, block_payload, noise_fields, rows_per_block
 from pipeline.importers.rows import MeasuredRows
 from pipeline.importers.sweeps import whole_turns
 from pipeline.rig.recorder import Message
@@ -86,9 +87,11 @@ def session_messages(
     instrument: str,
     tool_local_cm: np.ndarray | None = None,
     robot_id: str | None = None,
+    in_blocks: bool = True,
 ) -> list[Message]:
     """The recording's messages: descriptions, then joint states and points by (sweep,
-    step). ``tool_local_cm``: the design tool point in the last D-H frame (cm), else the
+    step); a pose set's in ``/points/block`` messages unless not ``in_blocks``.
+    ``tool_local_cm``: the design tool point in the last D-H frame (cm), else the
     robot description's tool; ``robot_id``: the arm's own id, recorded when given."""
     units = [j.unit for j in robot.joints]
     ids = list(rows.targets)
@@ -112,9 +115,13 @@ def session_messages(
         )
     configs += [("tool", s, int(k)) for s, k in enumerate(tool.rows)]
     poses = np.flatnonzero(rows.sweep == POSES_SWEEP)
-    configs += [("poses", s, int(k)) for s, k in enumerate(poses)]
     check = np.flatnonzero(rows.sweep == CHECK_SWEEP)
-    configs += [("check", s, int(k)) for s, k in enumerate(check)]
+    blocks = in_blocks and len(poses) > 0  # a pose set's rows as columns (issue 45)
+    if blocks:
+        blocked = _blocks(rows, {"poses": poses, "check": check}, len(configs), units, ids)
+    else:
+        configs += [("poses", s, int(k)) for s, k in enumerate(poses)]
+        configs += [("check", s, int(k)) for s, k in enumerate(check)]
     local = robot.tool.xyz_cm if tool_local_cm is None else tool_local_cm
     plan: dict[str, Any] = {
         "n_avg": 1,
@@ -178,15 +185,59 @@ def session_messages(
                 if rows.orientation_sigma_deg is not None:
                     point["orientation_sigma_deg"] = float(rows.orientation_sigma_deg)
             if rows.sigma is not None:
-                point.update(_noise(rows.sigma[target][k]))
+                point.update(noise_fields(rows.sigma[target][k]))
             messages.append(Message("/points", t_ns, point))
-    return messages
+    return messages + blocked if blocks else messages
 
 
-def _noise(sigma: np.ndarray) -> dict[str, Any]:
-    """A point's stated σ of x, y, z (cm): ``sigma_cm`` when they are equal, else the
-    diagonal ``cov_cm2``."""
-    if sigma[0] == sigma[1] == sigma[2]:
-        return {"sigma_cm": float(sigma[0])}
-    return {"cov_cm2": [[float(s * s) if r == c else 0.0 for c, s in enumerate(sigma)]
-                        for r in range(3)]}  # fmt: skip
+def _blocks(
+    rows: MeasuredRows, sweeps: dict[str, np.ndarray], c0: int, units: list[str], ids: list[str]
+) -> list[Message]:
+    """The ``/points/block`` messages of a pose set: per sweep (``poses``, ``check``) its
+    rows in step order, :func:`~pipeline.contract.blocks.rows_per_block` a message, what
+    the per-configuration messages would carry (:mod:`pipeline.contract.blocks`); the
+    first is the ``c0``-th configuration of the recording."""
+    names = list(dict.fromkeys(rows.files))
+    files = None
+    if len(names) > 1:  # one file: armsig.source names it, not every row (issue 42)
+        number = {f: i for i, f in enumerate(names)}
+        files = np.array([number[f] for f in rows.files], np.int32)
+    out = []
+    for sweep, index in sweeps.items():
+        per = rows_per_block(_columns(rows, index[:1], ids, names, files)[0]) if len(index) else 1
+        for start in range(0, len(index), per):
+            cols, fields = _columns(rows, index[start : start + per], ids, names, files)
+            payload = block_payload(sweep, start, units, ids, cols, **fields)
+            out.append(Message(BLOCK_TOPIC, T0_NS + (c0 + start + 1) * STEP_NS, payload))
+        c0 += len(index)
+    return out
+
+
+def _columns(
+    rows: MeasuredRows, k: np.ndarray, ids: list[str], names: list[str], files: np.ndarray | None
+) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """A block's columns and fields of rows ``k``, in step order (its time as a
+    per-configuration message's: one configuration a second)."""
+    cols: dict[str, np.ndarray] = {
+        "dt_ns": np.arange(len(k), dtype=np.int64) * STEP_NS,
+        "q_commanded": rows.q[k],  # and the encoder's: a file holds what the joints read
+        "points_cm": np.stack([rows.targets[t][k] for t in ids], axis=1),
+    }
+    fields: dict[str, Any] = {}
+    if rows.sigma is not None:
+        cols["sigma_cm"] = np.stack([rows.sigma[t][k] for t in ids], axis=1)
+    if rows.orientation_wxyz is not None:
+        cols["orientation_wxyz"] = rows.orientation_wxyz[k]
+        if rows.orientation_sigma_deg is not None:
+            fields["orientation_sigma_deg"] = float(rows.orientation_sigma_deg)
+    if rows.payload_kg is not None:
+        cols["payload_kg"] = rows.payload_kg[k]
+    if rows.drift_cm is not None:  # fixed targets: the tracker's drift at each pose
+        cols["tracker_drift_cm"] = rows.drift_cm[k]
+        cols["tracker_residual_cm"] = rows.residual_cm[k]  # type: ignore[index]
+    if files is not None:
+        cols["source_file"] = files[k]
+        fields["source_files"] = names
+    if rows.lines is not None:
+        cols["source_line"] = np.maximum(rows.lines[k], 0)
+    return cols, fields

@@ -25,6 +25,7 @@ from pipeline.importers.rows import (
     ANGLE_DEG,
     LENGTH_CM,
     MeasuredRows,
+    Places,
     concat_rows,
     readings_in_boundary_units,
     unit_factor,
@@ -169,7 +170,7 @@ def _parsed(cols: Columns, path: Path, imap: ImportMap, robot: RobotDescription)
     held = [] if cols.check is None else [
         _held_cell(f, cols.check, grid, r) for r, f in enumerate(grid.rows)]  # fmt: skip
     block = grid.blocks[0]
-    if not grid.rows:
+    if not len(grid.rows):
         raise ImportFileError(f"{block.name}: no rows", fix="check skip_rows and header in the map")
     n = len(grid.rows)
     units = [j.unit for j in imap.joints]
@@ -178,7 +179,7 @@ def _parsed(cols: Columns, path: Path, imap: ImportMap, robot: RobotDescription)
     if held:
         sw = np.where(held, CHECK_SWEEP, POSES_SWEEP)
     return MeasuredRows(
-        path, tuple(f"{block.word} {v}" for v in grid.lines[:, 0]), sw, qq,
+        path, Places(block.word, grid.lines[:, 0].copy()), sw, qq,
         pts,
         orientation_wxyz=_quaternions(angles, imap),
         sigma=_sigmas(rows_sigma=sig, ids=list(cols.targets), n=n),
@@ -233,6 +234,10 @@ def _numbers(grid: Grid, ks: list[tuple[int, str]], decimal: str) -> dict[int, n
     holds no '.') is converted at once, the same doubles as Python's ``float``; otherwise
     every cell is read in row order (:func:`cell_reader`), so that the first bad cell
     of the file is the one refused."""
+    if isinstance(grid.rows, np.ndarray):  # a plain numeric file (importers/numeric.py)
+        if all(k < grid.rows.shape[1] for k, _ in ks):
+            return {k: grid.rows[:, k] for k, _ in ks}
+        return _numbers_by_cell(grid, ks, decimal)
     out: dict[int, np.ndarray] = {}
     for k, _ in ks:
         try:

@@ -7,7 +7,8 @@ import os
 from pathlib import Path
 
 from pipeline.atomic import TEMP_SUFFIX, remove_debris
-from pipeline.contract.channels import POINT_CHANNELS, SOURCE_METADATA
+from pipeline.contract.blocks import BLOCK_TOPIC
+from pipeline.contract.channels import POINT_BLOCK_CHANNELS, POINT_CHANNELS, SOURCE_METADATA
 from pipeline.contract.digest import file_sha256
 from pipeline.errors import ImportFileError, RecordingError
 from pipeline.rig.recorder import Message, refuse_existing_recording, write_recording
@@ -43,7 +44,9 @@ def write_imported(
         refuse_existing_recording(session_dir, force, "the imported one")
         remove_debris(session_dir)  # the temp files of a killed import (issue 44)
         staged = session_dir / f".{recording.name}.import{TEMP_SUFFIX}"  # debris if killed
-        write_recording(staged, messages, POINT_CHANNELS, {SOURCE_METADATA: source})
+        blocks = any(m.topic == BLOCK_TOPIC for m in messages)  # a pose set's (issue 45)
+        channels = POINT_BLOCK_CHANNELS if blocks else POINT_CHANNELS
+        write_recording(staged, messages, channels, {SOURCE_METADATA: source})
         read_back(staged, source["file"], "check the map's length_unit (mm declared as m?), "
                   "columns and target ids")  # fmt: skip
         os.replace(staged, recording)

@@ -21,9 +21,11 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.contract.blocks import BLOCK_TOPIC
 from pipeline.contract.channels import (
     IMAGE_SET_CHANNELS,
     OPTIONAL_CHANNELS,
+    POINT_BLOCK_CHANNELS,
     SENSOR_CHANNELS,
     SOURCE_METADATA,
 )
@@ -36,6 +38,7 @@ from pipeline.stages.recording_keys import (
     pair_keys,
     refuse_duplicates,
     refuse_step_gaps,
+    seconds_after,
 )
 from pipeline.sweeps import CHECK_SWEEP, POSES_SWEEP, TOOL_SWEEP, sweep_id, sweep_name
 
@@ -44,7 +47,7 @@ __all__ = ["CHECK_SWEEP", "POSES_SWEEP", "TOOL_SWEEP", "Recording", "read_record
 #: The stage list of a session of flange poses without joints (issue 40)
 FLANGE_KIND = "camera-flange"
 #: every channel a session recording may hold (sonic and point sensors)
-_ALL = (*SENSOR_CHANNELS.values(), IMAGE_SET_CHANNELS)  # image sets: issue 40
+_ALL = (*SENSOR_CHANNELS.values(), IMAGE_SET_CHANNELS, POINT_BLOCK_CHANNELS)  # issues 40, 45
 TOPICS = tuple(dict.fromkeys(t for ch in _ALL for t in ch))
 _KNOWN = {t: s for ch in _ALL for t, s in ch.items()}
 #: Recorded joint values may pass the robot's limits by this much (deg or cm): far
@@ -52,6 +55,8 @@ _KNOWN = {t: s for ch in _ALL for t, s in ch.items()}
 #: (tenths of a degree), far below what garbage or a wrong unit gives.
 LIMIT_MARGIN = 5.0
 _FIX = "re-copy the file from the rig, or re-record the session"
+#: The channels whose rows a point session's /points/block messages may carry instead.
+BLOCK_REPLACES = ("/robot/joint_state", "/points")
 
 
 @dataclass(frozen=True)
@@ -141,7 +146,7 @@ def read_recording(path: str | Path, sha256: str | None = None) -> Recording:
 @lru_cache(maxsize=4)
 def _read_cached(p: Path, sha: str) -> Recording:
     from pipeline.contract.mcap_read import read_mcap  # parsing: only when not cached
-    from pipeline.stages import recording_points
+    from pipeline.stages import recording_blocks, recording_points
 
     content = read_mcap(p, _KNOWN, _FIX)
     msgs = content.messages
@@ -151,7 +156,8 @@ def _read_cached(p: Path, sha: str) -> Recording:
     if msgs["/robot/flange_pose"]:  # an image set without joint readings (issue 40)
         return _flange_recording(p, sha, msgs, sensor)
     topics = tuple(SENSOR_CHANNELS[sensor])
-    missing = [t for t in topics if not msgs[t]]
+    in_blocks = BLOCK_REPLACES if msgs[BLOCK_TOPIC] else ()  # rows as columns (issue 45)
+    missing = [t for t in topics if not msgs[t] and t not in in_blocks]
     if missing:
         raise RecordingError(
             f"{p}: missing channel(s) {', '.join(missing)}",
@@ -172,32 +178,13 @@ def _read_cached(p: Path, sha: str) -> Recording:
     desc, units = _check_rig_and_robot(p, rig, robot, sensor)
     n_points, n_avg = _planned(p, robot, len(units), sensor)
 
-    js = msgs["/robot/joint_state"]
-    j_sweep, j_step = message_keys(p, "/robot/joint_state", [m for _, m in js], n_points)
-    order = np.lexsort((j_step, j_sweep))
-    js = [js[k] for k in order]
-    j_sweep, j_step = j_sweep[order], j_step[order]
-    refuse_duplicates(p, "/robot/joint_state", j_sweep, j_step)
-    refuse_step_gaps(p, j_sweep, j_step)
-    q_cmd, q_enc = _joint_values(p, js, j_sweep, j_step, units, desc)
-    t0 = min(t for t, _ in js)
-    joints = {
-        "joint_sweep": j_sweep,
-        "joint_step": j_step,
-        "joint_t_s": np.array([(t - t0) * 1e-9 for t, _ in js]),
-        "q_commanded": q_cmd,
-        "q_encoder": q_enc,
-        "joint_payload_kg": np.array([m.get("payload_kg", np.nan) for _, m in js], float),
-        "joint_source_file": np.array([m.get("source_file", one_file) for _, m in js], str),
-        "joint_source_line": np.array([m.get("source_line", 0) for _, m in js], np.int64),
-        "joint_drift_cm": np.array(
-            [
-                [m.get("tracker_drift_cm", np.nan), m.get("tracker_residual_cm", np.nan)]
-                for _, m in js
-            ],
-            float,
-        ).reshape(-1, 2),  # fmt: skip
-    }
+    b_joints, b_points = recording_blocks.block_rows(p, msgs[BLOCK_TOPIC], n_points, units,
+                                                     one_file)  # fmt: skip
+    joints, t_ns = _joint_arrays(p, msgs["/robot/joint_state"], b_joints, n_points, units, desc,
+                                 one_file)  # fmt: skip
+    t0 = int(t_ns.min())
+    joints["joint_t_s"] = seconds_after(t_ns, t0)
+    j_sweep, j_step = joints["joint_sweep"], joints["joint_step"]
     if sensor == "camera":
         from pipeline.stages import recording_camera, recording_flange
 
@@ -217,7 +204,9 @@ def _read_cached(p: Path, sha: str) -> Recording:
         return Recording(p, sha, rig, robot, sensor, **joints, **_no_cycles(),
                          **recording_points.no_points(), **det, **images)  # fmt: skip
     if sensor == "points":
-        measured = recording_points.read_points(p, msgs["/points"], robot["plan"], n_points, t0)
+        measured = recording_points.read_points(
+            p, msgs["/points"], robot["plan"], n_points, t0, b_points
+        )
         ps, pk, pt = measured["point_sweep"], measured["point_step"], measured["point_target"]
         pair_keys(
             p, j_sweep, j_step, ps, pk,
@@ -395,19 +384,66 @@ def _planned(
     return points, int(plan["n_avg"])
 
 
-def _joint_values(
+def _joint_arrays(
     p: Path,
     js: list[tuple[int, dict[str, Any]]],
-    sweep: np.ndarray,
-    step: np.ndarray,
+    blocks: dict[str, np.ndarray] | None,
+    n_points: dict[int, int | None],
     units: list[str],
     desc: Any,  # RobotDescription
-) -> tuple[np.ndarray, np.ndarray]:
-    """Commanded and encoder readings (K, n), checked against units and the joint limits
-    (the joint values, through the robot's coupling when it has one)."""
+    one_file: str,
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """The ``joint_*`` arrays of the joint-state messages ``js`` and the rows of the
+    blocks (:mod:`pipeline.stages.recording_blocks`, None: none), sorted by key, and
+    their times (ns, uint64): each key planned and recorded once, no step gap, the
+    readings fitting the robot's units and within its joint limits (through its coupling
+    when it has one)."""
+    from pipeline.stages.recording_blocks import merged
+
     n = len(units)
-    for k, (_, m) in enumerate(js):
-        if m["units"] != units or len(m["q_commanded"]) != n or len(m["q_encoder"]) != n:
+    payloads = [m for _, m in js]
+    sweep, step = message_keys(p, "/robot/joint_state", payloads, n_points)
+    fits = [
+        m["units"] == units and len(m["q_commanded"]) == n and len(m["q_encoder"]) == n
+        for m in payloads
+    ]
+    none = [math.nan] * n  # a message that does not fit: refused once sorted
+
+    def q(name: str) -> np.ndarray:
+        return np.array([m[name] if f else none for m, f in zip(payloads, fits, strict=True)],
+                        float).reshape(-1, n)  # fmt: skip
+
+    cols = {
+        "joint_sweep": sweep,
+        "joint_step": step,
+        "t_ns": np.array([t for t, _ in js], np.uint64),
+        "q_commanded": q("q_commanded"),
+        "q_encoder": q("q_encoder"),
+        "joint_payload_kg": np.array([m.get("payload_kg", np.nan) for m in payloads], float),
+        "joint_source_file": np.array([m.get("source_file", one_file) for m in payloads], str),
+        "joint_source_line": np.array([m.get("source_line", 0) for m in payloads], np.int64),
+        "joint_drift_cm": np.array(
+            [
+                [m.get("tracker_drift_cm", np.nan), m.get("tracker_residual_cm", np.nan)]
+                for m in payloads
+            ],
+            float,
+        ).reshape(-1, 2),  # fmt: skip
+    }
+    message = np.arange(len(js))
+    if blocks is not None:
+        cols = merged([cols, blocks]) if len(js) else blocks
+        message = np.r_[message, np.full(len(blocks["joint_step"]), -1)]
+    order = np.lexsort((cols["joint_step"], cols["joint_sweep"]))
+    if not (order == np.arange(len(order))).all():  # blocks are written in key order
+        cols = {k: v[order] for k, v in cols.items()}
+        message = message[order]
+    sweep, step = cols["joint_sweep"], cols["joint_step"]
+    refuse_duplicates(p, "/robot/joint_state", sweep, step)
+    refuse_step_gaps(p, sweep, step)
+    for k in np.flatnonzero(message >= 0):
+        m = payloads[message[k]]
+        if not fits[message[k]]:
             raise RecordingError(
                 f"{p}: /robot/joint_state {key_text(sweep[k], step[k])} does not fit the robot",
                 expected=f"{n} joint values in units {units}",
@@ -415,13 +451,11 @@ def _joint_values(
                 f"{len(m['q_encoder'])} encoder values",
                 fix="record one value per joint of /robot/description, deg or cm by joint type",
             )
-    q_cmd = np.array([m["q_commanded"] for _, m in js], float).reshape(-1, n)
-    q_enc = np.array([m["q_encoder"] for _, m in js], float).reshape(-1, n)
     limits = desc.limits
     lo, hi = limits[:, 0] - LIMIT_MARGIN, limits[:, 1] + LIMIT_MARGIN
-    for name, q_read in (("q_encoder", q_enc), ("q_commanded", q_cmd)):
-        q = desc.joints_from_readings(q_read)
-        bad = np.argwhere(~((q >= lo) & (q <= hi)))
+    for name in ("q_encoder", "q_commanded"):
+        q_joint = desc.joints_from_readings(cols[name])
+        bad = np.argwhere(~((q_joint >= lo) & (q_joint <= hi)))
         if len(bad):
             k, j = bad[0]
             raise RecordingError(
@@ -429,10 +463,11 @@ def _joint_values(
                 "is outside its limits" + (" (through the coupling)" if desc.coupling else ""),
                 expected=f"{limits[j, 0]:g} to {limits[j, 1]:g} {units[j]} "
                 f"(± {LIMIT_MARGIN:g} {units[j]})",
-                got=f"{q[k, j]:g} {units[j]}",
+                got=f"{q_joint[k, j]:g} {units[j]}",
                 fix="check the encoder units and the limits of /robot/description",
             )
-    return q_cmd, q_enc
+    t_ns = cols.pop("t_ns")
+    return cols, t_ns
 
 
 def _ranges(

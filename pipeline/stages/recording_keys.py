@@ -27,6 +27,17 @@ def key_text(sweep: Any, step: Any, repeat: Any = None, target: Any = None) -> s
     return out + (")" if repeat is None else f", repeat {int(repeat)})")
 
 
+def seconds_after(t_ns: np.ndarray, t0: int) -> np.ndarray:
+    """``(t - t0) * 1e-9`` of times ``t_ns`` (uint64 ns), the same doubles as Python's
+    ``(t - t0) * 1e-9`` of ints (each difference rounded once to a float, then scaled)."""
+    t = np.asarray(t_ns, np.uint64)
+    base = np.uint64(t0)
+    after = t >= base
+    out = np.where(after, t - np.where(after, base, t), 0).astype(float)
+    out[~after] = -(base - t[~after]).astype(float)
+    return out * 1e-9
+
+
 def message_keys(
     p: Path, topic: str, payloads: list[dict[str, Any]], n_points: dict[int, int | None]
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -34,10 +45,34 @@ def message_keys(
     (``n_points``: sweep id -> planned positions, None: any number)."""
     sweep = np.array([sweep_id(m["sweep"]) for m in payloads], np.int64)
     step = np.array([m["step"] for m in payloads], np.int64)
-    unplanned, unlimited = -1, np.iinfo(np.int64).max
-    limit = np.array([n_points.get(int(s), unplanned) for s in sweep], dtype=object)
-    limit = np.where(limit == None, unlimited, limit).astype(np.int64)  # noqa: E711 (tool)
-    bad = np.flatnonzero((limit == unplanned) | (step >= limit))
+    limit = np.array([n_points.get(int(s), _UNPLANNED) for s in sweep], dtype=object)
+    limit = np.where(limit == None, _UNLIMITED, limit).astype(np.int64)  # noqa: E711 (tool)
+    refuse_unplanned(p, topic, sweep, step, limit, lambda k: payloads[k]["sweep"], n_points)
+    return sweep, step
+
+
+_UNPLANNED, _UNLIMITED = -1, np.iinfo(np.int64).max
+
+
+def planned_limit(n_points: dict[int, int | None], sweep: int) -> int:
+    """The steps sweep ``sweep`` may have: its planned positions, the int64 maximum for
+    the tool (any number), -1 when the plan has no such sweep."""
+    limit = n_points.get(sweep, _UNPLANNED)
+    return _UNLIMITED if limit is None else limit
+
+
+def refuse_unplanned(
+    p: Path,
+    topic: str,
+    sweep: np.ndarray,
+    step: np.ndarray,
+    limit: np.ndarray | int,
+    recorded: Callable[[int], Any],
+    n_points: dict[int, int | None],
+) -> None:
+    """Refuse the first key whose sweep is not planned (``limit`` -1) or whose step is not
+    below its ``limit``; ``recorded(k)``: the k-th key's sweep as recorded."""
+    bad = np.flatnonzero((limit == _UNPLANNED) | (step >= limit))
     if len(bad):
         k = bad[0]
         planned = [sweep_name(s) for s in sorted(n_points)]
@@ -45,10 +80,9 @@ def message_keys(
             f"{p}: {topic} {key_text(sweep[k], step[k])} names no planned position",
             expected=f"a sweep of plan.order ({', '.join(planned)}) and a step below its "
             "plan.sweeps n_points",
-            got=f"sweep {payloads[k]['sweep']!r}, step {step[k]}",
+            got=f"sweep {recorded(int(k))!r}, step {step[k]}",
             fix=KEY_FIX,
         )
-    return sweep, step
 
 
 def refuse_duplicates(

@@ -21,7 +21,13 @@ import numpy as np
 
 from pipeline.errors import RecordingError
 from pipeline.schemas import mcap_json_schema
-from pipeline.stages.recording_keys import KEY_FIX, key_text, message_keys, refuse_duplicates
+from pipeline.stages.recording_keys import (
+    KEY_FIX,
+    key_text,
+    message_keys,
+    refuse_duplicates,
+    seconds_after,
+)
 from pipeline.sweeps import POSES_SWEEP, TOOL_SWEEP, sweep_name
 
 TOPIC = "/points"
@@ -63,24 +69,44 @@ def read_points(
     plan: dict[str, Any],
     n_points: dict[int, int | None],
     t0: int,
+    blocks: dict[str, np.ndarray] | None = None,
 ) -> dict[str, np.ndarray]:
     """The ``point_*`` arrays of :class:`pipeline.stages.recording.Recording`, sorted by
     ``(sweep, step, target)``; ``n_points``: sweep id -> planned positions; ``t0``: the
-    earliest joint state's log time (ns)."""
+    earliest joint state's log time (ns); ``blocks``: the point rows of the
+    ``/points/block`` messages (:mod:`pipeline.stages.recording_blocks`), checked there
+    (None: none)."""
     payloads = [m for _, m in msgs]
+    n = len(msgs)
     sweep, step = message_keys(p, TOPIC, payloads, n_points)
-    target = np.array([m["target"] for m in payloads], str)
-    order = np.lexsort((target, step, sweep))
-    sweep, step, target = sweep[order], step[order], target[order]
-    msgs = [msgs[k] for k in order]
+    cols = {
+        "point_sweep": sweep,
+        "point_step": step,
+        "point_target": np.array([m["target"] for m in payloads], str),
+        "t_ns": np.array([t for t, _ in msgs], np.uint64),
+        "points_cm": np.array([[m["x_cm"], m["y_cm"], m["z_cm"]] for m in payloads], float).reshape(
+            -1, 3
+        ),  # fmt: skip
+        "point_sigma_cm": np.full(n, np.nan),
+        "point_cov_cm2": np.full((n, 3, 3), np.nan),
+        "point_wxyz": np.full((n, 4), np.nan),
+        "point_orientation_sigma_deg": np.full(n, np.nan),
+    }
+    message = np.arange(n)
+    if blocks is not None:
+        cols = blocks if not n else {k: np.concatenate([v, blocks[k]]) for k, v in cols.items()}
+        message = np.r_[message, np.full(len(blocks["point_step"]), -1)]
+    order = np.lexsort((cols["point_target"], cols["point_step"], cols["point_sweep"]))
+    if not (order == np.arange(len(order))).all():  # blocks are written in key order
+        cols = {k: v[order] for k, v in cols.items()}
+        message = message[order]
+    sweep, step, target = cols["point_sweep"], cols["point_step"], cols["point_target"]
     refuse_duplicates(p, TOPIC, sweep, step, target=target)
     _refuse_unplanned_targets(p, sweep, step, target, plan)
-    n = len(msgs)
-    sigma = np.full(n, np.nan)
-    cov = np.full((n, 3, 3), np.nan)
-    wxyz = np.full((n, 4), np.nan)
-    sigma_o = np.full(n, np.nan)
-    for k, (_, m) in enumerate(msgs):
+    sigma, cov = cols["point_sigma_cm"], cols["point_cov_cm2"]
+    wxyz, sigma_o = cols["point_wxyz"], cols["point_orientation_sigma_deg"]
+    for k in np.flatnonzero(message >= 0):
+        m = payloads[message[k]]
         if "cov_cm2" not in m and "orientation_wxyz" not in m and "orientation_sigma_deg" not in m:
             if "sigma_cm" in m:
                 sigma[k] = m["sigma_cm"]
@@ -93,11 +119,11 @@ def read_points(
                 fix="record either, not both (schemas/mcap/points.json)",
             )
         if "sigma_cm" in m:
-            sigma[k] = _checked_sigma(p, key, float(m["sigma_cm"]))
+            sigma[k] = checked_sigma(p, key, float(m["sigma_cm"]))
         if "cov_cm2" in m:
             cov[k] = _checked_cov(p, key, np.array(m["cov_cm2"], float))
         if "orientation_wxyz" in m:
-            wxyz[k] = _checked_quaternion(p, key, np.array(m["orientation_wxyz"], float))
+            wxyz[k] = checked_quaternion(p, key, np.array(m["orientation_wxyz"], float))
         if "orientation_sigma_deg" in m:
             if "orientation_wxyz" not in m:
                 raise RecordingError(
@@ -108,21 +134,11 @@ def read_points(
             sigma_o[k] = m["orientation_sigma_deg"]
     tiny = np.flatnonzero(sigma < MIN_SIGMA_CM)  # the messages the loop read unchecked
     if tiny.size:
-        k = int(tiny[0])
-        _checked_sigma(p, key_text(sweep[k], step[k], target=target[k]), float(sigma[k]))
-    return {
-        "point_sweep": sweep,
-        "point_step": step,
-        "point_target": target,
-        "point_t_s": np.array([(t - t0) * 1e-9 for t, _ in msgs]),
-        "points_cm": np.array([[m["x_cm"], m["y_cm"], m["z_cm"]] for _, m in msgs], float).reshape(
-            -1, 3
-        ),
-        "point_sigma_cm": sigma,
-        "point_cov_cm2": cov,
-        "point_wxyz": wxyz,
-        "point_orientation_sigma_deg": sigma_o,
-    }
+        first = int(tiny[0])
+        key = key_text(sweep[first], step[first], target=target[first])
+        checked_sigma(p, key, float(sigma[first]))
+    cols["point_t_s"] = seconds_after(cols.pop("t_ns"), t0)
+    return cols
 
 
 def _refuse_unplanned_targets(
@@ -149,7 +165,7 @@ def _refuse_unplanned_targets(
     if "tool_target" in plan:
         allowed[TOOL_SWEEP] = list(plan.get("tool_targets", [str(plan["tool_target"])]))
     for s, what in ((TOOL_SWEEP, "sweep tool measures"), (POSES_SWEEP, "the pose set measures")):
-        measured = sorted(set(target[sweep == s].tolist()))
+        measured = np.unique(target[sweep == s]).tolist()
         if "tool_target" not in plan and len(measured) > 1:
             raise RecordingError(
                 f"{p}: {TOPIC} {what} {len(measured)} targets ({', '.join(measured)}) and "
@@ -164,20 +180,23 @@ def _refuse_unplanned_targets(
                 expected=f"the tool target among the pose set's targets ({', '.join(measured)})",
                 fix="record the tool target at every pose, or name it in plan.tool_target",
             )
-    for k in range(len(sweep)):
-        ids = allowed.get(int(sweep[k]))
-        if ids is not None and target[k] not in ids:
-            tool = "plan.tool_targets" if "tool_targets" in plan else "plan.tool_target"
-            where = {TOOL_SWEEP: tool, POSES_SWEEP: "plan.poses targets"}.get(
-                int(sweep[k]), "its plan.sweeps targets"
-            )
-            raise RecordingError(
-                f"{p}: {TOPIC} {key_text(sweep[k], step[k], target=target[k])} names a target "
-                f"that sweep {sweep_name(sweep[k])} does not plan",
-                expected=f"a target of {where}: {', '.join(ids)}",
-                got=f"target {target[k]}",
-                fix=KEY_FIX,
-            )
+    bad = np.zeros(len(sweep), bool)
+    for s, ids in allowed.items():
+        bad |= (sweep == s) & ~np.isin(target, ids)
+    if bad.any():
+        k = int(np.argmax(bad))
+        ids = allowed[int(sweep[k])]
+        tool = "plan.tool_targets" if "tool_targets" in plan else "plan.tool_target"
+        where = {TOOL_SWEEP: tool, POSES_SWEEP: "plan.poses targets"}.get(
+            int(sweep[k]), "its plan.sweeps targets"
+        )
+        raise RecordingError(
+            f"{p}: {TOPIC} {key_text(sweep[k], step[k], target=target[k])} names a target "
+            f"that sweep {sweep_name(sweep[k])} does not plan",
+            expected=f"a target of {where}: {', '.join(ids)}",
+            got=f"target {target[k]}",
+            fix=KEY_FIX,
+        )
 
 
 def _checked_cov(p: Path, key: str, c: np.ndarray) -> np.ndarray:
@@ -199,11 +218,11 @@ def _checked_cov(p: Path, key: str, c: np.ndarray) -> np.ndarray:
             fix="record the covariance of (x, y, z) in cm^2, or sigma_cm",
         )
     small = float(np.sqrt(np.linalg.eigvalsh(c)[0]))
-    _checked_sigma(p, key, small, "cov_cm2's smallest σ")
+    checked_sigma(p, key, small, "cov_cm2's smallest σ")
     return c
 
 
-def _checked_sigma(p: Path, key: str, sigma: float, what: str = "sigma_cm") -> float:
+def checked_sigma(p: Path, key: str, sigma: float, what: str = "sigma_cm") -> float:
     """``sigma`` (cm), refused under :data:`MIN_SIGMA_CM`."""
     if not sigma >= MIN_SIGMA_CM:
         raise RecordingError(
@@ -214,7 +233,7 @@ def _checked_sigma(p: Path, key: str, sigma: float, what: str = "sigma_cm") -> f
     return sigma
 
 
-def _checked_quaternion(p: Path, key: str, q: np.ndarray) -> np.ndarray:
+def checked_quaternion(p: Path, key: str, q: np.ndarray) -> np.ndarray:
     """``q`` (4,), refused unless of unit length within :data:`UNIT_TOL`."""
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > UNIT_TOL:
