@@ -79,6 +79,16 @@ def test_a_bad_fixed_correction_is_one_line(tmp_path: Path) -> None:
     assert "expected 'auto' | 'always' | 'never'" in line, line
 
 
+@pytest.mark.parametrize("key", ['fixed_correction = "always"', "fixed_block = 5"])
+def test_a_fixed_key_without_fixed_targets_is_one_line(tmp_path: Path, key: str) -> None:
+    """A drift setting in a map whose targets are all on the arm would do nothing."""
+    ps = pose_set(n=20)
+    paths, text = one_file(ps, tmp_path)
+    line = _refused(tmp_path, paths, f"{key}\n" + text)
+    assert line.startswith(f"error: map.toml: {key.split()[0]}: is given, but no "), line
+    assert "fixed = true on the base's reflectors" in line, line
+
+
 def _readings(rng: np.random.Generator, n: int = 60, sigma_cm: float = 0.001) -> np.ndarray:
     """Three base reflectors read at ``n`` poses, no drift (cm)."""
     base = np.array(list(BASE_MM.values())) / 10.0

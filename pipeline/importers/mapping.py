@@ -241,6 +241,15 @@ def _check_combinations(src: str, data: dict[str, Any]) -> None:
     if fixed and len(fixed) == len(targets):
         raise _refuse(src, "targets", "are all fixed in the world: no point of the arm",
                       "at least one [[targets]] on the arm (fixed = false)", fixed)  # fmt: skip
+    for key in ("fixed_block", "fixed_correction"):  # would do nothing: said, not ignored
+        if key in data and not fixed:
+            raise _refuse(
+                src,
+                key,
+                "is given, but no [[targets]] is fixed on the base",
+                f"fixed = true on the base's reflectors, or no {key}",
+                data[key],
+            )
     if data.get("tool_target") in fixed:
         raise _refuse(src, "tool_target", "is a fixed target, not a point of the arm",
                       "a [[targets]] id without fixed = true", data["tool_target"])  # fmt: skip
