@@ -308,7 +308,13 @@ def test_near_wrist_singularity_every_target_is_solved(robot3: Controller) -> No
     on_arm = np.all(puma560.branch_of(r.q)[:, :2] == [1, 1], axis=1)
     assert r.branch_changed is not None
     assert r.branch_changed[~on_arm].all() and not r.branch_changed[on].any()
+    # Issue 45: every converged answer off the requested branch is flagged, a wrist flag
+    # changed by the restarts into the limits too (before: 1 of these unflagged).
+    assert r.branch_changed[r.converged & ~on].all()
     assert on.mean() >= 0.99
+    solver = robot3.realtime(b)
+    for k in np.flatnonzero(r.converged & ~on):
+        assert solver.solve_one(T[k]) and solver.branch_changed
 
 
 def test_jacobi_compiled_agrees_with_numpy(robot3: Controller, monkeypatch) -> None:

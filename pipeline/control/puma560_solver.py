@@ -382,6 +382,9 @@ class PumaSolver:
                 res, self.chain, T[rows], self._limits, self.resolution, True,
                 arm=lambda q: puma560.branch_of(q)[:, :2], near=near[rows],
             )  # the kernel's limits rule, in numpy  # fmt: skip
+            # a solution moved into the limits with its wrist flipped: flagged too
+            off = np.any(puma560.branch_of(res.q) != [b.shoulder, b.elbow, b.wrist], axis=-1)
+            changed[rows] |= res.converged & off
             q[rows], iterations[rows], status[rows] = res.q, res.iterations, res.status
             errors[rows, 0], errors[rows, 1] = res.position_error_cm, res.orientation_error_rad
         return IKResult(
