@@ -165,13 +165,16 @@ def _restart_into_limits(
 def _solve_targets(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
-    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf,
+    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf,
     outcome: Buf, iterations: Buf, errors: Buf, lower: Buf, upper: Buf, turn: Buf,
 ) -> None:  # fmt: skip
     """:func:`_solve_realtime` for each of ``T_base`` (m, 4, 4); outputs by row
-    (``errors`` (m, 2): position cm, rotation rad). Allocates the scratch;
-    :func:`_solve_rows` loops (without reference counting: its views of each row)."""
+    (``errors`` (m, 2): position cm, rotation rad). Allocates the scratch (the target in
+    the sensor frame too: not kept, :meth:`.puma560_solver.PumaSolver.finish` forms it for
+    the rows it needs); :func:`_solve_rows` loops (without reference counting: its views
+    of each row)."""
     Tw, spare, ws = np.empty((4, 4)), np.empty((2, 6)), workspace(q.shape[1])
+    target = np.empty((4, 4))
     _solve_rows(
         base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
         settings, X, T_base, q_near, q0, q, delta, target, outcome, iterations, errors,
@@ -187,11 +190,11 @@ def _solve_rows(
     outcome: Buf, iterations: Buf, errors: Buf, lower: Buf, upper: Buf, turn: Buf,
     Tw: Buf, spare: Buf, ws: Work, info: Buf,
 ) -> None:  # fmt: skip
-    """:func:`_solve_targets`' loop over the rows, with its scratch."""
+    """:func:`_solve_targets`' loop over the rows, with its scratch (``target`` (4, 4))."""
     for k in range(T_base.shape[0]):
         _solve_realtime(
             base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
-            settings, X, T_base[k], q_near[k], q0[k], q[k], delta[k], target[k], Tw, spare,
+            settings, X, T_base[k], q_near[k], q0[k], q[k], delta[k], target, Tw, spare,
             ws, info, errors[k], lower, upper, turn,
         )  # fmt: skip
         outcome[k], iterations[k] = info[0], info[1]
