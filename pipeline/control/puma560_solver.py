@@ -88,8 +88,9 @@ class PumaSolver:
 
     The converged solution is then put inside the joint limits
     (:mod:`pipeline.control.limits`): shifted by ±2π, else its wrist flip
-    ``(θ4 + π, −θ5, θ6 + π)`` polished by Newton-Raphson and shifted, else the
-    status ``out_of_limits`` (not converged) with the solution kept.
+    ``(θ4 + π, −θ5, θ6 + π)`` polished by Newton-Raphson and shifted (flagged as
+    another branch: its wrist flag is the other one), else the status ``out_of_limits``
+    (not converged) with the solution kept.
 
     Parameters
     ----------
