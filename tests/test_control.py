@@ -308,7 +308,13 @@ def test_near_wrist_singularity_every_target_is_solved(robot3: Controller) -> No
     on_arm = np.all(puma560.branch_of(r.q)[:, :2] == [1, 1], axis=1)
     assert r.branch_changed is not None
     assert r.branch_changed[~on_arm].all() and not r.branch_changed[on].any()
+    # Issue 45: every converged answer off the requested branch is flagged, a wrist flag
+    # changed by the restarts into the limits too (before: 1 of these unflagged).
+    assert r.branch_changed[r.converged & ~on].all()
     assert on.mean() >= 0.99
+    solver = robot3.realtime(b)
+    for k in np.flatnonzero(r.converged & ~on):
+        assert solver.solve_one(T[k]) and solver.branch_changed
 
 
 def test_jacobi_compiled_agrees_with_numpy(robot3: Controller, monkeypatch) -> None:
@@ -450,3 +456,17 @@ def test_one_target_passes_few_arrays(robot3: Controller) -> None:
         assert robot3.solve(T[k], branch=b).converged[0]
     # 6 per call, and a few targets' Levenberg-Marquardt scratch (11 arrays each)
     assert rtsys.get_allocation_stats().alloc - before <= 6 * len(T) + 25
+
+
+def test_sensor_targets_of_the_finish_are_the_kernels(robot3: Controller) -> None:
+    """The batched kernel keeps no target in the sensor frame (issue 45); the rows the
+    numpy finish needs are formed by ``in_sensor_frame``: the kernel's products, bit for
+    bit (the real-time solver keeps the last one)."""
+    from pipeline.control.puma560_solver import in_sensor_frame
+
+    q, T = _targets(robot3, 20, 13)
+    solver = robot3.realtime(parse_branch("right-up-noflip"))
+    formed = in_sensor_frame(solver._X, T)
+    for k in range(len(T)):
+        solver.solve_one(T[k])
+        np.testing.assert_array_equal(solver._target, formed[k])

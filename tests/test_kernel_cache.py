@@ -198,7 +198,8 @@ from pipeline.robots import puma560
 c, T = puma560.simulator_chain(), np.eye(4)
 T[:3, 3] = [10.0, 20.0, 30.0]
 arrays = [np.ascontiguousarray(a) for a in (c.base, c.links, c.tool, c.joint_offsets, c.prismatic)]
-print(S._error_at(*arrays, T, np.zeros(6), np.empty((4, 4)), np.empty(6), 1.0)[0])
+print(S._error_at(*arrays, T, np.zeros(6), np.empty((4, 4)), np.empty(6), 1.0,
+                 np.empty((2, 6)))[0])
 """
 
 

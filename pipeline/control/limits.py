@@ -14,8 +14,10 @@ exits 3), its joints unchanged so the caller can see which joint is outside.
 The Puma's branch names the wrist flag too (``noflip``/``flip``, the sign of θ5). The
 wrist flag of a requested branch is a preference: the flipped wrist is taken only when
 the preferred one is outside the limits and the flipped one inside (the two are the same
-arm configuration). The compiled real-time solver does the same in its kernel
-(:func:`pipeline.control.puma560_newton._solve_realtime`).
+arm configuration), and the Puma's solvers flag it
+(:attr:`~pipeline.kinematics.ik.result.IKResult.branch_changed`: the answer's wrist flag
+is not the requested one; issue 45). The compiled real-time solver does the same in its
+kernel (:func:`pipeline.control.puma560_newton._solve_realtime`).
 """
 
 from __future__ import annotations

@@ -29,8 +29,9 @@ _JACOBI_SLOW = JACOBI_SLOW_RATIO
 _JACOBI_PATIENCE = JACOBI_STALL_PATIENCE
 _ANDERSON_RCOND = ANDERSON_RCOND
 _STALL = STALL_RATIO
-#: :func:`_jacobi_work`: scratch of one Jacobi solve (4 history, 6 pose, 5 vector buffers).
-JacobiWork = tuple[Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf]
+#: :func:`_jacobi_work`: scratch of one Jacobi solve (4 history, 6 pose, 5 vector buffers,
+#: the joints' cosines and sines).
+JacobiWork = tuple[Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf, Buf]
 
 
 @jit
@@ -62,10 +63,12 @@ def _jacobi_map(
     d_base: Buf, d_links: Buf, d_tool: Buf, d_offsets: Buf,
     pre: Buf, post: Buf, branch: Buf, margins: Buf,
     target: Buf, q: Buf, Ts: Buf, q_next: Buf, Tw: Buf, Td: Buf, Delta: Buf, Tk: Buf,
+    trig: Buf,
 ) -> bool:  # fmt: skip
     """(5.8): ``q_next = F_d⁻¹[F_d(q) · F_s(q)⁻¹ · T*]`` (``Ts``: F_s(q)); False when
-    the design inverse has none. ``Tw``, ``Td``, ``Delta``, ``Tk`` (4, 4): scratch."""
-    pose(d_base, d_links, d_tool, d_offsets, prismatic, q, Td)
+    the design inverse has none. ``Tw``, ``Td``, ``Delta``, ``Tk`` (4, 4), ``trig``
+    (2, n): scratch."""
+    pose(d_base, d_links, d_tool, d_offsets, prismatic, q, Td, trig)
     for r in range(3):  # Eq. (5.9): Δ = F_s(q)⁻¹ T*, C.2 step 4
         for c in range(4):
             acc = Ts[0, r] * target[0, c] + Ts[1, r] * target[1, c] + Ts[2, r] * target[2, c]
@@ -83,11 +86,11 @@ def _jacobi_map(
 @jit_views
 def _error_at(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
-    target: Buf, q: Buf, Ts: Buf, d: Buf, length: float,
+    target: Buf, q: Buf, Ts: Buf, d: Buf, length: float, trig: Buf,
 ) -> tuple[float, float, float]:  # fmt: skip
     """F_s(q) into ``Ts``, its δ into ``d``; the position and rotation errors and the
-    scaled error."""
-    pose(base, links, tool, offsets, prismatic, q, Ts)
+    scaled error (``trig`` (2, n): scratch)."""
+    pose(base, links, tool, offsets, prismatic, q, Ts, trig)
     _delta(Ts, target, d)
     ep, eo = _errors(d)
     return ep, eo, ep * (1.0 / length) + eo
@@ -97,13 +100,13 @@ def _error_at(
 def _jacobi_work(n: int) -> JacobiWork:
     """Scratch of :func:`_jacobi_one` for ``n`` joints, made once per batch: the
     Anderson history Qh, Gh (n + 1, n) and its differences dF (n, n), dG (n, n);
-    six (4, 4) poses; q_next, q_acc (n,), δ_new, δ_acc (6,), f (n,)."""
+    six (4, 4) poses; q_next, q_acc (n,), δ_new, δ_acc (6,), f (n,); trig (2, n)."""
     h = n + 1
     return (
         np.zeros((h, n)), np.zeros((h, n)), np.zeros((n, h - 1)), np.zeros((h - 1, n)),
         np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)),
         np.empty((4, 4)), np.empty((4, 4)), np.empty(n), np.empty(n), np.empty(6),
-        np.empty(6), np.empty(n),
+        np.empty(6), np.empty(n), np.empty((2, n)),
     )  # fmt: skip
 
 
@@ -127,20 +130,21 @@ def _jacobi_one(
     max_iter, length = int(settings[0]), settings[1]
     tol_p, tol_o = settings[2], settings[3]
     h = n + 1
-    Qh, Gh, dF, dG, Ts, T_plain, T_acc, Td, Delta, Tk, q_next, q_acc, d_new, d_acc, f = work
+    Qh, Gh, dF, dG, Ts, T_plain, T_acc, Td, Delta, Tk, q_next, q_acc, d_new, d_acc, f, cs = work
     Qh[:] = 0.0
     Gh[:] = 0.0
-    ep, eo, e = _error_at(base, links, tool, offsets, prismatic, target, q, Ts, delta, length)
+    ep, eo, e = _error_at(base, links, tool, offsets, prismatic, target, q, Ts, delta, length,
+                          cs)  # fmt: skip
     count, slow, idle = 0, False, 0
     for it in range(1, max_iter + 1):
         found = _jacobi_map(
             base, links, tool, offsets, prismatic, d_base, d_links, d_tool, d_offsets,
-            pre, post, branch, margins, target, q, Ts, q_next, Tw, Td, Delta, Tk,
+            pre, post, branch, margins, target, q, Ts, q_next, Tw, Td, Delta, Tk, cs,
         )  # fmt: skip
         if not found:
             return J_NO_INVERSE, it - 1
         ep, eo, e_plain = _error_at(
-            base, links, tool, offsets, prismatic, target, q_next, T_plain, d_new, length
+            base, links, tool, offsets, prismatic, target, q_next, T_plain, d_new, length, cs
         )
         taken = T_plain
         for k in range(h - 1):  # the history, oldest first
@@ -154,7 +158,7 @@ def _jacobi_one(
         if was_slow:
             _anderson(Qh, Gh, count, q_acc, dF, dG, f)
             ap, ao, e_acc = _error_at(
-                base, links, tool, offsets, prismatic, target, q_acc, T_acc, d_acc, length
+                base, links, tool, offsets, prismatic, target, q_acc, T_acc, d_acc, length, cs
             )
             if e_acc < e_new:  # never worse than (5.8)
                 for j in range(n):

@@ -118,15 +118,17 @@ def _solve_target(
 def _restart_into_limits(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf, res: Buf, limit: Buf,
     settings: Buf, target: Buf, q_near: Buf, q: Buf, delta: Buf, spare: Buf, ws: Work,
-    info: Buf, lower: Buf, upper: Buf, turn: Buf,
+    info: Buf, lower: Buf, upper: Buf, turn: Buf, branch: Buf,
 ) -> None:  # fmt: skip
     """A converged solution ``q`` outside the limits: Newton-Raphson from its wrist flip
     ``(θ4 + π, −θ5, θ6 + π)``, then (next to the wrist singularity) from its
     :data:`WRIST_TURNS`, the first converged one on the same arm branch inside the limits
     once in the 2π class nearest ``q_near`` and shifted by ±2π
-    (:func:`pipeline.control.limits.honour_limits`, in numpy). None: ``q`` and δ kept,
-    ``info[0]`` set to :data:`OUT_OF_LIMITS` (or :data:`OUT_OF_LIMITS_OFF_BRANCH`);
-    ``info[1]`` counts every restart's iterations."""
+    (:func:`pipeline.control.limits.honour_limits`, in numpy); one whose wrist flag
+    is not ``branch``'s (the flip's, or a turn's across θ5 = 0) makes ``info[0]``
+    :data:`OFF_BRANCH` (flagged: issue 45 found 14 of 100,000 such answers unflagged).
+    None: ``q`` and δ kept, ``info[0]`` set to :data:`OUT_OF_LIMITS` (or
+    :data:`OUT_OF_LIMITS_OFF_BRANCH`); ``info[1]`` counts every restart's iterations."""
     for j in range(6):
         spare[0, j], spare[1, j] = q[j], delta[j]
     near_singular = abs(math.sin(spare[0, 4])) < NEAR_WRIST_SINGULAR
@@ -151,6 +153,8 @@ def _restart_into_limits(
                 q[j] = q_near[j] + _wrap(q[j] - q_near[j])
             _into_limits(q, lower, upper, turn)
             if _inside(q, lower, upper) and _same_arm(q, spare[0]):
+                if not _on_branch(q, branch):
+                    info[0] = OFF_BRANCH
                 return
     for j in range(6):
         q[j], delta[j] = spare[0, j], spare[1, j]
@@ -161,13 +165,16 @@ def _restart_into_limits(
 def _solve_targets(
     base: Buf, links: Buf, tool: Buf, offsets: Buf, prismatic: Buf,
     pre: Buf, post: Buf, branch: Buf, margins: Buf, res: Buf, limit: Buf, settings: Buf,
-    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf, target: Buf,
+    X: Buf, T_base: Buf, q_near: Buf, q0: Buf, q: Buf, delta: Buf,
     outcome: Buf, iterations: Buf, errors: Buf, lower: Buf, upper: Buf, turn: Buf,
 ) -> None:  # fmt: skip
     """:func:`_solve_realtime` for each of ``T_base`` (m, 4, 4); outputs by row
-    (``errors`` (m, 2): position cm, rotation rad). Allocates the scratch;
-    :func:`_solve_rows` loops (without reference counting: its views of each row)."""
+    (``errors`` (m, 2): position cm, rotation rad). Allocates the scratch (the target in
+    the sensor frame too: not kept, :meth:`.puma560_solver.PumaSolver.finish` forms it for
+    the rows it needs); :func:`_solve_rows` loops (without reference counting: its views
+    of each row)."""
     Tw, spare, ws = np.empty((4, 4)), np.empty((2, 6)), workspace(q.shape[1])
+    target = np.empty((4, 4))
     _solve_rows(
         base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
         settings, X, T_base, q_near, q0, q, delta, target, outcome, iterations, errors,
@@ -183,11 +190,11 @@ def _solve_rows(
     outcome: Buf, iterations: Buf, errors: Buf, lower: Buf, upper: Buf, turn: Buf,
     Tw: Buf, spare: Buf, ws: Work, info: Buf,
 ) -> None:  # fmt: skip
-    """:func:`_solve_targets`' loop over the rows, with its scratch."""
+    """:func:`_solve_targets`' loop over the rows, with its scratch (``target`` (4, 4))."""
     for k in range(T_base.shape[0]):
         _solve_realtime(
             base, links, tool, offsets, prismatic, pre, post, branch, margins, res, limit,
-            settings, X, T_base[k], q_near[k], q0[k], q[k], delta[k], target[k], Tw, spare,
+            settings, X, T_base[k], q_near[k], q0[k], q[k], delta[k], target, Tw, spare,
             ws, info, errors[k], lower, upper, turn,
         )  # fmt: skip
         outcome[k], iterations[k] = info[0], info[1]
@@ -215,7 +222,7 @@ def _solve_realtime(
         if not _inside(q, lower, upper):
             _restart_into_limits(base, links, tool, offsets, prismatic, res, limit, settings,
                                  target, q_near, q, delta, spare, ws, info, lower, upper,
-                                 turn)  # fmt: skip
+                                 turn, branch)  # fmt: skip
     errors[0], errors[1] = _errors(delta)
 
 
@@ -230,11 +237,11 @@ _PACK_SIZES = (16, 96, 16, 6, 16, 16, 3, 2, 6, 6, 4, 16, 6, 6, 6)
     np.cumsum((0, *_PACK_SIZES)).tolist())  # fmt: skip
 #: Its scratch packed likewise: q0, q, δ, errors, target, Tw, spare (2, 6), then the
 #: :func:`~pipeline.kinematics.ik_compiled.workspace` T, J, M, dq, q_new, δ_new, J_new, A,
-#: Am, g, r, Js.
-_SCRATCH_SIZES = (6, 6, 6, 2, 16, 16, 12, 16, 36, 42, 6, 6, 6, 36, 36, 36, 6, 6, 36)
+#: Am, g, r, Js, trig, trig_new.
+_SCRATCH_SIZES = (6, 6, 6, 2, 16, 16, 12, 16, 36, 42, 6, 6, 6, 36, 36, 36, 6, 6, 36, 12, 12)
 (_S_Q0, _S_Q, _S_DELTA, _S_ERRORS, _S_TARGET, _S_TW, _S_SPARE, _S_T, _S_J, _S_M, _S_DQ,
- _S_QNEW, _S_DNEW, _S_JNEW, _S_A, _S_AM, _S_G, _S_R, _S_JS, _S_END) = np.cumsum(
-    (0, *_SCRATCH_SIZES)).tolist()  # fmt: skip
+ _S_QNEW, _S_DNEW, _S_JNEW, _S_A, _S_AM, _S_G, _S_R, _S_JS, _S_TRIG, _S_TRIG_NEW,
+ _S_END) = np.cumsum((0, *_SCRATCH_SIZES)).tolist()  # fmt: skip
 
 
 @jit_views
@@ -247,7 +254,8 @@ def _solve_packed(
           S[_S_DQ:_S_QNEW], S[_S_QNEW:_S_DNEW], S[_S_DNEW:_S_JNEW],
           S[_S_JNEW:_S_A].reshape(6, 6), S[_S_A:_S_AM].reshape(6, 6),
           S[_S_AM:_S_G].reshape(6, 6), S[_S_G:_S_R], S[_S_R:_S_JS],
-          S[_S_JS:_S_END].reshape(6, 6))  # fmt: skip
+          S[_S_JS:_S_TRIG].reshape(6, 6), S[_S_TRIG:_S_TRIG_NEW].reshape(2, 6),
+          S[_S_TRIG_NEW:_S_END].reshape(2, 6))  # fmt: skip
     _solve_realtime(
         P[_P_BASE:_P_LINKS].reshape(4, 4), P[_P_LINKS:_P_TOOL].reshape(6, 4, 4),
         P[_P_TOOL:_P_OFFSETS].reshape(4, 4), P[_P_OFFSETS:_P_PRE], prismatic,

@@ -7,6 +7,7 @@ finishes the targets those defer with the numpy iterations of
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from typing import cast
 
@@ -87,8 +88,9 @@ class PumaSolver:
 
     The converged solution is then put inside the joint limits
     (:mod:`pipeline.control.limits`): shifted by ±2π, else its wrist flip
-    ``(θ4 + π, −θ5, θ6 + π)`` polished by Newton-Raphson and shifted, else the
-    status ``out_of_limits`` (not converged) with the solution kept.
+    ``(θ4 + π, −θ5, θ6 + π)`` polished by Newton-Raphson and shifted (flagged as
+    another branch: its wrist flag is the other one), else the status ``out_of_limits``
+    (not converged) with the solution kept.
 
     Parameters
     ----------
@@ -227,9 +229,9 @@ class PumaSolver:
         if self.info[0] == OUT_OF_LIMITS or self.info[0] == OUT_OF_LIMITS_OFF_BRANCH:
             self.branch_changed = self.info[0] == OUT_OF_LIMITS_OFF_BRANCH
             return False  # q: the solution, outside the limits
-        res = self.finish(self._target[None], near[None], self.q0[None], self.q[None].copy(),
-                          self.info[:1].copy(), self.info[1:].copy(), self.delta[None],
-                          self.errors[None].copy())  # fmt: skip
+        res = self.finish(lambda _: self._target[None], near[None], self.q0[None],
+                          self.q[None].copy(), self.info[:1].copy(), self.info[1:].copy(),
+                          self.delta[None], self.errors[None].copy())  # fmt: skip
         self.q[:] = res.q[0]
         self.info[1] = res.iterations[0]
         self.branch_changed = bool(res.branch_changed is not None and res.branch_changed[0])
@@ -279,18 +281,21 @@ class PumaSolver:
         near = np.ascontiguousarray(
             np.broadcast_to(self._q_ref if q_near is None else q_near, (m, n)), float
         )
-        q0, q, delta, T = np.empty((m, n)), np.empty((m, n)), np.empty((m, 6)), np.empty_like(Tb)
+        q0, q, delta = np.empty((m, n)), np.empty((m, n)), np.empty((m, 6))
         outcome, iterations = np.empty(m, np.int64), np.empty(m, np.int64)
         errors = np.empty((m, 2))
 
         def run(rows: slice) -> None:
             *model, X, lower, upper, turn = _own((*self._model, self._X, *self._limits))
             _solve_targets(*model, X, Tb[rows], near[rows], q0[rows], q[rows], delta[rows],
-                           T[rows], outcome[rows], iterations[rows], errors[rows], lower,
-                           upper, turn)  # type: ignore[call-arg]  # fmt: skip
+                           outcome[rows], iterations[rows], errors[rows], lower, upper,
+                           turn)  # type: ignore[call-arg]  # fmt: skip
 
         run_in_shares(run, m)
-        res = self.finish(T, near, q0, q, outcome, iterations, delta, errors)
+        # The targets in the sensor frame for the rows finish needs only (issue 45: the
+        # kernel keeps none, 128 bytes a target less to write and to page in).
+        res = self.finish(lambda rows: in_sensor_frame(self._X, Tb[rows]), near, q0, q,
+                          outcome, iterations, delta, errors)  # fmt: skip
         if self._deflection is None:
             return res
         outside = np.zeros(m, np.bool_)
@@ -351,11 +356,12 @@ class PumaSolver:
         )  # fmt: skip
 
     def finish(
-        self, T: Array, near: Array, q0: Array, q: Array, outcome: IntArray,
-        iterations: IntArray, delta: Array, errors: Array,
+        self, targets: Callable[[IntArray], Array], near: Array, q0: Array, q: Array,
+        outcome: IntArray, iterations: IntArray, delta: Array, errors: Array,
     ) -> IKResult:  # fmt: skip
         """The result of kernel outputs (``errors`` (m, 2): the kernel's position and
-        rotation errors): deferred targets by the numpy iteration from their start,
+        rotation errors; ``targets(rows)``: those rows' targets in the sensor frame,
+        (k, 4, 4)): deferred targets by the numpy iteration from their start,
         targets without a start from ``near`` (the numpy design inverse's fallback),
         so the numpy iteration reports them; those rows put inside the limits as the
         kernel puts the rows it solves (:func:`pipeline.control.limits.honour_limits`),
@@ -368,9 +374,10 @@ class PumaSolver:
         rows = np.flatnonzero((outcome != FAST_CONVERGED) & ~changed & ~limited)
         if rows.size:
             start = np.where((outcome[rows] == NO_START)[:, None], near[rows], q0[rows])
+            T_rows = targets(rows)
             max_iter, tol_p, tol_o, max_step = self.settings
             res = finish_deferred(
-                self.chain, T[rows], start, self.resolution, q[rows],
+                self.chain, T_rows, start, self.resolution, q[rows],
                 np.full(rows.size, FAST_DEFERRED), iterations[rows], delta[rows],
                 max_iter=max_iter, position_tol_cm=tol_p, orientation_tol_rad=tol_o,
                 max_step=max_step,
@@ -379,9 +386,12 @@ class PumaSolver:
             off = np.any(puma560.branch_of(res.q) != [b.shoulder, b.elbow, b.wrist], axis=-1)
             changed[rows] = res.converged & off
             res = honour_limits(
-                res, self.chain, T[rows], self._limits, self.resolution, True,
+                res, self.chain, T_rows, self._limits, self.resolution, True,
                 arm=lambda q: puma560.branch_of(q)[:, :2], near=near[rows],
             )  # the kernel's limits rule, in numpy  # fmt: skip
+            # a solution moved into the limits with its wrist flipped: flagged too
+            off = np.any(puma560.branch_of(res.q) != [b.shoulder, b.elbow, b.wrist], axis=-1)
+            changed[rows] |= res.converged & off
             q[rows], iterations[rows], status[rows] = res.q, res.iterations, res.status
             errors[rows, 0], errors[rows, 1] = res.position_error_cm, res.orientation_error_rad
         return IKResult(
@@ -389,6 +399,14 @@ class PumaSolver:
             position_error_cm=errors[:, 0], orientation_error_rad=errors[:, 1], status=status,
             branch_changed=changed,
         )  # fmt: skip
+
+
+def in_sensor_frame(X: Array, T_base: Array) -> Array:
+    """``X · T_base`` of poses (k, 4, 4): the kernel's :func:`.puma560_start._to_sensor`,
+    the same products summed in the same order (the same bits)."""
+    T = T_base[:, :, None, :]  # T[k, j, 0, c]: row j of pose k
+    out: Array = X[:, 0, None] * T[:, 0] + X[:, 1, None] * T[:, 1]
+    return out + X[:, 2, None] * T[:, 2] + X[:, 3, None] * T[:, 3]
 
 
 def _own(arrays: tuple[Array, ...]) -> tuple[Array, ...]:

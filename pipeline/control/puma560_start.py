@@ -47,11 +47,13 @@ def _design_start(
     elbow margin (rad) and shoulder margin (cm); ``Tw`` (4, 4): scratch.
     False when even the clamped pose has no solution.
     """
-    for r in range(4):  # Tw = (pre · target) · post, as puma_design_inverse
+    # Tw = (pre · target) · post, as puma_design_inverse; its rows 0-2 (row r of the
+    # product is row r of pre · target times post; the inverse reads no row 3)
+    for r in range(3):
         for c in range(4):
             Tw[r, c] = (pre[r, 0] * target[0, c] + pre[r, 1] * target[1, c]
                         + pre[r, 2] * target[2, c] + pre[r, 3] * target[3, c])  # fmt: skip
-    for r in range(4):
+    for r in range(3):
         a0, a1, a2, a3 = Tw[r, 0], Tw[r, 1], Tw[r, 2], Tw[r, 3]
         for c in range(4):
             Tw[r, c] = a0 * post[0, c] + a1 * post[1, c] + a2 * post[2, c] + a3 * post[3, c]
