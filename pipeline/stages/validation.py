@@ -57,6 +57,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     pos = inputs["positions"]
     import pyarrow.compute as pc  # lazy: ~70 ms of import, which a warm run never needs
 
+    from pipeline.refine.solve import CHUNK
+
     pos = pos.filter(pc.equal(pos.column("target"), tool_target(plan, pos)))
     xyz = positions(pos)
     sweep = pos.column("sweep").to_numpy().astype(np.int64)
@@ -76,7 +78,10 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
             q[at] = readings_at(inputs["joints"], int(s), step[sel][at], n, pris)
         arrays["q"].append(q)
         kg = payloads_at(inputs["joints"], sweep[sel], step[sel])
-        model = model_points(chain, q, pris, nongeometric, kg)
+        model = np.zeros((len(q), 3))
+        for c in range(0, len(q), CHUNK):  # a chunk at a time: (k, n, 4, 4) stacks
+            at = slice(c, c + CHUNK)
+            model[at] = model_points(chain, q[at], pris, nongeometric, kg[at])
         raw, reg = error_distances(model, xyz[sel])
         cols["sweep"] += sweep[sel].tolist()
         cols["step"] += step[sel].tolist()
