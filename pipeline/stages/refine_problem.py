@@ -28,6 +28,7 @@ from pipeline.refine.problem import (
 )
 from pipeline.sensor.geometry import DigitizerGeometry
 from pipeline.stages.frames import chain_from_frames, matrices_from_columns, readings_at
+from pipeline.stages.joints import rows_of_keys
 from pipeline.stages.positions import _COV_INDEX, COV_ENTRIES, positions
 from pipeline.stages.session import session_geometry, session_plan, session_robot, session_sensor
 from pipeline.sweeps import CHECK_SWEEP
@@ -168,18 +169,8 @@ def payloads_at(joints: pa.Table, sweep: np.ndarray, step: np.ndarray) -> Array:
     the ``joints`` table; NaN where none was recorded."""
     first = joints.filter(pa.array(joints.column("joint").to_numpy() == 1))
     kg = first.column("payload_kg").to_numpy(zero_copy_only=False).astype(float)
-    have = _key(first.column("sweep").to_numpy(), first.column("step").to_numpy())
-    want = _key(np.asarray(sweep), np.asarray(step))
-    if len(have) == 0:
-        return np.full(len(want), np.nan)
-    order = np.argsort(have, kind="stable")  # of a key recorded twice, the last one counts
-    i = order[np.maximum(np.searchsorted(have[order], want, side="right") - 1, 0)]
-    return np.where(have[i] == want, kg[i], np.nan)
-
-
-def _key(sweep: np.ndarray, step: np.ndarray) -> npt.NDArray[np.int64]:
-    """One int64 per (sweep, step), in their lexicographic order (steps are int32)."""
-    return np.asarray(sweep, np.int64) * (1 << 32) + np.asarray(step, np.int64)
+    i, found = rows_of_keys(first, sweep, step)
+    return np.where(found, kg[i] if len(kg) else np.nan, np.nan)
 
 
 def independent_terms(terms: Terms, model: ChainModel, reach_cm: float) -> Terms:
