@@ -47,10 +47,10 @@ UNDERSTATED_NOISE = 2.0
 RECORDED_EVALUATIONS = 10
 #: Observations per chunk when the chain is evaluated on many (issue 45): its (k, n, 4, 4)
 #: motion stacks and (k, 3, P) Jacobian formed a chunk at a time, never for a million
-#: observations at once (8 GB of them). A session of at most this many observations is
-#: evaluated whole, as before. Chunks of 4,096 to 20,000 UR10 poses took 0.12 s of CPU for
-#: 100,000 positions, and 0.35 s (4,096) to 0.49 s (20,000) for their Jacobian, against
-#: 0.47 and 0.68 s whole (one run each, 2026-11-29).
+#: observations at once (the Jacobian alone 0.65-1.1 GB). A session of at most this many
+#: observations is evaluated whole, as before. Chunks of 4,096 to 20,000 UR10 poses took
+#: 0.12 s of CPU for 100,000 positions, and 0.35 s (4,096) to 0.49 s (20,000) for their
+#: Jacobian, against 0.47 and 0.68 s whole (one run each, 2026-11-29).
 CHUNK = 4_096
 #: A fit of more positions than twice this (a point block's) first solves 1 in every
 #: ``⌈K / PREFIT⌉`` of them, and goes on from that solution with all of them (issue 45):
@@ -133,6 +133,13 @@ def chunks(model: ChainModel, keep: bool = True) -> list[tuple[slice, ChainModel
 
 
 _CHUNKED: list[tuple[ChainModel, list[tuple[slice, ChainModel]]]] = []
+
+
+def release_chunks() -> None:
+    """Forget the kept chunks (:func:`chunks`): a stage that fitted calls it when done, so
+    that its last model's chunks (their regressors: ~1 kB an observation with the
+    non-geometric terms) do not stay through the stages after it."""
+    _CHUNKED.clear()
 
 
 def chain_positions(model: ChainModel, kin: Array, keep: bool = True) -> Array:

@@ -58,6 +58,15 @@ class Params:
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
+    from pipeline.refine.solve import release_chunks
+
+    try:
+        return _compute(inputs, params)
+    finally:  # the last fitted model's chunks are not kept past the stage
+        release_chunks()
+
+
+def _compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.stages.refine import (
         held_parameters,
         internal_factors,

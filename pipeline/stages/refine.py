@@ -164,6 +164,15 @@ def _disabled(level: str) -> pa.Table:
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
+    from pipeline.refine.solve import release_chunks
+
+    try:
+        return _compute(inputs, params)
+    finally:  # the last fitted model's chunks are not kept past the stage
+        release_chunks()
+
+
+def _compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.refine.solve import recorded_chi2
     from pipeline.stages.refine_problem import session_problem
 
