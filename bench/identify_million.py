@@ -71,8 +71,10 @@ def _split(data: Path, parts: int) -> list[Path]:
 
 
 def _signature_values(session: Path) -> dict[str, object]:
+    """The signature's content: not its session's name, provenance (times, tables' hashes:
+    the source file of each row differs) or checksum."""
     doc = json.loads((session / "signature.json").read_text())
-    return {k: v for k, v in doc.items() if k not in ("sha256", "created", "provenance")}
+    return {k: v for k, v in doc.items() if k not in ("session", "sha256", "provenance")}
 
 
 def main(rows: int, ten_files: bool) -> None:
@@ -106,8 +108,9 @@ def main(rows: int, ten_files: bool) -> None:
         if ten_files:
             _import(_split(data, 10), mp, folder / "s10")
             _identify(folder / "s10")
-            same = _signature_values(folder / "s") == _signature_values(folder / "s10")
-            word = "equal" if same else "DIFFERENT"
+            one, ten = _signature_values(folder / "s"), _signature_values(folder / "s10")
+            differ = [k for k in one if one[k] != ten.get(k)]
+            word = "equal" if not differ else f"DIFFERENT ({', '.join(differ)})"
             print(f"the same rows imported from ten files: signature {word}")
 
 
