@@ -19,8 +19,9 @@ from pipeline.errors import ImportFileError
 #: Peak resident memory (bytes) of ``pipeline identify --no-report`` of an imported pose
 #: set: the interpreter and its modules, plus per row. Measured (issue 45, 2026-11-29, in
 #: process, every stage forced, the process's peak RSS): 100,000 rows 0.69 GB, 300,000
-#: 1.68 GB, 1,000,000 4.62 GB (reading the recording alone peaks at 4.65 GB). Before the refinement evaluated its chain a chunk at
-#: a time: 170 MB + 12.3 kB a row (20,000 rows 412 MB, 50,000 779 MB).
+#: 1.68 GB, 1,000,000 4.62 GB (reading the recording alone peaks at 4.65 GB). Before the
+#: refinement evaluated its chain a chunk at a time: 170 MB + 12.3 kB a row (20,000 rows
+#: 412 MB, 50,000 779 MB).
 BASE, PER_ROW = 250e6, 4_400.0
 #: The import's own peak (bytes): 300,000 rows 1.89 GB, 1,000,000 rows 6.15 GB (issue 45,
 #: ``/usr/bin/time -v``; 20,000 to 100,000 rows before: 60 MB + 5.7 kB a row).
