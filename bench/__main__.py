@@ -10,6 +10,7 @@ from bench import (
     hand_eye_real,
     identify,
     identify_cost,
+    identify_million,
     ik,
     import_rows,
     kinematics,
@@ -34,6 +35,10 @@ if __name__ == "__main__":
     pose_sets.main()
     print()
     identify_cost.main()
+    print()
+    identify_million.main(
+        identify_million.ROWS, ten_files=False
+    )  # ~10 min; skipped when memory is short
     print()
     fit_floor.main()
     print()

@@ -1,12 +1,12 @@
 """Whether an import of so many rows fits in this machine's memory (issue 45).
 
 There is no fixed row limit: a file is refused, in one line, before anything is checked
-or written, only when the peak memory of identifying what it imports (more than the
-import's own) would exceed the memory available now (``MemAvailable`` of ``/proc/meminfo``,
-capped by the process's address-space limit). The estimate is linear in the rows, from
-peak resident memory measured on this project's 2-core machine for UR10 pose sets of
-20,000 to 100,000 rows (docs/import.md, "Size"); where the available memory
-cannot be read, nothing is refused.
+or written, only when the peak memory of importing it or of identifying what it imports
+(the larger) would exceed the memory available now (``MemAvailable`` of
+``/proc/meminfo``, capped by the process's address-space limit). Each estimate is linear
+in the rows, from peak resident memory measured on this project's 2-core machine for
+UR10 pose sets of 100,000 to 1,000,000 rows (docs/import.md, "Size"); where the
+available memory cannot be read, nothing is refused.
 """
 
 from __future__ import annotations
@@ -17,10 +17,15 @@ from pathlib import Path
 from pipeline.errors import ImportFileError
 
 #: Peak resident memory (bytes) of ``pipeline identify --no-report`` of an imported pose
-#: set: the interpreter and its modules, plus per row. Measured (peak RSS): 20,000 rows
-#: 412 MB, 50,000 rows 779 MB. The import itself peaks lower (20,000 rows 174 MB, 50,000
-#: 355 MB, 100,000 628 MB: 60 MB + 5.7 kB a row), so identify's peak decides.
-BASE, PER_ROW = 170e6, 12_300.0
+#: set: the interpreter and its modules, plus per row. Measured (issue 45, 2026-11-29, in
+#: process, every stage forced, the process's peak RSS): 100,000 rows 0.69 GB, 300,000
+#: 1.68 GB, 1,000,000 4.62 GB (reading the recording alone peaks at 4.65 GB). Before the
+#: refinement evaluated its chain a chunk at a time: 170 MB + 12.3 kB a row (20,000 rows
+#: 412 MB, 50,000 779 MB).
+BASE, PER_ROW = 250e6, 4_400.0
+#: The import's own peak (bytes): 300,000 rows 1.89 GB, 1,000,000 rows 6.15 GB (issue 45,
+#: ``/usr/bin/time -v``; 20,000 to 100,000 rows before: 60 MB + 5.7 kB a row).
+IMPORT_BASE, IMPORT_PER_ROW = 60e6, 6_100.0
 #: Headroom over the estimate (the measured sets are one layout; others differ a little).
 HEADROOM = 1.25
 MEMINFO = Path("/proc/meminfo")
@@ -43,8 +48,9 @@ def available_bytes() -> float | None:
 
 
 def needed_bytes(rows: int) -> float:
-    """The peak (bytes, with :data:`HEADROOM`) of identifying ``rows`` imported rows."""
-    return HEADROOM * (BASE + PER_ROW * rows)
+    """The peak (bytes, with :data:`HEADROOM`) of importing ``rows`` rows or identifying
+    them, the larger."""
+    return HEADROOM * max(BASE + PER_ROW * rows, IMPORT_BASE + IMPORT_PER_ROW * rows)
 
 
 def check_fits(name: str, rows: int) -> None:
@@ -54,9 +60,10 @@ def check_fits(name: str, rows: int) -> None:
     need = needed_bytes(rows)
     if avail is None or need <= avail:
         return
-    fit = max(int((avail / HEADROOM - BASE) / PER_ROW), 0)
+    lines = ((BASE, PER_ROW), (IMPORT_BASE, IMPORT_PER_ROW))
+    fit = max(min(int((avail / HEADROOM - b) / per) for b, per in lines), 0)
     raise ImportFileError(
-        f"{name}: {rows:,} rows need about {need / 1e9:.1f} GB to identify, "
+        f"{name}: {rows:,} rows need about {need / 1e9:.1f} GB to import and identify, "
         f"{avail / 1e9:.1f} GB of memory is available",
         expected=f"at most ~{fit:,} rows on this machine now (docs/import.md, Size)",
         fix=f"free memory, or subsample the file (1 row in {-(-rows // max(fit, 1))} of "

@@ -33,7 +33,7 @@ from scipy import sparse
 from pipeline.optim.block import Linearization
 from pipeline.optim.lm import rho
 from pipeline.refine.kinematics import TOOL_POINT, ChainModel
-from pipeline.refine.solve import Problem, linearize, normal_equations
+from pipeline.refine.solve import Problem, chain_positions, chunks, linearize, normal_equations
 from pipeline.sweeps import POSES_SWEEP
 
 Array = npt.NDArray[np.float64]
@@ -88,14 +88,20 @@ def fold_of_blocks(
 
 def _score(
     model: ChainModel, x: Array, cov: Array, sel: npt.NDArray[np.bool_],
-    measured: Array, cov_m: Array,
+    measured: Array, cov_m: Array, expected: bool = True,
 ) -> tuple[Array, Array, Array]:  # fmt: skip
-    """Errors, expected errors and the measurement parts of the rows ``sel``."""
+    """Errors, expected errors and the measurement parts of the rows ``sel``; without
+    ``expected`` the fit's part of the expected errors is left out (zero), and the chain's
+    Jacobian is not formed. The chain is evaluated a chunk at a time
+    (:func:`pipeline.refine.solve.chunks`)."""
     sub = model.observing(sel)
-    J = sub.position_jacobian(x)
-    fit_var = np.einsum("kip,pq,kiq->k", J, cov, J)
+    fit_var = np.zeros(len(sub.link))
+    if expected:
+        for at, part in chunks(sub, keep=False):
+            J = part.position_jacobian(x)
+            fit_var[at] = np.einsum("kip,pq,kiq->k", J, cov, J)
     meas_var = np.trace(cov_m[sel], axis1=1, axis2=2)
-    err = np.linalg.norm(measured[sel] - sub.positions(x), axis=1)
+    err = np.linalg.norm(measured[sel] - chain_positions(sub, x, keep=False), axis=1)
     return err, np.sqrt(fit_var + meas_var), np.sqrt(meas_var)
 
 
@@ -104,6 +110,7 @@ def kfold(
     measured: Array, cov_m: Array, refit: Refit, k: int = FOLDS,
     fold: npt.NDArray[np.int64] | None = None,
     measured_by: Callable[[npt.NDArray[np.bool_]], Array] | None = None,
+    expected: bool = True,
 ) -> HeldOut:  # fmt: skip
     """Held-out errors of the joint sweeps' and the pose set's positions, k-fold (the
     targets of one pose share its fold: a pose is held out whole).
@@ -112,20 +119,26 @@ def kfold(
     scored; their covariances ``cov_m`` (K, 3, 3)); ``refit(keep)`` fits without the
     positions ``~keep``; ``fold`` (K,): each position's fold in ``0..k−1``, by default
     :func:`fold_of_steps`; ``measured_by(keep)``: the positions measured by the refit's
-    own block parameters, when the block calibrates its sensor (else ``measured``).
+    own block parameters, when the block calibrates its sensor (else ``measured``);
+    ``expected``: whether the expected errors count the refit's covariance (else only the
+    measurements', :func:`_score`). A ``refit`` with a ``prepare(keeps)`` (a
+    :class:`StepRefit`) is handed every fold's kept positions first.
     """
     fold = fold_of_steps(step, k) if fold is None else np.asarray(fold, np.int64)
     sweep = np.asarray(sweep)
     joint = ((sweep >= 1) | (sweep == POSES_SWEEP)) & np.isfinite(measured).all(axis=1)
+    helds = [(f, joint & (fold == f)) for f in range(k)]
+    helds = [(f, held) for f, held in helds if held.any()]
+    prepare = getattr(refit, "prepare", None)
+    if prepare is not None:
+        prepare([~held for _, held in helds])
     out: list[tuple[np.ndarray, ...]] = []
-    for f in range(k):
-        held = joint & (fold == f)
-        if not held.any():
-            continue
+    for f, held in helds:
         x, cov = refit(~held)
         m = measured if measured_by is None else measured_by(~held)
         idx = np.flatnonzero(held)
-        out.append((idx, np.full(len(idx), f), *_score(model, x, cov, held, m, cov_m)))
+        scored = _score(model, x, cov, held, m, cov_m, expected)
+        out.append((idx, np.full(len(idx), f), *scored))
     return _held_out(out)
 
 
@@ -202,22 +215,47 @@ class StepRefit:
         # for its chain, its expected error and its measured positions
         object.__setattr__(self, "_steps", {})
 
+    def prepare(self, keeps: list[npt.NDArray[np.bool_]]) -> None:
+        """The steps of every fold's kept positions ``keeps``, their normal equations
+        formed in one pass (:meth:`pipeline.refine.solve.NormalEquations.many`: past
+        :data:`~pipeline.refine.solve.CHUNK` positions the chain's Jacobian is formed
+        anew at each pass)."""
+        steps = self._steps  # type: ignore[attr-defined]
+        todo = {self._key(keep): keep for keep in keeps if self._key(keep) not in steps}
+        _, _, _, normal = self._at_x_hat  # type: ignore[attr-defined]
+        products = normal.many([self._weights(keep) for keep in todo.values()])
+        for key, (A, g) in zip(todo, products, strict=True):
+            steps[key] = self._solved(A, g)
+
+    @staticmethod
+    def _key(keep: npt.NDArray[np.bool_]) -> bytes:
+        return np.packbits(keep).tobytes() + len(keep).to_bytes(8, "little")
+
+    def _weights(self, keep: npt.NDArray[np.bool_]) -> Array:
+        """The robust weights at ``x_hat``, zero on the rows of the positions ``~keep`` (a
+        row of weight zero is out of the fit)."""
+        _, lin, w, _ = self._at_x_hat  # type: ignore[attr-defined]
+        kept = (lin.pos < 0) | keep[np.maximum(lin.pos, 0)]  # as kept_rows keeps them
+        return np.where(kept, w, 0.0)
+
     def step(self, keep: npt.NDArray[np.bool_]) -> tuple[Array, Array]:
         """The whole step's ``x`` (kinematics and block) without the positions ``~keep``,
         and ``(Jᵀ W J)⁺`` (unscaled)."""
-        key = np.packbits(keep).tobytes() + len(keep).to_bytes(8, "little")
+        key = self._key(keep)
         steps = self._steps  # type: ignore[attr-defined]
-        if key in steps:
-            return steps[key]  # type: ignore[no-any-return]
-        full, lin, w, normal = self._at_x_hat  # type: ignore[attr-defined]
-        kept = (lin.pos < 0) | keep[np.maximum(lin.pos, 0)]  # as kept_rows keeps them
-        A, g = normal(np.where(kept, w, 0.0))  # a row of weight zero is out of the fit
+        if key not in steps:
+            normal = self._at_x_hat[3]  # type: ignore[attr-defined]
+            steps[key] = self._solved(*normal(self._weights(keep)))
+        return steps[key]  # type: ignore[no-any-return]
+
+    def _solved(self, A: Array, g: Array) -> tuple[Array, Array]:
+        """The step and ``(Jᵀ W J)⁺`` of the normal equations ``A``, ``g``."""
+        full = self._at_x_hat[0]  # type: ignore[attr-defined]
         free = np.ones(len(g), bool) if full.held is None else ~full.held[: len(g)]
         N = np.zeros_like(A)  # held parameters (not identifiable) stay where the fit held them
         N[np.ix_(free, free)] = np.linalg.pinv(A[np.ix_(free, free)])
         x = self.x_hat.copy()
         x[: len(g)] -= N @ g
-        steps[key] = (x, N)
         return x, N
 
     def __call__(self, keep: npt.NDArray[np.bool_]) -> tuple[Array, Array]:
@@ -225,13 +263,19 @@ class StepRefit:
         n = self.problem.model.n_params
         return x[:n], (N * self.noise_var)[:n, :n]
 
-    @property
+    @cached_property
+    def _predicted(self) -> Array:
+        """The chain's positions (K, 3) at ``x_hat``."""
+        full = self._at_x_hat[0]  # type: ignore[attr-defined]
+        return chain_positions(full.model, self.x_hat[: full.n_kin])
+
+    @cached_property
     def measured(self) -> Array:
         """The positions (K, 3) the block measures with its own parameters at ``x_hat``
         (:func:`measured_positions`): for a block of positions, its measured positions;
         for raw ranges, the positions the fitted sensor's ranges put there."""
-        full, lin, w, _ = self._at_x_hat  # type: ignore[attr-defined]
-        return measured_positions(lin, full.model.positions(self.x_hat[: full.n_kin]), w)
+        _, lin, w, _ = self._at_x_hat  # type: ignore[attr-defined]
+        return measured_positions(lin, self._predicted, w)
 
     @property
     def measured_covariance(self) -> Array:
@@ -279,9 +323,11 @@ class StepRefit:
         of positions (no parameters of its own) the same as :attr:`measured`."""
         full, lin, w, _ = self._at_x_hat  # type: ignore[attr-defined]
         n = full.n_kin
+        if n == full.n_params:  # no parameters of its own: the residuals do not move
+            return self.measured
         x, _ = self.step(keep)
         moved = dataclasses.replace(lin, r=lin.r + lin.d_x @ (x[n:] - self.x_hat[n:]))
-        return measured_positions(moved, full.model.positions(self.x_hat[:n]), w)
+        return measured_positions(moved, self._predicted, w)
 
 
 def check_configurations(

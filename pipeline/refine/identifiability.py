@@ -41,7 +41,7 @@ import numpy.typing as npt
 
 from pipeline.errors import StageError
 from pipeline.optim.block import Array
-from pipeline.refine.solve import Problem, Solution, residuals_and_jacobian, solve
+from pipeline.refine.solve import Problem, Solution, jacobian_factor, solve
 
 #: Design tolerances the columns are scaled by: the basin a design model is expected in
 #: (issue 26: off by up to 1 cm and 1° in every parameter).
@@ -114,21 +114,41 @@ def analyse(
     ``held_before``: parameters held already (at the start: they stay held);
     ``tolerance`` (P,): each parameter's, where its start is not a design value
     (default :func:`tolerance_scale` of ``units``)."""
-    from scipy.linalg import qr
+    Js = scaled_columns(J, units, held_before, tolerance)
+    # J_s = Q₀ R₀ (blocked Householder, fast), then R₀ P = Q₁ R: the pivots and R of J_s
+    # itself (Q₀ Q₁ orthonormal), at the cost of a (P, P) pivoted QR (geqp3 on the tall
+    # J_s took 0.14 s of a 2,000-pose fit).
+    R0 = np.asarray(np.linalg.qr(Js, mode="r"))
+    return analyse_factor(R0, noise_stated, n_points, held_before)
 
+
+def scaled_columns(
+    J: Array, units: tuple[str, ...], held_before: npt.NDArray[np.bool_] | None = None,
+    tolerance: Array | None = None,
+) -> Array:  # fmt: skip
+    """``J_s``: the columns of ``J`` scaled by their tolerances, those ``held_before``
+    zero (:func:`analyse`)."""
     Js = J * (tolerance_scale(units) if tolerance is None else tolerance)
     if held_before is not None:  # held already: out of the QR, so that the exact partner
         # of a held parameter (two lumped masses on one joint's axis) is not held too
         Js = np.where(held_before, 0.0, Js)
-    # J_s = Q₀ R₀ (blocked Householder, fast), then R₀ P = Q₁ R: the pivots and R of J_s
-    # itself (Q₀ Q₁ orthonormal), at the cost of a (P, P) pivoted QR (geqp3 on the tall
-    # J_s took 0.14 s of a 2,000-pose fit).
-    R0 = np.linalg.qr(Js, mode="r")
+    return Js
+
+
+def analyse_factor(
+    R0: Array, noise_stated: bool, n_points: int,
+    held_before: npt.NDArray[np.bool_] | None = None,
+) -> Identifiability:  # fmt: skip
+    """:func:`analyse` from ``R₀`` (min(R, P), P) of the QR ``J_s = Q₀ R₀`` of the scaled
+    Jacobian (:func:`scaled_columns`), which may be formed a chunk of rows at a time
+    (:func:`pipeline.refine.solve.jacobian_factor`)."""
+    from scipy.linalg import qr
+
     R, piv = qr(R0, mode="r", pivoting=True)
-    R = R[: min(Js.shape)]
+    R = R[: min(R0.shape)]
     d = np.abs(np.diag(R)) if R.size else np.zeros(0)
-    d = np.concatenate([d, np.zeros(Js.shape[1] - len(d))])  # fewer rows than parameters
-    sigmas = np.zeros(Js.shape[1])
+    d = np.concatenate([d, np.zeros(R0.shape[1] - len(d))])  # fewer rows than parameters
+    sigmas = np.zeros(R0.shape[1])
     sigmas[piv] = d
     top = d[0] if len(d) and d[0] > 0 else 1.0
     held = sigmas < RANK_RTOL * top
@@ -235,29 +255,32 @@ def fit_identifiable(
     problem with fewer residuals than :data:`COORDINATES_PER_PARAMETER` per identifiable
     parameter is refused. ``tolerance``: as :func:`analyse`'s."""
     begin = x0 if x_warm is None else np.asarray(x_warm, float)
-    r, J = residuals_and_jacobian(problem, begin)
-    n = J.shape[1]
+    tol = tolerance_scale(units) if tolerance is None else tolerance
+    n_res, R0 = jacobian_factor(problem, begin, lambda J: J * tol)
+    n = R0.shape[1]
     need = COORDINATES_PER_PARAMETER * n
-    if len(r) < need:  # before the analysis: with so few rows every rank is the data's
+    if n_res < need:  # before the analysis: with so few rows every rank is the data's
         raise StageError(
-            f"refine: {n_points} measured points ({len(r)} coordinates) cannot identify the "
+            f"refine: {n_points} measured points ({n_res} coordinates) cannot identify the "
             f"{n} parameters of the chain",
             expected=f"at least {need} coordinates ({COORDINATES_PER_PARAMETER} per parameter): "
             f"{poses_needed(n)} poses of one target",
-            got=f"{len(r)}",
+            got=f"{n_res}",
             fix="measure more poses, spread over the joint ranges",
         )
-    start = analyse(J, units, noise_stated, n_points, tolerance=tolerance)
+    start = analyse_factor(R0, noise_stated, n_points)
     begin = begin.copy()
     begin[start.held] = x0[start.held]
     solution = solve(replace(problem, held=start.held), begin, f_scale_hint=f_scale_hint)
-    r, J = residuals_and_jacobian(problem, solution.x)
     # The noise the data show, when above the stated one: a σ stated for the sensor alone
     # (a tracker's 0.008 mm) leaves out what the chain cannot model (a robot's 0.5 mm),
     # and a parameter below that scatter is fitted to it (UR10 Series C: joint 6's
     # direction fitted to 6.3° ± 5.7° at the stated σ).
     scale = solution.noise_scale if np.isfinite(solution.noise_scale) else 1.0
-    final = analyse(J / max(scale, 1.0), units, noise_stated, n_points, start.held, tolerance)
+    _, R0 = jacobian_factor(
+        problem, solution.x, lambda J: np.where(start.held, 0.0, (J / max(scale, 1.0)) * tol)
+    )
+    final = analyse_factor(R0, noise_stated, n_points, start.held)
     if (final.held & ~start.held).any():  # seen at the design, not at the solution
         warm = solution.x.copy()  # the rest from where the first fit left them
         warm[final.held] = x0[final.held]

@@ -19,7 +19,7 @@ from pipeline.optim.block import Array, MeasurementBlock
 from pipeline.refine.kinematics import ChainModel, start_points
 from pipeline.refine.orientation import OrientationRows, start_rotation
 from pipeline.refine.points import PointBlock, with_reading_noise
-from pipeline.refine.solve import Problem
+from pipeline.refine.solve import Problem, chunks
 from pipeline.sweeps import TOOL_SWEEP, sweep_name
 
 BLOCK_GROUPS = ("mic", "bias", "speed")
@@ -90,6 +90,36 @@ def reading_tangents(model: ChainModel, x: Array) -> Array:
     return out
 
 
+def chunked_start_points(model: ChainModel, measured: Array) -> Array:
+    """:func:`pipeline.refine.kinematics.start_points` (n_points, 3) a chunk of
+    observations at a time (:func:`pipeline.refine.solve.chunks`: never the (K, n, 4, 4)
+    motions of every observation at once): each chunk's mean of the points it sees,
+    weighed by their usable observations; the whole at once when one chunk holds them."""
+    parts = chunks(model, keep=False)
+    if len(parts) == 1:
+        return start_points(model, measured)
+    ok = np.asarray(np.isfinite(measured).all(axis=1), bool)
+    total, count = np.zeros((model.n_points, 3)), np.zeros(model.n_points)
+    for at, sub in parts:
+        rows = np.flatnonzero(ok[at])
+        seen = np.unique(sub.point[rows])
+        if not len(rows):
+            continue
+        index = np.zeros(model.n_points, np.int64)
+        index[seen] = np.arange(len(seen))
+        names = tuple(model.point_names[j] for j in seen)
+        part = replace(sub.observing(rows), point=index[sub.point[rows]], point_names=names)
+        n = np.bincount(part.point, minlength=len(seen))
+        total[seen] += start_points(part, measured[at][rows]) * n[:, None]
+        count[seen] += n
+    for j in np.flatnonzero(count == 0):  # its one-line error, as for the whole
+        none = np.flatnonzero(model.point == j)[:1]
+        part = replace(model.observing(none), point=np.zeros(len(none), np.int64),
+                       point_names=(model.point_names[j],))  # fmt: skip
+        start_points(part, np.full((len(none), 3), np.nan))
+    return total / count[:, None]
+
+
 def chain_problem(
     model: ChainModel,
     block: MeasurementBlock,
@@ -105,7 +135,7 @@ def chain_problem(
     noise too, ``reading_var`` (n,) their variances (internal units: rad², cm²).
     ``orientation``: measured tool orientations (the model then has ``tool_rotation``,
     started at :func:`pipeline.refine.orientation.start_rotation`)."""
-    p0 = start_points(model, measured)
+    p0 = chunked_start_points(model, measured)
     kin = np.concatenate(
         [
             np.zeros(model.n_axis_params),
@@ -116,7 +146,10 @@ def chain_problem(
     if orientation is not None:
         kin[model.rotation_slice] = start_rotation(model, kin, orientation)
     if isinstance(block, PointBlock):
-        block = with_reading_noise(block, reading_tangents(model, kin), reading_var)
+        tangents = np.concatenate(  # a chunk at a time: the same bits (issue 45)
+            [reading_tangents(sub, kin) for _, sub in chunks(model, keep=False)]
+        )
+        block = with_reading_noise(block, tangents, reading_var)
     x0 = np.concatenate([kin, block.x0])
     names, units, groups = parameter_labels(model, block)
     problem = Problem(model, block, loss, f_scale, orientation=orientation)

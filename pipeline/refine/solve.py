@@ -15,6 +15,7 @@ the plain Σr² for rows within ``f_scale``).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -26,6 +27,7 @@ from pipeline.optim.block import Array, Linearization, MeasurementBlock, dense
 from pipeline.optim.lm import LOSSES, Normal, levenberg_marquardt
 from pipeline.refine.kinematics import ChainModel
 from pipeline.refine.orientation import OrientationRows
+from pipeline.refine.points import PointBlock
 
 #: Solver tolerances: at 1e-15 (relative cost, step and gradient) a noiseless session
 #: converges to its rounding floor (audit ~1e-12 cm, well inside the 1e-6 cm acceptance);
@@ -43,6 +45,18 @@ UNDERSTATED_NOISE = 2.0
 #: The recorded-sensor χ² re-solves the kinematics only, warm-started at the solution:
 #: ~3 iterations; capped so that a poorly recorded sensor cannot double the stage's time.
 RECORDED_EVALUATIONS = 10
+#: Observations per chunk when the chain is evaluated on many (issue 45): its (k, n, 4, 4)
+#: motion stacks and (k, 3, P) Jacobian formed a chunk at a time, never for a million
+#: observations at once (the Jacobian alone 0.65-1.1 GB). A session of at most this many
+#: observations is evaluated whole, as before. Chunks of 4,096 to 20,000 UR10 poses took
+#: 0.12 s of CPU for 100,000 positions, and 0.35 s (4,096) to 0.49 s (20,000) for their
+#: Jacobian, against 0.47 and 0.68 s whole (one run each, 2026-11-29).
+CHUNK = 4_096
+#: A fit of more positions than twice this (a point block's) first solves 1 in every
+#: ``⌈K / PREFIT⌉`` of them, and goes on from that solution with all of them (issue 45):
+#: the iterations from a far start cost a subsample's evaluations, and the whole data's
+#: few more end at the same minimum (the solver's tolerance), not at the subsample's.
+PREFIT = 20_000
 
 
 @dataclass(frozen=True)
@@ -99,6 +113,47 @@ class Solution:
         return float(np.sqrt(self.chi2 / self.dof)) if self.dof > 0 else float("nan")
 
 
+def chunks(model: ChainModel, keep: bool = True) -> list[tuple[slice, ChainModel]]:
+    """The observations of ``model`` in chunks of at most :data:`CHUNK`: each chunk's
+    slice and the model observing it (``model`` itself when one chunk holds them all).
+    With ``keep`` the chunks of the last model so asked for are kept (a fit evaluates
+    its model again and again; its chunks' regressors are formed once)."""
+    K = len(model.link)
+    if K <= CHUNK:
+        return [(slice(0, K), model)]
+    if _CHUNKED and _CHUNKED[0][0] is model:
+        return _CHUNKED[0][1]
+    out = [
+        (slice(s, min(s + CHUNK, K)), model.observing(np.arange(s, min(s + CHUNK, K))))
+        for s in range(0, K, CHUNK)
+    ]
+    if keep:
+        _CHUNKED[:] = [(model, out)]
+    return out
+
+
+_CHUNKED: list[tuple[ChainModel, list[tuple[slice, ChainModel]]]] = []
+
+
+def release_chunks() -> None:
+    """Forget the kept chunks (:func:`chunks`): a stage that fitted calls it when done, so
+    that its last model's chunks (their regressors: ~1 kB an observation with the
+    non-geometric terms) do not stay through the stages after it."""
+    _CHUNKED.clear()
+
+
+def chain_positions(model: ChainModel, kin: Array, keep: bool = True) -> Array:
+    """:meth:`ChainModel.positions` (K, 3) at ``kin``, a chunk at a time (:func:`chunks`,
+    ``keep`` as there): bit for bit the same (each observation's product is its own)."""
+    parts = chunks(model, keep)
+    if len(parts) == 1:
+        return model.positions(kin)
+    out = np.empty((len(model.link), 3))
+    for at, sub in parts:
+        out[at] = sub.positions(kin)
+    return out
+
+
 def linearize(problem: Problem, x: Array) -> Linearization:
     """The block's linearization at ``x`` (and the measured orientations' rows after it),
     on the rows ``problem.keep`` leaves in the fit."""
@@ -107,7 +162,7 @@ def linearize(problem: Problem, x: Array) -> Linearization:
     if pose is not None:  # (a camera: pipeline.refine.camera_block)
         lin = pose(problem.model, kin, own)
     else:
-        lin = problem.block.linearize(problem.model.positions(kin), own)
+        lin = problem.block.linearize(chain_positions(problem.model, kin), own)
     if problem.orientation is not None:
         lin = _with_orientation(lin, problem, x)
     return lin if problem.keep is None else kept_rows(lin, problem.keep)
@@ -164,6 +219,41 @@ def residuals_and_jacobian(problem: Problem, x: Array) -> tuple[Array, Array]:
     return lin.r, J
 
 
+def jacobian_factor(
+    problem: Problem, x: Array, columns: Callable[[Array], Array]
+) -> tuple[int, Array]:
+    """The number of residuals at ``x`` and ``R`` (min(R, P), P) of the QR ``columns(J) =
+    Q R`` of the whitened Jacobian ``J`` (:func:`residuals_and_jacobian`), ``columns``
+    acting on its rows (a column scaling). Past :data:`CHUNK` observations ``J`` is never
+    formed whole: ``R`` is that of the chunks' ``R``s stacked with each next chunk's rows
+    (TSQR), equal to the whole ``J``'s up to the rows' signs and rounding."""
+    parts = chunks(problem.model)
+    if len(parts) == 1:
+        r, J = residuals_and_jacobian(problem, x)
+        return len(r), np.asarray(np.linalg.qr(columns(J), mode="r"))
+    lin = linearize(problem, x)
+    n_kin, kin = problem.n_kin, x[: problem.n_kin]
+    order = np.argsort(lin.pos, kind="stable")
+    bounds = np.searchsorted(lin.pos[order], [0, *(at.stop for at, _ in parts)])
+
+    def rows_of(rows: npt.NDArray[np.int64], kin_part: Array | None) -> Array:
+        J = np.zeros((len(rows), problem.n_params))
+        if kin_part is not None:
+            J[:, :n_kin] = kin_part
+        if lin.d_theta is not None:
+            J[:, :n_kin] += lin.d_theta[rows]
+        J[:, n_kin:] = dense(lin.d_x[rows])
+        return columns(J)
+
+    R = rows_of(order[: bounds[0]], None)  # the rows of no position (rods, priors)
+    for (at, sub), lo, hi in zip(parts, bounds[:-1], bounds[1:], strict=True):
+        rows = order[lo:hi]
+        dpdx = sub.position_jacobian(kin)  # (k, 3, n_kin)
+        kin_part = np.einsum("ri,rij->rj", lin.d_p[rows], dpdx[lin.pos[rows] - at.start])
+        R = np.asarray(np.linalg.qr(np.vstack([R, rows_of(rows, kin_part)]), mode="r"))
+    return len(lin.r), R
+
+
 def _block_information(lin: Linearization, w: Array) -> Array:
     """``XᵀWX`` of the block's ``d_x`` (``X``): group by group when the block names its
     rows' column patterns (:class:`~pipeline.optim.block.Linearization`), else one
@@ -184,7 +274,99 @@ def _block_information(lin: Linearization, w: Array) -> Array:
     return out
 
 
-def normal_equations(problem: Problem, x: Array, lin: Linearization) -> Normal:
+class NormalEquations:
+    """``w -> (JᵀWJ, JᵀWr)`` of one linearization (:func:`normal_equations`); :meth:`many`
+    forms them for several weight vectors in one pass over the chain's chunks."""
+
+    def __init__(self, problem: Problem, x: Array, lin: Linearization) -> None:
+        self.problem, self.x, self.lin = problem, x, lin
+        self.n = problem.n_kin if problem.fixed_block else problem.n_params
+        self.on = np.flatnonzero(lin.pos >= 0)
+        self._Dt: sparse.csr_array | None = None
+        self._P: Array | None = None  # ∂p/∂θ (3K, n_kin), kept when one chunk holds it
+
+    def __call__(self, w: Array) -> tuple[Array, Array]:
+        return self.many([w])[0]
+
+    def _transposed_rows(self) -> sparse.csr_array:
+        """``Dᵀ`` (3K, R): row 3k + i holds ``d_p[:, i]`` of k's rows."""
+        if self._Dt is None:
+            K, lin, on = len(self.problem.model.link), self.lin, self.on
+            rows = (3 * lin.pos[on][:, None] + np.arange(3)).ravel()
+            self._Dt = sparse.csr_array(
+                (lin.d_p[on].ravel(), (rows, np.repeat(on, 3))), (3 * K, len(lin.r))
+            )
+        return self._Dt
+
+    def many(self, ws: list[Array]) -> list[tuple[Array, Array]]:
+        """:meth:`__call__` of each of ``ws``, ``∂p/∂θ`` formed once for all of them."""
+        problem, lin, on, n = self.problem, self.lin, self.on, self.n
+        n_kin, K = problem.n_kin, len(problem.model.link)
+        key, d_p = lin.pos[on], lin.d_p[on]
+        Dt = self._transposed_rows()
+        out: list[tuple[Array, Array]] = []
+        per_w = []  # per w: H (K, 3, 3), DᵀWr (3K,), DᵀWT, DᵀWX (3K, ·) or None
+        for w in ws:
+            wk = w[on]
+            H = np.empty((K, 3, 3))  # Σ over k's rows of w d_p d_pᵀ
+            for i in range(3):
+                for j in range(i, 3):
+                    H[:, i, j] = H[:, j, i] = np.bincount(key, wk * d_p[:, i] * d_p[:, j], K)
+            DtW = sparse.csr_array((Dt.data * w[Dt.indices], Dt.indices, Dt.indptr), Dt.shape)
+            DtWT = None if lin.d_theta is None else np.asarray(DtW @ lin.d_theta)
+            DtWX = dense(DtW @ lin.d_x) if n > n_kin else None
+            per_w.append((H, DtW @ lin.r, DtWT, DtWX))
+        sums: list[list[Array | None]] = [[None, None, None, None] for _ in ws]
+        for at, P in self._jacobians():
+            rows, k = slice(3 * at.start, 3 * at.stop), at.stop - at.start
+            for (H, v, DtWT, DtWX), acc in zip(per_w, sums, strict=True):
+                terms = (
+                    P.T @ (H[at] @ P.reshape(k, 3, n_kin)).reshape(3 * k, n_kin),
+                    P.T @ v[rows],
+                    None if DtWT is None else P.T @ DtWT[rows],
+                    None if DtWX is None else P.T @ DtWX[rows],
+                )
+                for m, t in enumerate(terms):
+                    if t is not None:
+                        before = acc[m]
+                        acc[m] = t if before is None else before + t
+        for w, (Akk, gk, C, Akx) in zip(ws, sums, strict=True):
+            A = np.empty((n, n))
+            g = np.empty(n)
+            A[:n_kin, :n_kin] = Akk
+            g[:n_kin] = gk
+            if lin.d_theta is not None and C is not None:  # rows of the kinematics directly
+                T = lin.d_theta  # (orientations)
+                A[:n_kin, :n_kin] += T.T @ (w[:, None] * T)
+                g[:n_kin] += T.T @ (w * lin.r)
+                # rows of both a position and the kinematics directly (a camera's pixels):
+                # the cross terms Pᵀ DᵀW T (zero when no row has both, as for orientations)
+                A[:n_kin, :n_kin] += C + C.T
+            if n > n_kin:
+                A[:n_kin, n_kin:] = Akx
+                if lin.d_theta is not None:  # zero while those rows have no block derivative
+                    A[:n_kin, n_kin:] += lin.d_theta.T @ dense(
+                        sparse.csr_array(lin.d_x).multiply(w[:, None])
+                    )
+                A[n_kin:, :n_kin] = A[:n_kin, n_kin:].T
+                A[n_kin:, n_kin:] = _block_information(lin, w)
+                g[n_kin:] = lin.d_x.T @ (w * lin.r)  # sparse where the block's is
+            out.append((A, g))
+        return out
+
+    def _jacobians(self) -> Iterable[tuple[slice, Array]]:
+        """Each chunk's slice of the observations and its ``∂p/∂θ`` (3k, n_kin), the one
+        chunk's kept; more chunks are formed anew at each pass (never all at once)."""
+        n_kin, kin = self.problem.n_kin, self.x[: self.problem.n_kin]
+        parts = chunks(self.problem.model)
+        if len(parts) == 1:
+            if self._P is None:
+                self._P = parts[0][1].position_jacobian(kin).reshape(-1, n_kin)
+            return [(parts[0][0], self._P)]
+        return ((at, sub.position_jacobian(kin).reshape(-1, n_kin)) for at, sub in parts)
+
+
+def normal_equations(problem: Problem, x: Array, lin: Linearization) -> NormalEquations:
     """``w -> (JᵀWJ, JᵀWr)`` of ``lin`` (at ``x``) without forming ``J`` (R, P); over the
     kinematic parameters only when ``problem.fixed_block``.
 
@@ -199,52 +381,13 @@ def normal_equations(problem: Problem, x: Array, lin: Linearization) -> Normal:
     ``DᵀWX`` is a sparse product when ``X`` is sparse: never the dense R × n_x, whose
     columns (the speed spline's) grow with the session's length, so a dense ``X`` made
     the cost grow as points² (refine 25.7 s at 1,600 points per sweep, 2.9 s at 400).
-    ``∂p/∂θ`` and ``D`` are formed at the first call only.
+    ``∂p/∂θ`` and ``D`` are formed at the first call only; past :data:`CHUNK`
+    observations ``∂p/∂θ`` is formed a chunk at a time at each call and its products
+    summed (issue 45: a million poses' would be 0.6-1 GB), and
+    :meth:`NormalEquations.many` forms the products of several weightings (a k-fold's
+    folds) in one pass.
     """
-    n_kin, K = problem.n_kin, problem.model.theta.shape[0]
-    n = n_kin if problem.fixed_block else problem.n_params
-    on = np.flatnonzero(lin.pos >= 0)
-    key, d_p = lin.pos[on], lin.d_p[on]
-    cache: list[tuple[Array, sparse.csr_array]] = []
-
-    def normal(w: Array) -> tuple[Array, Array]:
-        if not cache:
-            P = problem.model.position_jacobian(x[:n_kin]).reshape(3 * K, n_kin)
-            cols = np.repeat(on, 3)  # Dᵀ (3K, R): row 3k + i holds d_p[:, i] of k's rows
-            rows = (3 * key[:, None] + np.arange(3)).ravel()
-            Dt = sparse.csr_array((d_p.ravel(), (rows, cols)), (3 * K, len(lin.r)))
-            cache.append((P, Dt))
-        P, Dt = cache[0]
-        wk = w[on]
-        H = np.empty((K, 3, 3))  # Σ over k's rows of w d_p d_pᵀ
-        for i in range(3):
-            for j in range(i, 3):
-                H[:, i, j] = H[:, j, i] = np.bincount(key, wk * d_p[:, i] * d_p[:, j], K)
-        DtW = sparse.csr_array((Dt.data * w[Dt.indices], Dt.indices, Dt.indptr), Dt.shape)
-        A = np.empty((n, n))
-        A[:n_kin, :n_kin] = P.T @ (H @ P.reshape(K, 3, n_kin)).reshape(3 * K, n_kin)
-        g = np.empty(n)
-        g[:n_kin] = P.T @ (DtW @ lin.r)
-        if lin.d_theta is not None:  # rows of the kinematics directly (orientations)
-            T = lin.d_theta
-            A[:n_kin, :n_kin] += T.T @ (w[:, None] * T)
-            g[:n_kin] += T.T @ (w * lin.r)
-            # rows of both a position and the kinematics directly (a camera's pixels):
-            # the cross terms Pᵀ DᵀW T (zero when no row has both, as for orientations)
-            C = P.T @ np.asarray(DtW @ T)
-            A[:n_kin, :n_kin] += C + C.T
-        if n > n_kin:
-            A[:n_kin, n_kin:] = P.T @ dense(DtW @ lin.d_x)
-            if lin.d_theta is not None:  # zero while those rows have no block derivative
-                A[:n_kin, n_kin:] += lin.d_theta.T @ dense(
-                    sparse.csr_array(lin.d_x).multiply(w[:, None])
-                )
-            A[n_kin:, :n_kin] = A[:n_kin, n_kin:].T
-            A[n_kin:, n_kin:] = _block_information(lin, w)
-            g[n_kin:] = lin.d_x.T @ (w * lin.r)  # sparse where the block's is
-        return A, g
-
-    return normal
+    return NormalEquations(problem, x, lin)
 
 
 def solve(
@@ -261,6 +404,9 @@ def solve(
         raise ArmsigError(
             f"unknown loss {problem.loss!r}", expected=", ".join(LOSSES), fix="soft_l1"
         )
+    prefit = _subsampled(problem)
+    if prefit is not None:  # PREFIT: the iterations from afar on a subsample
+        x_start = solve(prefit, x_start, max_evaluations, f_scale_hint).x
     free = np.ones(problem.n_params, bool)
     if problem.fixed_block:
         free[problem.n_kin :] = False
@@ -328,6 +474,19 @@ def solve(
         down_weighted=int((np.abs(result.r) > f_scale).sum()),
         f_scale=f_scale,
     )
+
+
+def _subsampled(problem: Problem) -> Problem | None:
+    """``problem`` on 1 in every ``⌈K / PREFIT⌉`` of its positions (:data:`PREFIT`), when
+    it has more than twice that many and its block is one of positions without
+    parameters of its own (a pose set's, a point sensor's); else None."""
+    block, K = problem.block, len(problem.model.link)
+    simple = problem.keep is None and problem.orientation is None and not len(block.x0)
+    if K <= 2 * PREFIT or not simple or not isinstance(block, PointBlock):
+        return None
+    rows = np.arange(0, K, -(-K // PREFIT))
+    sub = PointBlock(block.keys.take(rows), block.measured[rows], block.whiten[rows])
+    return replace(problem, model=problem.model.observing(rows), block=sub)
 
 
 def recorded_chi2(problem: Problem, solution: Solution) -> float:

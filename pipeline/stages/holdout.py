@@ -58,6 +58,15 @@ class Params:
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
+    from pipeline.refine.solve import release_chunks
+
+    try:
+        return _compute(inputs, params)
+    finally:  # the last fitted model's chunks are not kept past the stage
+        release_chunks()
+
+
+def _compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.stages.refine import (
         held_parameters,
         internal_factors,
@@ -246,7 +255,7 @@ def _held_out(
         held = _own_sensor_expected(held, at_fit, len(sweep))
     k = held.index
     step = keys.column("step").to_numpy()[k].tolist()
-    target = [keys.column("target")[int(i)].as_py() for i in k]
+    target = keys.column("target").take(pa.array(k)).to_pylist()  # not a row at a time
     return (sweep[k].tolist(), step, target), held, measured_by
 
 
@@ -345,7 +354,7 @@ def _table(
 #: The sonic session's stage: the raw ranges too (level ``ranges`` rebuilds its problem).
 STAGE = Stage(
     "holdout",
-    7,  # 2: the folds' normal equations by the solver's structured products;
+    8,  # 2: the folds' normal equations by the solver's structured products;
     # 3: the problem rebuilt with every refine.* parameter (speed_knot_s crashed it), and
     # single-cycle sonic positions' covariances from the range noise law (issue 33);
     # 4: rigid_error_cm, the same positions held out of the rigid fit (issue 27);
@@ -353,7 +362,9 @@ STAGE = Stage(
     # expected error with the fit's unmodelled error (issue 41); 6: source_file and
     # source_line of an imported row (issue 42); 7: a sonic session refined at its ranges
     # scored, and its design registered, at the positions each fold's own sensor
-    # triangulates (issue 41)
+    # triangulates (issue 41); 8: past 4,096 positions the folds' normal equations summed
+    # over chunks of positions in one pass, the problem's start points likewise (issue 45:
+    # other rounding; smaller sessions' bits unchanged)
     ("session", "refine", "positions", "joints", "frames", "chain", "uncertainty", "ranges"),
     Params(),
     compute,

@@ -11,6 +11,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pyarrow as pa
 
 from pipeline.stages.base import RECORDING, NoParams, Stage
@@ -62,16 +63,40 @@ def source_columns(files: np.ndarray, lines: np.ndarray, n: int = 1) -> dict[str
 
 def sources_at(joints: pa.Table | None, sweep: np.ndarray, step: np.ndarray) -> dict[str, pa.Array]:
     """``source_file`` and ``source_line`` of the configurations (sweep, step), joined by
-    that key from the ``joints`` table (null where not recorded, or no table)."""
+    that key from the ``joints`` table (null where not recorded, or no table; of a key
+    recorded twice, the last row). Columns at once, never a row at a time (issue 45)."""
     if joints is None or "source_file" not in joints.column_names:
         return source_columns(np.full(len(sweep), ""), np.zeros(len(sweep), np.int64))
-    cols = joints.select(["sweep", "step", "source_file", "source_line"]).to_pydict()
-    at = {(s, k): (f or "", ln or 0)
-          for s, k, f, ln in zip(cols["sweep"], cols["step"], cols["source_file"],
-                                 cols["source_line"], strict=True)}  # fmt: skip
-    found = [at.get((int(s), int(k)), ("", 0)) for s, k in zip(sweep, step, strict=True)]
-    return source_columns(np.array([f for f, _ in found], str).reshape(-1),
-                          np.array([ln for _, ln in found], np.int64))  # fmt: skip
+    import pyarrow.compute as pc
+
+    i, found = rows_of_keys(joints, sweep, step)
+    files = joints.column("source_file").take(pa.array(i)).combine_chunks()
+    keep = pc.and_kleene(pa.array(found), pc.not_equal(files, ""))  # null: a null file
+    lines = joints.column("source_line").take(pa.array(i)).to_numpy(zero_copy_only=False)
+    lines = np.nan_to_num(np.asarray(lines, float), nan=0.0)
+    return {
+        "source_file": pc.if_else(keep, files, pa.scalar(None, pa.string())),
+        "source_line": pa.array(lines.astype(np.int32), mask=(lines <= 0) | ~found),
+    }
+
+
+def rows_of_keys(
+    table: pa.Table, sweep: np.ndarray, step: np.ndarray
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.bool_]]:
+    """For each configuration (sweep, step), the last row of ``table`` (columns ``sweep``
+    and ``step``) with that key (0 where none) and whether there is one: a sorted join."""
+    have = _key(table.column("sweep").to_numpy(), table.column("step").to_numpy())
+    want = _key(np.asarray(sweep), np.asarray(step))
+    if len(have) == 0:
+        return np.zeros(len(want), np.int64), np.zeros(len(want), bool)
+    order = np.argsort(have, kind="stable")  # of a key recorded twice, the last one counts
+    i = order[np.maximum(np.searchsorted(have[order], want, side="right") - 1, 0)]
+    return i.astype(np.int64), have[i] == want
+
+
+def _key(sweep: np.ndarray, step: np.ndarray) -> npt.NDArray[np.int64]:
+    """One int64 per (sweep, step), in their lexicographic order (steps are int32)."""
+    return np.asarray(sweep, np.int64) * (1 << 32) + np.asarray(step, np.int64)
 
 
 STAGE = Stage(

@@ -164,6 +164,15 @@ def _disabled(level: str) -> pa.Table:
 
 
 def compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
+    from pipeline.refine.solve import release_chunks
+
+    try:
+        return _compute(inputs, params)
+    finally:  # the last fitted model's chunks are not kept past the stage
+        release_chunks()
+
+
+def _compute(inputs: Mapping[str, Any], params: Params) -> pa.Table:
     from pipeline.refine.solve import recorded_chi2
     from pipeline.stages.refine_problem import session_problem
 
@@ -347,7 +356,7 @@ def _scored(name: str, sp: Any, sol: Any, ident: dict[str, Any], k: int) -> Any:
     cov_m = np.zeros((len(measured), 3, 3))  # the expected errors are not needed here
     fold = fold_of_blocks(sweep, step, k)
     out = kfold(problem.model, sweep, step, measured, cov_m, refit, k, fold,
-                refit.measured_without)  # fmt: skip
+                refit.measured_without, expected=False)  # fmt: skip
     n = np.bincount(out.fold, minlength=k)[:k]
     exact = fits_to_rounding(sol.chi2, sol.dof)
     n_terms = int((~held[problem.model.beta_slice]).sum())  # the identified ones
@@ -445,7 +454,7 @@ def held_parameters(refine: pa.Table) -> np.ndarray:
 
 STAGE = Stage(
     "refine",
-    7,  # 3: the rods' speed spline fit on its normal equations (linear in the samples);
+    8,  # 3: the rods' speed spline fit on its normal equations (linear in the samples);
     # 4: the speed spline's knots chosen from the rods, every parameter in the summary,
     # single-cycle sonic positions weighed by the range noise law (level points);
     # 5: non-geometric terms (refine.nongeometric), the robust scale follows understated
@@ -453,7 +462,10 @@ STAGE = Stage(
     # in every joint sweep that measures it, named tool/<target> (was poses/<target>);
     # 7: refine.nongeometric=auto chooses rigid, compliance, harmonic (joints covered over
     # enough of a turn) or both by k-fold over blocks of the measurement order
-    # (refine.cv_folds, summary nongeometric.cv), no longer by a score test (issue 41)
+    # (refine.cv_folds, summary nongeometric.cv), no longer by a score test (issue 41);
+    # 8: past 4,096 positions the chain is evaluated a chunk at a time, its sums and the
+    # identifiability's QR over chunks, a large pose set's fit started on a subsample
+    # (issue 45: the same minimum, other rounding; smaller sessions' bits unchanged)
     ("session", "joints", "positions", "frames", "ranges"),
     Params(),
     compute,

@@ -28,6 +28,7 @@ from pipeline.refine.problem import (
 )
 from pipeline.sensor.geometry import DigitizerGeometry
 from pipeline.stages.frames import chain_from_frames, matrices_from_columns, readings_at
+from pipeline.stages.joints import rows_of_keys
 from pipeline.stages.positions import _COV_INDEX, COV_ENTRIES, positions
 from pipeline.stages.session import session_geometry, session_plan, session_robot, session_sensor
 from pipeline.sweeps import CHECK_SWEEP
@@ -168,9 +169,8 @@ def payloads_at(joints: pa.Table, sweep: np.ndarray, step: np.ndarray) -> Array:
     the ``joints`` table; NaN where none was recorded."""
     first = joints.filter(pa.array(joints.column("joint").to_numpy() == 1))
     kg = first.column("payload_kg").to_numpy(zero_copy_only=False).astype(float)
-    keys = zip(first.column("sweep").to_pylist(), first.column("step").to_pylist(), strict=True)
-    at = dict(zip(keys, kg, strict=True))
-    return np.array([at.get((int(a), int(b)), np.nan) for a, b in zip(sweep, step, strict=True)])
+    i, found = rows_of_keys(first, sweep, step)
+    return np.where(found, kg[i] if len(kg) else np.nan, np.nan)
 
 
 def independent_terms(terms: Terms, model: ChainModel, reach_cm: float) -> Terms:
@@ -185,19 +185,44 @@ def independent_terms(terms: Terms, model: ChainModel, reach_cm: float) -> Terms
     value at most 1e-9 rad, or 1e-9 of the reach ``reach_cm`` (cm) for a lever."""
     from scipy.linalg import qr
 
-    Phi = model.regressor
     scale = np.array([reach_cm if u == "rad/cm" else 1.0 for u in terms.units])
     keep = np.zeros(terms.size, bool)
-    for j in range(model.n_joints):
-        cols = np.flatnonzero(np.abs(Phi[:, j, :]).max(axis=0) * scale > 1e-9)
+    for j, (top, R) in enumerate(_regressor_factors(model)):
+        cols = np.flatnonzero(top * scale > 1e-9)
         if not len(cols):
             continue
-        block = Phi[:, j, cols] / np.linalg.norm(Phi[:, j, cols], axis=0)
+        if R is None:  # the columns themselves (one chunk): as before issue 45
+            block = model.regressor[:, j, cols]
+            block = block / np.linalg.norm(block, axis=0)
+        else:  # R of the columns (the same QR): unit-normed (norms kept by Q)
+            block = np.asarray(np.linalg.qr(R[:, cols], mode="r"))
+            block = block / np.linalg.norm(block, axis=0)
         _, R, piv = qr(block, mode="economic", pivoting=True)
         d = np.abs(np.diag(R))
         keep[cols[piv[: len(d)][d > 1e-9 * d[0]]]] = True
     names = [nm for nm, k in zip(terms.names, keep, strict=True) if k]
     return Terms.from_names(names)
+
+
+def _regressor_factors(model: ChainModel) -> list[tuple[Array, Array | None]]:
+    """Per joint, the largest magnitude of each regressor column over the observations,
+    and, past :data:`pipeline.refine.solve.CHUNK` observations, the columns' ``R``
+    (TSQR over chunks of observations: the regressor is never formed whole; else None)."""
+    from pipeline.refine.solve import chunks
+
+    parts = chunks(model, keep=False)
+    if len(parts) == 1:
+        top = np.abs(model.regressor).max(axis=0)  # (n, size)
+        return [(top[j], None) for j in range(model.n_joints)]
+    n, size = model.n_joints, model.terms.size
+    tops, Rs = np.zeros((n, size)), [np.zeros((0, size)) for _ in range(n)]
+    for _, sub in parts:
+        Phi = sub.regressor
+        tops = np.maximum(tops, np.abs(Phi).max(axis=0))
+        Rs = [
+            np.asarray(np.linalg.qr(np.vstack([Rs[j], Phi[:, j, :]]), mode="r")) for j in range(n)
+        ]
+    return list(zip(tops, Rs, strict=True))
 
 
 def orientation_rows(

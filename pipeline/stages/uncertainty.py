@@ -185,6 +185,7 @@ def fit_unmodelled(inputs: Mapping[str, Any], fit: Any = None) -> Any:
     refinement's χ² (none for an import without a stated σ: ``recorded_sigma_cm``); a
     point sensor's only: a sonic session's is 0 (below). ``fit``: :func:`_fit_model`'s,
     when already built."""
+    from pipeline.refine.solve import chain_positions
     from pipeline.refine.unmodelled import Unmodelled, unmodelled_error
     from pipeline.stages.positions import positions, recorded_sigma_cm
     from pipeline.stages.refine import refine_summary
@@ -192,7 +193,7 @@ def fit_unmodelled(inputs: Mapping[str, Any], fit: Any = None) -> Any:
 
     model, x, rows = _fit_model(inputs) if fit is None else fit
     summ = refine_summary(inputs["refine"])
-    r = positions(rows) - model.positions(x)
+    r = positions(rows) - chain_positions(model, x, keep=False)  # a chunk at a time
     if session_sensor(inputs["session"]) == "sonic":
         # Not estimated: the triangulated positions' residuals exceed their covariance on
         # clean sessions too (0.026 against 0.0185 cm, seed 11), the ranges-level fit's

@@ -57,6 +57,8 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     pos = inputs["positions"]
     import pyarrow.compute as pc  # lazy: ~70 ms of import, which a warm run never needs
 
+    from pipeline.refine.solve import CHUNK
+
     pos = pos.filter(pc.equal(pos.column("target"), tool_target(plan, pos)))
     xyz = positions(pos)
     sweep = pos.column("sweep").to_numpy().astype(np.int64)
@@ -64,7 +66,7 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     ok = np.isfinite(xyz).all(axis=1)
     if not plan.get("sweeps_measure_tool", False):
         ok &= sweep <= 0  # sweep targets sit on the links: not the tool point
-    cols: dict[str, list[Any]] = {k: [] for k in ("sweep", "step", "role")}
+    cols: dict[str, list[np.ndarray]] = {k: [] for k in ("sweep", "step", "role")}
     arrays: dict[str, list[np.ndarray]] = {k: [] for k in ("p", "m", "raw", "reg", "q")}
     for role in ROLES:
         sel = ok & ((sweep == CHECK_SWEEP) == (role == "check"))
@@ -76,11 +78,14 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
             q[at] = readings_at(inputs["joints"], int(s), step[sel][at], n, pris)
         arrays["q"].append(q)
         kg = payloads_at(inputs["joints"], sweep[sel], step[sel])
-        model = model_points(chain, q, pris, nongeometric, kg)
+        model = np.zeros((len(q), 3))
+        for c in range(0, len(q), CHUNK):  # a chunk at a time: (k, n, 4, 4) stacks
+            at = slice(c, c + CHUNK)
+            model[at] = model_points(chain, q[at], pris, nongeometric, kg[at])
         raw, reg = error_distances(model, xyz[sel])
-        cols["sweep"] += sweep[sel].tolist()
-        cols["step"] += step[sel].tolist()
-        cols["role"] += [role] * int(sel.sum())
+        cols["sweep"].append(sweep[sel])  # columns, not Python lists (issue 45)
+        cols["step"].append(step[sel])
+        cols["role"].append(np.full(int(sel.sum()), role))
         arrays["p"].append(xyz[sel])
         arrays["m"].append(model)
         arrays["raw"].append(raw)
@@ -88,19 +93,23 @@ def compute(inputs: Mapping[str, Any], params: NoParams) -> pa.Table:
     p, m = (np.vstack(arrays[k]) if arrays[k] else np.zeros((0, 3)) for k in ("p", "m"))
     raw, reg = (np.concatenate(arrays[k]) if arrays[k] else np.zeros(0) for k in ("raw", "reg"))
     q_all = np.vstack(arrays["q"]) if arrays["q"] else np.zeros((0, n))
-    fit = np.array(cols["role"]) == "fit"
+    sweeps, steps, roles = (
+        np.concatenate(cols[k]) if cols[k] else np.zeros(0, t)
+        for k, t in (("sweep", np.int64), ("step", np.int64), ("role", str))
+    )
+    fit = roles == "fit"
     design = _design_errors(robot, plan, q_all, p, fit)
     return pa.table(
         {
-            "sweep": pa.array(cols["sweep"], pa.int32()),
-            "step": pa.array(cols["step"], pa.int32()),
-            "role": pa.array(cols["role"], pa.string()),
+            "sweep": pa.array(sweeps, pa.int32()),
+            "step": pa.array(steps, pa.int32()),
+            "role": pa.array(roles, pa.string()),
             **{f"{a}_cm": pa.array(p[:, k], pa.float64()) for k, a in enumerate("xyz")},
             **{f"model_{a}_cm": pa.array(m[:, k], pa.float64()) for k, a in enumerate("xyz")},
             "error_cm": pa.array(raw, pa.float64()),
             "registered_error_cm": pa.array(reg, pa.float64(), mask=np.isnan(reg)),
             "design_error_cm": pa.array(design, pa.float64(), mask=np.isnan(design)),
-            **sources_at(inputs["joints"], np.array(cols["sweep"]), np.array(cols["step"])),
+            **sources_at(inputs["joints"], sweeps, steps),
         }
     )
 
