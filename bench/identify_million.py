@@ -87,10 +87,9 @@ def main(rows: int, ten_files: bool) -> None:
         print(f"identify of {rows:,} rows skipped: its import needs ~{need / 1e9:.1f} GB, "
               f"{avail / 1e9:.1f} GB is available")  # fmt: skip
         return
-    layout.ROWS = rows
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        data, mp = layout.write_file(folder)
+        data, mp = layout.write_file(folder, rows)
         wall, cpu, peak = _import([data], mp, folder / "s")
         print(
             f"import of {rows:,} rows: {wall:.1f} s wall, {cpu:.1f} s CPU, peak {peak / 1e9:.2f} GB"
