@@ -18,6 +18,8 @@ rigid chain, unweighted by a robust loss, the floor's problem), the floor's CPU,
 ratio (issue 45's goal ≤ 2) and both RMS residuals (the same optimum to the weights'
 difference: armsig weighs each point by its recorded σ and the encoders' rounding, the
 floor weighs them equally). ``python -m bench.fit_floor``; ``BENCH_RUNS`` runs, median.
+A second line per set: armsig's fit in a warm process (:data:`_WARM`), the floor's own
+state: the cold identify's fit includes the one-off imports its stages make on first use.
 """
 
 from __future__ import annotations
@@ -180,6 +182,29 @@ def armsig_fit(exe: str, d: Path) -> tuple[float, float]:
     return cpu, sigma * float(np.sqrt(s["chi2"] / (s["dof"] + s["identifiability"]["rank"])))
 
 
+#: A child that runs the same fit ``RUNS + 1`` times in one process (``identify`` with
+#: ``force``) and prints each run's fit CPU: the first pays the imports its stages make on
+#: first use (``scipy.linalg`` for the identifiability analysis), the rest do not, as the
+#: floor, which runs in this warm process, does not.
+_WARM = """
+import json, sys
+from pipeline.identify import identify
+ov = {"refine": {"nongeometric": "none", "loss": "linear"}}
+cpu = []
+for _ in range(int(sys.argv[2]) + 1):
+    runs = identify(sys.argv[1], force=True, overrides=ov, report=False).runs
+    cpu.append(sum(r.cpu_seconds for r in runs if r.name in ("frames", "refine")))
+print(json.dumps(cpu))
+"""
+
+
+def armsig_fit_warm(d: Path) -> float:
+    """Median CPU of armsig's fit in a process that has already run it once."""
+    out = subprocess.run([sys.executable, "-c", _WARM, str(d), str(RUNS)],
+                         capture_output=True, text=True, check=True)  # fmt: skip
+    return statistics.median(json.loads(out.stdout)[1:])
+
+
 def measure(exe: str, d: Path, label: str, robot: str) -> None:
     chain = get_robot(robot).design_chain()
     floor, ours = [], []
@@ -193,9 +218,11 @@ def measure(exe: str, d: Path, label: str, robot: str) -> None:
             r, its = floor_fit(chain, q, xyz, rows)
             floor.append(time.process_time() - c0)
     f, a = statistics.median(floor), statistics.median(ours)
+    w = armsig_fit_warm(d)
     print(f"{label:36s} armsig fit {a:6.3f} s  floor {f:6.3f} s ({its} iterations)  "
           f"fit / floor {a / f:5.2f} (goal <= 2)  rms {rms:.5f} / "
           f"{np.sqrt(np.mean(r**2)):.5f} cm")  # fmt: skip
+    print(f"{'':36s} armsig fit in a warm process {w:6.3f} s  fit / floor {w / f:5.2f}")
 
 
 def main() -> None:
