@@ -3,7 +3,13 @@
 import numpy as np
 import pytest
 
-from pipeline.kinematics.chain import SerialChain, forward_kinematics, link_frames
+from pipeline.kinematics.chain import (
+    SOA_BLOCK,
+    SerialChain,
+    forward_kinematics,
+    frames_at,
+    link_frames,
+)
 from pipeline.kinematics.dh import dh_link
 from pipeline.kinematics.jacobian import geometric_jacobian
 from pipeline.kinematics.transforms import rot_z, trans_z
@@ -145,3 +151,17 @@ def test_one_pose_gives_the_same_bits_as_in_a_batch(rng, monkeypatch, prismatic)
         np.testing.assert_array_equal(J1, J[k])
         np.testing.assert_array_equal(link_frames(chain, q[k]), F[k])
         np.testing.assert_array_equal(forward_kinematics(chain, q[k]), T_fk[k])
+
+
+@pytest.mark.parametrize("robot", ["puma560", "stanford"])
+def test_frames_at_are_link_frames_rows_bit_for_bit(robot: str) -> None:
+    """``frames_at``: each row's own frame of :func:`link_frames`, the same bits, over
+    several blocks of rows (a part block at the end), any link or one for all."""
+    chain = get_robot(robot).design_chain()
+    rng = np.random.default_rng(3)
+    K = 2 * SOA_BLOCK + 17
+    q = rng.uniform(-2.0, 2.0, (K, chain.n_joints))
+    link = rng.integers(0, chain.n_joints + 2, K)
+    every = link_frames(chain, q)
+    assert np.array_equal(frames_at(chain, q, link), every[np.arange(K), link])
+    assert np.array_equal(frames_at(chain, q, chain.n_joints), every[:, chain.n_joints])

@@ -218,6 +218,24 @@ def link_frames(chain: SerialChain, q: ArrayLike) -> Array:
     return out
 
 
+def frames_at(chain: SerialChain, q: ArrayLike, link: ArrayLike) -> Array:
+    """``link_frames(chain, q)[k, link[k]]`` (K, 4, 4) of every row ``k`` of ``q`` (K, n),
+    the same bits, formed a block of rows at a time (issue 45: a million poses' whole
+    (K, n + 2, 4, 4) stack is 1 GB where the rows need one frame each)."""
+    qq = np.asarray(q, float)
+    at = np.broadcast_to(np.asarray(link, np.int64), qq.shape[:1])
+    if not is_single_robot(chain):
+        return np.asarray(link_frames(chain, qq)[np.arange(len(qq)), at])
+    out = np.zeros((len(qq), 4, 4))
+    for block in soa_blocks(len(qq)):
+        F, tool = frames_soa(chain, qq[block])  # (n + 1, 4, 3, m), (4, 3, m)
+        frames = np.concatenate([F, tool[None]])  # (n + 2, column, row, m)
+        own = frames[at[block], :, :, np.arange(frames.shape[-1])]  # (m, 4, 3)
+        out[block, :3, :] = np.swapaxes(own, 1, 2)
+    out[:, 3, 3] = 1.0
+    return out
+
+
 def is_single_robot(chain: SerialChain) -> bool:
     """Whether the chain has no robot batch axis: its poses take the column-major
     path :func:`frames_soa`, whatever their number (so one pose gives the same

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.kinematics.chain import SerialChain, link_frames
+from pipeline.kinematics.chain import SerialChain, frames_at, link_frames
 from pipeline.kinematics.so3 import rotation_from_vector, skew
 from pipeline.optim.block import Array
 from pipeline.optim.lm import dense_least_squares
@@ -46,7 +46,7 @@ class DesignBaseline:
         t = (self.tool[None] if self.targets is None else self.targets)[
             np.zeros(len(q), np.int64) if target is None else np.asarray(target)
         ]
-        F = link_frames(self.chain, q)[np.arange(len(q)), link]
+        F = frames_at(self.chain, q, link)
         p = np.einsum("kij,kj->ki", F[:, :3, :3], t) + F[:, :3, 3]
         out: Array = p @ self.base[:3, :3].T + self.base[:3, 3]
         return out
@@ -83,7 +83,7 @@ def register_design_points(
     docstring). Used for the tool point (:func:`register_design`) and for the joint
     sweeps' link targets (the design's held-out errors of stage ``holdout``)."""
     target = np.asarray(target, np.int64)
-    F = link_frames(chain, q)[np.arange(len(q)), np.asarray(link)]
+    F = frames_at(chain, q, link)
     R_k, o_k = F[:, :3, :3], F[:, :3, 3]
     B0 = base0
     local = ((measured - B0[:3, 3]) @ B0[:3, :3]) - o_k  # B0⁻¹ m_k − o_k

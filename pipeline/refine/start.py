@@ -30,7 +30,7 @@ import numpy as np
 
 from pipeline.errors import StageError
 from pipeline.kinematics.alignment import register_rigid
-from pipeline.kinematics.chain import SerialChain, link_frames
+from pipeline.kinematics.chain import SerialChain, frames_at, link_frames
 from pipeline.kinematics.transforms import invert_transform
 from pipeline.optim.block import Array
 
@@ -88,7 +88,7 @@ def design_start(
         ``q̄^s``, where the frames are taken (rad / cm).
     """
     n = chain.n_joints
-    flange = link_frames(chain, q)[:, n]  # (K, 4, 4): F_n(q_k)
+    flange = frames_at(chain, q, n)  # (K, 4, 4): F_n(q_k)
     t = np.asarray(tool_local, float).copy()
     B = np.eye(4)
     for _ in range(START_ROUNDS):
