@@ -15,8 +15,9 @@ the plain Σr² for rows within ``f_scale``).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
+from typing import overload
 
 import numpy as np
 import numpy.typing as npt
@@ -113,23 +114,50 @@ class Solution:
         return float(np.sqrt(self.chi2 / self.dof)) if self.dof > 0 else float("nan")
 
 
-def chunks(model: ChainModel, keep: bool = True) -> list[tuple[slice, ChainModel]]:
+def chunks(model: ChainModel, keep: bool = True) -> Sequence[tuple[slice, ChainModel]]:
     """The observations of ``model`` in chunks of at most :data:`CHUNK`: each chunk's
     slice and the model observing it (``model`` itself when one chunk holds them all).
     With ``keep`` the chunks of the last model so asked for are kept (a fit evaluates
-    its model again and again; its chunks' regressors are formed once)."""
+    its model again and again; its chunks' regressors are formed once); without, each
+    chunk's model is formed when it is reached and is gone when the loop moves on (a
+    list of them all held every chunk's regressor and readings' sines at once: ~1 GB at a
+    million observations, issue 45)."""
     K = len(model.link)
     if K <= CHUNK:
         return [(slice(0, K), model)]
     if _CHUNKED and _CHUNKED[0][0] is model:
         return _CHUNKED[0][1]
-    out = [
-        (slice(s, min(s + CHUNK, K)), model.observing(np.arange(s, min(s + CHUNK, K))))
-        for s in range(0, K, CHUNK)
-    ]
-    if keep:
-        _CHUNKED[:] = [(model, out)]
+    if not keep:
+        return _Chunks(model, K)
+    out = [_Chunks(model, K)[k] for k in range(-(-K // CHUNK))]
+    _CHUNKED[:] = [(model, out)]
     return out
+
+
+@dataclass(frozen=True)
+class _Chunks(Sequence[tuple[slice, ChainModel]]):
+    """:func:`chunks` formed one at a time, as they are reached."""
+
+    model: ChainModel
+    K: int
+
+    def __len__(self) -> int:
+        return -(-self.K // CHUNK)
+
+    @overload
+    def __getitem__(self, k: int) -> tuple[slice, ChainModel]: ...
+    @overload
+    def __getitem__(self, k: slice) -> Sequence[tuple[slice, ChainModel]]: ...
+    def __getitem__(
+        self, k: int | slice
+    ) -> tuple[slice, ChainModel] | Sequence[tuple[slice, ChainModel]]:
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(len(self)))]
+        if not -len(self) <= k < len(self):
+            raise IndexError(k)
+        s = (k % len(self)) * CHUNK
+        at = slice(s, min(s + CHUNK, self.K))
+        return at, self.model.observing(np.arange(at.start, at.stop))
 
 
 _CHUNKED: list[tuple[ChainModel, list[tuple[slice, ChainModel]]]] = []

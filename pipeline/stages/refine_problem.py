@@ -159,15 +159,17 @@ def model_for_keys(
 def measured_payloads(joints: pa.Table) -> tuple[float, ...]:
     """The distinct payloads (kg, ascending) recorded with the configurations the fit uses
     (every sweep but ``check``); empty when none was recorded."""
-    rows = joints.filter(pa.array(joints.column("sweep").to_numpy() != CHECK_SWEEP))
-    kg = rows.column("payload_kg").to_numpy(zero_copy_only=False).astype(float)
+    fit = joints.column("sweep").to_numpy() != CHECK_SWEEP  # the column, not the table
+    kg = joints.column("payload_kg").to_numpy(zero_copy_only=False).astype(float)[fit]
     return tuple(float(v) for v in np.unique(kg[np.isfinite(kg)]))
 
 
 def payloads_at(joints: pa.Table, sweep: np.ndarray, step: np.ndarray) -> Array:
     """The payload (kg) recorded with each configuration (sweep, step), joined by key from
     the ``joints`` table; NaN where none was recorded."""
-    first = joints.filter(pa.array(joints.column("joint").to_numpy() == 1))
+    first = joints.select(["sweep", "step", "payload_kg"]).filter(
+        pa.array(joints.column("joint").to_numpy() == 1)
+    )
     kg = first.column("payload_kg").to_numpy(zero_copy_only=False).astype(float)
     i, found = rows_of_keys(first, sweep, step)
     return np.where(found, kg[i] if len(kg) else np.nan, np.nan)
