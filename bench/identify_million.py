@@ -7,7 +7,8 @@ imports it (``pipeline import``, a child process), then times a cold ``pipeline 
 resident memory (``wait4``'s ``ru_maxrss`` of that child alone), and each stage's CPU.
 ``--ten-files``: the same rows imported again from ten files, identified, and the two
 signatures compared (issue 45: equal). Skipped, with the reason printed, when the memory
-available now is below what the import needs (:data:`IMPORT_BYTES_PER_ROW`).
+available now is below what importing and identifying them needs
+(:func:`pipeline.importers.memory.needed_bytes`, the estimate import refuses by).
 """
 
 from __future__ import annotations
@@ -24,9 +25,6 @@ ROOT = Path(__file__).resolve().parent.parent
 ROWS = 1_000_000
 #: The goals of issue 45.
 GOAL_S, GOAL_BYTES = 120.0, 4e9
-#: The import's peak resident memory a row (docs/import.md "Size": 60 MB + 5.7 kB a row),
-#: with a margin: the bench is skipped when less is available.
-IMPORT_BYTES_PER_ROW = 7_000.0
 
 
 def _run(cmd: list[str]) -> tuple[float, float, float, str]:
@@ -79,12 +77,12 @@ def _signature_values(session: Path) -> dict[str, object]:
 
 def main(rows: int, ten_files: bool) -> None:
     import bench.import_rows as layout
-    from pipeline.importers.memory import available_bytes
+    from pipeline.importers.memory import available_bytes, needed_bytes
 
     avail = available_bytes()
-    need = IMPORT_BYTES_PER_ROW * rows
+    need = needed_bytes(rows)
     if avail is not None and avail < need:
-        print(f"identify of {rows:,} rows skipped: its import needs ~{need / 1e9:.1f} GB, "
+        print(f"identify of {rows:,} rows skipped: it needs ~{need / 1e9:.1f} GB, "
               f"{avail / 1e9:.1f} GB is available")  # fmt: skip
         return
     with tempfile.TemporaryDirectory() as tmp:

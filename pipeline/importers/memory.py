@@ -23,9 +23,11 @@ from pipeline.errors import ImportFileError
 #: refinement evaluated its chain a chunk at a time: 170 MB + 12.3 kB a row (20,000 rows
 #: 412 MB, 50,000 779 MB).
 BASE, PER_ROW = 250e6, 4_400.0
-#: The import's own peak (bytes): 300,000 rows 1.89 GB, 1,000,000 rows 6.15 GB (issue 45,
-#: ``/usr/bin/time -v``; 20,000 to 100,000 rows before: 60 MB + 5.7 kB a row).
-IMPORT_BASE, IMPORT_PER_ROW = 60e6, 6_100.0
+#: The import's own peak (bytes) since a pose set is written as ``/points/block`` (issue
+#: 45, ``/usr/bin/time -v``, 2026-11-29): 100,000 rows 0.19 GB (polars' path 192 MB, the
+#: ``csv`` path of a file with quotes or a blank line 186 MB), 1,000,000 rows 0.92 GB.
+#: Before the blocks: 300,000 rows 1.89 GB, 1,000,000 rows 6.15 GB (60 MB + 6.1 kB a row).
+IMPORT_BASE, IMPORT_PER_ROW = 110e6, 810.0
 #: Headroom over the estimate (the measured sets are one layout; others differ a little).
 HEADROOM = 1.25
 MEMINFO = Path("/proc/meminfo")
