@@ -481,14 +481,12 @@ def chain_model(
     read by :func:`pipeline.stages.refine_problem.model_for_keys`.
     """
     n = len(prismatic)
-    # one name per distinct (sweep, target), in the order of first appearance (a million
-    # observations of a pose set have one or a few: no Python string per observation)
-    pairs = np.char.add(np.asarray(sweep).astype(str), np.char.add("\x00", np.asarray(target, str)))
-    distinct, first, inverse = np.unique(pairs, return_index=True, return_inverse=True)
-    names = [point_name(int(sweep[k]), str(target[k]), tool, sweep_tool_targets) for k in first]
-    point_names = tuple(dict.fromkeys(names[i] for i in np.argsort(first, kind="stable")))
+    names = [
+        point_name(int(s), str(t), tool, sweep_tool_targets)
+        for s, t in zip(sweep, target, strict=True)
+    ]
+    point_names = tuple(dict.fromkeys(names))
     index = {p: j for j, p in enumerate(point_names)}
-    point = np.array([index[nm] for nm in names], np.int64)[inverse.reshape(-1)]
     on_last = np.isin(sweep, WHOLE_ARM_SWEEPS) | np.isin(np.array(target), sweep_tool_targets)
     link = np.where(on_last, n, sweep)
     if ((link < 1) | (link > n)).any():
@@ -503,7 +501,7 @@ def chain_model(
         prismatic=prismatic,
         link=link.astype(np.int64),
         theta=theta,
-        point=point,
+        point=np.array([index[p] for p in names], np.int64),
         point_names=point_names,
         tool_rotation=tool_rotation,
     )
