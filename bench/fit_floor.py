@@ -189,7 +189,7 @@ def armsig_fit(exe: str, d: Path) -> tuple[float, float]:
 _WARM = """
 import json, sys
 from pipeline.identify import identify
-ov = {"refine": {"nongeometric": "none", "loss": "linear"}}
+ov = json.loads(sys.argv[3])
 cpu = []
 for _ in range(int(sys.argv[2]) + 1):
     runs = identify(sys.argv[1], force=True, overrides=ov, report=False).runs
@@ -200,7 +200,10 @@ print(json.dumps(cpu))
 
 def armsig_fit_warm(d: Path) -> float:
     """Median CPU of armsig's fit in a process that has already run it once."""
-    out = subprocess.run([sys.executable, "-c", _WARM, str(d), str(RUNS)],
+    from pipeline.cli.options import stage_params
+
+    overrides = json.dumps(stage_params(list(ARMSIG_FIT[1::2])))  # the cold command's
+    out = subprocess.run([sys.executable, "-c", _WARM, str(d), str(RUNS), overrides],
                          capture_output=True, text=True, check=True)  # fmt: skip
     return statistics.median(json.loads(out.stdout)[1:])
 
