@@ -17,6 +17,7 @@ from pipeline.refine.model_choice import (
     CANDIDATES,
     HARMONIC_EXTRAPOLATION,
     Scored,
+    choice_rows,
     choose,
     harmonic_extrapolation,
     nests,
@@ -198,3 +199,38 @@ def test_sonic_sweeps_score_the_ranges_with_the_folds_own_sensor(
     simulate_session(tmp_path, SimulationOptions(seed=1, compliance_mm=compliance_mm))
     identify(tmp_path, report=False)
     assert _cv(tmp_path)["chosen"] == ("compliance" if compliance_mm else "rigid")
+
+
+def test_a_large_session_is_chosen_on_whole_poses_spaced_evenly() -> None:
+    """Three targets a pose: 1 in ⌈K / most⌉ of each sweep's steps, in step order, each
+    with all its targets; every position when there are at most ``most``."""
+    step = np.repeat([5, 1, 4, 2, 3, 0], 3)  # measured out of row order
+    sweep = np.full(18, -2)
+    assert choice_rows(sweep, step, 18) is None
+    rows = choice_rows(sweep, step, 6)  # every 3rd step: 0 and 3
+    assert rows is not None
+    assert sorted(set(step[rows].tolist())) == [0, 3]
+    assert len(rows) == 6 and np.all(np.bincount(step[rows])[[0, 3]] == 3)
+
+
+def test_a_large_session_fits_the_candidate_chosen_on_its_subsample_to_all(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """300 poses of a robot with joint compliance, the choice on 1 in 3 of them: the same
+    candidate as on all, recorded with the positions it was chosen on, and the fit of it
+    to all positions the same minimum as the explicit setting's (a start from the design)."""
+    from pipeline.refine import model_choice
+
+    opts = SimulationOptions(sensor="tracker", poses=300, sweeps=False, seed=1, compliance_mm=0.3)
+    simulate_session(tmp_path / "a", opts)
+    simulate_session(tmp_path / "b", opts)
+    monkeypatch.setattr(model_choice, "CHOICE_POSITIONS", 100)
+    identify(tmp_path / "a", report=False)
+    cv = _cv(tmp_path / "a")
+    assert cv["chosen"] == "compliance", cv["why"]
+    assert cv["positions"] == {"chosen_on": 100, "of": 300}
+    identify(tmp_path / "b", report=False, overrides={"refine": {"nongeometric": "compliance"}})
+    a, b = (read_table(stage_path(tmp_path / s, "refine")) for s in "ab")
+    assert a.column("name").to_pylist() == b.column("name").to_pylist()
+    value, sigma = (b.column(c).to_numpy() for c in ("value", "sigma"))
+    assert np.abs((a.column("value").to_numpy() - value) / sigma).max() < 1e-4

@@ -506,13 +506,27 @@ def solve(
 
 def _subsampled(problem: Problem) -> Problem | None:
     """``problem`` on 1 in every ``⌈K / PREFIT⌉`` of its positions (:data:`PREFIT`), when
-    it has more than twice that many and its block is one of positions without
-    parameters of its own (a pose set's, a point sensor's); else None."""
-    block, K = problem.block, len(problem.model.link)
-    simple = problem.keep is None and problem.orientation is None and not len(block.x0)
-    if K <= 2 * PREFIT or not simple or not isinstance(block, PointBlock):
+    it has more than twice that many and :func:`on_positions` can take them; else None."""
+    K = len(problem.model.link)
+    if K <= 2 * PREFIT or not takes_positions(problem):
         return None
-    rows = np.arange(0, K, -(-K // PREFIT))
+    return on_positions(problem, np.arange(0, K, -(-K // PREFIT)))
+
+
+def takes_positions(problem: Problem) -> bool:
+    """Whether ``problem`` is one of positions a subset of which is a problem of its own
+    (:func:`on_positions`): a block of positions without parameters of its own (a pose
+    set's, a point sensor's), every position kept, no orientation rows."""
+    block = problem.block
+    simple = problem.keep is None and problem.orientation is None and not len(block.x0)
+    return simple and isinstance(block, PointBlock)
+
+
+def on_positions(problem: Problem, rows: npt.NDArray[np.int64]) -> Problem:
+    """``problem`` observing only its positions ``rows`` (indices, in their order; a
+    problem :func:`takes_positions` of)."""
+    block = problem.block
+    assert isinstance(block, PointBlock)  # takes_positions
     sub = PointBlock(block.keys.take(rows), block.measured[rows], block.whiten[rows])
     return replace(problem, model=problem.model.observing(rows), block=sub)
 

@@ -74,10 +74,17 @@ def choice_text(cv: dict[str, Any], table: Table) -> str:
         if spans
         else ""
     )
+    sub = cv.get("positions")
+    on = (
+        f" on evenly spaced poses ({sub['chosen_on']:,} of {sub['of']:,} positions; the "
+        "chosen one then fitted to all)"
+        if sub
+        else ""
+    )
     return (
         f"**Model: {cv['why']}.** `refine.nongeometric=auto` fitted each candidate and "
         f"scored it by {cv['folds']}-fold cross-validation over blocks of the measurement "
-        "order; a candidate is taken only when it beats every simpler one it nests by more "
+        f"order{on}; a candidate is taken only when it beats every simpler one it nests by more "
         "than the fold-to-fold spread of the gain (paired per-fold differences of the "
         "held-out mean squared error, mean > 0 and > their standard deviation), and of "
         "those the lowest CV error wins (docs/nongeometric.md).\n\n"

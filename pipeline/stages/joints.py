@@ -54,9 +54,20 @@ DRIFT = ("tracker_drift_cm", "tracker_residual_cm")
 def source_columns(files: np.ndarray, lines: np.ndarray, n: int = 1) -> dict[str, pa.Array]:
     """``source_file`` and ``source_line`` of each configuration, repeated ``n`` times (one
     row per joint): where an imported row came from, null when not recorded."""
-    f, ln = np.repeat(files, n), np.repeat(lines, n)
+    files = np.asarray(files, str)
+    # by runs of one file, not a Python string a row (a million rows' six joint rows:
+    # 6 million strings and their 0.8 GB (K·n, len) array, issue 45)
+    changed = np.r_[True, files[1:] != files[:-1]] if len(files) else np.zeros(0, bool)
+    start = np.flatnonzero(changed)
+    names, run = np.unique(files[start], return_inverse=True)
+    code = np.repeat(np.repeat(run, np.diff(np.r_[start, len(files)])), n).astype(np.int32)
+    absent = np.repeat(files == "", n)
+    dictionary = pa.DictionaryArray.from_arrays(
+        pa.array(code, mask=absent), pa.array(names.tolist(), pa.string())
+    )
+    ln = np.repeat(lines, n)
     return {
-        "source_file": pa.array(f.tolist(), pa.string(), mask=f == ""),
+        "source_file": dictionary.cast(pa.string()),
         "source_line": pa.array(ln.astype(np.int32), mask=ln <= 0),
     }
 

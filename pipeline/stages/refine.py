@@ -260,9 +260,13 @@ def cross_validated(
     (:func:`with_rigid_solution`); each scored by k-fold over blocks of the measurement
     order and the model chosen by :func:`pipeline.refine.model_choice.choose` (its rule
     there). A rigid chain that fits to rounding (noiseless data of a rigid robot) is kept
-    without fitting the others. Returns the chosen problem, its solution and
-    identifiability summary, the record (``nongeometric.cv``), and the rigid solution
-    when terms replace it (stage ``holdout`` compares with it)."""
+    without fitting the others. A session of more than
+    :data:`~pipeline.refine.model_choice.CHOICE_POSITIONS` positions fits and scores the
+    candidates on a subsample of its poses (:func:`_choice_problem`), the rigid chain
+    refitted there from its solution on all, and fits the chosen one to every position
+    (:func:`_fitted_to_all`; the record's ``positions``). Returns the chosen problem, its
+    solution and identifiability summary, the record (``nongeometric.cv``), and the rigid
+    solution when terms replace it (stage ``holdout`` compares with it)."""
     from pipeline.refine.model_choice import (
         CANDIDATES,
         choose,
@@ -273,8 +277,11 @@ def cross_validated(
     from pipeline.stages.refine_problem import with_terms
 
     sol, ident = fit_session(rigid, inputs)
-    fits = {"rigid": (rigid, sol, ident)}
     exact = fits_to_rounding(sol.chi2, sol.dof)
+    on = rigid if exact else _choice_problem(rigid)  # a large session's subsample
+    base = (sol, ident) if on is rigid else fit_session(on, inputs, (sol.x, sol.f_scale))
+    fits = {"rigid": (on, *base)}
+    asked: dict[str, Any] = {}  # each fitted candidate's terms, before independent_terms
     skipped: dict[str, str] = {}
     extrapolation = harmonic_joints(rigid.problem.model.theta, ~np.asarray(prismatic, bool))
     for name in CANDIDATES[1:]:
@@ -285,7 +292,7 @@ def cross_validated(
         if "harmonic" in name and not terms.harmonic:
             skipped[name] = "not fitted: no joint's readings span enough of a turn for a harmonic"
             continue
-        sp = with_terms(rigid, terms, inputs)
+        sp = with_terms(on, terms, inputs)
         same = [
             o for o, fit in fits.items() if fit[0].problem.model.terms == sp.problem.model.terms
         ]
@@ -296,11 +303,18 @@ def cross_validated(
         elif _too_few_for(sp):
             skipped[name] = "not fitted: too few coordinates (2 per parameter)"
         else:
-            warm = (with_rigid_solution(sp, rigid, sol.x), sol.f_scale)
+            warm = (with_rigid_solution(sp, on, base[0].x), base[0].f_scale)
             fits[name] = (sp, *fit_session(sp, inputs, warm))
+            asked[name] = terms
     scored = [_scored(name, *fit, k) for name, fit in fits.items()]
     choice = choose(scored)
-    sp, chosen, chosen_ident = fits[choice.chosen]
+    if choice.chosen == "rigid":
+        sp, chosen, chosen_ident = rigid, sol, ident
+    elif on is rigid:
+        sp, chosen, chosen_ident = fits[choice.chosen]
+    else:  # chosen on the subsample: fitted to every position from its solution there
+        sp, chosen, chosen_ident = _fitted_to_all(rigid, sol, fits[choice.chosen],
+                                                  asked[choice.chosen], inputs)  # fmt: skip
     rigid_fit = None
     if choice.chosen != "rigid":  # the rigid fit kept: the holdout compares with it
         rigid_fit = {
@@ -310,7 +324,43 @@ def cross_validated(
         }
     cv = record(scored, choice, k, skipped)
     cv["harmonic_extrapolation"] = {f"j{j}": v for j, v in extrapolation.items()}
+    if on is not rigid:
+        cv["positions"] = {"chosen_on": len(on.problem.model.link),
+                           "of": len(rigid.problem.model.link)}  # fmt: skip
     return sp, chosen, chosen_ident, cv, rigid_fit
+
+
+def _choice_problem(rigid: Any) -> Any:
+    """The session problem ``rigid`` on the positions its model is chosen on
+    (:func:`pipeline.refine.model_choice.choice_rows`: a large pose set's subsample), or
+    ``rigid`` itself (every position)."""
+    from pipeline.refine.model_choice import choice_rows
+    from pipeline.refine.solve import on_positions, takes_positions
+
+    if not takes_positions(rigid.problem):
+        return rigid
+    keys = rigid.problem.block.keys
+    rows = choice_rows(keys.column("sweep").to_numpy(), keys.column("step").to_numpy())
+    return rigid if rows is None else replace(rigid, problem=on_positions(rigid.problem, rows))
+
+
+def _fitted_to_all(
+    rigid: Any, rigid_sol: Any, fit: tuple[Any, Any, dict[str, Any]], terms: Any,
+    inputs: Mapping[str, Any],
+) -> tuple[Any, Any, dict[str, Any]]:  # fmt: skip
+    """The candidate chosen on a subsample (``fit``: its problem there, solution and
+    identifiability; ``terms``: the terms it was asked for) fitted to every position of
+    ``rigid``: started from its subsample solution when the whole session keeps the same
+    parameters, else from the rigid solution ``rigid_sol`` with the terms at zero."""
+    from pipeline.stages.refine_problem import with_terms
+
+    sub, sub_sol = fit[0], fit[1]
+    sp = with_terms(rigid, terms, inputs)
+    if sp.names == sub.names:
+        warm = (sub_sol.x, sub_sol.f_scale)
+    else:
+        warm = (with_rigid_solution(sp, rigid, rigid_sol.x), rigid_sol.f_scale)
+    return (sp, *fit_session(sp, inputs, warm))
 
 
 def candidate_terms(
@@ -454,7 +504,7 @@ def held_parameters(refine: pa.Table) -> np.ndarray:
 
 STAGE = Stage(
     "refine",
-    8,  # 3: the rods' speed spline fit on its normal equations (linear in the samples);
+    9,  # 3: the rods' speed spline fit on its normal equations (linear in the samples);
     # 4: the speed spline's knots chosen from the rods, every parameter in the summary,
     # single-cycle sonic positions weighed by the range noise law (level points);
     # 5: non-geometric terms (refine.nongeometric), the robust scale follows understated
@@ -465,7 +515,9 @@ STAGE = Stage(
     # (refine.cv_folds, summary nongeometric.cv), no longer by a score test (issue 41);
     # 8: past 4,096 positions the chain is evaluated a chunk at a time, its sums and the
     # identifiability's QR over chunks, a large pose set's fit started on a subsample
-    # (issue 45: the same minimum, other rounding; smaller sessions' bits unchanged)
+    # (issue 45: the same minimum, other rounding; smaller sessions' bits unchanged);
+    # 9: past 100,000 positions the model is chosen on evenly spaced poses and the chosen
+    # one fitted to all (model_choice.CHOICE_POSITIONS; smaller sessions' bits unchanged)
     ("session", "joints", "positions", "frames", "ranges"),
     Params(),
     compute,

@@ -36,6 +36,7 @@ from pipeline import __version__
 from pipeline.atomic import WRITE_FIX, remove_debris
 from pipeline.contract.digest import file_sha256
 from pipeline.errors import ArmsigError, StageError, os_errors_refused
+from pipeline.heap import return_freed
 from pipeline.progress import Progress
 from pipeline.schemas import validate_table
 from pipeline.stages.base import IMAGES, RECORDING, Stage, StageRun, session_folder
@@ -486,6 +487,7 @@ def _run_all(
         t0, c0 = time.perf_counter(), time.process_time()
         # Dependants compare their recorded input hash with the new one in `hashes`.
         table = _run_one(sdir, stage, params, hashes)
+        return_freed()  # the stage's temporaries: not a floor under the next one's
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         runs.append(StageRun(stage.name, "ran", wall, table.num_rows, cpu))
     bar.step()
