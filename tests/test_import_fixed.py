@@ -128,13 +128,22 @@ def test_the_motion_test_sees_a_drift_and_takes_missing_readings() -> None:
 
 
 def test_the_report_says_when_the_points_were_not_corrected() -> None:
+    import pyarrow as pa
+
     from pipeline.report.validation import drift_text
 
-    rows = [{"sweep": "poses", "step": s, "tracker_drift_cm": 0.001 * (s + 1)} for s in range(3)]
-    text = drift_text([{**r, "tracker_residual_cm": None} for r in rows])
+    def joints(residual: float | None) -> pa.Table:  # two joint rows per configuration
+        return pa.Table.from_pylist(
+            [{"sweep": -2, "step": s, "tracker_drift_cm": 0.001 * (s + 1),
+              "tracker_residual_cm": residual} for s in range(3) for _ in range(2)],
+            pa.schema([("sweep", pa.int32()), ("step", pa.int32()),
+                       ("tracker_drift_cm", pa.float64()), ("tracker_residual_cm", pa.float64())]),
+        )  # fmt: skip
+
+    text = drift_text(joints(None))
     assert "median 0.002 cm, max 0.003 cm before the correction. Not corrected" in text, text
     assert "the points above are as measured" in text
-    text = drift_text([{**r, "tracker_residual_cm": 0.0005} for r in rows])
+    text = drift_text(joints(0.0005))
     assert "after registering each pose by them, median 0.0005 cm" in text, text
     assert text.endswith("The points above are the registered ones.")
 

@@ -337,7 +337,7 @@ def test_held_out_rows_by_name(tmp_path: Path, check: str, want: list) -> None: 
 
 def test_held_out_rows_by_column_and_listed_in_the_report(tmp_path: Path) -> None:
     from pipeline.identify import identify
-    from pipeline.report.validation import validation_rows, validation_section
+    from pipeline.report.validation import validation_section, validation_table
 
     paths, text = one_file(pose_set(), tmp_path)
     src = paths[0]
@@ -349,7 +349,7 @@ def test_held_out_rows_by_column_and_listed_in_the_report(tmp_path: Path) -> Non
     import_file(str(src), "table", UR10, tmp_path / "s", tmp_path / "map.toml")
     assert _held(tmp_path / "s") == [("poses.csv", k) for k in (6, 7, 8, 32)]
     identify(tmp_path / "s", report=False)
-    section = validation_section(validation_rows(tmp_path / "s" / "stages" / "validation.arrow"))
+    section = validation_section(validation_table(tmp_path / "s" / "stages" / "validation.arrow"))
     assert "Held out (4 rows, by source file and line): poses.csv lines 6-8, 32." in section
     (tmp_path / "map.toml").write_text(text + '\n[check]\ncolumn = "j1"\n')
     args = [str(src), str(tmp_path / "t"), "--format", "table", "--robot", str(UR10)]
@@ -421,13 +421,14 @@ def test_fixed_base_reflectors_correct_the_drift(tmp_path: Path) -> None:
     print("audit (cm):", audits)
     assert audits["fixed"] <= 1.1 * audits["clean"], audits
     assert audits["plain"] > 2.0 * audits["clean"], audits  # the drift the correction removed
-    j = read_table(tmp_path / "fixed" / "stages" / "joints.arrow").to_pylist()
+    joints = read_table(tmp_path / "fixed" / "stages" / "joints.arrow")
+    j = joints.to_pylist()
     drift_cm = [r["tracker_drift_cm"] for r in j if r["joint"] == 1]
     assert len(drift_cm) == 60 and 0.0 < np.median(drift_cm) < 0.01 and max(drift_cm) < 0.02
-    from pipeline.report.validation import validation_rows, validation_section
+    from pipeline.report.validation import validation_section, validation_table
 
-    v = validation_rows(tmp_path / "fixed" / "stages" / "validation.arrow")
-    text = validation_section(v, j)
+    v = validation_table(tmp_path / "fixed" / "stages" / "validation.arrow")
+    text = validation_section(v, joints)
     want = f"median {np.median(drift_cm):.3g} cm, max {max(drift_cm):.3g} cm before the correction"
     assert "Tracker drift by the fixed targets (60 configurations" in text and want in text
 

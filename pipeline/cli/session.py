@@ -311,11 +311,11 @@ def validate(
 def _validation(session: str) -> dict[str, Any] | None:
     """The session's ``validation`` numbers per role (signature, and the registered design
     model beside it: issue 29), None without the stage (a sonic session) or a session folder."""
-    from pipeline.report.validation import role_errors, validation_rows
+    from pipeline.report.validation import role_errors, validation_table
     from pipeline.stages.runner import session_folder, stage_path
 
     try:
-        rows = validation_rows(stage_path(session_folder(session), "validation"))
+        table = validation_table(stage_path(session_folder(session), "validation"))
     except ArmsigError:
         return None
-    return None if rows is None else role_errors(rows)
+    return None if table is None else role_errors(table)

@@ -111,7 +111,7 @@ def session_row(
     """The row of an identified session (``evaluation``: its evaluation summary, if run)."""
     import datetime as dt
 
-    from pipeline.report.validation import role_errors, validation_rows
+    from pipeline.report.validation import role_errors, validation_table
 
     doc = read_signature_document(sdir / FILE_NAME)
     session = read_table(stage_path(sdir, "session"))
@@ -142,8 +142,8 @@ def session_row(
             verdict=v["verdict"],
             verdict_reasons=list(v["reasons"]),
         )
-    rows = validation_rows(stage_path(sdir, "validation"))
-    roles = role_errors(rows)
+    table = validation_table(stage_path(sdir, "validation"))
+    roles = role_errors(table)
     if "fit" in roles:
         row.update(fit_rms_cm=roles["fit"]["rms_cm"],
                    fit_design_rms_cm=roles["fit"]["design_registered_rms_cm"])  # fmt: skip
@@ -158,7 +158,7 @@ def session_row(
         )
     elif command == "validate":
         row["warnings"].append(
-            NO_VALIDATION if rows is None else "no validation (check) configurations recorded"
+            NO_VALIDATION if table is None else "no validation (check) configurations recorded"
         )
     if evaluation is not None:
         found = [

@@ -16,12 +16,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 
 from pipeline.atomic import write_text_atomic
 from pipeline.errors import StageError
 from pipeline.report import figures
 from pipeline.report.pose_set import pose_set_section
 from pipeline.report.validation import validation_section
+from pipeline.sensor.range_rows import unique_rows
 from pipeline.stages.catalog import identification_names
 from pipeline.stages.recording import CHECK_SWEEP, POSES_SWEEP
 from pipeline.stages.runner import stage_path
@@ -32,6 +34,10 @@ Row = dict[str, Any]
 #: Stage tables the report reads (every stage's provenance is listed); ``compensate``
 #: too when the session has it (sonic).
 USED = ("session", "positions", "features", "residuals", "frames", "smodel", "dh")
+#: Tables the report reads by columns, not as a Python dict a row: a pose set's grow with
+#: it (a million poses' positions, validation and six million joint rows took 9.7 GB as
+#: dicts, issue 45).
+COLUMNAR = ("positions", "validation", "joints")
 DASH = "—"
 
 
@@ -58,7 +64,7 @@ def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str
     return "\n".join(lines)
 
 
-def _load(sdir: Path) -> tuple[dict[str, list[Row]], dict[str, dict[str, Any]], Any]:
+def _load(sdir: Path) -> tuple[dict[str, Any], dict[str, dict[str, Any]], Any, dict[str, Any]]:
     session = stage_path(sdir, "session")
     names = identification_names(
         session_sensor(read_table(session)) if session.is_file() else "sonic"
@@ -70,26 +76,25 @@ def _load(sdir: Path) -> tuple[dict[str, list[Row]], dict[str, dict[str, Any]], 
             fix=f"run `pipeline identify {sdir}` first",
         )
     paths = {n: stage_path(sdir, n) for n in names}
-    tables = {n: read_table(paths[n])
-              for n in (*USED, "compensate", "validation", "joints") if n in paths}  # fmt: skip
+    shown = (*USED, "compensate", "validation", "joints")
+    tables = {n: read_table(paths[n]) for n in (*shown, "refine", "holdout") if n in paths}
     robot = session_robot(tables["session"])
-    rows = {n: t.to_pylist() for n, t in tables.items()}
-    return rows, {n: read_provenance(p) for n, p in paths.items()}, robot
+    rows = {n: t if n in COLUMNAR else t.to_pylist() for n, t in tables.items() if n in shown}
+    return rows, {n: read_provenance(p) for n, p in paths.items()}, robot, tables
 
 
-def _pose_tables(sdir: Path) -> dict[str, Any] | None:
-    """The tables of the pose-set section when the session has a pose set, else None."""
-    session = read_table(stage_path(sdir, "session"))
-    if "poses" not in session_plan(session):
+def _pose_tables(tables: dict[str, Any]) -> dict[str, Any] | None:
+    """The tables of the pose-set section when the session has a pose set, else None
+    (``tables``: the stage tables :func:`_load` read, each once)."""
+    if "poses" not in session_plan(tables["session"]):
         return None
-    names = ("session", "positions", "joints", "frames", "refine")
-    return {n: read_table(stage_path(sdir, n)) for n in names}
+    return {n: tables[n] for n in ("session", "positions", "joints", "frames", "refine")}
 
 
-def _nongeometric_part(sdir: Path, robot: Any) -> list[str]:
+def _nongeometric_part(tables: dict[str, Any], robot: Any) -> list[str]:
     """The non-geometric section (:mod:`pipeline.report.nongeometric`) when the signature
     has such terms or ``refine.nongeometric=auto`` chose among them, with the readings of
-    every configuration the fit used."""
+    every configuration the fit used (``tables``: the stage tables :func:`_load` read)."""
     import pyarrow.compute as pc
 
     from pipeline.kinematics.nongeometric import KINDS
@@ -97,47 +102,49 @@ def _nongeometric_part(sdir: Path, robot: Any) -> list[str]:
     from pipeline.stages.frames import readings_at
     from pipeline.stages.refine import refine_summary
 
-    refine = read_table(stage_path(sdir, "refine"))
+    refine = tables["refine"]
     chose = "cv" in refine_summary(refine).get("nongeometric", {})
     if not chose and not np.isin(refine.column("group").to_pylist(), KINDS).any():
         return []
-    joints = read_table(stage_path(sdir, "joints"))
+    joints = tables["joints"]
     fitted = joints.filter(pc.not_equal(joints.column("sweep"), CHECK_SWEEP))
-    keys = sorted(set(zip(*(fitted.column(c).to_pylist() for c in ("sweep", "step")), strict=True)))
+    sweep, step = (fitted.column(c).to_numpy().astype(np.int64) for c in ("sweep", "step"))
+    keys = unique_rows(np.stack([sweep, step], axis=1))[0]  # by sweep, then step
     n, pris = robot.n_joints, robot.prismatic
-    by_sweep: dict[int, list[int]] = {}
-    for s, k in keys:  # one join per sweep (one per key took 0.9 s for 2,773 poses)
-        by_sweep.setdefault(s, []).append(k)
-    q = np.vstack([readings_at(joints, s, np.array(k), n, pris) for s, k in by_sweep.items()])
-    holdout = read_table(stage_path(sdir, "holdout"))
+    # one join per sweep (one per key took 0.9 s for 2,773 poses)
+    q = np.vstack([readings_at(joints, int(s), keys[keys[:, 0] == s, 1], n, pris)
+                   for s in np.unique(keys[:, 0])])  # fmt: skip
+    holdout = tables["holdout"]
     return [nongeometric_section(refine, holdout, q, robot, markdown_table)]
 
 
-def _summary(name: str, t: dict[str, list[Row]], robot: Any, mode: str) -> str:
+def _summary(name: str, t: dict[str, Any], robot: Any, mode: str) -> str:
     pos, feats = t["positions"], t["features"]
-    sweeps = sorted({r["sweep"] for r in pos if r["sweep"] > 0})
-    configs = {(r["sweep"], r["step"]) for r in pos}
-    probe = sum(s == 0 for s, _ in configs)
-    check = sum(s == CHECK_SWEEP for s, _ in configs)
-    poses = sum(s == POSES_SWEEP for s, _ in configs)
-    total = {k: sum(r[k] for r in pos) for k in ("n_samples", "n_dropped", "n_rejected", "n_used")}
+    sweep, step = (pos.column(c).to_numpy().astype(np.int64) for c in ("sweep", "step"))
+    sweeps = np.unique(sweep[sweep > 0])
+    config_sweep = unique_rows(np.stack([sweep, step], axis=1))[0][:, 0]
+    probe = int(np.sum(config_sweep == 0))
+    check = int(np.sum(config_sweep == CHECK_SWEEP))
+    poses = int(np.sum(config_sweep == POSES_SWEEP))
     warned = [f for f in feats if f["warnings"]]
     text = (
         f"Session **{name}** ({mode}) identifies the arm signature of a {robot.name} with "
-        f"{robot.n_joints} joints from {len(configs) - check} configurations ({len(sweeps)} "
-        f"joint sweeps, {probe} tool-probe configuration(s)"
+        f"{robot.n_joints} joints from {len(config_sweep) - check} configurations "
+        f"({len(sweeps)} joint sweeps, {probe} tool-probe configuration(s)"
         + (f", {poses} poses of a pose set) " if poses else ") ")
     )
     if "compensate" in t:
+        total = {k: int(pos.column(k).to_numpy().sum())
+                 for k in ("n_samples", "n_dropped", "n_rejected", "n_used")}  # fmt: skip
         text += (
             f"and {total['n_samples']} digitize cycles: "
             f"{total['n_dropped']} cycles were dropped by the compensation, "
             f"{total['n_rejected']} rejected as outliers, {total['n_used']} averaged. "
         )
     else:
-        targets = sorted({r["target"] for r in pos})
+        targets = sorted(set(pos.column("target").unique().to_pylist()))
         text += (
-            f"and {len(pos)} measured target positions of a point sensor ({len(targets)} "
+            f"and {pos.num_rows} measured target positions of a point sensor ({len(targets)} "
             f"target id(s): {', '.join(targets)})"
             + (f"; {check} validation configuration(s) were not used. " if check else ". ")
         )
@@ -304,17 +311,20 @@ def _figures_section(paths: dict[str, Path]) -> str:
     return "\n\n".join(out)
 
 
-def _point_quality_section(pos: list[Row]) -> str:
+def _point_quality_section(pos: pa.Table) -> str:
+    sweep, step = (pos.column(c).to_numpy().astype(np.int64) for c in ("sweep", "step"))
+    target = np.asarray(pos.column("target").to_numpy(zero_copy_only=False))
+    unusable = pos.column("x_cm").is_null().to_numpy(zero_copy_only=False)
+    sigma = pos.column("sigma_cm").to_numpy(zero_copy_only=False).astype(float)  # NaN: none
+    cov = pos.column("cov_xx_cm2").is_valid().to_numpy(zero_copy_only=False)
     body = []
-    for s in sorted({r["sweep"] for r in pos}):
-        rows = [r for r in pos if r["sweep"] == s]
-        sigma = [r["sigma_cm"] for r in rows if r["sigma_cm"] is not None]
-        cov = [r for r in rows if r["cov_xx_cm2"] is not None]
+    for s in np.unique(sweep):
+        on = sweep == s
+        have = sigma[on][np.isfinite(sigma[on])]
         body.append(
-            [_sweep_label(s), len({r["step"] for r in rows}), len(rows),
-             ", ".join(sorted({r["target"] for r in rows})),
-             sum(r["x_cm"] is None for r in rows),
-             cm(float(np.median(sigma))) if sigma else DASH, len(cov)]
+            [_sweep_label(int(s)), len(np.unique(step[on])), int(on.sum()),
+             ", ".join(sorted(set(target[on].tolist()))), int(unusable[on].sum()),
+             cm(float(np.median(have))) if len(have) else DASH, int(cov[on].sum())]
         )  # fmt: skip
     head = ["Sweep", "Configurations", "Points", "Targets", "Unusable"]
     head += ["Median σ (cm)", "Points with covariance"]
@@ -425,22 +435,22 @@ def write_report(session_dir: str | Path, audit: dict[str, Any] | None = None) -
     Raises :class:`StageError` when a stage output is missing. Returns the report path.
     """
     sdir = Path(session_dir)
-    t, prov, robot = _load(sdir)
+    t, prov, robot, tables = _load(sdir)
     out = sdir / "report"
     out.mkdir(parents=True, exist_ok=True)
     name, mode = sdir.resolve().name, t["session"][0]["mode"]
-    pose_tables = _pose_tables(sdir)
+    pose_tables = _pose_tables(tables)
     sweeps = _sweep_sections(t, robot, out) if t["features"] else []
     parts = [
         f"# Arm signature identification: {name}\n\nRobot **{robot.name}**, mode **{mode}**.",
         *_verdict_parts(sdir, prov, out),
         _summary(name, t, robot, mode),
         *([] if pose_tables is None else [pose_set_section(pose_tables, out, markdown_table)]),
-        *_nongeometric_part(sdir, robot),
+        *_nongeometric_part(tables, robot),
         _dh_section(sdir, robot),
         _smodel_section(t["smodel"], t["frames"], robot),
         *sweeps,
-        _quality_section(t["positions"], t["compensate"])
+        _quality_section(t["positions"].to_pylist(), t["compensate"])  # sonic: small
         if "compensate" in t
         else _point_quality_section(t["positions"]),
         *([validation_section(t["validation"], t.get("joints"))] if "validation" in t else []),
