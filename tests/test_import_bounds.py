@@ -141,7 +141,7 @@ def test_more_rows_than_memory_takes_is_one_line(tmp_path: Path, monkeypatch) ->
     src.write_text(sscanss2_text(TWO_LINK, TWO_LINK_VALUES))
     r = CliRunner().invoke(app, ["import", str(src), "--format", "sscanss2", "--robot",
                                  str(TWO_LINK), str(tmp_path / "s")])  # fmt: skip
-    _refusal(r, "two.txt: 14 rows need about 0.3 GB to import and identify", "at most ~10 rows",
+    _refusal(r, "two.txt: 14 rows need about 0.4 GB to import and identify", "at most ~10 rows",
              "1 row in 2 of each sweep")  # fmt: skip
     assert not (tmp_path / "s").exists()
 

@@ -16,13 +16,15 @@ from pathlib import Path
 
 from pipeline.errors import ImportFileError
 
-#: Peak resident memory (bytes) of ``pipeline identify --no-report`` of an imported pose
-#: set: the interpreter and its modules, plus per row. Measured (issue 45, 2026-11-29, in
-#: process, every stage forced, the process's peak RSS): 100,000 rows 0.69 GB, 300,000
-#: 1.68 GB, 1,000,000 4.62 GB (reading the recording alone peaks at 4.65 GB). Before the
-#: refinement evaluated its chain a chunk at a time: 170 MB + 12.3 kB a row (20,000 rows
-#: 412 MB, 50,000 779 MB).
-BASE, PER_ROW = 250e6, 4_400.0
+#: Peak resident memory (bytes) of ``pipeline identify`` (the report included) of an
+#: imported pose set: the interpreter and its modules, plus per row. Measured (issue 45,
+#: 2026-11-29, ``/usr/bin/time -v`` of the command, from no stage): 200,000 rows 0.87 GB,
+#: 1,000,000 rows 3.13 GB (3.09 GB with ``--no-report``), since the model is chosen on a
+#: subsample, stage tables are hashed as they are serialized and the report reads its
+#: large tables by columns. Before: 4.62 GB at a million rows without the report (250 MB
+#: + 4.4 kB a row), and 170 MB + 12.3 kB a row before the chain was evaluated a chunk at
+#: a time.
+BASE, PER_ROW = 300e6, 2_830.0
 #: The import's own peak (bytes) since a pose set is written as ``/points/block`` (issue
 #: 45, ``/usr/bin/time -v``, 2026-11-29): 100,000 rows 0.19 GB (polars' path 192 MB, the
 #: ``csv`` path of a file with quotes or a blank line 186 MB), 1,000,000 rows 0.92 GB.
