@@ -283,7 +283,7 @@ def cross_validated(
     fits = {"rigid": (on, *base)}
     asked: dict[str, Any] = {}  # each fitted candidate's terms, before independent_terms
     skipped: dict[str, str] = {}
-    extrapolation = harmonic_joints(rigid.problem.model.theta, ~np.asarray(prismatic, bool))
+    extrapolation = harmonic_joints(on.problem.model.theta, ~np.asarray(prismatic, bool))
     for name in CANDIDATES[1:]:
         terms = candidate_terms(name, prismatic, payloads, extrapolation)
         if exact:
