@@ -77,13 +77,24 @@ def fold_of_blocks(
     cannot leak from a held-out block into the fit of its neighbours, as it does when
     the folds interleave (:func:`fold_of_steps`). The targets of one step share its
     fold."""
+    rank, count = step_ranks(sweep, step)
+    return rank * k // count  # rank r of n in block ⌊r k / n⌋
+
+
+def step_ranks(
+    sweep: npt.ArrayLike, step: npt.ArrayLike
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Per row (sweep, step): the rank of its step among its sweep's distinct steps in
+    step order (the order they were measured in), and how many distinct steps that sweep
+    has."""
     sweep, step = np.asarray(sweep), np.asarray(step, np.int64)
-    fold = np.zeros(len(step), np.int64)
+    rank = np.zeros(len(step), np.int64)
+    count = np.ones(len(step), np.int64)
     for s in np.unique(sweep):
         on = sweep == s
-        steps, rank = np.unique(step[on], return_inverse=True)
-        fold[on] = rank * k // len(steps)  # rank r of n in block ⌊r k / n⌋
-    return fold
+        steps, rank[on] = np.unique(step[on], return_inverse=True)
+        count[on] = len(steps)
+    return rank, count
 
 
 def _score(

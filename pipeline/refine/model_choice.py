@@ -99,17 +99,13 @@ def choice_rows(
     folds' blocks of the measurement order stay blocks of it
     (:func:`pipeline.refine.holdout.fold_of_blocks`); None when there are at most
     ``most`` (every position)."""
+    from pipeline.refine.holdout import step_ranks
+
     most = CHOICE_POSITIONS if most is None else most
-    sweep, step = np.asarray(sweep), np.asarray(step, np.int64)
-    if len(step) <= most:
+    K = np.size(step)
+    if K <= most:
         return None
-    every = -(-len(step) // most)
-    keep = np.zeros(len(step), bool)
-    for s in np.unique(sweep):
-        on = sweep == s
-        rank = np.unique(step[on], return_inverse=True)[1]
-        keep[on] = rank % every == 0
-    return np.flatnonzero(keep)
+    return np.flatnonzero(step_ranks(sweep, step)[0] % -(-K // most) == 0)  # 1 in ⌈K / most⌉
 
 
 def fits_to_rounding(chi2: float, dof: int) -> bool:
