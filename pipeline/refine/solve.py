@@ -278,8 +278,14 @@ def jacobian_factor(
         rows = order[lo:hi]
         dpdx = sub.position_jacobian(kin)  # (k, 3, n_kin)
         kin_part = np.einsum("ri,rij->rj", lin.d_p[rows], dpdx[lin.pos[rows] - at.start])
-        R = np.asarray(np.linalg.qr(np.vstack([R, rows_of(rows, kin_part)]), mode="r"))
+        R = r_with_rows(R, rows_of(rows, kin_part))
     return len(lin.r), R
+
+
+def r_with_rows(R: Array, rows: Array) -> Array:
+    """One step of a TSQR: the ``R`` of a QR of the rows ``R`` stands for, with ``rows``
+    below them (the same ``R`` up to the rows' signs and rounding)."""
+    return np.asarray(np.linalg.qr(np.vstack([R, rows]), mode="r"))
 
 
 def _block_information(lin: Linearization, w: Array) -> Array:

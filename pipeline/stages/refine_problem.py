@@ -210,7 +210,7 @@ def _regressor_factors(model: ChainModel) -> list[tuple[Array, Array | None]]:
     """Per joint, the largest magnitude of each regressor column over the observations,
     and, past :data:`pipeline.refine.solve.CHUNK` observations, the columns' ``R``
     (TSQR over chunks of observations: the regressor is never formed whole; else None)."""
-    from pipeline.refine.solve import chunks
+    from pipeline.refine.solve import chunks, r_with_rows
 
     parts = chunks(model, keep=False)
     if len(parts) == 1:
@@ -221,9 +221,7 @@ def _regressor_factors(model: ChainModel) -> list[tuple[Array, Array | None]]:
     for _, sub in parts:
         Phi = sub.regressor
         tops = np.maximum(tops, np.abs(Phi).max(axis=0))
-        Rs = [
-            np.asarray(np.linalg.qr(np.vstack([Rs[j], Phi[:, j, :]]), mode="r")) for j in range(n)
-        ]
+        Rs = [r_with_rows(Rs[j], Phi[:, j, :]) for j in range(n)]
     return list(zip(tops, Rs, strict=True))
 
 
